@@ -1,0 +1,137 @@
+"""The ``tunespec`` command line.
+
+Subcommands live in ``tunespec.app.commands.*`` modules, each with a
+``register(subparsers)`` function that adds its parsers and sets ``func`` (called with
+the parsed namespace, returns an exit code). This module owns error handling: any
+:class:`~tunespec.core.errors.TuneSpecError` or
+:class:`~tunespec.devices.protocols.DeviceError` becomes one line on stderr and exit
+code 2 (input) or 3 (device); ``Cancelled``/Ctrl-C exit with 130. No Qt is imported.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+import time
+from collections.abc import Sequence
+
+from tunespec.core.errors import TuneSpecError
+from tunespec.core.progress import Cancelled, ProgressFn
+from tunespec.core.spectra import DEFAULT_GRID, Grid
+
+COMMAND_MODULES = (
+    "tunespec.app.commands.core_cmds",
+    "tunespec.app.commands.device_cmds",
+    "tunespec.app.commands.session_cmds",
+    "tunespec.app.commands.export_cmds",
+)
+
+EXIT_INPUT = 2
+EXIT_DEVICE = 3
+EXIT_CANCELLED = 130
+
+
+def grid_arg(text: str) -> Grid:
+    """argparse type for ``--grid START:END:STEP``."""
+    try:
+        return Grid.parse(text)
+    except TuneSpecError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def add_grid_option(parser: argparse.ArgumentParser) -> None:
+    """The shared ``--grid`` option."""
+    parser.add_argument(
+        "--grid",
+        type=grid_arg,
+        default=DEFAULT_GRID,
+        metavar="START:END:STEP",
+        help=f"working wavelength grid in nm (default {DEFAULT_GRID})",
+    )
+
+
+class TerminalProgress:
+    """A one-line progress bar on stderr, usable as a :data:`ProgressFn`.
+
+    Redraws at most 10 times a second, shows elapsed and remaining time, and stays
+    silent when stderr is not a terminal unless ``force`` (then it prints a line per
+    10 % so logs still show progress).
+    """
+
+    def __init__(self, label: str, *, width: int = 30, force: bool = False) -> None:
+        self.label = label
+        self.width = width
+        self._tty = sys.stderr.isatty()
+        self._force = force
+        self._t0 = time.monotonic()
+        self._last_draw = 0.0
+        self._last_decile = -1
+
+    def __call__(self, fraction: float) -> None:
+        now = time.monotonic()
+        elapsed = now - self._t0
+        if self._tty:
+            if fraction < 1.0 and now - self._last_draw < 0.1:
+                return
+            self._last_draw = now
+            filled = round(self.width * fraction)
+            eta = elapsed / fraction * (1 - fraction) if fraction > 0 else float("nan")
+            eta_s = f"{eta:5.0f}s left" if eta == eta else "   ?s left"
+            bar = "#" * filled + "-" * (self.width - filled)
+            sys.stderr.write(f"\r{self.label:<28} [{bar}] {fraction:6.1%} {eta_s}")
+            if fraction >= 1.0:
+                sys.stderr.write(
+                    f"\r{self.label:<28} [{bar}] done in {elapsed:.1f}s   \n"
+                )
+            sys.stderr.flush()
+        elif self._force:
+            decile = int(fraction * 10)
+            if decile > self._last_decile:
+                self._last_decile = decile
+                sys.stderr.write(f"{self.label}: {fraction:.0%} ({elapsed:.1f}s)\n")
+
+
+def progress_bar(label: str) -> ProgressFn:
+    """A terminal progress callback for ``label``."""
+    return TerminalProgress(label)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="tunespec",
+        description="Spectral reflectance from an RGB camera and a tunable LED source.",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name in COMMAND_MODULES:
+        try:
+            module = importlib.import_module(name)
+        except ModuleNotFoundError as exc:
+            if exc.name == name:  # a command group not built yet
+                continue
+            raise
+        module.register(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``tunespec``; returns the exit code."""
+    from tunespec.devices.protocols import DeviceError
+
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except TuneSpecError as exc:
+        print(f"tunespec {args.command}: error: {exc}", file=sys.stderr)
+        return EXIT_INPUT
+    except DeviceError as exc:
+        print(f"tunespec {args.command}: device error: {exc}", file=sys.stderr)
+        return EXIT_DEVICE
+    except (Cancelled, KeyboardInterrupt):
+        print(f"tunespec {args.command}: cancelled", file=sys.stderr)
+        return EXIT_CANCELLED
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,248 @@
+"""Target layouts: where the patches are on a chart, and their ROIs in an image.
+
+A layout describes a rectangular target in its own millimetre coordinates: the outer
+rectangle ``(0, 0)-(width_mm, height_mm)`` (the four corners a homography maps into
+the image), a grid of ``rows x cols`` equal cells inside the margins, and per cell a
+patch of ``patch_fraction`` of the cell's side. The ROI of a patch is its central
+``roi_fraction`` of the patch *area* (the paper's "central 20 % patch-pixels").
+
+Patch names come from a naming scheme (``"sg"``: letter = column, digit = row, as on
+the ColorChecker SG, A1 ... N10) or an explicit list in row-major order.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, field, replace
+from os import PathLike
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from tunespec.core.errors import InputError
+
+__all__ = ["TargetLayout", "apply_homography", "homography_from_corners"]
+
+LAYOUT_VERSION = 1
+
+
+@dataclass(frozen=True)
+class TargetLayout:
+    """A chart's geometry and patch names.
+
+    Parameters
+    ----------
+    name
+        Human name, e.g. ``"ColorChecker SG"``.
+    rows, cols
+        Patch grid size.
+    width_mm, height_mm
+        Outer rectangle of the target (its corners are the homography's anchors).
+    margin_mm
+        (left, top, right, bottom) from the outer edge to the patch grid.
+    patch_fraction
+        Side of a patch as a fraction of its cell (the rest is the gap between patches).
+    roi_fraction
+        ROI area as a fraction of the patch area (paper: 0.2).
+    patch_names
+        Row-major names, ``rows * cols`` of them; empty means the ``"sg"`` scheme.
+    corners_px
+        The target's outer corners in the image (TL, TR, BR, BL), ``(4, 2)`` x/y pixels,
+        or ``None`` if not yet known.
+    """
+
+    name: str
+    rows: int
+    cols: int
+    width_mm: float
+    height_mm: float
+    margin_mm: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+    patch_fraction: float = 1.0
+    roi_fraction: float = 0.2
+    patch_names: tuple[str, ...] = ()
+    corners_px: tuple[tuple[float, float], ...] | None = None
+    meta: dict[str, str] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.rows < 1 or self.cols < 1:
+            raise InputError(f"layout {self.name!r}: rows and cols must be >= 1")
+        if not (0 < self.patch_fraction <= 1 and 0 < self.roi_fraction <= 1):
+            raise InputError(
+                f"layout {self.name!r}: patch_fraction and roi_fraction must be in (0, 1]"
+            )
+        l, t, r, b = self.margin_mm
+        if self.width_mm - l - r <= 0 or self.height_mm - t - b <= 0:
+            raise InputError(f"layout {self.name!r}: margins leave no room for patches")
+        names = tuple(self.patch_names) or _sg_names(self.rows, self.cols)
+        if len(names) != self.rows * self.cols:
+            raise InputError(
+                f"layout {self.name!r}: {len(names)} patch names for "
+                f"{self.rows}x{self.cols} patches"
+            )
+        if len(set(names)) != len(names):
+            raise InputError(f"layout {self.name!r}: duplicate patch names")
+        object.__setattr__(self, "patch_names", names)
+        object.__setattr__(self, "margin_mm", tuple(float(m) for m in self.margin_mm))
+        if self.corners_px is not None:
+            c = np.asarray(self.corners_px, dtype=np.float64)
+            if c.shape != (4, 2) or not np.all(np.isfinite(c)):
+                raise InputError(
+                    f"layout {self.name!r}: corners_px must be 4 (x, y) pairs"
+                )
+            object.__setattr__(self, "corners_px", tuple(map(tuple, c.tolist())))
+
+    # -- geometry in target millimetres ------------------------------------------
+    @property
+    def n_patches(self) -> int:
+        return self.rows * self.cols
+
+    def cell_size_mm(self) -> tuple[float, float]:
+        """(width, height) of one grid cell."""
+        l, t, r, b = self.margin_mm
+        return (
+            (self.width_mm - l - r) / self.cols,
+            (self.height_mm - t - b) / self.rows,
+        )
+
+    def patch_centers_mm(self) -> NDArray[np.float64]:
+        """Patch centres, (n_patches, 2) x/y mm, row-major like ``patch_names``."""
+        l, t, _, _ = self.margin_mm
+        cw, ch = self.cell_size_mm()
+        rr, cc = np.mgrid[0 : self.rows, 0 : self.cols]
+        x = l + (cc.ravel() + 0.5) * cw
+        y = t + (rr.ravel() + 0.5) * ch
+        return np.stack([x, y], axis=1)
+
+    def patch_quads_mm(self, area_fraction: float = 1.0) -> NDArray[np.float64]:
+        """Patch squares scaled to ``area_fraction`` of the patch, (n, 4, 2) mm.
+
+        ``area_fraction=1`` is the whole patch; ``self.roi_fraction`` the ROI.
+        """
+        cw, ch = self.cell_size_mm()
+        s = self.patch_fraction * math.sqrt(area_fraction)
+        hw, hh = 0.5 * cw * s, 0.5 * ch * s
+        offs = np.array([[-hw, -hh], [hw, -hh], [hw, hh], [-hw, hh]])
+        return self.patch_centers_mm()[:, None, :] + offs[None]
+
+    def outer_corners_mm(self) -> NDArray[np.float64]:
+        """TL, TR, BR, BL of the outer rectangle, (4, 2) mm."""
+        w, h = self.width_mm, self.height_mm
+        return np.array([[0.0, 0.0], [w, 0.0], [w, h], [0.0, h]])
+
+    # -- image coordinates ------------------------------------------------------
+    def homography(self) -> NDArray[np.float64]:
+        """3x3 homography mapping target mm to image pixels (needs ``corners_px``)."""
+        if self.corners_px is None:
+            raise InputError(f"layout {self.name!r}: the target's corners are not set")
+        return homography_from_corners(self.outer_corners_mm(), self.corners_px)
+
+    def roi_quads_px(self) -> NDArray[np.float64]:
+        """ROI quadrilaterals in image pixels, (n_patches, 4, 2) x/y."""
+        return apply_homography(
+            self.homography(), self.patch_quads_mm(self.roi_fraction)
+        )
+
+    def with_corners(self, corners_px: ArrayLike | None) -> TargetLayout:
+        """A copy with new image corners (TL, TR, BR, BL)."""
+        c = (
+            None
+            if corners_px is None
+            else tuple(map(tuple, np.asarray(corners_px, dtype=float).tolist()))
+        )
+        return replace(self, corners_px=c)
+
+    # -- JSON -------------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["format"] = "tunespec-layout"
+        d["version"] = LAYOUT_VERSION
+        d["margin_mm"] = list(self.margin_mm)
+        d["patch_names"] = list(self.patch_names)
+        d["corners_px"] = (
+            None if self.corners_px is None else [list(c) for c in self.corners_px]
+        )
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any], *, source: str | None = None) -> TargetLayout:
+        if d.get("format") != "tunespec-layout":
+            raise InputError(
+                "not a TuneSpec layout (format != 'tunespec-layout')", path=source
+            )
+        if int(d.get("version", 0)) > LAYOUT_VERSION:
+            raise InputError(
+                f"layout version {d.get('version')} is newer than this "
+                f"TuneSpec understands ({LAYOUT_VERSION})",
+                path=source,
+            )
+        keys = set(cls.__dataclass_fields__)
+        try:
+            kw = {k: v for k, v in d.items() if k in keys}
+            kw["margin_mm"] = tuple(kw.get("margin_mm", (0, 0, 0, 0)))
+            kw["patch_names"] = tuple(kw.get("patch_names", ()))
+            if kw.get("corners_px") is not None:
+                kw["corners_px"] = tuple(tuple(c) for c in kw["corners_px"])
+            return cls(**kw)
+        except TypeError as exc:
+            raise InputError(f"bad layout: {exc}", path=source) from None
+        except InputError as exc:
+            raise InputError(exc.message, path=source) from None
+
+    def save(self, path: str | PathLike[str]) -> None:
+        Path(path).write_text(
+            json.dumps(self.to_dict(), indent=2) + "\n", encoding="utf-8"
+        )
+
+    @classmethod
+    def load(cls, path: str | PathLike[str]) -> TargetLayout:
+        path = Path(path)
+        try:
+            d = json.loads(path.read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise InputError("file not found", path=path) from None
+        except json.JSONDecodeError as exc:
+            raise InputError(
+                f"not valid JSON: {exc.msg}", path=path, line=exc.lineno
+            ) from None
+        if not isinstance(d, dict):
+            raise InputError("expected a JSON object", path=path)
+        return cls.from_dict(d, source=str(path))
+
+
+def _sg_names(rows: int, cols: int) -> tuple[str, ...]:
+    """ColorChecker SG naming: letter = column (A...), digit = row (1...), row-major."""
+    if cols > 26:
+        raise InputError("the 'sg' naming scheme supports at most 26 columns")
+    return tuple(f"{chr(65 + c)}{r + 1}" for r in range(rows) for c in range(cols))
+
+
+def homography_from_corners(src: ArrayLike, dst: ArrayLike) -> NDArray[np.float64]:
+    """The 3x3 homography taking 4 ``src`` points to 4 ``dst`` points (OpenCV).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> H = homography_from_corners([[0, 0], [1, 0], [1, 1], [0, 1]],
+    ...                             [[0, 0], [2, 0], [2, 2], [0, 2]])
+    >>> np.round(apply_homography(H, [[0.5, 0.5]]), 6)
+    array([[1., 1.]])
+    """
+    import cv2
+
+    s = np.asarray(src, dtype=np.float32).reshape(4, 2)
+    d = np.asarray(dst, dtype=np.float32).reshape(4, 2)
+    H = cv2.getPerspectiveTransform(s, d)
+    if not np.all(np.isfinite(H)) or abs(np.linalg.det(H)) < 1e-12:
+        raise InputError("degenerate corners: three or more are collinear")
+    return np.asarray(H, dtype=np.float64)
+
+
+def apply_homography(H: ArrayLike, points: ArrayLike) -> NDArray[np.float64]:
+    """Map points (..., 2) through the homography ``H`` (3, 3)."""
+    H = np.asarray(H, dtype=np.float64)
+    p = np.asarray(points, dtype=np.float64)
+    flat = p.reshape(-1, 2)
+    q = np.c_[flat, np.ones(len(flat))] @ H.T
+    return (q[:, :2] / q[:, 2:3]).reshape(p.shape)

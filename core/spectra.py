@@ -1,0 +1,322 @@
+"""Spectral data: a wavelength grid and named spectra, spectral CSV in and out.
+
+A spectral CSV has a first column whose header contains ``wavelength`` (in nm, strictly
+increasing), then one column per named spectrum::
+
+    wavelength_nm,A1,A2
+    380,0.108,0.0068
+    390,0.200,0.0067
+
+Every input is resampled onto one working :class:`Grid` before any computation, so
+reflectances, illuminants and sensitivities always share their wavelength axis.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from os import PathLike
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from tunespec.core.errors import InputError
+
+__all__ = [
+    "DEFAULT_GRID",
+    "Grid",
+    "Spectra",
+    "read_spectra_csv",
+    "write_spectra_csv",
+]
+
+_WL_TOL_NM = 1e-6
+
+
+@dataclass(frozen=True)
+class Grid:
+    """An equidistant wavelength grid ``start_nm, start_nm + step_nm, ..., end_nm``."""
+
+    start_nm: float
+    end_nm: float
+    step_nm: float
+
+    def __post_init__(self) -> None:
+        if not (self.step_nm > 0 and self.end_nm > self.start_nm):
+            raise InputError(
+                f"bad grid {self.start_nm}:{self.end_nm}:{self.step_nm}: "
+                "expected START < END and STEP > 0"
+            )
+        n = (self.end_nm - self.start_nm) / self.step_nm
+        if abs(n - round(n)) > 1e-6:
+            raise InputError(
+                f"bad grid {self.start_nm}:{self.end_nm}:{self.step_nm}: "
+                "END - START must be a multiple of STEP"
+            )
+
+    @classmethod
+    def parse(cls, text: str) -> Grid:
+        """Parse ``"START:END:STEP"`` in nm, e.g. ``"400:700:10"``.
+
+        Examples
+        --------
+        >>> Grid.parse("400:700:10").n
+        31
+        """
+        parts = text.split(":")
+        try:
+            if len(parts) != 3:
+                raise ValueError
+            start, end, step = (float(p) for p in parts)
+        except ValueError:
+            raise InputError(
+                f"bad grid {text!r}: expected START:END:STEP in nm, e.g. 400:700:10"
+            ) from None
+        return cls(start, end, step)
+
+    @property
+    def n(self) -> int:
+        """Number of samples."""
+        return round((self.end_nm - self.start_nm) / self.step_nm) + 1
+
+    @property
+    def wavelength_nm(self) -> NDArray[np.float64]:
+        """The sample wavelengths, shape (n,)."""
+        return self.start_nm + self.step_nm * np.arange(self.n, dtype=np.float64)
+
+    def __str__(self) -> str:
+        return f"{self.start_nm:g}:{self.end_nm:g}:{self.step_nm:g}"
+
+
+#: The working grid: the ColorChecker SG reference range at 5 nm. The CAL1's shortest
+#: LED reaches below 400 nm, so the grid starts at 380 nm.
+DEFAULT_GRID = Grid(380.0, 730.0, 5.0)
+
+
+@dataclass(frozen=True, eq=False)
+class Spectra:
+    """Named spectra on a common wavelength axis.
+
+    Parameters
+    ----------
+    wavelength_nm : (n_wl,)
+        Strictly increasing wavelengths in nm.
+    values : (n, n_wl)
+        One spectrum per row.
+    names : n names
+        Unique spectrum names (patch labels, LED channel names, ``R``/``G``/``B``).
+    """
+
+    wavelength_nm: NDArray[np.float64]
+    values: NDArray[np.float64]
+    names: tuple[str, ...]
+    meta: dict[str, str] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        wl = np.asarray(self.wavelength_nm, dtype=np.float64)
+        vals = np.atleast_2d(np.asarray(self.values, dtype=np.float64))
+        names = tuple(str(n) for n in self.names)
+        if wl.ndim != 1 or vals.shape != (len(names), wl.size):
+            raise InputError(
+                f"spectra shape mismatch: {len(names)} names, {wl.size} wavelengths, "
+                f"values {vals.shape}"
+            )
+        if wl.size > 1 and np.any(np.diff(wl) <= 0):
+            raise InputError("wavelengths must be strictly increasing")
+        if len(set(names)) != len(names):
+            dup = sorted({n for n in names if names.count(n) > 1})
+            raise InputError(f"duplicate spectrum names: {', '.join(dup)}")
+        wl.flags.writeable = False
+        vals.flags.writeable = False
+        object.__setattr__(self, "wavelength_nm", wl)
+        object.__setattr__(self, "values", vals)
+        object.__setattr__(self, "names", names)
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    def __getitem__(self, name: str) -> NDArray[np.float64]:
+        try:
+            return self.values[self.names.index(name)]
+        except ValueError:
+            raise KeyError(name) from None
+
+    def __repr__(self) -> str:
+        wl = self.wavelength_nm
+        return (
+            f"Spectra({len(self)} spectra, {wl[0]:g}-{wl[-1]:g} nm, {wl.size} samples)"
+        )
+
+    @property
+    def step_nm(self) -> float:
+        """The wavelength step in nm (the grid must be equidistant)."""
+        d = np.diff(self.wavelength_nm)
+        if d.size == 0 or np.ptp(d) > _WL_TOL_NM:
+            raise InputError("spectra are not on an equidistant grid")
+        return float(d[0])
+
+    def select(self, names: Iterable[str], *, source: str | None = None) -> Spectra:
+        """The spectra called ``names``, in that order.
+
+        Raises
+        ------
+        InputError
+            Naming ``source`` and the missing names.
+        """
+        names = list(names)
+        missing = [n for n in names if n not in self.names]
+        if missing:
+            shown = ", ".join(missing[:8]) + (" ..." if len(missing) > 8 else "")
+            raise InputError(f"{len(missing)} name(s) not found: {shown}", path=source)
+        idx = [self.names.index(n) for n in names]
+        return Spectra(self.wavelength_nm, self.values[idx], tuple(names), self.meta)
+
+    def resample(self, grid: Grid, *, source: str | None = None) -> Spectra:
+        """Linear interpolation onto ``grid``.
+
+        Linear interpolation never creates negative values or overshoot, which matters
+        for narrowband LED peaks; the grid must lie inside the data's range.
+
+        Raises
+        ------
+        InputError
+            If the data do not cover the grid.
+        """
+        wl = self.wavelength_nm
+        if wl[0] > grid.start_nm + _WL_TOL_NM or wl[-1] < grid.end_nm - _WL_TOL_NM:
+            raise InputError(
+                f"wavelength range {wl[0]:g}-{wl[-1]:g} nm is too short for the grid "
+                f"{grid} (choose a grid inside it with --grid START:END:STEP)",
+                path=source,
+            )
+        target = grid.wavelength_nm
+        if wl.size == target.size and np.allclose(wl, target, atol=_WL_TOL_NM):
+            return Spectra(target, self.values, self.names, self.meta)
+        out = np.stack([np.interp(target, wl, v) for v in self.values])
+        return Spectra(target, out, self.names, self.meta)
+
+    def with_values(
+        self, values: ArrayLike, names: Sequence[str] | None = None
+    ) -> Spectra:
+        """A copy on the same wavelengths with new values (and optionally names)."""
+        return Spectra(
+            self.wavelength_nm,
+            np.asarray(values, dtype=np.float64),
+            tuple(self.names if names is None else names),
+            self.meta,
+        )
+
+
+def read_spectra_csv(
+    path: str | PathLike[str],
+    grid: Grid | None = None,
+    *,
+    allow_negative: bool = False,
+) -> Spectra:
+    """Read a spectral CSV and optionally resample it onto ``grid``.
+
+    Parameters
+    ----------
+    path
+        The CSV file; first column header contains ``wavelength``.
+    grid
+        Working grid; ``None`` keeps the file's wavelengths.
+    allow_negative
+        Accept negative values (e.g. signed basis functions); otherwise they are
+        an error, as are NaN and empty cells.
+
+    Raises
+    ------
+    InputError
+        With the file, the line and what was expected.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except FileNotFoundError:
+        raise InputError("file not found", path=path) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read: {exc}", path=path) from None
+    rows = list(csv.reader(text.splitlines()))
+    numbered = [(i + 1, r) for i, r in enumerate(rows) if any(c.strip() for c in r)]
+    if not numbered:
+        raise InputError("empty file, expected a spectral CSV", path=path)
+    line0, header = numbered[0]
+    header = [h.strip() for h in header]
+    if "wavelength" not in header[0].lower():
+        raise InputError(
+            f"first column header is {header[0]!r}; expected one containing "
+            "'wavelength' (e.g. wavelength_nm)",
+            path=path,
+            line=line0,
+        )
+    names = header[1:]
+    if not names or any(not n for n in names):
+        raise InputError(
+            "expected named spectrum columns after the wavelength column",
+            path=path,
+            line=line0,
+        )
+    if len(set(names)) != len(names):
+        dup = sorted({n for n in names if names.count(n) > 1})
+        raise InputError(
+            f"duplicate column names: {', '.join(dup)}", path=path, line=line0
+        )
+    wl: list[float] = []
+    data: list[list[float]] = []
+    for lineno, row in numbered[1:]:
+        if len(row) != len(header):
+            raise InputError(
+                f"{len(row)} fields, expected {len(header)} as in the header",
+                path=path,
+                line=lineno,
+            )
+        try:
+            nums = [float(c) for c in row]
+        except ValueError:
+            bad = next(c for c in row if not _is_float(c))
+            raise InputError(f"not a number: {bad!r}", path=path, line=lineno) from None
+        for name, v in zip(header, nums, strict=True):
+            if not math.isfinite(v):
+                raise InputError(
+                    f"{name}: value {v} is not finite", path=path, line=lineno
+                )
+            if v < 0 and not allow_negative and name is not header[0]:
+                raise InputError(f"{name}: negative value {v}", path=path, line=lineno)
+        if wl and nums[0] <= wl[-1]:
+            raise InputError(
+                f"wavelength {nums[0]:g} nm is not above the previous row's {wl[-1]:g} nm",
+                path=path,
+                line=lineno,
+            )
+        wl.append(nums[0])
+        data.append(nums[1:])
+    if len(wl) < 2:
+        raise InputError("expected at least two wavelength rows", path=path)
+    spectra = Spectra(
+        np.array(wl), np.array(data).T, tuple(names), {"source": str(path)}
+    )
+    return spectra if grid is None else spectra.resample(grid, source=str(path))
+
+
+def write_spectra_csv(
+    spectra: Spectra, path: str | PathLike[str], *, header: str = "wavelength_nm"
+) -> None:
+    """Write ``spectra`` as a spectral CSV (full float precision, round-trips exactly)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh, lineterminator="\n")
+        w.writerow([header, *spectra.names])
+        for i, wl in enumerate(spectra.wavelength_nm):
+            w.writerow([f"{wl:g}", *(repr(float(v)) for v in spectra.values[:, i])])
+
+
+def _is_float(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True

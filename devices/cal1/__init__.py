@@ -1,0 +1,1 @@
+"""cal1 package."""
