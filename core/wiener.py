@@ -46,6 +46,8 @@ NOISE_SOURCES = ("pixel", "mean")
 #: of full scale it corresponds to a noise std of about 1e-6, well under the 16-bit
 #: quantisation step, so measured (noisy) data never reach it.
 RIDGE_RELATIVE = 1e-10
+#: Noise variance given to saturated responses (full scale^2): effectively ignored.
+SATURATED_VARIANCE = 1e6
 
 _WL_TOL_NM = 1e-6
 #: Relative spread below which a prior counts as having no variance at all.
@@ -349,6 +351,12 @@ def _noise_variance(
         if not np.all(np.isfinite(n_pix) & (n_pix >= 1)):
             raise InputError("responses: n_pixels must be finite and >= 1")
         var = var / n_pix[..., None]
+    if responses.saturated is not None:
+        # A clipped ROI has a tiny std (every pixel at the white level), so Eq. 6
+        # would trust it most; it carries no information about r, so give it a
+        # variance that removes it from the estimate instead.
+        clipped = np.nan_to_num(responses.saturated, nan=0.0) > 0
+        var = np.where(clipped[..., None], SATURATED_VARIANCE, var)
     return var
 
 

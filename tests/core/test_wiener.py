@@ -301,3 +301,35 @@ def test_degenerate_systems_raise_singular(bench) -> None:
     # solved through the ridge floor, not refused.
     est = wiener_reflectance(resp, illum, cam, prior, noise_std=0.0)
     assert np.isfinite(est.reflectance.values).all() and est.ridge > 0
+
+
+def test_saturated_responses_are_ignored() -> None:
+    """A clipped response must not pull the estimate (it would, with its tiny std)."""
+    from tunespec.core.datasets import load_camera, load_colorchecker_sg, load_led_set
+    from tunespec.core.forward_model import render_rgb
+    from tunespec.core.responses import Responses
+    from tunespec.core.wiener import wiener_reflectance
+
+    sg, leds, cam = load_colorchecker_sg(), load_led_set(), load_camera()
+    patches = sg.select(["A1", "E5", "J7"])
+    raw = render_rgb(patches.values, leds.values, cam.values, sg.step_nm)
+    scale = 0.8 / raw.max()
+    rgb = raw * scale
+    std = np.full_like(rgb, 1e-3)
+    clean = Responses(patches.names, leds.names, rgb, std)
+    bad_rgb, bad_std = rgb.copy(), std.copy()
+    sat = np.zeros(rgb.shape[:2])
+    bad_rgb[:, 3] = 1.0  # LED450 clipped for every patch
+    bad_std[:, 3] = 1e-6
+    sat[:, 3] = 0.5
+    sens = cam.with_values(cam.values * scale)
+    ref = wiener_reflectance(clean, leds, sens, sg).reflectance.values
+    est_ign = wiener_reflectance(
+        Responses(patches.names, leds.names, bad_rgb, bad_std, None, sat), leds, sens, sg
+    ).reflectance.values
+    est_raw = wiener_reflectance(
+        Responses(patches.names, leds.names, bad_rgb, bad_std), leds, sens, sg
+    ).reflectance.values
+    err_ign = np.sqrt(np.mean((est_ign - ref) ** 2))
+    err_raw = np.sqrt(np.mean((est_raw - ref) ** 2))
+    assert err_ign < 0.01 < err_raw
