@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
 from tunespec.core.errors import InputError
 from tunespec.core.spectra import DEFAULT_GRID, Grid, Spectra, read_spectra_csv
 

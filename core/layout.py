@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
 from tunespec.core.errors import InputError
 
 __all__ = ["TargetLayout", "apply_homography", "homography_from_corners"]

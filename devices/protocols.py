@@ -13,6 +13,7 @@ from typing import Literal, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
+
 from tunespec.core.spectra import Spectra
 
 __all__ = [

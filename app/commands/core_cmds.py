@@ -1,0 +1,311 @@
+"""``tunespec calibrate | estimate | evaluate | simulate-responses``: the core on files."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tunespec.app.cli import add_grid_option, progress_bar
+from tunespec.core.datasets import read_rawtoaces_json
+from tunespec.core.errors import InputError
+from tunespec.core.responses import Responses, read_responses_csv, write_responses_csv
+from tunespec.core.spectra import Grid, Spectra, read_spectra_csv, write_spectra_csv
+
+
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Add the core subcommands."""
+    from tunespec.core.sensitivity import SENSITIVITY_METHODS
+
+    p = sub.add_parser(
+        "calibrate",
+        help="estimate camera sensitivities from a chart under all LEDs (Table 1)",
+        description="Camera sensitivities from chart responses under all LEDs "
+        "(paper Eq. 3-4 and better estimators); prints Table 1.",
+    )
+    p.add_argument("--responses", required=True, type=Path, help="responses CSV")
+    p.add_argument("--illuminants", required=True, type=Path, help="LED spectra CSV")
+    p.add_argument(
+        "--reflectances", required=True, type=Path, help="chart reflectances"
+    )
+    p.add_argument("--method", choices=sorted(SENSITIVITY_METHODS), default="smooth")
+    p.add_argument("--components", type=int, default=4, help="pca: components (4)")
+    p.add_argument(
+        "--explained-variance",
+        type=float,
+        default=None,
+        help="pca: use as many components as reach this fraction (e.g. 0.97)",
+    )
+    p.add_argument(
+        "--exclude-camera",
+        default=None,
+        help="pca/smooth: leave this camera out of the database",
+    )
+    p.add_argument(
+        "--hold-out-every",
+        type=int,
+        default=0,
+        metavar="N",
+        help="fit without every N-th patch and report Table 1 on them too",
+    )
+    add_grid_option(p)
+    p.add_argument("-o", "--output", required=True, type=Path, help="sensitivities CSV")
+    p.add_argument("--stats", type=Path, help="write the statistics as JSON")
+    p.set_defaults(func=cmd_calibrate)
+
+    p = sub.add_parser(
+        "estimate",
+        help="Wiener reflectance estimation (Eq. 5-6)",
+        description="Reflectances from responses under all LEDs by Wiener estimation "
+        "with patch-wise noise covariance (Eq. 5-6).",
+    )
+    p.add_argument("--responses", required=True, type=Path)
+    p.add_argument("--illuminants", required=True, type=Path)
+    p.add_argument(
+        "--sensitivities",
+        required=True,
+        type=Path,
+        help="sensitivities CSV (R,G,B columns) or rawtoaces JSON",
+    )
+    p.add_argument("--prior", type=Path, help="prior reflectances CSV (default: SG)")
+    p.add_argument(
+        "--noise-std",
+        type=float,
+        default=None,
+        help="one noise level for all responses (default: per patch, Eq. 6)",
+    )
+    p.add_argument(
+        "--uncentred-prior",
+        action="store_true",
+        help="use the prior's correlation matrix instead of its covariance",
+    )
+    p.add_argument("--no-clip", action="store_true", help="do not clip to [0, 1]")
+    add_grid_option(p)
+    p.add_argument("-o", "--output", required=True, type=Path)
+    p.set_defaults(func=cmd_estimate)
+
+    p = sub.add_parser(
+        "evaluate",
+        help="spectral RMS and CIEDE2000 (D50) against references (Table 2)",
+    )
+    p.add_argument("--estimated", required=True, type=Path)
+    p.add_argument("--reference", required=True, type=Path)
+    add_grid_option(p)
+    p.add_argument("--stats", type=Path, help="write the statistics as JSON")
+    p.set_defaults(func=cmd_evaluate)
+
+    p = sub.add_parser(
+        "simulate-responses",
+        help="forward model (Eq. 1) with photon and read noise",
+    )
+    p.add_argument("--sensitivities", required=True, type=Path)
+    p.add_argument("--illuminants", required=True, type=Path)
+    p.add_argument("--reflectances", required=True, type=Path)
+    p.add_argument(
+        "--exposure-target",
+        type=float,
+        default=None,
+        metavar="F",
+        help="scale each illuminant as if its exposure put the brightest "
+        "patch at F of full scale; write the scaled spectra with "
+        "--illuminants-out",
+    )
+    p.add_argument("--illuminants-out", type=Path)
+    p.add_argument("--full-well-e", type=float, default=67_000.0)
+    p.add_argument("--read-noise-e", type=float, default=30.0)
+    p.add_argument("--n-pixels", type=int, default=400)
+    p.add_argument("--flat-field-residual", type=float, default=0.003)
+    p.add_argument("--no-noise", action="store_true")
+    p.add_argument("--seed", type=int, default=0)
+    add_grid_option(p)
+    p.add_argument("-o", "--output", required=True, type=Path)
+    p.set_defaults(func=cmd_simulate)
+
+
+def read_sensitivities(path: Path, grid: Grid) -> Spectra:
+    """Sensitivities from a spectral CSV with R, G, B columns or a rawtoaces JSON."""
+    if path.suffix.lower() == ".json":
+        s = read_rawtoaces_json(path).resample(grid, source=str(path))
+    else:
+        s = read_spectra_csv(path, grid)
+        missing = [c for c in ("R", "G", "B") if c not in s.names]
+        if missing:
+            raise InputError(
+                f"missing column(s) {', '.join(missing)}; expected R, G, B", path=path
+            )
+        s = s.select(["R", "G", "B"])
+    return Spectra(s.wavelength_nm, s.values, s.names, {**s.meta, "source": str(path)})
+
+
+def _write_json(path: Path | None, data: dict[str, Any]) -> None:
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
+
+
+def _check_names(
+    responses: Responses,
+    spectra: Spectra,
+    what: str,
+    path: Path,
+    names: tuple[str, ...],
+) -> None:
+    missing = [n for n in names if n not in spectra.names]
+    if missing:
+        shown = ", ".join(missing[:6]) + (" ..." if len(missing) > 6 else "")
+        raise InputError(
+            f"{len(missing)} {what} name(s) of the responses are not columns here: "
+            f"{shown}",
+            path=path,
+        )
+
+
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    from tunespec.core.sensitivity import estimate_camera_sensitivity
+    from tunespec.core.stats import calibration_report, split_patches
+
+    responses = read_responses_csv(args.responses)
+    illuminants = read_spectra_csv(args.illuminants, args.grid)
+    reflectances = read_spectra_csv(args.reflectances, args.grid)
+    _check_names(
+        responses, illuminants, "illuminant", args.illuminants, responses.illuminants
+    )
+    _check_names(responses, reflectances, "patch", args.reflectances, responses.patches)
+    held: tuple[str, ...] = ()
+    fit = responses
+    if args.hold_out_every:
+        fit_names, held = split_patches(
+            responses.patches, every=args.hold_out_every, offset=args.hold_out_every - 1
+        )
+        fit = responses.subset(list(fit_names))
+    kwargs: dict[str, Any] = {"method": args.method, "exclude": args.exclude_camera}
+    if args.method == "pca":
+        kwargs["n_components"] = None if args.explained_variance else args.components
+        kwargs["explained_variance"] = args.explained_variance
+    est = estimate_camera_sensitivity(
+        fit, illuminants, reflectances, progress=progress_bar("calibrating"), **kwargs
+    )
+    write_spectra_csv(est.sensitivity, args.output)
+    report = calibration_report(
+        est, responses, illuminants, reflectances, held_out_patches=held
+    )
+    if est.excluded_patches:
+        print(f"left out (saturated): {', '.join(est.excluded_patches)}")
+    print(report.format_text())
+    print(f"sensitivities written to {args.output}")
+    _write_json(
+        args.stats,
+        {
+            "method": est.method,
+            "params": _jsonable(est.params),
+            "excluded_patches": list(est.excluded_patches),
+            **report.as_dict(),
+        },
+    )
+    return 0
+
+
+def cmd_estimate(args: argparse.Namespace) -> int:
+    from tunespec.core.datasets import load_colorchecker_sg
+    from tunespec.core.wiener import wiener_reflectance
+
+    responses = read_responses_csv(args.responses)
+    illuminants = read_spectra_csv(args.illuminants, args.grid)
+    _check_names(
+        responses, illuminants, "illuminant", args.illuminants, responses.illuminants
+    )
+    sensitivity = read_sensitivities(args.sensitivities, args.grid)
+    prior = (
+        read_spectra_csv(args.prior, args.grid)
+        if args.prior
+        else load_colorchecker_sg(args.grid)
+    )
+    est = wiener_reflectance(
+        responses,
+        illuminants,
+        sensitivity,
+        prior,
+        noise_std=args.noise_std,
+        center_prior=not args.uncentred_prior,
+        clip=not args.no_clip,
+    )
+    write_spectra_csv(est.reflectance, args.output)
+    if est.clipped:
+        print(
+            f"clipped to [0, 1]: {est.n_clipped_samples} sample(s) in "
+            f"{len(est.clipped)} patch(es): {', '.join(est.clipped[:10])}"
+            f"{' ...' if len(est.clipped) > 10 else ''}"
+        )
+    print(f"{len(est.reflectance)} reflectances written to {args.output}")
+    return 0
+
+
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    from tunespec.core.colorimetry import reflectance_stats
+
+    estimated = read_spectra_csv(args.estimated, args.grid)
+    reference = read_spectra_csv(args.reference, args.grid)
+    missing = [n for n in estimated.names if n not in reference.names]
+    if missing:
+        raise InputError(
+            f"no reference for {len(missing)} estimated patch(es): "
+            f"{', '.join(missing[:6])}",
+            path=args.reference,
+        )
+    stats = reflectance_stats(estimated, reference)
+    print(stats.format_table())
+    _write_json(args.stats, stats.as_dict())
+    return 0
+
+
+def cmd_simulate(args: argparse.Namespace) -> int:
+    from tunespec.core.simulate import NoiseModel, scale_to_exposure, simulate_responses
+
+    sensitivity = read_sensitivities(args.sensitivities, args.grid)
+    illuminants = read_spectra_csv(args.illuminants, args.grid)
+    reflectances = read_spectra_csv(args.reflectances, args.grid)
+    if args.exposure_target is not None:
+        illuminants = scale_to_exposure(
+            reflectances, illuminants, sensitivity, target=args.exposure_target
+        )
+    if args.illuminants_out:
+        write_spectra_csv(illuminants, args.illuminants_out)
+    noise = (
+        None
+        if args.no_noise
+        else NoiseModel(
+            full_well_e=args.full_well_e,
+            read_noise_e=args.read_noise_e,
+            n_pixels=args.n_pixels,
+            flat_field_residual=args.flat_field_residual,
+        )
+    )
+    responses = simulate_responses(
+        reflectances,
+        illuminants,
+        sensitivity,
+        noise=noise,
+        rng=np.random.default_rng(args.seed),
+    )
+    write_responses_csv(responses, args.output)
+    n_sat = 0 if responses.saturated is None else int(np.sum(responses.saturated > 0))
+    print(
+        f"{len(responses.patches)} patches x {len(responses.illuminants)} illuminants "
+        f"written to {args.output}" + (f" ({n_sat} saturated)" if n_sat else "")
+    )
+    return 0
+
+
+def _jsonable(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.generic):
+        return obj.item()
+    return obj

@@ -1,0 +1,357 @@
+"""The simulated scene: a chart on a white board, lit at 45 degrees, seen from 0 degrees.
+
+:class:`SimScene` is what is in front of the simulated camera. It implements the
+:class:`~tunespec.devices.protocols.TargetStage` protocol: ``present("white")`` shows
+the bare white background board (the flat-field frame of the paper's Eq. 2),
+``present("target")`` the chart lying on that board.
+
+Geometry (resolution independent, so the same scene serves any camera resolution):
+
+- The image spans ``field_width_mm`` of the target plane horizontally (504 mm: a
+  50 mm lens on a 36 mm wide sensor at the paper's 70 cm).
+- The camera is not exactly perpendicular to the target, so the chart's rectangle
+  lands on a trapezoid (``keystone``: the top edge is that fraction shorter than the
+  bottom one), turned by ``rotation_deg`` and centred at ``centre_frac`` of the image.
+  Any four corners define a homography, and the true corners are kept
+  (:meth:`SimScene.corners_px`).
+- The 45-degree illumination is not uniform: irradiance falls off quadratically from
+  a point ``falloff_centre_frac`` of the image, by ``falloff`` (10 %, the paper's
+  "irradiance-difference of approx. 10 % between center and margin") at
+  ``falloff_radius_mm`` (default: the chart's half-diagonal).
+
+Materials are numbered for the renderer: 0 the background board, 1 the chart's frame
+(the black card around and between the patches), ``2 + k`` the k-th patch of the
+layout (row-major, as ``layout.patch_names``).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from tunespec.core.datasets import load_colorchecker_sg, resource_path
+from tunespec.core.layout import TargetLayout, homography_from_corners
+from tunespec.core.spectra import DEFAULT_GRID, Grid, Spectra, read_spectra_csv
+
+__all__ = ["BACKGROUND", "FRAME", "SimScene", "white_board_reflectance"]
+
+#: Material index of the background board.
+BACKGROUND = 0
+#: Material index of the chart's frame and the gaps between patches.
+FRAME = 1
+
+#: Rows of the image handled at once when labelling pixels (bounds temporary memory).
+_CHUNK_ROWS = 256
+
+
+def white_board_reflectance(wavelength_nm: ArrayLike) -> NDArray[np.float64]:
+    """A matte white board: 0.90, dropping a little towards the UV (flat-ish).
+
+    Parameters
+    ----------
+    wavelength_nm : (n_wl,)
+
+    Returns
+    -------
+    (n_wl,)
+        Reflectance factor, 0.86 at 380 nm rising to 0.90 above 500 nm.
+    """
+    wl = np.asarray(wavelength_nm, dtype=np.float64)
+    return 0.90 - 0.04 * np.exp(-(wl - 380.0) / 40.0)
+
+
+class SimScene:
+    """A chart (or the bare white board) in front of the simulated camera.
+
+    Parameters
+    ----------
+    layout
+        The chart's geometry (``corners_px`` is ignored: the scene places it).
+    reflectances
+        One spectrum per patch, named as ``layout.patch_names`` (other names are
+        ignored).
+    background
+        The board's reflectance: a number (flat), a one-spectrum :class:`Spectra`, or
+        ``None`` for :func:`white_board_reflectance`.
+    frame
+        Reflectance of the chart's frame and of the gaps between patches (a number
+        or a one-spectrum :class:`Spectra`); 0.03 is a black card.
+    field_width_mm
+        Width of the target plane the image spans.
+    centre_frac
+        Where the chart's centre lands, as fractions of image width and height.
+    keystone
+        Relative difference of the top and bottom edge lengths (perspective).
+    rotation_deg
+        Rotation of the chart in the image, counter-clockwise on screen.
+    falloff
+        Relative irradiance drop at ``falloff_radius_mm`` from the brightest point.
+    falloff_radius_mm
+        Where the drop reaches ``falloff``; default the chart's half-diagonal.
+    falloff_centre_frac
+        The brightest point, as fractions of image width and height.
+    presented
+        What is shown at first.
+    """
+
+    def __init__(
+        self,
+        layout: TargetLayout,
+        reflectances: Spectra,
+        *,
+        background: float | Spectra | None = None,
+        frame: float | Spectra = 0.03,
+        field_width_mm: float = 504.0,
+        centre_frac: tuple[float, float] = (0.505, 0.49),
+        keystone: float = 0.04,
+        rotation_deg: float = 1.2,
+        falloff: float = 0.10,
+        falloff_radius_mm: float | None = None,
+        falloff_centre_frac: tuple[float, float] = (0.53, 0.47),
+        presented: Literal["white", "target"] = "target",
+    ) -> None:
+        if not field_width_mm > 0:
+            raise ValueError("field_width_mm must be > 0")
+        if not 0 <= falloff < 1:
+            raise ValueError("falloff must be in [0, 1)")
+        if not -0.5 < keystone < 0.5:
+            raise ValueError("keystone must be in (-0.5, 0.5)")
+        self.layout = layout.with_corners(None)
+        patches = reflectances.select(layout.patch_names, source="scene reflectances")
+        wl = patches.wavelength_nm
+        bg = (
+            white_board_reflectance(wl)
+            if background is None
+            else _as_spectrum(background, wl, "background")
+        )
+        fr = _as_spectrum(frame, wl, "frame")
+        self.materials = Spectra(
+            wl,
+            np.vstack([bg, fr, patches.values]),
+            ("background", "frame", *patches.names),
+            {"source": reflectances.meta.get("source", "")},
+        )
+        self.field_width_mm = float(field_width_mm)
+        self.centre_frac = (float(centre_frac[0]), float(centre_frac[1]))
+        self.keystone = float(keystone)
+        self.rotation_deg = float(rotation_deg)
+        self.falloff = float(falloff)
+        self.falloff_radius_mm = float(
+            falloff_radius_mm
+            if falloff_radius_mm is not None
+            else 0.5 * math.hypot(layout.width_mm, layout.height_mm)
+        )
+        self.falloff_centre_frac = (
+            float(falloff_centre_frac[0]),
+            float(falloff_centre_frac[1]),
+        )
+        self._presented: Literal["white", "target"] = "target"
+        self.present(presented)
+
+    # -- factories ---------------------------------------------------------------
+    @classmethod
+    def colorchecker_sg(cls, grid: Grid = DEFAULT_GRID, **kwargs: object) -> SimScene:
+        """The ColorChecker SG (14 x 10) with its shipped reflectances."""
+        layout = TargetLayout.load(resource_path("layouts", "colorchecker_sg.json"))
+        return cls(layout, load_colorchecker_sg(grid), **kwargs)  # type: ignore[arg-type]
+
+    @classmethod
+    def neugebauer_cmy(cls, grid: Grid = DEFAULT_GRID, **kwargs: object) -> SimScene:
+        """The sample target: 8 CMY Neugebauer primaries (model reflectances)."""
+        layout = TargetLayout.load(resource_path("layouts", "neugebauer_cmy.json"))
+        refl = read_spectra_csv(
+            resource_path("charts", "neugebauer_cmy_model.csv"), grid
+        )
+        return cls(layout, refl, **kwargs)  # type: ignore[arg-type]
+
+    # -- TargetStage -------------------------------------------------------------
+    def present(self, what: Literal["white", "target"]) -> None:
+        """Show the white board (``"white"``) or the chart on it (``"target"``)."""
+        if what not in ("white", "target"):
+            raise ValueError(f"present() takes 'white' or 'target', not {what!r}")
+        self._presented = what
+
+    @property
+    def presented(self) -> Literal["white", "target"]:
+        """What is in front of the camera now."""
+        return self._presented
+
+    @property
+    def geometry_key(self) -> tuple[float, ...]:
+        """Everything the pixel maps depend on (for caching them)."""
+        return (
+            self.field_width_mm,
+            *self.centre_frac,
+            self.keystone,
+            self.rotation_deg,
+            self.falloff,
+            self.falloff_radius_mm,
+            *self.falloff_centre_frac,
+        )
+
+    # -- geometry ------------------------------------------------------------------
+    def px_per_mm(self, width_px: int) -> float:
+        """Image scale on the target plane, mosaic pixels per mm."""
+        return width_px / self.field_width_mm
+
+    def corners_px(self, width_px: int, height_px: int) -> NDArray[np.float64]:
+        """The chart's outer corners TL, TR, BR, BL in mosaic pixels, (4, 2) x/y.
+
+        Pixel centres are at integer coordinates, x to the right, y down.
+        """
+        s = self.px_per_mm(width_px)
+        hw = 0.5 * self.layout.width_mm * s
+        hh = 0.5 * self.layout.height_mm * s
+        k = 0.5 * self.keystone
+        local = np.array(
+            [
+                [-hw * (1 - k), -hh],
+                [hw * (1 - k), -hh],
+                [hw * (1 + k), hh],
+                [-hw * (1 + k), hh],
+            ]
+        )
+        a = math.radians(self.rotation_deg)
+        # counter-clockwise on screen, where y points down
+        rot = np.array([[math.cos(a), math.sin(a)], [-math.sin(a), math.cos(a)]])
+        centre = np.array(
+            [
+                self.centre_frac[0] * width_px - 0.5,
+                self.centre_frac[1] * height_px - 0.5,
+            ]
+        )
+        return local @ rot.T + centre
+
+    def layout_px(self, width_px: int, height_px: int) -> TargetLayout:
+        """The layout with its true corners in mosaic pixels."""
+        return self.layout.with_corners(self.corners_px(width_px, height_px))
+
+    def homography_px_to_mm(self, width_px: int, height_px: int) -> NDArray[np.float64]:
+        """3x3 homography from mosaic pixels to chart millimetres."""
+        return homography_from_corners(
+            self.corners_px(width_px, height_px), self.layout.outer_corners_mm()
+        )
+
+    def irradiance(
+        self, x_px: ArrayLike, y_px: ArrayLike, width_px: int, height_px: int
+    ) -> NDArray[np.float64]:
+        """Relative irradiance (1 at the brightest point) at mosaic pixels.
+
+        Parameters
+        ----------
+        x_px, y_px
+            Broadcastable pixel coordinates.
+
+        Returns
+        -------
+        Broadcast shape, float32 for float32 input, else float64
+            ``1 - falloff * (d / falloff_radius_mm)**2`` with ``d`` the distance on the
+            target plane, floored at 0.05.
+        """
+        x, y = _float_arrays(x_px, y_px)
+        cx = self.falloff_centre_frac[0] * width_px - 0.5
+        cy = self.falloff_centre_frac[1] * height_px - 0.5
+        r_px = self.falloff_radius_mm * self.px_per_mm(width_px)
+        d2 = (x - cx) ** 2 + (y - cy) ** 2
+        d2 *= self.falloff / (r_px * r_px)
+        return np.maximum(1.0 - d2, 0.05)
+
+    def labels(
+        self,
+        x_px: NDArray[np.floating],
+        y_px: NDArray[np.floating],
+        width_px: int,
+        height_px: int,
+    ) -> NDArray[np.int16]:
+        """Material index at each pixel centre of the grid ``y_px x x_px``.
+
+        Parameters
+        ----------
+        x_px : (nx,)
+            Column coordinates (mosaic pixels).
+        y_px : (ny,)
+            Row coordinates.
+
+        Returns
+        -------
+        (ny, nx) int16
+            :data:`BACKGROUND`, :data:`FRAME` or ``2 + patch index``; all
+            :data:`BACKGROUND` when the white board is presented.
+        """
+        x = np.asarray(x_px, dtype=np.float64).ravel()
+        y = np.asarray(y_px, dtype=np.float64).ravel()
+        out = np.zeros((y.size, x.size), dtype=np.int16)
+        if self._presented == "white":
+            return out
+        H = self.homography_px_to_mm(width_px, height_px).astype(np.float32)
+        lay = self.layout
+        ml, mt, _, _ = lay.margin_mm
+        cw, ch = lay.cell_size_mm()
+        hx, hy = 0.5 * lay.patch_fraction * cw, 0.5 * lay.patch_fraction * ch
+        xr = x.astype(np.float32)[None, :]
+        for r0 in range(0, y.size, _CHUNK_ROWS):
+            yc = y[r0 : r0 + _CHUNK_ROWS].astype(np.float32)[:, None]
+            w = H[2, 0] * xr + H[2, 1] * yc + H[2, 2]
+            u = (H[0, 0] * xr + H[0, 1] * yc + H[0, 2]) / w
+            v = (H[1, 0] * xr + H[1, 1] * yc + H[1, 2]) / w
+            inside = (u >= 0) & (u < lay.width_mm) & (v >= 0) & (v < lay.height_mm)
+            gx = (u - ml) / cw
+            gy = (v - mt) / ch
+            col = np.floor(gx)
+            row = np.floor(gy)
+            in_patch = (
+                inside
+                & (col >= 0)
+                & (col < lay.cols)
+                & (row >= 0)
+                & (row < lay.rows)
+                & (np.abs(gx - col - 0.5) * cw <= hx)
+                & (np.abs(gy - row - 0.5) * ch <= hy)
+            )
+            block = out[r0 : r0 + _CHUNK_ROWS]
+            block[inside] = FRAME
+            idx = (row * lay.cols + col)[in_patch].astype(np.int16)
+            block[in_patch] = idx + 2
+        return out
+
+    def describe(self) -> dict[str, object]:
+        """The scene's parameters, for the truth file."""
+        return {
+            "chart": self.layout.name,
+            "presented": self._presented,
+            "field_width_mm": self.field_width_mm,
+            "centre_frac": list(self.centre_frac),
+            "keystone": self.keystone,
+            "rotation_deg": self.rotation_deg,
+            "falloff": self.falloff,
+            "falloff_radius_mm": self.falloff_radius_mm,
+            "falloff_centre_frac": list(self.falloff_centre_frac),
+            "materials": [*self.materials.names[:2], "<patches>"],
+        }
+
+
+def _float_arrays(
+    x: ArrayLike, y: ArrayLike
+) -> tuple[NDArray[np.floating], NDArray[np.floating]]:
+    """``x, y`` as float arrays, float32 kept (the pixel maps are float32)."""
+    xa, ya = np.asarray(x), np.asarray(y)
+    if xa.dtype == np.float32 and ya.dtype == np.float32:
+        return xa, ya
+    return xa.astype(np.float64), ya.astype(np.float64)
+
+
+def _as_spectrum(
+    value: float | Spectra, wavelength_nm: NDArray[np.float64], what: str
+) -> NDArray[np.float64]:
+    """A number or a one-spectrum Spectra as values on ``wavelength_nm``."""
+    if isinstance(value, Spectra):
+        if len(value) != 1:
+            raise ValueError(f"{what}: expected one spectrum, got {len(value)}")
+        return np.interp(wavelength_nm, value.wavelength_nm, value.values[0])
+    v = float(value)
+    if not 0 <= v <= 1.5:
+        raise ValueError(f"{what}: reflectance {v} out of range")
+    return np.full(wavelength_nm.shape, v)
