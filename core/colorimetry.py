@@ -38,6 +38,7 @@ import colour
 import numpy as np
 from colour.utilities import ColourRuntimeWarning, ColourUsageWarning, ColourWarning
 from numpy.typing import ArrayLike, NDArray
+
 from tunespec.core.errors import InputError
 from tunespec.core.spectra import Grid, Spectra
 

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
+
 from tunespec.core.errors import InputError
 
 __all__ = ["CHANNELS", "Responses", "read_responses_csv", "write_responses_csv"]

@@ -2,6 +2,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from tunespec.core.datasets import resource_path
 from tunespec.core.errors import InputError
 from tunespec.core.layout import TargetLayout, apply_homography

@@ -2,6 +2,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
+from tests.tolerances import ATOL_EXACT
 from tunespec.core.datasets import (
     camera_names,
     load_camera,
@@ -11,8 +13,6 @@ from tunespec.core.datasets import (
 from tunespec.core.errors import InputError
 from tunespec.core.forward_model import lighting_matrix, render_rgb
 from tunespec.core.spectra import Grid, Spectra, read_spectra_csv, write_spectra_csv
-
-from tests.tolerances import ATOL_EXACT
 
 
 def test_grid_parse_and_errors() -> None:
