@@ -1,0 +1,110 @@
+"""Device commands of the ``tunespec`` CLI.
+
+``tunespec emulate cal1 --port N [--leds FILE] [--seed S] [--warm]`` serves the
+(assumed) CAL1 protocol on ``127.0.0.1:N`` until Ctrl-C, so the application (or
+``open_cal1``) can be tried without the hardware: use the light source spec
+``cal1+socket://127.0.0.1:N``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import threading
+from typing import TextIO
+
+from tunespec.core.spectra import read_spectra_csv
+from tunespec.devices.cal1.emulator import Cal1Emulator
+from tunespec.devices.clock import RealClock
+from tunespec.devices.sim.led_physics import LedPhysics
+
+__all__ = ["register", "run_cal1_emulator"]
+
+#: How long before start a ``--warm`` emulated unit was switched on.
+WARM_POWER_ON_AGO_S = 3600.0
+
+
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Add ``emulate`` (with ``emulate cal1``) to the ``tunespec`` subcommands."""
+    emulate = sub.add_parser(
+        "emulate",
+        help="run a device emulator",
+        description="Run a device emulator until Ctrl-C.",
+    )
+    devices = emulate.add_subparsers(dest="device", metavar="DEVICE", required=True)
+    cal1 = devices.add_parser(
+        "cal1",
+        help="emulate the CAL1 light source on a local TCP port",
+        description=(
+            "Serve the CAL1 protocol (devices/cal1/PROTOCOL.md) on 127.0.0.1:PORT "
+            "with simulated LED physics. Connect with the light source spec "
+            "cal1+socket://127.0.0.1:PORT."
+        ),
+    )
+    cal1.add_argument(
+        "--port", type=int, default=0, help="TCP port (default: a free one)"
+    )
+    cal1.add_argument(
+        "--leds",
+        metavar="FILE",
+        help="LED spectral CSV (wavelength column, one column per LED) "
+        "instead of the shipped 22-LED CAL1 model",
+    )
+    cal1.add_argument(
+        "--seed", type=int, default=0, help="unit and noise seed (default 0)"
+    )
+    cal1.add_argument(
+        "--warm",
+        action="store_true",
+        help="start warmed up (as if switched on an hour ago)",
+    )
+    cal1.set_defaults(func=_emulate_cal1)
+
+
+def _emulate_cal1(args: argparse.Namespace) -> int:
+    return run_cal1_emulator(
+        port=args.port, leds=args.leds, seed=args.seed, warm=args.warm
+    )
+
+
+def run_cal1_emulator(
+    *,
+    port: int = 0,
+    leds: str | None = None,
+    seed: int = 0,
+    warm: bool = False,
+    stop: threading.Event | None = None,
+    out: TextIO | None = None,
+) -> int:
+    """Serve a CAL1 emulator until Ctrl-C (or until ``stop`` is set); exit code 0.
+
+    Prints the spec to connect with, e.g. ``cal1+socket://127.0.0.1:5025``.
+
+    Raises
+    ------
+    InputError
+        For a bad LED file.
+    OSError
+        If the port cannot be bound (e.g. in use).
+    """
+    out = out if out is not None else sys.stdout
+    spectra = read_spectra_csv(leds) if leds else None
+    clock = RealClock()
+    power_on_s = clock.now_s() - WARM_POWER_ON_AGO_S if warm else None
+    physics = LedPhysics(spectra, clock=clock, seed=seed, power_on_s=power_on_s)
+    stop = stop if stop is not None else threading.Event()
+    with Cal1Emulator(port, physics) as emu:
+        source = leds or "shipped 22-LED CAL1 model"
+        out.write(
+            f"CAL1 emulator ({physics.n_channels} LEDs from {source}, seed {seed}) "
+            f"listening on {emu.host}:{emu.port}\n"
+            f"light source spec: {emu.spec}\n"
+            "press Ctrl-C to stop\n"
+        )
+        out.flush()
+        try:
+            while not stop.wait(0.5):
+                pass
+        except KeyboardInterrupt:
+            out.write("stopped\n")
+    return 0
