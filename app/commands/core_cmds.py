@@ -45,6 +45,14 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="pca/smooth: leave this camera out of the database",
     )
     p.add_argument(
+        "--fit-spd-shift",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="also fit the spectroradiometer's wavelength shift (default: on for "
+        "smooth, off for pca); saved beside the output as OUTPUT.meta.json, where "
+        "'tunespec estimate' picks it up",
+    )
+    p.add_argument(
         "--hold-out-every",
         type=int,
         default=0,
@@ -83,6 +91,13 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="use the prior's correlation matrix instead of its covariance",
     )
     p.add_argument("--no-clip", action="store_true", help="do not clip to [0, 1]")
+    p.add_argument(
+        "--spd-shift-nm",
+        type=float,
+        default=None,
+        help="spectroradiometer wavelength shift to undo on the SPDs (default: from "
+        "SENSITIVITIES.meta.json written by calibrate, else 0)",
+    )
     add_grid_option(p)
     p.add_argument("-o", "--output", required=True, type=Path)
     p.set_defaults(func=cmd_estimate)
@@ -140,6 +155,23 @@ def read_sensitivities(path: Path, grid: Grid) -> Spectra:
     return Spectra(s.wavelength_nm, s.values, s.names, {**s.meta, "source": str(path)})
 
 
+def _meta_path(sensitivities: Path) -> Path:
+    """Where calibrate stores what the sensitivities CSV cannot hold."""
+    return sensitivities.with_name(sensitivities.name + ".meta.json")
+
+
+def _read_spd_shift(path: Path) -> float:
+    if not path.exists():
+        return 0.0
+    try:
+        value = json.loads(path.read_text(encoding="utf-8")).get("spd_shift_nm", 0.0)
+        return float(value)
+    except (json.JSONDecodeError, AttributeError, TypeError, ValueError) as exc:
+        raise InputError(
+            f"expected a JSON object with spd_shift_nm: {exc}", path=path
+        ) from None
+
+
 def _write_json(path: Path | None, data: dict[str, Any]) -> None:
     if path is not None:
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -181,7 +213,11 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             responses.patches, every=args.hold_out_every, offset=args.hold_out_every - 1
         )
         fit = responses.subset(list(fit_names))
-    kwargs: dict[str, Any] = {"method": args.method, "exclude": args.exclude_camera}
+    kwargs: dict[str, Any] = {
+        "method": args.method,
+        "exclude": args.exclude_camera,
+        "fit_spd_shift": args.fit_spd_shift,
+    }
     if args.method == "pca":
         kwargs["n_components"] = None if args.explained_variance else args.components
         kwargs["explained_variance"] = args.explained_variance
@@ -189,12 +225,18 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         fit, illuminants, reflectances, progress=progress_bar("calibrating"), **kwargs
     )
     write_spectra_csv(est.sensitivity, args.output)
+    _write_json(
+        _meta_path(args.output),
+        {"method": est.method, "spd_shift_nm": est.spd_shift_nm},
+    )
     report = calibration_report(
         est, responses, illuminants, reflectances, held_out_patches=held
     )
     if est.excluded_patches:
         print(f"left out (saturated): {', '.join(est.excluded_patches)}")
     print(report.format_text())
+    if est.spd_shift_nm:
+        print(f"spectroradiometer wavelength shift fitted: {est.spd_shift_nm:+.2f} nm")
     print(f"sensitivities written to {args.output}")
     _write_json(
         args.stats,
@@ -210,6 +252,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
 def cmd_estimate(args: argparse.Namespace) -> int:
     from tunespec.core.datasets import load_colorchecker_sg
+    from tunespec.core.sensitivity import correct_spd_shift
     from tunespec.core.wiener import wiener_reflectance
 
     responses = read_responses_csv(args.responses)
@@ -218,6 +261,11 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         responses, illuminants, "illuminant", args.illuminants, responses.illuminants
     )
     sensitivity = read_sensitivities(args.sensitivities, args.grid)
+    shift_nm = args.spd_shift_nm
+    if shift_nm is None:
+        shift_nm = _read_spd_shift(_meta_path(args.sensitivities))
+    if shift_nm:
+        illuminants = correct_spd_shift(illuminants, shift_nm)
     prior = (
         read_spectra_csv(args.prior, args.grid)
         if args.prior

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
+from tests.tolerances import ATOL_EXACT, ATOL_WIENER_LOOP
 from tunespec.core import wiener
 from tunespec.core.colorimetry import reflectance_stats
 from tunespec.core.datasets import (
@@ -17,8 +19,6 @@ from tunespec.core.forward_model import lighting_matrix, render_rgb
 from tunespec.core.responses import Responses
 from tunespec.core.spectra import DEFAULT_GRID, Spectra
 from tunespec.core.wiener import WienerEstimate, wiener_reflectance
-
-from tests.tolerances import ATOL_EXACT, ATOL_WIENER_LOOP
 
 
 @pytest.fixture(scope="module")
@@ -325,7 +325,10 @@ def test_saturated_responses_are_ignored() -> None:
     sens = cam.with_values(cam.values * scale)
     ref = wiener_reflectance(clean, leds, sens, sg).reflectance.values
     est_ign = wiener_reflectance(
-        Responses(patches.names, leds.names, bad_rgb, bad_std, None, sat), leds, sens, sg
+        Responses(patches.names, leds.names, bad_rgb, bad_std, None, sat),
+        leds,
+        sens,
+        sg,
     ).reflectance.values
     est_raw = wiener_reflectance(
         Responses(patches.names, leds.names, bad_rgb, bad_std), leds, sens, sg

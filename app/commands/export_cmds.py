@@ -1,0 +1,244 @@
+"""``tunespec export-cgats | export-rawtoaces | report``: exports and the report from files.
+
+``export-cgats`` writes an ArgyllCMS ``.ti3`` (CGATS) of reflectances with XYZ and
+L*a*b* (D50, 2°) and, from a responses CSV, the camera RGB under one illuminant, which
+``spec2cie``, ``colverify`` and ``colprof`` read. ``export-rawtoaces`` writes camera
+sensitivities in the rawtoaces-data JSON schema. ``report`` writes the HTML and PDF
+report of whatever files it is given.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+from tunespec.app.cli import grid_arg
+from tunespec.core.errors import InputError
+from tunespec.core.spectra import Grid, Spectra, read_spectra_csv
+
+__all__ = ["register"]
+
+
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Add ``export-cgats``, ``export-rawtoaces`` and ``report``."""
+    p = sub.add_parser(
+        "export-cgats",
+        help="reflectances (+ camera RGB) as an ArgyllCMS .ti3 CGATS file",
+        description="Write reflectances as an ArgyllCMS .ti3 (CGATS): SAMPLE_ID, "
+        "SAMPLE_NAME, RGB_R/G/B (percent of full scale, from --responses), XYZ "
+        "and L*a*b* (D50, CIE 1931 2°, ASTM E308, ICC D50 white) and SPEC_nnn "
+        "(percent). ArgyllCMS spec2cie, colverify and colprof read it.",
+    )
+    p.add_argument("--reflectances", required=True, type=Path, help="spectral CSV")
+    p.add_argument(
+        "--responses", type=Path, help="responses CSV: adds RGB_R/G/B (percent)"
+    )
+    p.add_argument(
+        "--illuminant",
+        help="whose RGB to write when the responses hold several illuminants",
+    )
+    _add_optional_grid(p)
+    p.add_argument(
+        "--no-spectra", action="store_true", help="leave out the SPEC_nnn fields"
+    )
+    p.add_argument("--descriptor", default="TuneSpec reflectances", help="DESCRIPTOR")
+    p.add_argument("-o", "--output", required=True, type=Path, help=".ti3 file")
+    p.set_defaults(func=cmd_export_cgats)
+
+    p = sub.add_parser(
+        "export-rawtoaces",
+        help="camera sensitivities as rawtoaces-data JSON",
+        description="Write camera sensitivities (CSV with R, G, B columns) in the "
+        "rawtoaces-data camera JSON schema, normalised to peak 1.",
+    )
+    p.add_argument("--sensitivities", required=True, type=Path, help="R,G,B CSV")
+    p.add_argument("--manufacturer", default="", help='e.g. "Canon"')
+    p.add_argument("--model", default="", help='e.g. "EOS 5D Mark III"')
+    p.add_argument(
+        "--absolute", action="store_true", help="keep the scale (no peak-1 norm)"
+    )
+    p.add_argument("-o", "--output", required=True, type=Path, help="JSON file")
+    p.set_defaults(func=cmd_export_rawtoaces)
+
+    p = sub.add_parser(
+        "report",
+        help="HTML and PDF report of a measurement from its files",
+        description="Write report.html (self-contained) and report.pdf from the "
+        "files given; each part of the report appears when its files are given.",
+    )
+    p.add_argument("-o", "--out", required=True, type=Path, help="output folder")
+    p.add_argument("--title", default="TuneSpec measurement report")
+    p.add_argument("--reflectances", type=Path, help="estimated reflectances CSV")
+    p.add_argument("--reference", type=Path, help="reference reflectances CSV")
+    p.add_argument("--sensitivities", type=Path, help="estimated sensitivities")
+    p.add_argument(
+        "--reference-sensitivities",
+        type=Path,
+        help="reference (true) sensitivities, CSV or rawtoaces JSON",
+    )
+    p.add_argument("--illuminants", type=Path, help="LED spectra CSV")
+    p.add_argument("--responses", type=Path, help="responses CSV (saturation flags)")
+    p.add_argument(
+        "--chart",
+        type=Path,
+        help="chart reflectances of --responses: computes Table 1 with "
+        "--sensitivities and --illuminants",
+    )
+    p.add_argument(
+        "--calibration-stats",
+        type=Path,
+        help="statistics JSON of 'tunespec calibrate --stats' (Table 1)",
+    )
+    p.add_argument("--session-id", help="session identifier shown in the report")
+    _add_optional_grid(p)
+    p.set_defaults(func=cmd_report)
+
+
+def _add_optional_grid(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--grid",
+        type=grid_arg,
+        default=None,
+        metavar="START:END:STEP",
+        help="resample onto this grid in nm (default: keep the file's wavelengths)",
+    )
+
+
+def cmd_export_cgats(args: argparse.Namespace) -> int:
+    from tunespec.core.cgats import write_cgats
+    from tunespec.core.export import reflectance_ti3
+    from tunespec.core.responses import read_responses_csv
+
+    reflectance = read_spectra_csv(args.reflectances, args.grid)
+    responses = None if args.responses is None else read_responses_csv(args.responses)
+    if args.illuminant and responses is None:
+        raise InputError("--illuminant needs --responses")
+    table = reflectance_ti3(
+        reflectance,
+        responses=responses,
+        illuminant=args.illuminant,
+        descriptor=args.descriptor,
+        spectra=not args.no_spectra,
+    )
+    write_cgats(table, args.output)
+    fields = "names" + (", RGB" if table.rgb is not None else "") + ", XYZ, Lab"
+    fields += "" if args.no_spectra else f", {reflectance.wavelength_nm.size} bands"
+    print(f"{len(table)} patches ({fields}) written to {args.output}")
+    return 0
+
+
+def _read_sensitivities(path: Path, grid: Grid | None) -> Spectra:
+    from tunespec.core.datasets import read_rawtoaces_json
+
+    if path.suffix.lower() == ".json":
+        s = read_rawtoaces_json(path)
+        return s if grid is None else s.resample(grid, source=str(path))
+    s = read_spectra_csv(path, grid)
+    missing = [c for c in ("R", "G", "B") if c not in s.names]
+    if missing:
+        raise InputError(
+            f"missing column(s) {', '.join(missing)}; expected R, G, B", path=path
+        )
+    return s.select(["R", "G", "B"], source=str(path))
+
+
+def cmd_export_rawtoaces(args: argparse.Namespace) -> int:
+    from tunespec.core.export import tunespec_version, write_sensitivity_json
+
+    sens = _read_sensitivities(args.sensitivities, None)
+    write_sensitivity_json(
+        sens,
+        args.output,
+        manufacturer=args.manufacturer,
+        model=args.model,
+        normalize=not args.absolute,
+        measurement_equipment=f"TuneSpec {tunespec_version()}",
+    )
+    print(
+        f"sensitivities ({sens.wavelength_nm.size} wavelengths) written to {args.output}"
+    )
+    return 0
+
+
+def _table1_from_json(path: Path) -> tuple[Any, Any, tuple[str, ...]]:
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError("file not found", path=path) from None
+    except json.JSONDecodeError as exc:
+        raise InputError(
+            f"not valid JSON: {exc.msg}", path=path, line=exc.lineno
+        ) from None
+    if not isinstance(doc, dict) or not isinstance(doc.get("training"), dict):
+        raise InputError(
+            "expected the statistics JSON of 'tunespec calibrate --stats' "
+            '(with a "training" table)',
+            path=path,
+        )
+    return doc["training"], doc.get("held_out"), tuple(doc.get("excluded_patches", ()))
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    from tunespec.core.report import ReportData, write_report
+    from tunespec.core.responses import read_responses_csv
+
+    grid = args.grid
+    data: dict[str, Any] = {"title": args.title, "session_id": args.session_id}
+    if args.reflectances:
+        data["reflectance"] = read_spectra_csv(args.reflectances, grid)
+    if args.reference:
+        data["reflectance_reference"] = read_spectra_csv(args.reference, grid)
+    if args.sensitivities:
+        data["sensitivity"] = _read_sensitivities(args.sensitivities, grid)
+    if args.reference_sensitivities:
+        data["sensitivity_reference"] = _read_sensitivities(
+            args.reference_sensitivities, grid
+        )
+    if args.illuminants:
+        data["illuminants"] = read_spectra_csv(args.illuminants, grid)
+    if args.responses:
+        data["responses"] = read_responses_csv(args.responses)
+    if "reflectance" in data and "reflectance_reference" in data:
+        from tunespec.core.colorimetry import reflectance_stats
+
+        data["table2"] = reflectance_stats(
+            data["reflectance"], data["reflectance_reference"]
+        )
+    if args.calibration_stats:
+        t1, held, excluded = _table1_from_json(args.calibration_stats)
+        data.update(table1=t1, table1_held_out=held, excluded_patches=excluded)
+    elif args.chart:
+        data["table1"] = _table1_from_files(args, data, grid)
+    html_path, pdf_path = write_report(args.out, ReportData(**data))
+    print(f"report written to {html_path} and {pdf_path}")
+    return 0
+
+
+def _table1_from_files(
+    args: argparse.Namespace, data: dict[str, Any], grid: Grid | None
+) -> Any:
+    from tunespec.core.forward_model import render_rgb
+    from tunespec.core.stats import prediction_stats
+
+    need = [n for n in ("sensitivity", "illuminants", "responses") if n not in data]
+    if need:
+        opts = {
+            "sensitivity": "--sensitivities",
+            "illuminants": "--illuminants",
+            "responses": "--responses",
+        }
+        raise InputError(f"--chart needs {', '.join(opts[n] for n in need)}")
+    responses = data["responses"]
+    sens: Spectra = data["sensitivity"]
+    wl = sens.wavelength_nm
+    work = Grid(float(wl[0]), float(wl[-1]), sens.step_nm) if grid is None else grid
+    chart = read_spectra_csv(args.chart, work).select(
+        responses.patches, source=str(args.chart)
+    )
+    illum = data["illuminants"].resample(work, source=str(args.illuminants))
+    illum = illum.select(responses.illuminants, source=str(args.illuminants))
+    sens = sens.resample(work, source=str(args.sensitivities))
+    predicted = render_rgb(chart.values, illum.values, sens.values, work.step_nm)
+    return prediction_stats(responses.rgb, predicted)

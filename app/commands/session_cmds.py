@@ -1,0 +1,325 @@
+"""``tunespec demo | capture | process | run``: measurement sessions on the command line."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from tunespec.app.cli import progress_bar
+from tunespec.core.errors import InputError
+from tunespec.core.layout import TargetLayout
+from tunespec.core.session import Session
+
+__all__ = ["register"]
+
+
+def _resolution(text: str) -> tuple[int, int]:
+    from tunespec.devices.registry import parse_resolution
+
+    try:
+        return parse_resolution(text)
+    except InputError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _exposure(text: str) -> str | float:
+    if text == "auto":
+        return text
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected 'auto' or seconds, got {text!r}"
+        ) from None
+    if not value > 0:
+        raise argparse.ArgumentTypeError("exposure must be > 0 s")
+    return value
+
+
+def _floats(text: str) -> tuple[float, ...]:
+    try:
+        return tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected comma-separated numbers, got {text!r}"
+        ) from None
+
+
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Add the session subcommands."""
+    from tunespec.devices.workflow import DEMO_RESOLUTION
+
+    p = sub.add_parser(
+        "demo",
+        help="the full measurement on the simulated bench (no hardware needed)",
+        description="Capture the ColorChecker SG and a CMY sample target under all "
+        "22 LEDs of the simulated bench, process, calibrate, estimate reflectances, "
+        "and write exports and a report; prints Tables 1 and 2 against the bench's "
+        "truth. Re-running on the same folder resumes it.",
+    )
+    p.add_argument("--out", type=Path, default=Path("tunespec-demo"), help="folder")
+    p.add_argument("--seed", type=int, default=0, help="simulation seed (0)")
+    p.add_argument(
+        "--resolution",
+        type=_resolution,
+        default=DEMO_RESOLUTION,
+        metavar="WxH",
+        help=f"simulated camera resolution (default {DEMO_RESOLUTION[0]}x"
+        f"{DEMO_RESOLUTION[1]}; the 5D Mark III has 5760x3840)",
+    )
+    p.add_argument("--no-report", action="store_true", help="skip the HTML/PDF report")
+    p.set_defaults(func=cmd_demo)
+
+    p = sub.add_parser(
+        "capture",
+        help="capture a session: darks, white background and target under each LED",
+        description="Capture (or resume) a measurement session into a folder. Every "
+        "frame is saved as it comes; after a crash, --resume takes only what is "
+        "missing.",
+    )
+    p.add_argument(
+        "--light",
+        default="sim",
+        help="sim | cal1:///dev/ttyUSB0 | cal1+socket://HOST:PORT",
+    )
+    p.add_argument(
+        "--camera",
+        default=None,
+        help="sim[?realtime=1] | gphoto2 | "
+        "gphoto2:usb:BUS,DEV (default: sim with a simulated light)",
+    )
+    p.add_argument(
+        "--layout", type=Path, help="target layout JSON (needed for a new session)"
+    )
+    p.add_argument("--out", required=True, type=Path, help="session folder")
+    p.add_argument("--resume", action="store_true", help="continue an existing session")
+    p.add_argument(
+        "--retake",
+        action="append",
+        default=[],
+        metavar="FRAME_ID",
+        help="take this frame again (repeatable; implies --resume)",
+    )
+    p.add_argument(
+        "--exposure",
+        type=_exposure,
+        default="auto",
+        help="'auto' (metered per LED) or seconds for every LED",
+    )
+    p.add_argument(
+        "--max-exposure",
+        type=float,
+        default=30.0,
+        metavar="S",
+        help="longest exposure auto may choose (30 s)",
+    )
+    p.add_argument("--iso", type=int, default=100)
+    p.add_argument(
+        "--brackets",
+        type=_floats,
+        default=(1.0,),
+        metavar="1,0.125",
+        help="exposure brackets per LED, merged as HDR in processing",
+    )
+    p.add_argument("--darks", type=int, default=1, help="dark frames per exposure")
+    p.add_argument("--channels", default=None, help="comma-separated LED channels")
+    p.add_argument(
+        "--resolution",
+        type=_resolution,
+        default=None,
+        metavar="WxH",
+        help="simulated camera resolution",
+    )
+    p.add_argument("--seed", type=int, default=0, help="simulation seed")
+    p.set_defaults(func=cmd_capture)
+
+    p = sub.add_parser(
+        "process",
+        help="responses and illuminants of a captured session",
+        description="Dark subtraction, flat field (Eq. 2), target corners, central "
+        "ROI statistics: writes the responses CSV that calibrate/estimate read, and "
+        "the illuminants (measured SPD x exposure).",
+    )
+    p.add_argument("session", type=Path, help="session folder")
+    p.add_argument("-o", "--output", required=True, type=Path, help="responses CSV")
+    p.add_argument(
+        "--illuminants-out",
+        type=Path,
+        default=None,
+        metavar="L.csv",
+        help="illuminants CSV (default: beside the responses)",
+    )
+    p.add_argument(
+        "--layout", type=Path, default=None, help="layout JSON (default: the session's)"
+    )
+    p.add_argument(
+        "--corners",
+        default=None,
+        help="auto | layout | x1,y1,x2,y2,x3,y3,x4,y4 (TL TR BR BL, px)",
+    )
+    p.add_argument(
+        "--roi-fraction",
+        type=float,
+        default=None,
+        help="ROI area fraction of a patch (layout's, paper: 0.2)",
+    )
+    p.add_argument(
+        "--allow-incomplete",
+        action="store_true",
+        help="leave out channels with missing frames",
+    )
+    p.add_argument("--verify", action="store_true", help="check file checksums first")
+    p.set_defaults(func=cmd_process)
+
+    p = sub.add_parser(
+        "run",
+        help="capture -> process -> calibrate -> estimate -> export from a config",
+        description="Run the whole measurement from a JSON or TOML configuration "
+        "(see tunespec.devices.workflow.load_config); existing sessions are resumed.",
+    )
+    p.add_argument("config", type=Path, help="configuration (.json or .toml)")
+    p.set_defaults(func=cmd_run)
+
+
+def _print_result(result: object, wall_s: float) -> None:
+    print(result.format_text())  # type: ignore[attr-defined]
+    for w in result.warnings:  # type: ignore[attr-defined]
+        print(f"warning: {w}", file=sys.stderr)
+    files = result.files  # type: ignore[attr-defined]
+    print(
+        f"\n{len(files)} files in {result.out_dir}, e.g. "  # type: ignore[attr-defined]
+        + ", ".join(p.name for p in list(files.values())[:6])
+    )
+    if "report_html" in files:
+        print(f"report: {files['report_html']}")
+    print(f"done in {wall_s:.1f} s")
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    from tunespec.devices.workflow import run_demo
+
+    t0 = time.perf_counter()
+    result = run_demo(
+        args.out,
+        progress=progress_bar("demo"),
+        seed=args.seed,
+        resolution=args.resolution,
+        report_files=not args.no_report,
+    )
+    _print_result(result, time.perf_counter() - t0)
+    return 0
+
+
+def cmd_capture(args: argparse.Namespace) -> int:
+    from tunespec.devices.capture import capture, new_session
+    from tunespec.devices.registry import open_bench
+
+    resume = args.resume or bool(args.retake)
+    exists = (args.out / "manifest.json").is_file()
+    if exists and not resume:
+        raise InputError(
+            "a session exists here; add --resume to continue it", path=args.out
+        )
+    if resume and not exists:
+        raise InputError("no session to resume here", path=args.out)
+    session = Session.open(args.out) if exists else None
+    layout = None
+    if args.layout is not None:
+        layout = TargetLayout.load(args.layout)
+    elif session is not None:
+        layout = session.layout
+    if layout is None:
+        raise InputError("--layout is needed for a new session")
+    with open_bench(
+        args.light,
+        args.camera,
+        layout=layout.with_corners(None),
+        layout_path=args.layout,
+        resolution=args.resolution,
+        seed=args.seed,
+    ) as bench:
+        if session is None:
+            session = new_session(
+                args.out,
+                bench.light,
+                bench.camera,
+                layout=layout,
+                exposure=args.exposure,
+                iso=args.iso,
+                channels=args.channels.split(",") if args.channels else None,
+                n_darks=args.darks,
+                brackets=args.brackets,
+            )
+        result = capture(
+            session,
+            bench.light,
+            bench.camera,
+            bench.stage,
+            resume=resume,
+            retake=args.retake,
+            max_exposure_s=args.max_exposure,
+            progress=progress_bar("capturing"),
+        )
+    for w in result.warnings:
+        print(f"warning: {w}", file=sys.stderr)
+    print(
+        f"{len(result.captured)} frame(s) captured, {result.skipped} already there; "
+        f"session {args.out} is complete"
+    )
+    return 0
+
+
+def _corners_arg(text: str | None) -> object:
+    if text is None or text in ("auto", "layout"):
+        return text
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        values = []
+    if len(values) != 8:
+        raise InputError(
+            f"--corners: expected auto, layout or 8 numbers x1,y1,...,x4,y4, got {text!r}"
+        )
+    return [values[i : i + 2] for i in range(0, 8, 2)]
+
+
+def cmd_process(args: argparse.Namespace) -> int:
+    from tunespec.core.processing import process_session, write_processed
+
+    session = Session.open(args.session)
+    layout = TargetLayout.load(args.layout) if args.layout else None
+    processed = process_session(
+        session,
+        layout=layout,
+        corners=_corners_arg(args.corners),  # type: ignore[arg-type]
+        roi_fraction=args.roi_fraction,
+        allow_incomplete=args.allow_incomplete,
+        verify=args.verify,
+        progress=progress_bar("processing"),
+    )
+    illum = args.illuminants_out or args.output.with_name(
+        args.output.stem + "_illuminants.csv"
+    )
+    write_processed(processed, args.output, illum)
+    for w in processed.warnings:
+        print(f"warning: {w}", file=sys.stderr)
+    r = processed.responses
+    corners = processed.layout.corners_px or ()
+    print(
+        f"{len(r.patches)} patches x {len(r.illuminants)} illuminants; corners "
+        f"({processed.corners_source}): "
+        + " ".join(f"({x:.1f},{y:.1f})" for x, y in corners)
+    )
+    print(f"responses written to {args.output}, illuminants to {illum}")
+    return 0
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from tunespec.devices.workflow import run_config
+
+    t0 = time.perf_counter()
+    result = run_config(args.config, progress=progress_bar("run"))
+    _print_result(result, time.perf_counter() - t0)
+    return 0

@@ -1,0 +1,524 @@
+"""Exports of a measurement that other tools read: CSV, rawtoaces JSON, Argyll ``.ti3``.
+
+One measurement gives these files (:func:`export_measurement`), each readable by
+TuneSpec again:
+
+===============================  =====================================================
+``sensitivities.csv``            estimated camera sensitivities, spectral CSV
+                                 (``wavelength_nm,R,G,B``, absolute scale: Eq. 1 with
+                                 them predicts the responses)
+``sensitivities.json``           the same in the rawtoaces-data camera schema (as
+                                 ``resources/cameras/*.json``), normalised to peak 1
+``reflectances.csv``             estimated reflectances, spectral CSV (0..1)
+``reflectances.ti3``             ArgyllCMS CGATS: names, camera RGB (percent), XYZ and
+                                 L*a*b* (D50, 2°), spectra (percent)
+``reference_reflectances.csv``   the reference measurements compared with, if given
+``reference_reflectances.ti3``   the same as ``.ti3``, on the estimate's grid (as
+                                 Table 2 compares), so ``colverify`` of the two
+                                 ``.ti3`` files reproduces Table 2's CIEDE2000
+``responses.csv``                camera responses, long format (``core.responses``)
+``illuminants.csv``              the LED spectra used, spectral CSV
+``table1_prediction.csv``        Table 1: response prediction errors per channel
+                                 (fitted and, if any, held-aside patches)
+``table2_reflectance.csv``       Table 2: CIEDE2000 (D50) and spectral RMS per patch
+===============================  =====================================================
+
+Numbers are written with :func:`repr`, so every file reads back bit for bit.
+
+References
+----------
+Trichromatic Reflectance Capture Using a Tunable Light Source (``shared/reference``),
+Tables 1 and 2; rawtoaces-data camera schema (``resources/cameras/SOURCE.md``).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import uuid
+from collections.abc import Mapping
+from datetime import UTC, datetime
+from os import PathLike
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from tunespec.core.cgats import CgatsTable, ti3_table, write_cgats
+from tunespec.core.colorimetry import lab_d50, xyz_d50
+from tunespec.core.errors import InputError
+from tunespec.core.responses import Responses, write_responses_csv
+from tunespec.core.spectra import Grid, Spectra, write_spectra_csv
+
+if TYPE_CHECKING:
+    from tunespec.core.colorimetry import ReflectanceStats
+    from tunespec.core.stats import CalibrationReport, PredictionStats
+
+__all__ = [
+    "EXPORT_NAMES",
+    "export_measurement",
+    "reflectance_ti3",
+    "sensitivity_rawtoaces_document",
+    "tunespec_version",
+    "write_prediction_stats_csv",
+    "write_reflectance_stats_csv",
+    "write_sensitivity_json",
+]
+
+#: File name of each export kind (the keys of :func:`export_measurement`'s result).
+EXPORT_NAMES: dict[str, str] = {
+    "sensitivities_csv": "sensitivities.csv",
+    "sensitivities_json": "sensitivities.json",
+    "reflectances_csv": "reflectances.csv",
+    "reflectances_ti3": "reflectances.ti3",
+    "reference_csv": "reference_reflectances.csv",
+    "reference_ti3": "reference_reflectances.ti3",
+    "responses_csv": "responses.csv",
+    "illuminants_csv": "illuminants.csv",
+    "table1_csv": "table1_prediction.csv",
+    "table2_csv": "table2_reflectance.csv",
+}
+
+_TABLE1_ROWS = ("Red", "Green", "Blue", "RGB")
+
+
+def tunespec_version() -> str:
+    """The installed TuneSpec version (``importlib.metadata``), or ``"unknown"``."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("tunespec")
+    except PackageNotFoundError:
+        return "unknown"
+
+
+def _now() -> datetime:
+    return datetime.now(UTC).replace(microsecond=0)
+
+
+def _iso(created: datetime | str | None) -> str:
+    if created is None:
+        created = _now()
+    if isinstance(created, str):
+        return created
+    return created.isoformat().replace("+00:00", "Z")
+
+
+def sensitivity_rawtoaces_document(
+    sensitivity: Spectra,
+    *,
+    manufacturer: str = "",
+    model: str = "",
+    normalize: bool = True,
+    description: str = "camera spectral sensitivity data",
+    document_creator: str = "TuneSpec",
+    laboratory: str = "",
+    measurement_equipment: str | None = None,
+    comments: str = "",
+    license: str = "",
+    unique_identifier: str | None = None,
+    created: datetime | str | None = None,
+) -> dict[str, Any]:
+    """Camera sensitivities as a rawtoaces-data JSON document (schema 1.0.0).
+
+    Parameters
+    ----------
+    sensitivity : Spectra R, G, B
+        Sensitivities on any grid (keys are the wavelengths, ``"380"``, ``"382.5"``).
+    manufacturer, model
+        The camera, e.g. ``"Canon"``, ``"EOS 5D Mark III"``.
+    normalize
+        Scale to peak 1 (rawtoaces' "relative" units, like the shipped files); the
+        factor that restores the absolute scale goes into ``comments``.
+    description, document_creator, laboratory, measurement_equipment, comments, license
+        Header fields of the schema.
+    unique_identifier
+        A UUID; ``None`` makes a random one.
+    created
+        ``document_creation_date``; ``None`` is now (UTC).
+
+    Returns
+    -------
+    dict
+        ``{"header": {...}, "spectral_data": {"units": "relative", "index": {"main":
+        ["R", "G", "B"]}, "data": {"main": {"380": [r, g, b], ...}}}}``.
+
+    Raises
+    ------
+    InputError
+        If the spectra are not ``R, G, B`` or hold non-finite values.
+    """
+    try:
+        rgb = sensitivity.select(["R", "G", "B"])
+    except InputError:
+        raise InputError(
+            f"sensitivities must be named R, G, B, not {', '.join(sensitivity.names)}",
+            path=sensitivity.meta.get("source"),
+        ) from None
+    values = rgb.values
+    if not np.all(np.isfinite(values)):
+        raise InputError("sensitivities hold non-finite values")
+    note = comments
+    if normalize:
+        peak = float(values.max())
+        if peak <= 0:
+            raise InputError("sensitivities are all zero or negative")
+        values = values / peak
+        scale = f"normalised to peak 1; multiply by {peak!r} for the absolute scale"
+        note = f"{comments}; {scale}" if comments else scale
+    data = {
+        f"{wl:g}": [float(v) for v in values[:, j]]
+        for j, wl in enumerate(rgb.wavelength_nm)
+    }
+    return {
+        "header": {
+            "schema_version": "1.0.0",
+            "manufacturer": manufacturer,
+            "model": model,
+            "description": description,
+            "document_creator": document_creator,
+            "unique_identifier": unique_identifier or str(uuid.uuid4()),
+            "measurement_equipment": measurement_equipment,
+            "laboratory": laboratory,
+            "document_creation_date": _iso(created),
+            "comments": note,
+            "license": license,
+        },
+        "spectral_data": {
+            "units": "relative",
+            "reflection_geometry": None,
+            "transmission_geometry": None,
+            "bandwidth_FWHM": None,
+            "bandwidth_corrected": None,
+            "index": {"main": ["R", "G", "B"]},
+            "data": {"main": data},
+        },
+    }
+
+
+def write_sensitivity_json(
+    sensitivity: Spectra, path: str | PathLike[str], **header: Any
+) -> Path:
+    """Write :func:`sensitivity_rawtoaces_document` to ``path``; returns the path.
+
+    ``tunespec.core.datasets.read_rawtoaces_json`` reads it back (values bit for bit
+    when ``normalize=False``). colour-science 0.4.7 has no reader for this schema.
+    """
+    doc = sensitivity_rawtoaces_document(sensitivity, **header)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(doc, indent=4) + "\n", encoding="utf-8")
+    return path
+
+
+def _write_rows(path: Path, header: list[str], rows: list[list[str]]) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh, lineterminator="\n")
+        w.writerow(header)
+        w.writerows(rows)
+    return path
+
+
+def write_prediction_stats_csv(
+    stats: PredictionStats | CalibrationReport | Mapping[str, Any],
+    path: str | PathLike[str],
+) -> Path:
+    """Table 1 as CSV: ``patches,channel,mean,max,p95,n_stimuli``.
+
+    Rows Red, Green, Blue, RGB of the ``fitted`` patches, then, for a calibration
+    report with held-aside patches, the same rows for ``held_out``.
+
+    Parameters
+    ----------
+    stats
+        A :class:`~tunespec.core.stats.PredictionStats` (its rows are ``fitted``), a
+        :class:`~tunespec.core.stats.CalibrationReport`, or the ``as_dict()`` of either.
+    path
+        Output file.
+    """
+    d = stats if isinstance(stats, Mapping) else stats.as_dict()
+    parts = [("fitted", d.get("training", d))]
+    if d.get("held_out") is not None:
+        parts.append(("held_out", d["held_out"]))
+    rows = []
+    try:
+        for label, t in parts:
+            n = str(int(t["n_stimuli"]))
+            rows += [
+                [
+                    label,
+                    row,
+                    *(repr(float(t[row][k])) for k in ("mean", "max", "p95")),
+                    n,
+                ]
+                for row in _TABLE1_ROWS
+            ]
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputError(f"not Table 1 statistics (missing {exc})") from None
+    header = ["patches", "channel", "mean", "max", "p95", "n_stimuli"]
+    return _write_rows(Path(path), header, rows)
+
+
+def write_reflectance_stats_csv(
+    stats: ReflectanceStats | Mapping[str, Any], path: str | PathLike[str]
+) -> Path:
+    """Table 2 as CSV: ``patch,delta_e00_d50,spectral_rms``, then ``average`` and ``max``.
+
+    Parameters
+    ----------
+    stats
+        A :class:`~tunespec.core.colorimetry.ReflectanceStats` or its ``as_dict()``.
+    path
+        Output file.
+    """
+    d = stats if isinstance(stats, Mapping) else stats.as_dict()
+    try:
+        rows = [
+            [str(name), repr(float(v["delta_e00"])), repr(float(v["spectral_rms"]))]
+            for name, v in d["patches"].items()
+        ]
+        for label in ("average", "max"):
+            rows.append(
+                [
+                    label,
+                    repr(float(d[label]["delta_e00"])),
+                    repr(float(d[label]["spectral_rms"])),
+                ]
+            )
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise InputError(f"not Table 2 statistics (missing {exc})") from None
+    return _write_rows(Path(path), ["patch", "delta_e00_d50", "spectral_rms"], rows)
+
+
+def _responses_rgb(
+    responses: Responses, names: tuple[str, ...], illuminant: str | None
+) -> tuple[np.ndarray, str]:
+    if illuminant is None:
+        if len(responses.illuminants) != 1:
+            raise InputError(
+                "the responses hold several illuminants; name the one whose RGB goes "
+                f"into the .ti3 (--illuminant): {', '.join(responses.illuminants)}"
+            )
+        illuminant = responses.illuminants[0]
+    if illuminant not in responses.illuminants:
+        raise InputError(
+            f"illuminant {illuminant!r} not in the responses "
+            f"({', '.join(responses.illuminants)})"
+        )
+    missing = [n for n in names if n not in responses.patches]
+    if missing:
+        raise InputError(
+            f"{len(missing)} patch(es) have no responses: {', '.join(missing[:8])}"
+        )
+    sub = responses.subset(list(names), [illuminant])
+    return sub.rgb[:, 0, :], illuminant
+
+
+def reflectance_ti3(
+    reflectance: Spectra,
+    *,
+    responses: Responses | None = None,
+    illuminant: str | None = None,
+    descriptor: str = "TuneSpec estimated reflectances",
+    created: datetime | str | None = None,
+    keywords: Mapping[str, str] | None = None,
+    spectra: bool = True,
+) -> CgatsTable:
+    """An Argyll ``.ti3`` of reflectances with XYZ and L*a*b* (D50, CIE 1931 2°).
+
+    Parameters
+    ----------
+    reflectance : Spectra (n, n_wl)
+        Reflectance factors 0..1 on an equidistant grid covering 400-700 nm.
+    responses
+        Camera responses; the RGB under ``illuminant`` of each patch is written as
+        ``RGB_R/G/B`` in percent of full scale (device values of an ``INPUT``
+        device), e.g. for ``colprof``. Values outside 0..100 % are clipped (Argyll
+        refuses them) and the patches listed in ``TUNESPEC_RGB_CLIPPED``.
+    illuminant
+        Which illuminant's RGB to write; may be omitted if there is only one.
+    descriptor
+        ``DESCRIPTOR``.
+    created
+        ``CREATED``; ``None`` is now (UTC).
+    keywords
+        More header keywords.
+    spectra
+        Write the ``SPEC_nnn`` fields (percent).
+
+    Returns
+    -------
+    CgatsTable
+        XYZ from :func:`~tunespec.core.colorimetry.xyz_d50` (Y = 100), L*a*b* from
+        :func:`~tunespec.core.colorimetry.lab_d50` (ICC D50 white), as ArgyllCMS's
+        ``spec2cie -i D50 -o 1931_2`` computes them.
+
+    Raises
+    ------
+    InputError
+        Patches without responses, an ambiguous or unknown illuminant, a grid that
+        does not cover 400-700 nm.
+    """
+    names = reflectance.names
+    # ISO 28178 (CGATS.17) keywords as X-Rite writes them; Argyll ignores both.
+    kw: dict[str, str] = {"ILLUMINATION_NAME": "D50", "OBSERVER_ANGLE": "2"}
+    rgb = None
+    if responses is not None:
+        rgb, used = _responses_rgb(responses, names, illuminant)
+        kw["TUNESPEC_RGB_ILLUMINANT"] = used
+        # ArgyllCMS refuses device values outside 0..100 % ("field exceeds 100.0");
+        # a flat-fielded response can pass full scale a little, a dark one dip below 0.
+        out = np.any((rgb < 0.0) | (rgb > 1.0), axis=1)
+        if np.any(out):
+            rgb = np.clip(rgb, 0.0, 1.0)
+            kw["TUNESPEC_RGB_CLIPPED"] = " ".join(
+                n for n, o in zip(names, out, strict=True) if o
+            )
+    kw.update(keywords or {})
+    return ti3_table(
+        names,
+        reflectance=reflectance if spectra else None,
+        rgb=rgb,
+        xyz=xyz_d50(reflectance),
+        lab=lab_d50(reflectance),
+        descriptor=descriptor,
+        originator=f"TuneSpec {tunespec_version()}",
+        created=created,
+        keywords=kw,
+    )
+
+
+def _reference_ti3(
+    reference: Spectra, estimated: Spectra | None, created: datetime | str | None
+) -> CgatsTable:
+    """The reference ``.ti3``, on the estimate's grid when it covers it.
+
+    Table 2 compares on the estimated grid (``reflectance_stats`` resamples the
+    reference); writing the reference on that grid makes ``colverify reference.ti3
+    reflectances.ti3`` reproduce Table 2's CIEDE2000.
+    """
+    keywords = {}
+    if estimated is not None:
+        wl = estimated.wavelength_nm
+        try:
+            grid = Grid(float(wl[0]), float(wl[-1]), estimated.step_nm)
+            resampled = reference.resample(grid)
+        except InputError:  # not equidistant, or not covered: keep it as it is
+            pass
+        else:
+            if not np.array_equal(resampled.wavelength_nm, reference.wavelength_nm):
+                keywords["TUNESPEC_RESAMPLED"] = (
+                    f"linear, onto the estimate's {grid} nm"
+                )
+            reference = resampled
+    return reflectance_ti3(
+        reference,
+        descriptor="Reference reflectances",
+        created=created,
+        keywords=keywords,
+    )
+
+
+def export_measurement(
+    out_dir: str | PathLike[str],
+    *,
+    sensitivity: Spectra | None = None,
+    reflectance: Spectra | None = None,
+    responses: Responses | None = None,
+    table1: PredictionStats | CalibrationReport | Mapping[str, Any] | None = None,
+    table2: ReflectanceStats | Mapping[str, Any] | None = None,
+    reference: Spectra | None = None,
+    illuminants: Spectra | None = None,
+    ti3_illuminant: str | None = None,
+    manufacturer: str = "",
+    model: str = "",
+    created: datetime | str | None = None,
+) -> dict[str, Path]:
+    """Write every export of a measurement into ``out_dir`` (see the module table).
+
+    Each argument is optional; only the files for what is given are written.
+
+    Parameters
+    ----------
+    out_dir
+        Folder, created if needed; existing files of the same names are replaced.
+    sensitivity : Spectra R, G, B
+        Estimated sensitivities (CSV absolute, JSON normalised to peak 1).
+    reflectance : Spectra
+        Estimated reflectances (CSV and ``.ti3``).
+    responses
+        Camera responses (CSV). The ``.ti3`` gets the RGB under ``ti3_illuminant``
+        (or the only illuminant); with several illuminants and none chosen it gets
+        no RGB.
+    table1, table2
+        Table 1 (:class:`~tunespec.core.stats.PredictionStats` or
+        :class:`~tunespec.core.stats.CalibrationReport`) and Table 2
+        (:class:`~tunespec.core.colorimetry.ReflectanceStats`), or their
+        ``as_dict()``.
+    reference : Spectra
+        Reference reflectances: CSV as given; ``.ti3`` resampled onto the estimate's
+        grid when it covers it, as Table 2 compares (e.g. for ``colverify``).
+    illuminants : Spectra
+        The LED spectra (CSV).
+    ti3_illuminant
+        See ``responses``.
+    manufacturer, model
+        The camera, for the rawtoaces JSON header.
+    created
+        Timestamp written into the headers; ``None`` is now (UTC).
+
+    Returns
+    -------
+    dict
+        Export kind (the keys of :data:`EXPORT_NAMES`) to path, in writing order.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    created = created if created is not None else _now()
+    paths: dict[str, Path] = {}
+
+    def target(kind: str) -> Path:
+        paths[kind] = out / EXPORT_NAMES[kind]
+        return paths[kind]
+
+    if sensitivity is not None:
+        write_spectra_csv(sensitivity, target("sensitivities_csv"))
+        write_sensitivity_json(
+            sensitivity,
+            target("sensitivities_json"),
+            manufacturer=manufacturer,
+            model=model,
+            measurement_equipment=f"TuneSpec {tunespec_version()}",
+            comments="estimated with TuneSpec from a chart under a tunable LED source",
+            created=created,
+        )
+    ti3_rgb = responses
+    if responses is not None and ti3_illuminant is None:
+        ti3_rgb = responses if len(responses.illuminants) == 1 else None
+    if reflectance is not None:
+        write_spectra_csv(reflectance, target("reflectances_csv"))
+        write_cgats(
+            reflectance_ti3(
+                reflectance,
+                responses=ti3_rgb,
+                illuminant=ti3_illuminant,
+                created=created,
+            ),
+            target("reflectances_ti3"),
+        )
+    if reference is not None:
+        write_spectra_csv(reference, target("reference_csv"))
+        write_cgats(
+            _reference_ti3(reference, reflectance, created),
+            target("reference_ti3"),
+        )
+    if responses is not None:
+        write_responses_csv(responses, target("responses_csv"))
+    if illuminants is not None:
+        write_spectra_csv(illuminants, target("illuminants_csv"))
+    if table1 is not None:
+        write_prediction_stats_csv(table1, target("table1_csv"))
+    if table2 is not None:
+        write_reflectance_stats_csv(table2, target("table2_csv"))
+    return paths

@@ -1,0 +1,768 @@
+"""From a captured session to patch responses and illuminants (the paper's processing).
+
+For every LED channel ``j`` of a session (:mod:`tunespec.core.session`) and every patch:
+
+1. **Dark subtraction.** The dark frame(s) taken at the same exposure and ISO (light
+   off) are averaged and subtracted from the white and the target frame.
+2. **Exposure brackets (optional HDR).** With several exposures per channel each pixel
+   takes the longest exposure in which it is not saturated, scaled to the reference
+   (longest) exposure; this happens in the linear raw domain.
+3. **Flat field, Eq. 2.** ``A' = mean(A_B[centre]) * A / A_B``, pixel- and
+   channel-wise, where ``A_B`` is the white background and the mean is taken over a
+   ``window_px`` x ``window_px`` window at the centre of ``A_B``. Within each ROI
+   ``A_B`` is replaced by its least-squares plane: the light field is smooth at that
+   scale, and dividing by the raw white pixels would add the white frame's noise to
+   every flat-fielded pixel (and divide by noise in a channel the LED barely
+   excites; such a channel borrows the flat field of the ROI's strongest channel).
+4. **ROI statistics.** The patches' central ``roi_fraction`` (of the patch area) are
+   mapped into the image through the homography of the target's four corners (found
+   with :mod:`tunespec.core.homography` or given in the layout), rasterised once into
+   pixel indices, and per patch and channel the mean, the per-pixel standard
+   deviation (Eq. 6), the pixel count and the clipped fraction are taken. Patches with
+   clipped pixels are flagged (``Responses.saturated``), so calibration leaves them
+   out.
+
+All of it runs on the half-resolution R, G, B planes of the raw mosaic
+(:func:`tunespec.core.raw.load_raw`, no demosaicing), and only on the ROI pixels and
+the flat-field window: a frame is read, its ROI photosites are gathered as float32,
+and the frame is dropped before the next is read, so memory does not grow with the
+number of frames and processing costs little more than decoding the raw files.
+
+The illuminant of channel ``j`` in Eq. 1 is the SPD the light source measured around
+the target exposure times that exposure in seconds, so channels with different
+exposures stay consistent with one set of camera sensitivities.
+
+References
+----------
+Trichromatic Reflectance Capture Using a Tunable Light Source (``shared/reference``),
+section "Capturing and Processing", Eq. 1, 2 and 6.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+from os import PathLike
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from tunespec.core.errors import InputError
+from tunespec.core.layout import TargetLayout
+from tunespec.core.progress import ProgressFn, StopFn, check_stop, report
+from tunespec.core.raw import (
+    RawFrame,
+    full_to_plane_px,
+    load_raw,
+    plane_to_full_px,
+    quad_mask,
+)
+from tunespec.core.responses import Responses, write_responses_csv
+from tunespec.core.session import (
+    FrameRecord,
+    Session,
+    find_darks,
+    frames_by_channel,
+)
+from tunespec.core.spectra import Spectra, write_spectra_csv
+
+__all__ = [
+    "FLAT_WINDOW_PX",
+    "SATURATION_TOLERANCE",
+    "ProcessedSession",
+    "RoiSet",
+    "process_session",
+    "write_processed",
+]
+
+#: Side of the centre window of the white frame whose mean normalises Eq. 2 (plane px).
+FLAT_WINDOW_PX = 100
+#: A channel needs its white ROI mean to this relative precision to be flat-fielded
+#: with its own white frame (see ``_flat_field``).
+FLAT_MIN_PRECISION = 0.01
+#: Corner detection works on images at most this wide (block-averaged), in pixels.
+DETECT_MAX_WIDTH_PX = 1000
+#: A patch is flagged when more than this fraction of its ROI pixels is clipped.
+SATURATION_TOLERANCE = 0.0
+#: Unit of the illuminants written by processing.
+ILLUMINANT_UNIT = "W sr^-1 m^-2 nm^-1 s (measured radiance x exposure)"
+_FLAT = "__flat_field_window__"
+
+
+Loader = Callable[[Path], RawFrame]
+
+
+@dataclass(frozen=True, eq=False)
+class RoiSet:
+    """Quadrilateral ROIs rasterised once into plane-pixel indices.
+
+    Parameters
+    ----------
+    names : n names
+        One per ROI.
+    rows, cols : (n_total,) int
+        Plane-pixel row and column of every ROI pixel, ROIs concatenated in order.
+    n_pixels : (n,) int
+        Pixels per ROI.
+    """
+
+    names: tuple[str, ...]
+    rows: NDArray[np.int64]
+    cols: NDArray[np.int64]
+    n_pixels: NDArray[np.int64]
+
+    @classmethod
+    def from_quads(
+        cls, names: Sequence[str], quads_px: ArrayLike, shape: tuple[int, int]
+    ) -> RoiSet:
+        """Rasterise quads given in plane pixels (x, y) on planes of ``shape``.
+
+        A pixel belongs to an ROI when its centre lies inside the quad
+        (:func:`tunespec.core.raw.quad_mask`).
+
+        Raises
+        ------
+        InputError
+            An ROI reaching outside the image or holding no pixel.
+        """
+        q = np.asarray(quads_px, dtype=np.float64)
+        if q.ndim != 3 or q.shape[1:] != (4, 2) or len(q) != len(names):
+            raise InputError(f"ROI quads must be (n, 4, 2) for n names, got {q.shape}")
+        h, w = shape
+        rows, cols, counts = [], [], []
+        for name, quad in zip(names, q, strict=True):
+            c0, c1 = math.floor(quad[:, 0].min()), math.ceil(quad[:, 0].max()) + 1
+            r0, r1 = math.floor(quad[:, 1].min()), math.ceil(quad[:, 1].max()) + 1
+            if c0 < 0 or r0 < 0 or c1 > w or r1 > h:
+                raise InputError(
+                    f"the ROI of patch {name!r} reaches outside the image ({w}x{h} "
+                    "plane px): check the target's corners"
+                )
+            rr, cc = np.nonzero(quad_mask(quad, c0, r0, c1 - c0, r1 - r0))
+            if rr.size == 0:
+                raise InputError(
+                    f"the ROI of patch {name!r} holds no pixel: the target is too "
+                    "small in the image or the ROI fraction too small"
+                )
+            rows.append(rr + r0)
+            cols.append(cc + c0)
+            counts.append(rr.size)
+        return cls(
+            tuple(names),
+            np.concatenate(rows).astype(np.int64),
+            np.concatenate(cols).astype(np.int64),
+            np.array(counts, dtype=np.int64),
+        )
+
+    def with_window(
+        self, name: str, row0: int, row1: int, col0: int, col1: int
+    ) -> RoiSet:
+        """A copy with an extra rectangular ROI (all pixels of the window)."""
+        rr, cc = np.mgrid[row0:row1, col0:col1]
+        return RoiSet(
+            (*self.names, name),
+            np.concatenate([self.rows, rr.ravel()]),
+            np.concatenate([self.cols, cc.ravel()]),
+            np.append(self.n_pixels, rr.size),
+        )
+
+    def centred_coords(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Column and row offset of every ROI pixel from its ROI's centroid.
+
+        Returns
+        -------
+        u, v : (n_total,)
+            Plane pixels, ROIs concatenated in order (as :meth:`gather`).
+        """
+        starts = np.concatenate([[0], np.cumsum(self.n_pixels)[:-1]])
+        n = self.n_pixels
+        u = self.cols.astype(np.float64)
+        v = self.rows.astype(np.float64)
+        u -= np.repeat(np.add.reduceat(u, starts) / n, n)
+        v -= np.repeat(np.add.reduceat(v, starts) / n, n)
+        return u, v
+
+    def gather(self, frame: RawFrame) -> tuple[NDArray[np.float32], NDArray[np.bool_]]:
+        """The R, G, B plane values of every ROI pixel of a frame.
+
+        Reads only the ROI photosites of the mosaic, with the same arithmetic as
+        :meth:`tunespec.core.raw.RawFrame.planes_in` (so the values are identical),
+        instead of converting windows or whole planes: on a full-size frame that
+        is what keeps processing close to the raw decoder's own speed.
+
+        Returns
+        -------
+        values : (3, n_total) float32
+            R, G, B of every ROI pixel, full-scale units, ROIs concatenated.
+        saturated : (n_total,) bool
+            Pixels whose CFA cell has a photosite at or above the white level.
+        """
+        mosaic = frame.mosaic
+        width = mosaic.shape[1]
+        flat = mosaic.reshape(-1)  # a view: load_raw keeps the mosaic contiguous
+        base = 2 * self.rows * width + 2 * self.cols
+        out = np.zeros((3, base.size), dtype=np.float32)
+        saturated = np.zeros(base.size, dtype=bool)
+        counts = [0, 0, 0]
+        for k, letter in enumerate(frame.cfa_pattern):
+            dy, dx = divmod(k, 2)
+            raw = flat[base + (dy * width + dx)]
+            saturated |= raw >= frame.white_level
+            black = float(frame.black_level_cfa[dy, dx])
+            scale = np.float32(1.0 / (frame.white_level - black))
+            val = np.multiply(raw, scale, dtype=np.float32)
+            val -= np.float32(black * scale)
+            ch = "RGB".index(letter)
+            out[ch] += val
+            counts[ch] += 1
+        for ch, n in enumerate(counts):
+            if n > 1:
+                out[ch] *= np.float32(1.0 / n)
+        return out, saturated
+
+
+@dataclass(frozen=True, eq=False)
+class ProcessedSession:
+    """What :func:`process_session` returns.
+
+    Parameters
+    ----------
+    responses : Responses
+        (n_patches, n_channels, 3): mean, per-pixel std, pixel count and saturated
+        fraction of the dark-corrected, flat-fielded ROI pixels, full-scale units.
+    illuminants : Spectra, (n_channels, n_wl)
+        Measured SPD x exposure of each channel's target frame, named by channel,
+        on the spectroradiometer's wavelengths.
+    layout : TargetLayout
+        The layout with the corners used (mosaic pixels).
+    corners_source : str
+        ``"auto"`` (found in the image), ``"layout"`` or ``"given"``.
+    flagged : tuple of (patch, channel)
+        Patch/channel pairs with clipped pixels, to be left out of calibration.
+    warnings : tuple of str
+        Operator-readable notes (saturation, incomplete channels).
+    corner_residual_px : float
+        RMS distance of the detected edge points from the fitted sides, mosaic
+        pixels (NaN unless the corners were found automatically).
+    """
+
+    responses: Responses
+    illuminants: Spectra
+    layout: TargetLayout
+    corners_source: str
+    flagged: tuple[tuple[str, str], ...] = ()
+    warnings: tuple[str, ...] = ()
+    corner_residual_px: float = float("nan")
+    stats: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class _Pixels:
+    """ROI pixels of one frame (or dark average), float32."""
+
+    values: NDArray[np.float32]  # (3, n_total)
+    saturated: NDArray[np.bool_]  # (n_total,)
+
+
+def _merge_brackets(
+    frames: Sequence[_Pixels], darks: Sequence[_Pixels], exposures_s: Sequence[float]
+) -> _Pixels:
+    """Dark-subtract and merge exposure brackets (longest first) in the linear domain.
+
+    Each pixel takes the longest exposure in which it is not clipped, scaled to the
+    reference (first) exposure; a pixel clipped in every bracket stays flagged.
+    """
+    values = frames[0].values - darks[0].values
+    clipped = frames[0].saturated.copy()
+    for f, d, t in zip(frames[1:], darks[1:], exposures_s[1:], strict=True):
+        use = clipped & ~f.saturated
+        if use.any():
+            scale = np.float32(exposures_s[0] / t)
+            values[:, use] = (f.values[:, use] - d.values[:, use]) * scale
+            clipped[use] = False
+    return _Pixels(values, clipped)
+
+
+@dataclass(frozen=True, eq=False)
+class _RoiGeometry:
+    """What the per-ROI fits need of the ROI pixels, computed once per session.
+
+    ``u, v`` are float32 pixel offsets from each ROI's centroid; ``suu, suv, svv``
+    their per-ROI sums of products (the plane fit's normal matrix, whose intercept
+    row decouples because the offsets sum to zero).
+    """
+
+    n: NDArray[np.int64]
+    starts: NDArray[np.int64]
+    u: NDArray[np.float32]
+    v: NDArray[np.float32]
+    suu: NDArray[np.float64]
+    suv: NDArray[np.float64]
+    svv: NDArray[np.float64]
+
+    @classmethod
+    def of(cls, rois: RoiSet, n_rois: int) -> _RoiGeometry:
+        n = rois.n_pixels[:n_rois]
+        total = int(n.sum())
+        u64, v64 = rois.centred_coords()
+        u64, v64 = u64[:total], v64[:total]
+        starts = np.concatenate([[0], np.cumsum(n)[:-1]]).astype(np.int64)
+        return cls(
+            n,
+            starts,
+            u64.astype(np.float32),
+            v64.astype(np.float32),
+            np.add.reduceat(u64 * u64, starts),
+            np.add.reduceat(u64 * v64, starts),
+            np.add.reduceat(v64 * v64, starts),
+        )
+
+    def sums(self, x: NDArray[np.float32]) -> NDArray[np.float64]:
+        """Per-ROI sums along the last axis, accumulated in float64."""
+        return np.add.reduceat(x, self.starts, axis=-1, dtype=np.float64)
+
+    def spread(self, per_roi: NDArray[np.float64]) -> NDArray[np.float32]:
+        """Per-ROI values repeated to every pixel, float32."""
+        return np.repeat(per_roi.astype(np.float32), self.n, axis=-1)
+
+
+def _smooth_white(
+    white: NDArray[np.float32], geo: _RoiGeometry
+) -> tuple[NDArray[np.float32], NDArray[np.float64]]:
+    """Least-squares plane through the white frame over each ROI, per channel.
+
+    The light field is smooth at the scale of a patch's ROI (the paper's bench varies
+    by 10 % over the whole target), so a plane in ``(u, v)`` keeps its gradient while
+    averaging away the white frame's shot and read noise, which a per-pixel division
+    would otherwise add to every flat-fielded pixel.
+
+    Parameters
+    ----------
+    white : (3, N)
+        Dark-corrected white-frame pixels of the ROIs, concatenated.
+    geo
+        The ROIs' pixel offsets and sums.
+
+    Returns
+    -------
+    fitted : (3, N) float32
+        The plane at every pixel.
+    rel_se : (3, n_roi)
+        Standard error of each ROI's mean white level relative to it (``inf`` for a
+        non-positive mean).
+    """
+    n = geo.n
+    sw = geo.sums(white)
+    suw = geo.sums(white * geo.u)
+    svw = geo.sums(white * geo.v)
+    sww = geo.sums(white * white)
+    mean = sw / n
+    det = geo.suu * geo.svv - geo.suv * geo.suv
+    ok = det > 1e-9 * np.maximum(geo.suu * geo.svv, 1e-30)  # one row/column: flat
+    safe = np.where(ok, det, 1.0)
+    b = np.where(ok, (geo.svv * suw - geo.suv * svw) / safe, 0.0)
+    c = np.where(ok, (geo.suu * svw - geo.suv * suw) / safe, 0.0)
+    # residual sum of squares of a least-squares fit, without a pass over the pixels
+    rss = np.maximum(sww - mean * sw - b * suw - c * svw, 0.0)
+    se = np.sqrt(rss / np.maximum(n - 3, 1) / n)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rel_se = np.where(mean > 0, se / mean, np.inf)
+    fitted = geo.spread(mean)
+    fitted += geo.spread(b) * geo.u
+    fitted += geo.spread(c) * geo.v
+    return fitted, rel_se
+
+
+def _flat_field(
+    target: NDArray[np.float32],
+    white: NDArray[np.float32],
+    mean_b: NDArray[np.float64],
+    geo: _RoiGeometry,
+) -> tuple[NDArray[np.float32], NDArray[np.bool_]]:
+    """Eq. 2, ``A' = mean(A_B) A / A_B``, pixel- and channel-wise over the ROIs.
+
+    ``A_B`` is the white frame smoothed by :func:`_smooth_white`. A channel whose
+    white signal in an ROI is too weak to divide by (relative standard error above
+    :data:`FLAT_MIN_PRECISION`, e.g. the blue channel under a deep-red LED) takes the
+    flat field of the strongest channel of that ROI instead: the light field's shape
+    is the same for the three channels, only the weak one cannot measure it.
+
+    Returns
+    -------
+    flat : (3, N) float32
+        Flat-fielded target pixels.
+    borrowed : (3, n_roi) bool
+        Where a channel used the strongest channel's flat field.
+    """
+    fitted, rel_se = _smooth_white(white, geo)
+    positive = np.minimum.reduceat(fitted, geo.starts, axis=1) > 0
+    positive &= mean_b[:, None] > 0
+    own = (rel_se < FLAT_MIN_PRECISION) & positive
+    # factor = mean(A_B) / A_B, in place (channels without signal are replaced below)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        np.divide(mean_b.astype(np.float32)[:, None], fitted, out=fitted)
+    if not own.all():
+        best = np.argmin(np.where(positive, rel_se, np.inf), axis=0)
+        lent = fitted[np.repeat(best, geo.n), np.arange(fitted.shape[1])]
+        lent[~np.isfinite(lent) | (lent <= 0)] = 1.0  # no white signal at all
+        fitted = np.where(np.repeat(own, geo.n, axis=1), fitted, lent[None, :])
+    fitted *= target
+    return fitted, ~own
+
+
+def _patch_stats(
+    values: NDArray[np.float32], clipped: NDArray[np.bool_], geo: _RoiGeometry
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Mean, per-pixel std (ddof=1) and clipped fraction per ROI.
+
+    Returns
+    -------
+    mean, std : (n_roi, 3)
+    clipped_fraction : (n_roi,)
+    """
+    n = geo.n
+    mean = geo.sums(values) / n
+    dev = values - geo.spread(mean)
+    dev *= dev
+    var = geo.sums(dev) / np.maximum(n - 1, 1)
+    std = np.where(n > 1, np.sqrt(var), np.nan)
+    frac = geo.sums(clipped.astype(np.float32)) / n
+    return mean.T, std.T, frac
+
+
+def _detection_channel(channels: Sequence[str]) -> str:
+    """A broadband channel for finding the target (white LEDs first)."""
+    for c in channels:
+        if "WHITE" in c.upper():
+            return c
+    return channels[len(channels) // 2]
+
+
+def _green_plane(frame: RawFrame, step: int) -> NDArray[np.float32]:
+    """The G plane (mean of the two green photosites), block-averaged by ``step``.
+
+    Only for finding the target: no black level or scaling, which the ratio to the
+    white frame cancels anyway.
+    """
+    import cv2
+
+    h2, w2 = frame.shape
+    h, w = (h2 // step) * step, (w2 // step) * step
+    greens = [divmod(k, 2) for k, c in enumerate(frame.cfa_pattern) if c == "G"]
+    (y0, x0), (y1, x1) = greens
+    img = frame.mosaic[y0 : 2 * h : 2, x0 : 2 * w : 2].astype(np.float32)
+    img += frame.mosaic[y1 : 2 * h : 2, x1 : 2 * w : 2]
+    if step > 1:  # an integer factor: INTER_AREA is the block mean
+        img = cv2.resize(img, (w // step, h // step), interpolation=cv2.INTER_AREA)
+    img -= np.float32(2 * frame.black_level)
+    return img
+
+
+def _find_corners(
+    white: RawFrame, target: RawFrame, layout: TargetLayout
+) -> tuple[NDArray[np.float64], float]:
+    """Target corners (mosaic px) from a white-background and a target frame.
+
+    Works on the G plane straight from the mosaic, block-averaged down to at most
+    :data:`DETECT_MAX_WIDTH_PX` columns: sub-pixel edges at that scale place the ROIs
+    (the central 20 % of each patch) well within a pixel.
+    """
+    from tunespec.core.homography import locate_target
+
+    step = max(1, math.ceil(target.shape[1] / DETECT_MAX_WIDTH_PX))
+    corners, fit = locate_target(
+        _green_plane(target, step), layout, background=_green_plane(white, step)
+    )
+    plane_xy = corners * step + (step - 1) / 2.0  # block centres -> plane pixels
+    return plane_to_full_px(plane_xy), 2.0 * step * fit.residual_px
+
+
+def process_session(
+    session: Session,
+    *,
+    layout: TargetLayout | None = None,
+    corners: str | ArrayLike | None = None,
+    roi_fraction: float | None = None,
+    window_px: int = FLAT_WINDOW_PX,
+    channels: Sequence[str] | None = None,
+    allow_incomplete: bool = False,
+    verify: bool = False,
+    loader: Loader | None = None,
+    progress: ProgressFn | None = None,
+    should_stop: StopFn | None = None,
+) -> ProcessedSession:
+    """Patch responses and illuminants of a captured session (dark, Eq. 2, ROIs).
+
+    Parameters
+    ----------
+    session
+        A captured session (see :mod:`tunespec.core.session`).
+    layout
+        The target's layout; default the one stored in the session.
+    corners
+        ``"auto"`` (find the target in a white-LED frame), ``"layout"`` (use
+        ``layout.corners_px``), or four (x, y) mosaic-pixel corners TL, TR, BR, BL.
+        Default: the layout's corners if set, else ``"auto"``.
+    roi_fraction
+        ROI area as a fraction of the patch area; default the layout's (paper: 0.2).
+    window_px
+        Side of the flat-field normalisation window at the white frame's centre, in
+        plane pixels (paper: 100).
+    channels
+        Channels to process (default: all captured, in capture order).
+    allow_incomplete
+        Skip channels with missing frames (with a warning) instead of failing.
+    verify
+        Check every raw file's SHA-256 against the manifest first.
+    loader
+        Reads a raw file; default :func:`tunespec.core.raw.load_raw`.
+    progress, should_stop
+        Progress (fraction of frames read) and cancellation hooks.
+
+    Returns
+    -------
+    ProcessedSession
+        Responses, illuminants, the layout with the corners used, and flags.
+
+    Raises
+    ------
+    InputError
+        Missing frames (unless ``allow_incomplete``), a file failing its checksum,
+        no layout, corners not found, ROIs outside the image.
+    Cancelled
+        When ``should_stop()`` turns true.
+
+    References
+    ----------
+    Trichromatic Reflectance Capture Using a Tunable Light Source, Eq. 2 and 6.
+    """
+    load = loader or load_raw
+    layout = layout or session.layout
+    if layout is None:
+        raise InputError(
+            "the session has no target layout; pass one (--layout)",
+            path=session.manifest_path,
+        )
+    if roi_fraction is not None:
+        layout = replace(layout, roi_fraction=float(roi_fraction))
+    frames = session.frames
+    whites = frames_by_channel(frames, "white")
+    targets = frames_by_channel(frames, "target")
+    wanted = list(channels) if channels is not None else list(session.settings.channels)
+    warnings: list[str] = []
+    missing_specs = session.missing(verify=verify)
+    incomplete = {s.channel for s in missing_specs if s.channel is not None}
+    dark_missing = [s for s in missing_specs if s.kind == "dark"]
+    use: list[str] = []
+    for c in wanted:
+        ok = c in whites and c in targets and c not in incomplete
+        if ok:
+            needed = [*whites[c], *targets[c]]
+            if any(not find_darks(frames, f.exposure_s, f.iso) for f in needed):
+                ok = False
+        if ok:
+            use.append(c)
+        elif allow_incomplete:
+            warnings.append(f"channel {c}: frames missing, left out")
+        else:
+            raise InputError(
+                f"channel {c}: frames missing or marked bad; resume the capture "
+                "(tunespec capture ... --resume) or pass allow_incomplete",
+                path=session.manifest_path,
+            )
+    if dark_missing and not allow_incomplete:
+        raise InputError(
+            f"{len(dark_missing)} dark frame(s) missing; resume the capture",
+            path=session.manifest_path,
+        )
+    if not use:
+        raise InputError("no complete channel to process", path=session.manifest_path)
+
+    dark_ids = {
+        d.id
+        for c in use
+        for f in (*whites[c], *targets[c])
+        for d in find_darks(frames, f.exposure_s, f.iso)
+    }
+    total = len(dark_ids) + sum(len(whites[c]) + len(targets[c]) for c in use)
+    done = 0
+
+    def step() -> None:
+        nonlocal done
+        done += 1
+        report(progress, done / total)
+        check_stop(should_stop)
+
+    def read(rec: FrameRecord) -> RawFrame:
+        check_stop(should_stop)
+        try:
+            return load(session.path_of(rec))
+        except InputError as exc:
+            raise InputError(f"frame {rec.id}: {exc}") from None
+
+    # -- geometry: corners, then ROIs rasterised once ---------------------------------
+    if isinstance(corners, str) and corners not in ("auto", "layout"):
+        raise InputError(
+            f"corners must be 'auto', 'layout' or 4 points, got {corners!r}"
+        )
+    mode = (
+        corners if corners is not None else ("layout" if layout.corners_px else "auto")
+    )
+    residual = float("nan")
+    first = _detection_channel(use)
+    order = [first, *[c for c in use if c != first]]
+    preloaded: dict[str, RawFrame] = {}
+    if isinstance(mode, str) and mode == "auto":
+        w_frame, t_frame = read(whites[first][0]), read(targets[first][0])
+        corners_px, residual = _find_corners(w_frame, t_frame, layout)
+        layout = layout.with_corners(corners_px)
+        source = "auto"
+        preloaded = {whites[first][0].id: w_frame, targets[first][0].id: t_frame}
+    elif isinstance(mode, str):
+        if layout.corners_px is None:
+            raise InputError(
+                "corners='layout' but the layout has no corners_px",
+                path=session.manifest_path,
+            )
+        source = "layout"
+    else:
+        layout = layout.with_corners(mode)
+        source = "given"
+
+    # the plane shape comes from a frame processing reads first anyway
+    first_white = whites[first][0]
+    if first_white.id not in preloaded:
+        preloaded[first_white.id] = read(first_white)
+    shape = preloaded[first_white.id].shape
+    h, w = shape
+    win = min(window_px, h, w)
+    r0, c0 = (h - win) // 2, (w - win) // 2
+    rois = RoiSet.from_quads(
+        layout.patch_names, full_to_plane_px(layout.roi_quads_px()), shape
+    ).with_window(_FLAT, r0, r0 + win, c0, c0 + win)
+    n_px = rois.n_pixels
+    n_patch = layout.n_patches
+    n_patch_px = int(n_px[:n_patch].sum())
+
+    # -- per channel: darks, brackets, Eq. 2, statistics ------------------------------
+    dark_cache: dict[tuple[float, int], _Pixels] = {}
+
+    def dark_for(rec: FrameRecord) -> _Pixels:
+        key = (rec.exposure_s, rec.iso)
+        if key not in dark_cache:
+            acc: _Pixels | None = None
+            darks = find_darks(frames, rec.exposure_s, rec.iso)
+            for d in darks:
+                px = _Pixels(*rois.gather(read(d)))
+                step()
+                if acc is None:
+                    acc = px
+                else:
+                    acc.values += px.values
+            assert acc is not None  # checked above: every frame has its darks
+            if len(darks) > 1:
+                acc.values *= np.float32(1.0 / len(darks))
+            dark_cache[key] = acc
+        return dark_cache[key]
+
+    def pixels(records: Sequence[FrameRecord]) -> _Pixels:
+        got = []
+        for rec in records:
+            frame = preloaded.pop(rec.id, None)
+            got.append(_Pixels(*rois.gather(frame if frame is not None else read(rec))))
+            del frame
+            step()
+        return _merge_brackets(
+            got, [dark_for(r) for r in records], [r.exposure_s for r in records]
+        )
+
+    geo = _RoiGeometry.of(rois, n_patch)
+    n_borrowed = 0
+    rgb = np.zeros((n_patch, len(use), 3))
+    std = np.zeros_like(rgb)
+    sat = np.zeros((n_patch, len(use)))
+    spds: dict[str, NDArray[np.float64]] = {}
+    wl_nm: NDArray[np.float64] | None = None
+    flagged: list[tuple[str, str]] = []
+    for c in order:
+        j = use.index(c)
+        white = pixels(whites[c])
+        target = pixels(targets[c])
+        flat = white.values[:, n_patch_px:]
+        flat_ok = ~white.saturated[n_patch_px:]
+        if flat_ok.sum() < 0.5 * flat_ok.size:
+            raise InputError(
+                f"channel {c}: the white frame's centre window is clipped; lower the "
+                "exposure (or re-meter)",
+                path=session.manifest_path,
+            )
+        mean_b = flat[:, flat_ok].astype(np.float64).mean(axis=1)  # Eq. 2's mean A_B
+        a_flat, borrowed = _flat_field(  # Eq. 2
+            target.values[:, :n_patch_px], white.values[:, :n_patch_px], mean_b, geo
+        )
+        n_borrowed += int(borrowed.sum())
+        clipped = target.saturated[:n_patch_px] | white.saturated[:n_patch_px]
+        m, s, f = _patch_stats(a_flat, clipped, geo)
+        rgb[:, j], std[:, j], sat[:, j] = m, s, f
+        for i in np.nonzero(f > SATURATION_TOLERANCE)[0]:
+            flagged.append((layout.patch_names[i], c))
+        ref = targets[c][0]
+        spd = session.read_spd(ref)
+        if wl_nm is None:
+            wl_nm = spd.wavelength_nm
+            spds[c] = spd.values[0] * ref.exposure_s
+        else:
+            spds[c] = (
+                np.interp(wl_nm, spd.wavelength_nm, spd.values[0]) * ref.exposure_s
+            )
+    assert wl_nm is not None
+    if flagged:
+        chans = sorted({c for _, c in flagged}, key=use.index)
+        warnings.append(
+            f"{len(flagged)} patch/channel pair(s) have clipped pixels (channels "
+            f"{', '.join(chans[:6])}{' ...' if len(chans) > 6 else ''}); they are "
+            "flagged saturated and left out of calibration"
+        )
+    responses = Responses(
+        layout.patch_names,
+        tuple(use),
+        rgb,
+        std,
+        np.repeat(n_px[:n_patch, None], len(use), axis=1).astype(np.float64),
+        sat,
+    )
+    illuminants = Spectra(
+        wl_nm,
+        np.stack([spds[c] for c in use]),
+        tuple(use),
+        {"unit": ILLUMINANT_UNIT, "source": str(session.root)},
+    )
+    return ProcessedSession(
+        responses=responses,
+        illuminants=illuminants,
+        layout=layout,
+        corners_source=source,
+        flagged=tuple(flagged),
+        warnings=tuple(warnings),
+        corner_residual_px=residual,
+        stats={
+            "frames_read": done,
+            "roi_pixels_per_patch_min": int(n_px[:n_patch].min()),
+            "flat_window_px": win,
+            "flat_fields_borrowed": n_borrowed,
+        },
+    )
+
+
+def write_processed(
+    processed: ProcessedSession,
+    responses_path: str | PathLike[str],
+    illuminants_path: str | PathLike[str] | None = None,
+) -> None:
+    """Write ``responses.csv`` and (optionally) ``illuminants.csv`` for calibrate/estimate."""
+    write_responses_csv(processed.responses, responses_path)
+    if illuminants_path is not None:
+        write_spectra_csv(processed.illuminants, illuminants_path)

@@ -1,0 +1,788 @@
+"""A measurement session on disk: a folder with a versioned JSON manifest and raw files.
+
+Layout of a session folder::
+
+    SESSION/
+      manifest.json          format "tunespec-session", version, devices, settings,
+                             target layout, and one record per frame
+      frames/<id>.<ext>      raw files as the camera wrote them (``.dng``, ``.cr2``)
+      frames/<id>.spd.csv    the light source's measured SPD around that exposure
+      tmp/                   files being written (never referenced by the manifest)
+
+Crash safety: a frame is written to ``tmp/``, flushed to disk, moved into ``frames/``
+with :func:`os.replace` and only then entered into the manifest, which is itself
+rewritten atomically (temporary file, ``fsync``, ``os.replace``, ``fsync`` of the
+folder). A crash, a kill or a device error at any moment therefore leaves a manifest
+that lists only complete, checksummed frames; what is not listed is taken again on
+resume (:meth:`Session.missing`).
+
+The frames a session needs follow from its :class:`CaptureSettings`
+(:func:`plan_frames`): dark frame(s) for each distinct exposure, then per LED channel
+a white-background frame and a target frame (one per exposure bracket).
+
+References
+----------
+Trichromatic Reflectance Capture Using a Tunable Light Source (``shared/reference``),
+section "Capturing and Processing": dark frame, white background ``A_B`` and target
+``A`` under each of the 22 LEDs.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import copy
+import hashlib
+import json
+import math
+import os
+import tempfile
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import asdict, dataclass, field, replace
+from datetime import UTC, datetime
+from os import PathLike
+from pathlib import Path
+from typing import Any
+
+from tunespec.core.errors import InputError
+from tunespec.core.layout import TargetLayout
+from tunespec.core.spectra import Spectra, read_spectra_csv, write_spectra_csv
+
+__all__ = [
+    "FRAME_KINDS",
+    "MANIFEST_NAME",
+    "SESSION_FORMAT",
+    "SESSION_VERSION",
+    "CaptureSettings",
+    "FrameRecord",
+    "FrameSpec",
+    "Session",
+    "atomic_write_bytes",
+    "atomic_write_text",
+    "dark_id",
+    "find_darks",
+    "frames_by_channel",
+    "plan_frames",
+    "sha256_file",
+    "with_exposures",
+]
+
+SESSION_FORMAT = "tunespec-session"
+SESSION_VERSION = 1
+MANIFEST_NAME = "manifest.json"
+FRAMES_DIR = "frames"
+TMP_DIR = "tmp"
+
+FRAME_KINDS: tuple[str, ...] = ("dark", "white", "target")
+EXPOSURE_MODES = ("fixed", "auto")
+
+#: Two exposures closer than this (relative) are the same setting (JSON keeps floats
+#: exactly, so this only absorbs cameras that report a rounded value).
+EXPOSURE_RTOL = 1e-6
+
+
+# -- atomic file helpers ---------------------------------------------------------------
+def _fsync_dir(folder: Path) -> None:
+    """Make a rename inside ``folder`` durable (a no-op where folders cannot be opened)."""
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:  # e.g. Windows
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def atomic_write_bytes(path: str | PathLike[str], data: bytes) -> None:
+    """Write ``data`` to ``path`` atomically: temporary file, fsync, ``os.replace``.
+
+    A reader (or a process started after a crash) sees either the old content or the
+    new one, never a partial file.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+    _fsync_dir(path.parent)
+
+
+def atomic_write_text(path: str | PathLike[str], text: str) -> None:
+    """:func:`atomic_write_bytes` for UTF-8 text."""
+    atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def sha256_file(path: str | PathLike[str], *, chunk_bytes: int = 1 << 20) -> str:
+    """Hex SHA-256 of a file, read in chunks (raw files are tens of MB)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        while block := fh.read(chunk_bytes):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _utc_now() -> str:
+    return datetime.now(UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
+
+
+# -- what to capture -------------------------------------------------------------------
+def _exposure_tag(exposure_s: float) -> str:
+    """A file-name-safe, exact-enough tag for an exposure, e.g. ``"0.0125s"``."""
+    return f"{exposure_s:.6g}s"
+
+
+def dark_id(exposure_s: float, iso: int, index: int) -> str:
+    """Frame id of the ``index``-th dark frame at ``exposure_s`` and ``iso``."""
+    return f"dark_{_exposure_tag(exposure_s)}_iso{iso}_{index}"
+
+
+def _led_id(kind: str, channel: str, bracket: int) -> str:
+    return f"{kind}_{channel}" + (f"_b{bracket}" if bracket else "")
+
+
+@dataclass(frozen=True)
+class FrameSpec:
+    """One frame a session needs.
+
+    Parameters
+    ----------
+    id
+        Unique frame id, also the raw file's stem (``"target_LED410"``).
+    kind
+        ``"dark"`` (light off), ``"white"`` (white background, ``A_B`` of Eq. 2) or
+        ``"target"`` (the chart or sample, ``A``).
+    channel
+        LED channel name for white and target frames, ``None`` for darks.
+    exposure_s
+        Exposure time in seconds.
+    iso
+        ISO speed.
+    bracket
+        Index into the exposure bracket (0 = the reference, longest exposure).
+    """
+
+    id: str
+    kind: str
+    channel: str | None
+    exposure_s: float
+    iso: int
+    bracket: int = 0
+
+
+@dataclass(frozen=True)
+class CaptureSettings:
+    """How a session is captured.
+
+    Parameters
+    ----------
+    channels
+        LED channel names to capture, in capture order.
+    iso
+        ISO speed of every frame.
+    exposure_mode
+        ``"fixed"``: ``exposures_s`` were given; ``"auto"``: metered from a shot of the
+        white background under each LED so its brightest part lands at
+        ``target_level`` of full scale.
+    exposures_s
+        Per channel, the exposure of each bracket in seconds (longest first), as the
+        camera reported it after setting it. Empty until resolved or metered.
+    bracket_factors
+        Exposure brackets as fractions of the reference exposure, e.g. ``(1.0, 0.125)``
+        for an HDR pair; ``(1.0,)`` for single exposures.
+    n_darks
+        Dark frames per distinct exposure (averaged in processing).
+    target_level
+        Auto exposure aim, fraction of full scale.
+    levels
+        LED drive level per channel in [0, 1] (missing = 1.0).
+    requested_s
+        For fixed exposures: per channel the bracketed exposures asked for, before
+        the camera confirmed them (``exposures_s`` holds what it uses).
+    """
+
+    channels: tuple[str, ...]
+    iso: int = 100
+    exposure_mode: str = "auto"
+    exposures_s: Mapping[str, tuple[float, ...]] = field(default_factory=dict)
+    bracket_factors: tuple[float, ...] = (1.0,)
+    n_darks: int = 1
+    target_level: float = 0.75
+    levels: Mapping[str, float] = field(default_factory=dict)
+    requested_s: Mapping[str, tuple[float, ...]] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "channels", tuple(self.channels))
+        object.__setattr__(
+            self, "bracket_factors", tuple(float(f) for f in self.bracket_factors)
+        )
+        object.__setattr__(
+            self,
+            "exposures_s",
+            {str(k): tuple(float(t) for t in v) for k, v in self.exposures_s.items()},
+        )
+        object.__setattr__(
+            self, "levels", {str(k): float(v) for k, v in self.levels.items()}
+        )
+        object.__setattr__(
+            self,
+            "requested_s",
+            {str(k): tuple(float(t) for t in v) for k, v in self.requested_s.items()},
+        )
+        if not self.channels or len(set(self.channels)) != len(self.channels):
+            raise InputError("capture settings: channels must be unique and non-empty")
+        if self.exposure_mode not in EXPOSURE_MODES:
+            raise InputError(
+                f"capture settings: exposure_mode {self.exposure_mode!r}, expected "
+                f"one of {', '.join(EXPOSURE_MODES)}"
+            )
+        f = self.bracket_factors
+        if not f or f[0] != 1.0 or any(not (0 < x <= 1) for x in f):
+            raise InputError(
+                "capture settings: bracket_factors must start with 1.0, each in (0, 1]"
+            )
+        if self.n_darks < 1 or self.iso <= 0:
+            raise InputError("capture settings: n_darks >= 1 and iso > 0 required")
+        if not (0.05 <= self.target_level <= 0.95):
+            raise InputError("capture settings: target_level must be in [0.05, 0.95]")
+        for name, ts in (*self.exposures_s.items(), *self.requested_s.items()):
+            if len(ts) != len(f) or any(not (t > 0 and math.isfinite(t)) for t in ts):
+                raise InputError(
+                    f"capture settings: channel {name}: expected {len(f)} positive "
+                    f"exposure(s), got {ts}"
+                )
+
+    @property
+    def resolved(self) -> bool:
+        """True once every channel has its (bracketed) exposures."""
+        return all(c in self.exposures_s for c in self.channels)
+
+    def level(self, channel: str) -> float:
+        """Drive level of ``channel`` in [0, 1]."""
+        return self.levels.get(channel, 1.0)
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["channels"] = list(self.channels)
+        d["bracket_factors"] = list(self.bracket_factors)
+        d["exposures_s"] = {k: list(v) for k, v in self.exposures_s.items()}
+        d["levels"] = dict(self.levels)
+        d["requested_s"] = {k: list(v) for k, v in self.requested_s.items()}
+        return d
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> CaptureSettings:
+        keys = set(cls.__dataclass_fields__)
+        try:
+            return cls(**{k: v for k, v in d.items() if k in keys})
+        except (TypeError, ValueError) as exc:
+            raise InputError(f"bad capture settings: {exc}") from None
+
+
+def plan_frames(settings: CaptureSettings) -> list[FrameSpec]:
+    """Every frame a session with ``settings`` needs, in capture order.
+
+    Darks first (one set per distinct exposure and ISO), then one white frame per
+    channel and bracket, then one target frame per channel and bracket. Needs resolved
+    exposures (:attr:`CaptureSettings.resolved`).
+
+    Raises
+    ------
+    InputError
+        If the exposures are not resolved yet.
+
+    Examples
+    --------
+    >>> s = CaptureSettings(("L1", "L2"), exposures_s={"L1": (0.5,), "L2": (0.5,)})
+    >>> [f.id for f in plan_frames(s)]
+    ['dark_0.5s_iso100_0', 'white_L1', 'white_L2', 'target_L1', 'target_L2']
+    """
+    if not settings.resolved:
+        missing = [c for c in settings.channels if c not in settings.exposures_s]
+        raise InputError(
+            f"exposures not resolved for {len(missing)} channel(s), e.g. {missing[0]}"
+        )
+    exposures: list[float] = []
+    for c in settings.channels:
+        for t in settings.exposures_s[c]:
+            if not any(math.isclose(t, u, rel_tol=EXPOSURE_RTOL) for u in exposures):
+                exposures.append(t)
+    plan = [
+        FrameSpec(dark_id(t, settings.iso, n), "dark", None, t, settings.iso)
+        for t in sorted(exposures, reverse=True)
+        for n in range(settings.n_darks)
+    ]
+    for kind in ("white", "target"):
+        for c in settings.channels:
+            for b, t in enumerate(settings.exposures_s[c]):
+                plan.append(FrameSpec(_led_id(kind, c, b), kind, c, t, settings.iso, b))
+    return plan
+
+
+# -- what was captured -----------------------------------------------------------------
+@dataclass(frozen=True)
+class FrameRecord:
+    """A captured frame as the manifest lists it.
+
+    Parameters
+    ----------
+    id, kind, channel, exposure_s, iso, bracket
+        As in :class:`FrameSpec` (``exposure_s`` as the camera reported it).
+    file
+        Raw file, relative to the session folder.
+    sha256
+        Hex SHA-256 of the raw file.
+    time_utc
+        ISO 8601 UTC time the frame was committed.
+    status
+        ``"ok"`` or ``"bad"`` (to be taken again).
+    spd_file
+        The measured SPD (CSV, relative path), ``None`` for darks.
+    note
+        Free text: why a frame is bad, what was retaken.
+    """
+
+    id: str
+    kind: str
+    channel: str | None
+    exposure_s: float
+    iso: int
+    bracket: int
+    file: str
+    sha256: str
+    time_utc: str
+    status: str = "ok"
+    spd_file: str | None = None
+    note: str = ""
+
+    @property
+    def spec(self) -> FrameSpec:
+        """The :class:`FrameSpec` this record fulfils."""
+        return FrameSpec(
+            self.id, self.kind, self.channel, self.exposure_s, self.iso, self.bracket
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(
+        cls, d: Mapping[str, Any], *, source: str | None = None
+    ) -> FrameRecord:
+        keys = set(cls.__dataclass_fields__)
+        try:
+            rec = cls(**{k: v for k, v in d.items() if k in keys})
+        except TypeError as exc:
+            raise InputError(f"bad frame record: {exc}", path=source) from None
+        if rec.kind not in FRAME_KINDS or rec.status not in ("ok", "bad"):
+            raise InputError(
+                f"frame {rec.id!r}: bad kind {rec.kind!r} or status {rec.status!r}",
+                path=source,
+            )
+        return rec
+
+
+class Session:
+    """A session folder and its manifest (see the module docstring).
+
+    Open with :meth:`create` or :meth:`open`. Every change is written to disk before
+    the method returns. Not thread-safe: one owner (the capture thread) at a time.
+    """
+
+    def __init__(self, root: Path, manifest: dict[str, Any]) -> None:
+        self.root = Path(root)
+        self._m = manifest
+
+    # -- opening -----------------------------------------------------------------------
+    @classmethod
+    def create(
+        cls,
+        root: str | PathLike[str],
+        *,
+        settings: CaptureSettings,
+        devices: Mapping[str, Mapping[str, str]] | None = None,
+        layout: TargetLayout | None = None,
+        meta: Mapping[str, str] | None = None,
+    ) -> Session:
+        """Start a new session in ``root`` (created; must not hold a manifest yet).
+
+        Parameters
+        ----------
+        settings
+            Capture settings.
+        devices
+            Per role (``"light"``, ``"camera"``, ``"stage"``) the device identity as a
+            dict (vendor, model, serial, firmware, spec).
+        layout
+            The target's layout (its ``corners_px`` may be unknown).
+        meta
+            Free key/value notes (operator, sample name, ...).
+
+        Raises
+        ------
+        InputError
+            If ``root`` already holds a session.
+        """
+        root = Path(root)
+        if (root / MANIFEST_NAME).exists():
+            raise InputError(
+                "a session already exists here (resume it instead)", path=root
+            )
+        (root / FRAMES_DIR).mkdir(parents=True, exist_ok=True)
+        manifest: dict[str, Any] = {
+            "format": SESSION_FORMAT,
+            "version": SESSION_VERSION,
+            "created_utc": _utc_now(),
+            "devices": {k: dict(v) for k, v in (devices or {}).items()},
+            "settings": settings.to_dict(),
+            "layout": None if layout is None else layout.to_dict(),
+            "meta": dict(meta or {}),
+            "frames": [],
+        }
+        session = cls(root, manifest)
+        session._write_manifest()
+        return session
+
+    @classmethod
+    def open(cls, root: str | PathLike[str]) -> Session:
+        """Open an existing session folder.
+
+        Raises
+        ------
+        InputError
+            No manifest, not valid JSON, another format or a newer version.
+        """
+        root = Path(root)
+        path = root / MANIFEST_NAME
+        try:
+            m = json.loads(path.read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise InputError(
+                f"not a TuneSpec session (no {MANIFEST_NAME})", path=root
+            ) from None
+        except json.JSONDecodeError as exc:
+            raise InputError(
+                f"not valid JSON: {exc.msg}", path=path, line=exc.lineno
+            ) from None
+        if not isinstance(m, dict) or m.get("format") != SESSION_FORMAT:
+            raise InputError(
+                f"not a session manifest (format != {SESSION_FORMAT!r})", path=path
+            )
+        if int(m.get("version", 0)) > SESSION_VERSION:
+            raise InputError(
+                f"session version {m.get('version')} is newer than this TuneSpec "
+                f"understands ({SESSION_VERSION})",
+                path=path,
+            )
+        session = cls(root, m)
+        # validate eagerly so a damaged manifest fails here, naming the file
+        for d in m.get("frames", []):
+            FrameRecord.from_dict(d, source=str(path))
+        CaptureSettings.from_dict(m.get("settings", {}))
+        return session
+
+    # -- manifest ----------------------------------------------------------------------
+    @property
+    def manifest_path(self) -> Path:
+        return self.root / MANIFEST_NAME
+
+    def _write_manifest(self, manifest: dict[str, Any] | None = None) -> None:
+        """Write ``manifest`` (default the current one) and only then adopt it.
+
+        If the write fails, the file on disk and this object both keep the previous
+        state, so they never disagree.
+        """
+        m = self._m if manifest is None else manifest
+        atomic_write_text(self.manifest_path, json.dumps(m, indent=1) + "\n")
+        self._m = m
+
+    def _edited(self) -> dict[str, Any]:
+        """A deep copy of the manifest to change and pass to :meth:`_write_manifest`."""
+        return copy.deepcopy(self._m)
+
+    @property
+    def manifest(self) -> dict[str, Any]:
+        """A deep copy of the manifest (read-only view for reports)."""
+        copied: dict[str, Any] = json.loads(json.dumps(self._m))
+        return copied
+
+    @property
+    def devices(self) -> dict[str, dict[str, str]]:
+        return {k: dict(v) for k, v in self._m.get("devices", {}).items()}
+
+    def set_devices(self, devices: Mapping[str, Mapping[str, str]]) -> None:
+        """Record the devices in use (a resumed session may use other serials)."""
+        m = self._edited()
+        old = m.get("devices", {})
+        new = {k: dict(v) for k, v in devices.items()}
+        if old and old != new:
+            history = m.setdefault("device_history", [])
+            history.append({"until_utc": _utc_now(), "devices": old})
+        m["devices"] = new
+        self._write_manifest(m)
+
+    @property
+    def settings(self) -> CaptureSettings:
+        return CaptureSettings.from_dict(self._m["settings"])
+
+    def set_settings(self, settings: CaptureSettings) -> None:
+        """Replace the capture settings (e.g. once exposures are metered)."""
+        m = self._edited()
+        m["settings"] = settings.to_dict()
+        self._write_manifest(m)
+
+    @property
+    def layout(self) -> TargetLayout | None:
+        d = self._m.get("layout")
+        return (
+            None
+            if d is None
+            else TargetLayout.from_dict(d, source=str(self.manifest_path))
+        )
+
+    def set_layout(self, layout: TargetLayout | None) -> None:
+        m = self._edited()
+        m["layout"] = None if layout is None else layout.to_dict()
+        self._write_manifest(m)
+
+    @property
+    def meta(self) -> dict[str, str]:
+        return dict(self._m.get("meta", {}))
+
+    # -- frames ------------------------------------------------------------------------
+    @property
+    def frames(self) -> tuple[FrameRecord, ...]:
+        """Every recorded frame, in capture order."""
+        return tuple(FrameRecord.from_dict(d) for d in self._m["frames"])
+
+    def frame(self, frame_id: str) -> FrameRecord | None:
+        """The record of ``frame_id``, or ``None``."""
+        for d in self._m["frames"]:
+            if d["id"] == frame_id:
+                return FrameRecord.from_dict(d)
+        return None
+
+    def ok_frames(self, kind: str | None = None) -> list[FrameRecord]:
+        """Frames with status ok (of one ``kind`` if given)."""
+        return [f for f in self.frames if f.status == "ok" and kind in (None, f.kind)]
+
+    def path_of(self, record: FrameRecord) -> Path:
+        """Absolute path of a frame's raw file."""
+        return self.root / record.file
+
+    def plan(self) -> list[FrameSpec]:
+        """The frames this session needs (:func:`plan_frames` of its settings)."""
+        return plan_frames(self.settings)
+
+    def verify(self, record: FrameRecord) -> bool:
+        """True if the frame's raw file exists and matches its checksum."""
+        path = self.path_of(record)
+        return path.is_file() and sha256_file(path) == record.sha256
+
+    def missing(self, *, verify: bool = True) -> list[FrameSpec]:
+        """Planned frames that have no ok record, in capture order.
+
+        A frame counts as missing when it was never recorded, is marked bad, was
+        recorded with other parameters than planned, its file is gone, or
+        (``verify``) its file fails its checksum.
+        """
+        records = {f.id: f for f in self.frames}
+        out = []
+        for spec in self.plan():
+            rec = records.get(spec.id)
+            if (
+                rec is None
+                or rec.status != "ok"
+                or not _same_spec(rec.spec, spec)
+                or not self.path_of(rec).is_file()
+                or (verify and not self.verify(rec))
+            ):
+                out.append(spec)
+        return out
+
+    def temp_stem(self, frame_id: str) -> Path:
+        """Where a camera should write a frame before :meth:`commit_frame` (no suffix)."""
+        tmp = self.root / TMP_DIR
+        tmp.mkdir(parents=True, exist_ok=True)
+        return tmp / f"{frame_id}.{os.getpid()}"
+
+    def clean_temp(self) -> None:
+        """Remove leftovers of interrupted writes (never referenced by the manifest)."""
+        tmp = self.root / TMP_DIR
+        if tmp.is_dir():
+            for p in tmp.iterdir():
+                if p.is_file():
+                    with contextlib.suppress(OSError):
+                        p.unlink()
+
+    def commit_frame(
+        self,
+        spec: FrameSpec,
+        raw_file: str | PathLike[str],
+        *,
+        spd: Spectra | None = None,
+        note: str = "",
+    ) -> FrameRecord:
+        """Move a finished raw file into the session and record it (atomically).
+
+        Parameters
+        ----------
+        spec
+            The frame it fulfils (with the exposure the camera actually used).
+        raw_file
+            The file the camera wrote, ideally under :meth:`temp_stem` (same file
+            system, so the move is a rename). It is flushed to disk, then renamed to
+            ``frames/<id><suffix>``.
+        spd
+            The measured SPD (one spectrum) for LED frames.
+        note
+            Stored in the record.
+
+        Returns
+        -------
+        FrameRecord
+            The record now in the manifest (replacing an earlier one of that id).
+        """
+        src = Path(raw_file)
+        if spec.kind not in FRAME_KINDS:
+            raise InputError(f"frame {spec.id!r}: unknown kind {spec.kind!r}")
+        with open(src, "rb+") as fh:
+            os.fsync(fh.fileno())
+        frames = self.root / FRAMES_DIR
+        frames.mkdir(parents=True, exist_ok=True)
+        rel = f"{FRAMES_DIR}/{spec.id}{''.join(src.suffixes[-1:]).lower()}"
+        digest = sha256_file(src)
+        spd_rel = None
+        if spd is not None:
+            spd_rel = f"{FRAMES_DIR}/{spec.id}.spd.csv"
+            tmp_spd = self.temp_stem(spec.id).with_suffix(".spd.csv")
+            write_spectra_csv(spd, tmp_spd)
+            with open(tmp_spd, "rb+") as fh:
+                os.fsync(fh.fileno())
+            os.replace(tmp_spd, self.root / spd_rel)
+        os.replace(src, self.root / rel)
+        _fsync_dir(frames)
+        record = FrameRecord(
+            id=spec.id,
+            kind=spec.kind,
+            channel=spec.channel,
+            exposure_s=float(spec.exposure_s),
+            iso=int(spec.iso),
+            bracket=int(spec.bracket),
+            file=rel,
+            sha256=digest,
+            time_utc=_utc_now(),
+            status="ok",
+            spd_file=spd_rel,
+            note=note,
+        )
+        self._put(record)
+        return record
+
+    def mark_bad(self, frame_ids: str | Iterable[str], reason: str = "") -> None:
+        """Mark frames bad so that a resume takes them again.
+
+        Raises
+        ------
+        InputError
+            If a frame id is not in the session's plan or records.
+        """
+        ids = [frame_ids] if isinstance(frame_ids, str) else list(frame_ids)
+        try:
+            planned = {f.id for f in self.plan()}
+        except InputError:
+            planned = set()
+        known = planned | {d["id"] for d in self._m["frames"]}
+        unknown = [i for i in ids if i not in known]
+        if unknown:
+            raise InputError(
+                f"unknown frame id(s): {', '.join(unknown)}", path=self.manifest_path
+            )
+        m = self._edited()
+        for d in m["frames"]:
+            if d["id"] in ids:
+                d["status"] = "bad"
+                d["note"] = reason or "marked bad"
+        self._write_manifest(m)
+
+    def read_spd(self, record: FrameRecord) -> Spectra:
+        """The SPD measured around a frame (one spectrum).
+
+        Raises
+        ------
+        InputError
+            If the frame has no SPD.
+        """
+        if record.spd_file is None:
+            raise InputError(f"frame {record.id!r} has no measured SPD")
+        return read_spectra_csv(self.root / record.spd_file)
+
+    def _put(self, record: FrameRecord) -> None:
+        m = self._edited()
+        frames = m["frames"]
+        d = record.to_dict()
+        for i, old in enumerate(frames):
+            if old["id"] == record.id:
+                frames[i] = d
+                break
+        else:
+            frames.append(d)
+        self._write_manifest(m)
+
+    def __repr__(self) -> str:
+        return f"Session({str(self.root)!r}, {len(self._m['frames'])} frames)"
+
+
+def _same_spec(a: FrameSpec, b: FrameSpec) -> bool:
+    return (
+        a.kind == b.kind
+        and a.channel == b.channel
+        and a.iso == b.iso
+        and a.bracket == b.bracket
+        and math.isclose(a.exposure_s, b.exposure_s, rel_tol=EXPOSURE_RTOL)
+    )
+
+
+def frames_by_channel(
+    frames: Sequence[FrameRecord], kind: str
+) -> dict[str, list[FrameRecord]]:
+    """Ok frames of ``kind`` grouped by channel, each list sorted by bracket."""
+    out: dict[str, list[FrameRecord]] = {}
+    for f in frames:
+        if f.kind == kind and f.status == "ok" and f.channel is not None:
+            out.setdefault(f.channel, []).append(f)
+    for v in out.values():
+        v.sort(key=lambda r: r.bracket)
+    return out
+
+
+def find_darks(
+    frames: Sequence[FrameRecord], exposure_s: float, iso: int
+) -> list[FrameRecord]:
+    """Ok dark frames taken at ``exposure_s`` and ``iso``."""
+    return [
+        f
+        for f in frames
+        if f.kind == "dark"
+        and f.status == "ok"
+        and f.iso == iso
+        and math.isclose(f.exposure_s, exposure_s, rel_tol=EXPOSURE_RTOL)
+    ]
+
+
+def with_exposures(
+    settings: CaptureSettings, exposures_s: Mapping[str, Sequence[float]]
+) -> CaptureSettings:
+    """``settings`` with (some) channels' bracket exposures set."""
+    merged = dict(settings.exposures_s)
+    merged.update({k: tuple(v) for k, v in exposures_s.items()})
+    return replace(settings, exposures_s=merged)

@@ -1,0 +1,534 @@
+"""The capture sequence of the paper on any light source, camera and target stage.
+
+Order (each step only for what is still missing in the session):
+
+1. ``stage.present("white")``; if the exposures are not resolved yet, meter them:
+   per LED a shot of the white background, scaled so its brightest part lands at
+   ``target_level`` of full scale (or, for fixed exposures, set each one and read
+   back what the camera really uses).
+2. Dark frame(s) for every distinct exposure, with every LED off.
+3. Per LED (and exposure bracket) a frame of the white background (``A_B``).
+4. ``stage.present("target")``; per LED (and bracket) a frame of the target (``A``).
+
+Around every LED exposure the light source's spectroradiometer is read just before
+and just after; their mean is stored with the frame (Eq. 1's illuminant is that SPD
+times the exposure time). Every frame goes into the session at once
+(:meth:`tunespec.core.session.Session.commit_frame`), so a crash, a kill or a device
+error loses nothing already captured; :func:`capture` with ``resume=True`` takes only
+what is missing, bad or damaged, and ``retake=[ids]`` takes chosen frames again. All
+LEDs are switched off when the sequence ends, fails or is cancelled.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import asdict, dataclass, replace
+from os import PathLike
+from pathlib import Path
+
+import numpy as np
+
+from tunespec.core.errors import InputError
+from tunespec.core.layout import TargetLayout
+from tunespec.core.progress import ProgressFn, StopFn, check_stop, report
+from tunespec.core.session import (
+    CaptureSettings,
+    FrameRecord,
+    FrameSpec,
+    Session,
+    with_exposures,
+)
+from tunespec.core.spectra import Spectra
+from tunespec.devices.protocols import (
+    Camera,
+    DeviceCommandError,
+    DeviceError,
+    LightSource,
+    TargetStage,
+)
+
+__all__ = [
+    "CaptureResult",
+    "FrameCallback",
+    "capture",
+    "device_identities",
+    "meter_exposure",
+    "new_session",
+]
+
+#: Called after each committed frame with its record and raw file (GUI live view).
+FrameCallback = Callable[[FrameRecord, Path], None]
+
+#: Default longest exposure the metering may choose, seconds (a camera's timed range).
+MAX_EXPOSURE_S = 30.0
+#: Shortest exposure the metering may choose, seconds.
+MIN_EXPOSURE_S = 1.0 / 8000.0
+#: Metering: the level is the high percentile of the brightest channel (robust to
+#: hot pixels), and more than this fraction of clipped pixels means "too bright".
+METER_PERCENTILE = 99.5
+METER_CLIPPED_FRACTION = 1e-3
+#: Metering looks at every this-many-th CFA cell in each direction.
+METER_STEP = 4
+#: Below this fraction of full scale at the longest exposure, an LED is reported as
+#: too weak (its responses carry little more than noise).
+LOW_SIGNAL_LEVEL = 0.05
+#: Metering shots per channel before giving up.
+METER_MAX_SHOTS = 6
+
+
+@dataclass(frozen=True)
+class CaptureResult:
+    """What :func:`capture` did.
+
+    Parameters
+    ----------
+    session
+        The session (all frames it holds now).
+    captured
+        Ids of the frames taken in this call, in order.
+    skipped
+        Planned frames that were already complete.
+    metered
+        Channels whose exposure was metered (or resolved) in this call.
+    warnings
+        Operator-readable notes (e.g. an LED too weak for the longest exposure).
+    """
+
+    session: Session
+    captured: tuple[str, ...]
+    skipped: int
+    metered: tuple[str, ...] = ()
+    warnings: tuple[str, ...] = ()
+
+
+def device_identities(
+    light: LightSource, camera: Camera, stage: object | None = None
+) -> dict[str, dict[str, str]]:
+    """Identities of the devices as the session manifest stores them."""
+    out = {
+        "light": {k: str(v) for k, v in asdict(light.identity).items()},
+        "camera": {k: str(v) for k, v in asdict(camera.identity).items()},
+    }
+    if stage is not None:
+        out["stage"] = {"kind": type(stage).__name__}
+    return out
+
+
+def new_session(
+    root: str | PathLike[str],
+    light: LightSource,
+    camera: Camera,
+    *,
+    layout: TargetLayout | None,
+    exposure: str | float | Mapping[str, float] = "auto",
+    iso: int = 100,
+    channels: Sequence[str] | None = None,
+    n_darks: int = 1,
+    brackets: Sequence[float] = (1.0,),
+    target_level: float = 0.75,
+    levels: Mapping[str, float] | None = None,
+    meta: Mapping[str, str] | None = None,
+) -> Session:
+    """Create a session for ``light`` and ``camera`` (nothing is captured yet).
+
+    Parameters
+    ----------
+    root
+        The session folder (created).
+    layout
+        The target's layout (its corners may be unknown).
+    exposure
+        ``"auto"`` (metered per LED), one exposure in seconds for every LED, or a
+        mapping channel name -> seconds.
+    iso
+        ISO speed of every frame.
+    channels
+        LED channels to capture (default: all of the light source, device order).
+    n_darks
+        Dark frames per distinct exposure.
+    brackets
+        Exposure bracket factors, starting with 1.0 (e.g. ``(1.0, 0.125)`` for HDR).
+    target_level
+        Auto exposure aim, fraction of full scale.
+    levels
+        LED drive level per channel (default 1.0).
+    meta
+        Free notes stored in the manifest.
+
+    Raises
+    ------
+    InputError
+        Unknown channels, a mapping missing channels, bad settings.
+    """
+    available = [c.name for c in light.channels()]
+    chosen = list(channels) if channels is not None else available
+    unknown = [c for c in chosen if c not in available]
+    if unknown:
+        raise InputError(
+            f"unknown LED channel(s) {', '.join(unknown)}; the light source has "
+            f"{', '.join(available)}"
+        )
+    factors = tuple(float(f) for f in brackets)
+    if exposure == "auto":
+        mode, exposures = "auto", {}
+    else:
+        mode = "fixed"
+        if isinstance(exposure, Mapping):
+            missing = [c for c in chosen if c not in exposure]
+            if missing:
+                raise InputError(
+                    f"no exposure given for channel(s) {', '.join(missing)}"
+                )
+            base = {c: float(exposure[c]) for c in chosen}
+        else:
+            try:
+                t = float(exposure)
+            except (TypeError, ValueError):
+                raise InputError(
+                    f"exposure must be 'auto' or seconds, got {exposure!r}"
+                ) from None
+            base = dict.fromkeys(chosen, t)
+        exposures = {c: tuple(t * f for f in factors) for c, t in base.items()}
+        if any(not (t > 0 and math.isfinite(t)) for v in exposures.values() for t in v):
+            raise InputError("exposures must be positive seconds")
+    settings = CaptureSettings(
+        tuple(chosen),
+        iso=int(iso),
+        exposure_mode=mode,
+        # fixed exposures are confirmed with the camera (its steps) at capture time
+        requested_s=exposures,
+        bracket_factors=factors,
+        n_darks=int(n_darks),
+        target_level=float(target_level),
+        levels=dict(levels or {}),
+    )
+    return Session.create(
+        root,
+        settings=settings,
+        devices=device_identities(light, camera),
+        layout=layout,
+        meta=meta,
+    )
+
+
+def _levels_for(
+    light: LightSource, settings: CaptureSettings, channel: str
+) -> np.ndarray:
+    names = [c.name for c in light.channels()]
+    levels = np.zeros(len(names))
+    levels[names.index(channel)] = settings.level(channel)
+    return levels
+
+
+def _set_exposure(camera: Camera, exposure_s: float) -> float:
+    """Set an exposure and return what the camera really uses."""
+    camera.set_exposure(exposure_s)
+    return float(camera.exposure_s)
+
+
+def _bright_level(path: Path) -> tuple[float, float]:
+    """Brightest level and clipped fraction of a metering shot.
+
+    The level is the :data:`METER_PERCENTILE` percentile, over CFA cells, of the
+    brightest photosite of the cell (full-scale units); every
+    :data:`METER_STEP`-th cell in each direction is enough for that and keeps
+    metering cheap on a full-size frame.
+    """
+    from tunespec.core.raw import load_raw
+
+    frame = load_raw(path)
+    step = 2 * METER_STEP
+    brightest: np.ndarray | None = None
+    clipped: np.ndarray | None = None
+    for k in range(4):
+        dy, dx = divmod(k, 2)
+        site = frame.mosaic[dy::step, dx::step]
+        black = float(frame.black_level_cfa[dy, dx])
+        value = (site.astype(np.float32) - black) / (frame.white_level - black)
+        over = site >= frame.white_level
+        brightest = value if brightest is None else np.maximum(brightest, value)
+        clipped = over if clipped is None else clipped | over
+    assert brightest is not None and clipped is not None
+    return float(np.percentile(brightest, METER_PERCENTILE)), float(clipped.mean())
+
+
+def meter_exposure(
+    camera: Camera,
+    stem: Path,
+    *,
+    start_s: float,
+    target_level: float,
+    min_s: float = MIN_EXPOSURE_S,
+    max_s: float = MAX_EXPOSURE_S,
+    measure: Callable[[Path], tuple[float, float]] = _bright_level,
+) -> tuple[float, float]:
+    """The exposure that puts the brightest part of the scene at ``target_level``.
+
+    The sensor is linear, so one unclipped shot with enough signal predicts the
+    exposure; clipped shots are shortened eightfold and very dark ones lengthened.
+    The light and the scene must already be set up.
+
+    Parameters
+    ----------
+    camera
+        The camera; its exposure is left at the result.
+    stem
+        Where to write metering shots (deleted afterwards).
+    start_s
+        First exposure to try.
+    target_level
+        Aim, fraction of full scale.
+    min_s, max_s
+        Exposure range allowed.
+    measure
+        ``path -> (level, clipped fraction)`` of a shot.
+
+    Returns
+    -------
+    (exposure_s, expected_level)
+        The exposure the camera uses and the level it is expected to give (below
+        ``target_level`` when ``max_s`` limits it).
+    """
+    t = min(max(start_s, min_s), max_s)
+    for _ in range(METER_MAX_SHOTS):
+        t_set = _set_exposure(camera, t)
+        path = camera.capture(stem)
+        try:
+            level, clipped = measure(path)
+        finally:
+            with contextlib.suppress(OSError):
+                path.unlink()
+        if clipped > METER_CLIPPED_FRACTION or level >= 0.98:
+            if t_set <= min_s * 1.0001:
+                return t_set, level
+            t = max(min_s, t_set / 8.0)
+            continue
+        if level < 0.02:
+            if t_set >= max_s * 0.9999:
+                return t_set, level
+            t = min(
+                max_s,
+                t_set * (100.0 if level <= 0 else min(100.0, target_level / level)),
+            )
+            continue
+        t = min(max_s, max(min_s, t_set * target_level / level))
+        t_final = _set_exposure(camera, t)
+        return t_final, level * t_final / t_set
+    return _set_exposure(camera, t), float("nan")
+
+
+def _resolve_exposures(
+    session: Session,
+    light: LightSource,
+    camera: Camera,
+    stage: TargetStage,
+    *,
+    max_exposure_s: float,
+    warnings: list[str],
+    step: Callable[[], None],
+) -> tuple[str, ...]:
+    """Meter (auto) or confirm (fixed) every channel's bracketed exposures."""
+    settings = session.settings
+    todo = [c for c in settings.channels if c not in settings.exposures_s]
+    if not todo:
+        return ()
+    requested = settings.requested_s
+    if settings.exposure_mode == "auto":
+        stage.present("white")
+    start_s = 1.0
+    for c in todo:
+        if settings.exposure_mode == "auto":
+            light.set_levels(_levels_for(light, settings, c))
+            t0, level = meter_exposure(
+                camera,
+                session.temp_stem(f"meter_{c}"),
+                start_s=start_s,
+                target_level=settings.target_level,
+                max_s=max_exposure_s,
+            )
+            start_s = t0
+            if level < LOW_SIGNAL_LEVEL:
+                warnings.append(
+                    f"{c}: only {level:.1%} of full scale at the longest exposure "
+                    f"allowed ({t0:g} s); its responses will be noisy"
+                )
+            wanted = [t0 * f for f in settings.bracket_factors]
+        else:
+            if c not in requested:
+                raise InputError(
+                    f"no exposure recorded for channel {c}", path=session.manifest_path
+                )
+            wanted = list(requested[c])
+        actual = tuple(_set_exposure(camera, t) for t in wanted)
+        settings = with_exposures(settings, {c: actual})
+        session.set_settings(settings)  # metered values survive a crash
+        step()
+    return tuple(todo)
+
+
+def _mean_spd(a: Spectra, b: Spectra) -> Spectra:
+    """Mean of two one-spectrum measurements (on ``a``'s wavelengths)."""
+    vb = np.interp(a.wavelength_nm, b.wavelength_nm, b.values[0])
+    return Spectra(
+        a.wavelength_nm,
+        0.5 * (a.values[0] + vb)[None, :],
+        ("measured",),
+        {"how": "mean of readings just before and just after the exposure"},
+    )
+
+
+def capture(
+    session: Session,
+    light: LightSource,
+    camera: Camera,
+    stage: TargetStage,
+    *,
+    resume: bool = False,
+    retake: Iterable[str] = (),
+    max_exposure_s: float = MAX_EXPOSURE_S,
+    progress: ProgressFn | None = None,
+    should_stop: StopFn | None = None,
+    on_frame: FrameCallback | None = None,
+) -> CaptureResult:
+    """Run (or resume) the capture sequence of a session.
+
+    Parameters
+    ----------
+    session
+        A session from :func:`new_session` (or :meth:`Session.open` to resume).
+    light, camera, stage
+        The devices; ``stage.present("white"|"target")`` returns once that is in
+        front of the camera.
+    resume
+        Continue a session that already holds frames: take only the frames that are
+        missing, marked bad, or whose file fails its checksum.
+    retake
+        Frame ids to mark bad and take again (implies ``resume``).
+    max_exposure_s
+        Longest exposure the metering may choose.
+    progress, should_stop
+        Progress (fraction of the frames to take) and cancellation hooks; a
+        cancelled capture keeps every frame taken so far.
+    on_frame
+        Called with each committed frame's record and raw file path.
+
+    Returns
+    -------
+    CaptureResult
+
+    Raises
+    ------
+    InputError
+        A session that already holds frames without ``resume``; channels the light
+        source does not have.
+    DeviceError
+        From the devices; frames committed before it stay in the session.
+    Cancelled
+        When ``should_stop()`` turns true.
+    """
+    retake = list(retake)
+    if session.frames and not (resume or retake):
+        raise InputError(
+            "the session already holds frames; resume it (--resume) or start a new one",
+            path=session.root,
+        )
+    settings = session.settings
+    available = [c.name for c in light.channels()]
+    unknown = [c for c in settings.channels if c not in available]
+    if unknown:
+        raise InputError(
+            f"the light source has no channel(s) {', '.join(unknown)}",
+            path=session.root,
+        )
+    session.clean_temp()
+    session.set_devices(device_identities(light, camera, stage))
+    if retake:
+        session.mark_bad(retake, "retake requested")
+    warnings: list[str] = []
+    n_meter = sum(c not in settings.exposures_s for c in settings.channels)
+    # until the exposures are known, count every possible dark (an overestimate, so
+    # the fraction never goes back when the real count replaces it)
+    n_lit = 2 * len(settings.channels) * len(settings.bracket_factors)
+    total = [n_meter + n_lit + (n_lit // 2) * settings.n_darks if n_meter else 0]
+    done = [0]
+
+    def step() -> None:
+        done[0] += 1
+        report(progress, done[0] / max(1, total[0]))
+        check_stop(should_stop)
+
+    captured: list[str] = []
+    try:
+        check_stop(should_stop)
+        metered = _resolve_exposures(
+            session,
+            light,
+            camera,
+            stage,
+            max_exposure_s=max_exposure_s,
+            warnings=warnings,
+            step=step,
+        )
+        settings = session.settings
+        todo = session.missing(verify=resume or bool(retake))
+        total[0] = done[0] + len(todo)
+        skipped = len(session.plan()) - len(todo)
+        if camera.iso != settings.iso:
+            camera.set_iso(settings.iso)
+        darks = [s for s in todo if s.kind == "dark"]
+        if darks:
+            light.all_off()
+        for spec in darks:
+            captured.append(_take(session, camera, spec, None, on_frame).id)
+            step()
+        for kind in ("white", "target"):
+            specs = [s for s in todo if s.kind == kind]
+            if not specs:
+                continue
+            stage.present(kind)  # type: ignore[arg-type]
+            current: str | None = None
+            for spec in specs:
+                assert spec.channel is not None
+                if spec.channel != current:
+                    light.set_levels(_levels_for(light, settings, spec.channel))
+                    current = spec.channel
+                captured.append(_take(session, camera, spec, light, on_frame).id)
+                step()
+        light.all_off()
+    except BaseException:
+        # the original error matters more than a failure to switch off
+        with contextlib.suppress(DeviceError, OSError):
+            light.all_off()
+        raise
+    report(progress, 1.0)
+    return CaptureResult(session, tuple(captured), skipped, metered, tuple(warnings))
+
+
+def _take(
+    session: Session,
+    camera: Camera,
+    spec: FrameSpec,
+    light: LightSource | None,
+    on_frame: FrameCallback | None,
+) -> FrameRecord:
+    """Expose one frame (with SPD readings around it) and commit it."""
+    t = _set_exposure(camera, spec.exposure_s)
+    if not math.isclose(t, spec.exposure_s, rel_tol=1e-6):
+        raise DeviceCommandError(
+            f"the camera set {t:g} s instead of the session's {spec.exposure_s:g} s "
+            f"for frame {spec.id}; its exposure steps changed since metering"
+        )
+    spd = None
+    if light is not None:
+        before = light.measure_spd()
+        path = camera.capture(session.temp_stem(spec.id))
+        after = light.measure_spd()
+        spd = _mean_spd(before, after)
+    else:
+        path = camera.capture(session.temp_stem(spec.id))
+    record = session.commit_frame(replace(spec, exposure_s=t), path, spd=spd)
+    if on_frame is not None:
+        on_frame(record, session.path_of(record))
+    return record

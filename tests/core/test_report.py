@@ -1,0 +1,234 @@
+"""The HTML + PDF measurement report: self-contained, complete, flags right, no pyplot."""
+
+from __future__ import annotations
+
+import base64
+import re
+from html.parser import HTMLParser
+from pathlib import Path
+from typing import ClassVar
+
+import numpy as np
+import pytest
+
+from tunespec.core.colorimetry import reflectance_stats
+from tunespec.core.datasets import load_camera, load_colorchecker_sg, load_led_set
+from tunespec.core.export import tunespec_version
+from tunespec.core.forward_model import render_rgb
+from tunespec.core.report import (
+    PATCHES_PER_FIGURE,
+    Flag,
+    ReportData,
+    quality_flags,
+    render_html,
+    report_figures,
+    shipped_datasets,
+    write_report,
+)
+from tunespec.core.responses import Responses
+from tunespec.core.spectra import Grid
+
+GRID = Grid(380.0, 730.0, 10.0)
+TABLE1 = {
+    "n_stimuli": 32,
+    **{
+        row: {"mean": 0.0021, "max": 0.0123, "p95": 0.0099}
+        for row in ("Red", "Green", "Blue", "RGB")
+    },
+}
+
+
+@pytest.fixture(scope="module")
+def report() -> ReportData:
+    sg = load_colorchecker_sg(GRID)
+    patches = ["A1", "A2", "B3", "C4", "D5", "E6", "F7", "N10"]
+    ref = sg.select(patches)
+    leds = load_led_set(GRID).select(["LED450", "LED540", "LED630", "WHITE_WARM"])
+    cam = load_camera(grid=GRID)
+    rgb = render_rgb(ref.values, leds.values, cam.values, GRID.step_nm)
+    rgb = rgb / rgb.max()
+    sat = np.zeros(rgb.shape[:2])
+    sat[0, 3], sat[7, 1] = 0.25, 0.004
+    responses = Responses(ref.names, leds.names, rgb, saturated=sat)
+    rng = np.random.default_rng(0)
+    est = ref.with_values(
+        np.clip(ref.values + rng.normal(0, 0.01, ref.values.shape), 0, 1)
+    )
+    return ReportData(
+        title="Neugebauer <test> & report",
+        created="2026-01-02T03:04:05+00:00",
+        session_id="S-2026-0001",
+        devices={
+            "camera": {"model": "Canon EOS 5D Mark III", "serial": "SN-42"},
+            "light source": {"model": "CAL1", "serial": "CAL1-7"},
+        },
+        settings={"grid": str(GRID), "method": "smooth"},
+        illuminants=leds,
+        sensitivity=cam.with_values(cam.values * 3.0),
+        sensitivity_reference=cam,
+        sensitivity_reference_label="truth",
+        sensitivity_method="smooth",
+        reflectance=est,
+        reflectance_reference=sg,
+        table1=TABLE1,
+        table2=reflectance_stats(est, sg),
+        responses=responses,
+        excluded_patches=("A1",),
+        flags=["check the lens cap", Flag("info", "warm-up 20 min")],
+        exports={"reflectances_ti3": "reflectances.ti3", "report": "/abs/report.pdf"},
+    )
+
+
+class _TagBalance(HTMLParser):
+    VOID: ClassVar[set[str]] = {"meta", "img", "br", "hr", "link", "input"}
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.stack: list[str] = []
+        self.errors: list[str] = []
+
+    def handle_starttag(self, tag: str, attrs: list[tuple[str, str | None]]) -> None:
+        if tag not in self.VOID:
+            self.stack.append(tag)
+
+    def handle_endtag(self, tag: str) -> None:
+        if not self.stack or self.stack.pop() != tag:
+            self.errors.append(tag)
+
+
+@pytest.fixture(scope="module")
+def written(
+    report: ReportData, tmp_path_factory: pytest.TempPathFactory
+) -> tuple[Path, Path]:
+    import matplotlib.pyplot as plt  # colour-science imports it anyway
+
+    paths = write_report(tmp_path_factory.mktemp("rep"), report)
+    # The figures never went through pyplot (no global backend, no figure manager).
+    assert plt.get_fignums() == []
+    return paths
+
+
+def test_html_is_self_contained_and_complete(
+    written: tuple[Path, Path], report: ReportData
+) -> None:
+    html_path, pdf_path = written
+    assert (html_path.name, pdf_path.name) == ("report.html", "report.pdf")
+    text = html_path.read_text(encoding="utf-8")
+    # No external assets: every image is inline, no stylesheet or script is fetched.
+    assert re.findall(r'src="(?!data:image/png;base64,)', text) == []
+    assert not re.search(r"<link|<script|@import|url\(|https?://", text)
+    images = re.findall(r'src="data:image/png;base64,([^"]+)"', text)
+    names = [n for n, _ in report_figures(report)]
+    assert names == ["led_spd", "sensitivities", "response_map", "reflectance_grid_1"]
+    assert len(images) == len(names)
+    assert all(base64.b64decode(b)[:8] == b"\x89PNG\r\n\x1a\n" for b in images)
+    checker = _TagBalance()
+    checker.feed(text)
+    assert checker.errors == [] and checker.stack == []
+    # Escaped title, provenance, results.
+    assert "<title>Neugebauer &lt;test&gt; &amp; report</title>" in text
+    for needle in (
+        "S-2026-0001",
+        "SN-42",
+        "CAL1-7",
+        f"TuneSpec {tunespec_version()}",
+        "Apache-2.0",
+        "MIT",
+        "ColorChecker SG",
+        '<a href="reflectances.ti3">reflectances.ti3</a>',
+        "<td>/abs/report.pdf</td>",
+        "Table 2: reflectance accuracy",
+        f'<td class="num">{report.table2.mean_delta_e00:.2f}</td>',
+        '<td class="num">0.67</td>',  # the paper's average
+        '<td class="num">0.0305</td>',  # the paper's Table 1 RGB maximum
+        '<td class="num">0.0123</td>',
+        "check the lens cap",
+    ):
+        assert needle in text, needle
+
+
+def test_pdf_has_a_page_per_part(written: tuple[Path, Path]) -> None:
+    data = written[1].read_bytes()
+    assert data.startswith(b"%PDF-") and data.rstrip().endswith(b"%%EOF")
+    pages = len(re.findall(rb"/Type /Page\b(?!s)", data))
+    # summary + 4 figures + provenance
+    assert pages == 1 + 4 + 1
+    assert b"Neugebauer <test> & report" in data or b"(Neugebauer" in data
+
+
+def test_flags(report: ReportData) -> None:
+    flags = quality_flags(report)
+    assert [f.level for f in flags] == ["warning"] * 3 + ["info"]
+    assert flags[0].text == (
+        "2 of 32 stimuli have saturated pixels (max 25.0 % of the ROI): A1 under "
+        "WHITE_WARM (25.0 %), N10 under LED540 (0.4 %)"
+    )
+    assert flags[1].text == (
+        "1 patch(es) excluded from the sensitivity fit (saturated): A1"
+    )
+    assert flags[2].text == "check the lens cap"
+    assert flags[3] == Flag("info", "warm-up 20 min")
+
+
+def test_flags_reflectance_outside_0_1_and_no_saturation(report: ReportData) -> None:
+    est = report.reflectance
+    bad = est.with_values(
+        est.values + np.where(np.arange(len(est))[:, None] == 2, 0.5, 0)
+    )
+    r = report.responses
+    clean = Responses(
+        r.patches, r.illuminants, r.rgb, saturated=np.zeros(r.rgb.shape[:2])
+    )
+    flags = quality_flags(
+        ReportData(reflectance=bad, responses=clean, clipped_patches=("B3",))
+    )
+    texts = [f.text for f in flags]
+    assert texts[0] == "1 reflectance estimate(s) clipped to 0..1: B3"
+    assert texts[1].startswith(
+        "1 estimated reflectance(s) outside 0..1 (min 0.000, max 1."
+    )
+    assert texts[1].endswith("): B3")
+    assert texts[2] == "no saturated pixels in 32 stimuli"
+
+
+def test_empty_report(tmp_path: Path) -> None:
+    empty = ReportData(title="Nothing yet", datasets=())
+    assert report_figures(empty) == []
+    text = render_html(empty)
+    assert "No data to check" in text and "data:image" not in text
+    assert "Data sets and licences" not in text
+    _, pdf_path = write_report(tmp_path, empty)
+    assert pdf_path.read_bytes().startswith(b"%PDF-")
+
+
+def test_many_patches_split_into_pages() -> None:
+    sg = load_colorchecker_sg(GRID)
+    names = [n for n, _ in report_figures(ReportData(reflectance=sg))]
+    assert PATCHES_PER_FIGURE == 70
+    assert names == ["reflectance_grid_1", "reflectance_grid_2"]
+
+
+def test_table1_from_prediction_stats(report: ReportData) -> None:
+    stats_mod = pytest.importorskip("tunespec.core.stats")
+    s = stats_mod.prediction_stats([[0.5, 0.5, 0.5]], [[0.5, 0.5, 0.53]])
+    text = render_html(
+        ReportData(table1=s, table1_held_out=s.as_dict(), datasets=()), figures=[]
+    )
+    assert '<td class="num">0.0300</td>' in text
+    assert "Response prediction (held-aside patches)" in text
+
+
+def test_table1_from_calibration_stats_json() -> None:
+    # What 'tunespec calibrate --stats' writes (CalibrationReport.as_dict()).
+    doc = {"training": TABLE1, "held_out": {**TABLE1, "n_stimuli": 8}}
+    text = render_html(ReportData(table1=doc, datasets=()), figures=[])
+    assert text.count("<h3>Table 1: response prediction (fitted patches)</h3>") == 1
+    assert "<h3>Response prediction (held-aside patches)</h3>" in text
+    assert "32 stimuli (patch x LED)" in text and "8 stimuli (patch x LED)" in text
+
+
+def test_shipped_datasets_and_licences() -> None:
+    ds = {d.name: d for d in shipped_datasets()}
+    assert {"cameras/", "charts/", "leds/", "layouts/"} <= set(ds)
+    assert ds["charts/"].licence == "MIT"
+    assert ds["cameras/"].licence.startswith("Apache-2.0")

@@ -1,0 +1,150 @@
+"""The whole measurement on the simulated bench: the paper's numbers, resume, config.
+
+One demo run (module fixture, 768 x 512 frames) serves most tests; the thresholds are
+the paper's own figures (Table 1 and Table 2 averages).
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from tunespec.core.errors import InputError
+from tunespec.core.progress import Cancelled
+from tunespec.core.responses import read_responses_csv
+from tunespec.core.session import Session
+from tunespec.core.spectra import read_spectra_csv
+from tunespec.devices.workflow import (
+    ESTIMATION_GRID,
+    load_config,
+    run_config,
+    run_demo,
+)
+
+#: Paper, Table 1: mean RGB RMS prediction error of the SG under all LEDs.
+PAPER_TABLE1_RGB_RMS = 0.0024
+#: Paper, Table 2 averages: CIEDE2000 (D50) and spectral RMS of the sample target.
+PAPER_TABLE2_DE00 = 0.67
+PAPER_TABLE2_SPECTRAL_RMS = 0.0286
+#: Automatic corners against the simulation's truth, mosaic pixels.
+MAX_CORNER_ERROR_PX = 1.0
+#: Small frames keep the test fast; the demo default is 1536 x 1024.
+RESOLUTION = (768, 512)
+
+
+@pytest.fixture(scope="module")
+def demo(tmp_path_factory):
+    out = tmp_path_factory.mktemp("demo")
+    fractions: list[float] = []
+    result = run_demo(out, resolution=RESOLUTION, progress=fractions.append)
+    return result, fractions
+
+
+def test_demo_reaches_the_papers_numbers(demo) -> None:
+    result, _ = demo
+    assert result.table1.mean[3] <= PAPER_TABLE1_RGB_RMS
+    assert result.table1.n_stimuli == 140 * 22 - 22 * len(
+        result.calibration.estimate.excluded_patches
+    )
+    assert result.table2.mean_delta_e00 <= PAPER_TABLE2_DE00
+    assert result.table2.mean_spectral_rms <= PAPER_TABLE2_SPECTRAL_RMS
+    for err in result.truth["corner_error_px"].values():
+        assert err < MAX_CORNER_ERROR_PX
+    assert result.chart.corners_source == "auto"
+
+
+def test_demo_progress_and_outputs(demo) -> None:
+    result, fractions = demo
+    assert fractions == sorted(fractions) and fractions[-1] == 1.0
+    out = result.out_dir
+    for name in (
+        "chart_responses.csv",
+        "chart_illuminants.csv",
+        "responses.csv",
+        "illuminants.csv",
+        "sensitivities.csv",
+        "reflectances.csv",
+        "reflectances.ti3",
+        "table1_prediction.csv",
+        "table2_reflectance.csv",
+        "report.html",
+        "report.pdf",
+        "summary.json",
+    ):
+        assert (out / name).is_file(), name
+    # what `tunespec calibrate` / `estimate` read
+    chart = read_responses_csv(out / "chart_responses.csv")
+    assert chart.rgb.shape == (140, 22, 3)
+    illum = read_spectra_csv(out / "chart_illuminants.csv")
+    assert illum.names == chart.illuminants
+    refl = read_spectra_csv(out / "reflectances.csv")
+    assert refl.wavelength_nm[0] == ESTIMATION_GRID.start_nm
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["table1_rgb_rms_mean"] == pytest.approx(result.table1.mean[3])
+    # both sessions complete and checksummed
+    for name in ("chart", "sample"):
+        assert Session.open(out / name).missing() == []
+
+
+def test_illuminants_are_measured_spd_times_exposure(demo) -> None:
+    result, _ = demo
+    session = Session.open(result.out_dir / "chart")
+    rec = session.frame("target_LED540")
+    spd = session.read_spd(rec)
+    np.testing.assert_allclose(
+        result.chart.illuminants["LED540"], spd.values[0] * rec.exposure_s
+    )
+
+
+def test_rerun_resumes_without_capturing(demo, tmp_path) -> None:
+    result, _ = demo
+    out = tmp_path / "again"
+    shutil.copytree(result.out_dir, out)
+    before = {
+        p.name: p.stat().st_mtime_ns for p in (out / "chart" / "frames").iterdir()
+    }
+    again = run_demo(out, resolution=RESOLUTION, report_files=False)
+    after = {p.name: p.stat().st_mtime_ns for p in (out / "chart" / "frames").iterdir()}
+    assert after == before
+    assert again.table1.mean[3] == pytest.approx(result.table1.mean[3])
+
+
+def test_config_run_on_existing_sessions(demo, tmp_path) -> None:
+    result, _ = demo
+    shutil.copytree(result.out_dir / "chart", tmp_path / "run" / "chart")
+    shutil.copytree(result.out_dir / "sample", tmp_path / "run" / "sample")
+    cfg = tmp_path / "run.toml"
+    cfg.write_text(
+        'out = "run"\n[bench]\nlight = "sim"\nresolution = "768x512"\n'
+        "[export]\nreport = false\n"
+    )
+    run = run_config(cfg)
+    assert run.table1.mean[3] == pytest.approx(result.table1.mean[3])
+    assert (tmp_path / "run" / "sensitivities.csv").is_file()
+
+
+def test_config_errors_name_the_file(tmp_path) -> None:
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[bench]\nlamp = 'sim'\n")
+    with pytest.raises(InputError, match="lamp"):
+        load_config(bad)
+    bad.write_text("[bench\n")
+    with pytest.raises(InputError, match="TOML"):
+        load_config(bad)
+    with pytest.raises(InputError, match="not found"):
+        load_config(tmp_path / "none.json")
+
+
+def test_cancel_stops_the_demo_and_keeps_frames(tmp_path) -> None:
+    seen: list[str] = []
+    with pytest.raises(Cancelled):
+        run_demo(
+            tmp_path / "d",
+            resolution=(384, 256),
+            on_frame=lambda rec, _: seen.append(rec.id),
+            should_stop=lambda: len(seen) >= 5,
+        )
+    assert len(Session.open(tmp_path / "d" / "chart").frames) == 5

@@ -1,0 +1,199 @@
+"""The core commands end to end on files, and their one-line errors."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from tunespec.app.cli import main
+from tunespec.core.datasets import (
+    load_camera,
+    load_colorchecker_sg,
+    load_led_set,
+    resource_path,
+)
+from tunespec.core.spectra import read_spectra_csv, write_spectra_csv
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("cli")
+    write_spectra_csv(load_camera(), d / "cam.csv")
+    write_spectra_csv(load_led_set(), d / "leds.csv")
+    write_spectra_csv(load_colorchecker_sg(), d / "sg.csv")
+    return d
+
+
+def test_simulate_calibrate_estimate_evaluate(files, capsys) -> None:
+    d = files
+    assert (
+        main(
+            [
+                "simulate-responses",
+                "--sensitivities",
+                str(d / "cam.csv"),
+                "--illuminants",
+                str(d / "leds.csv"),
+                "--reflectances",
+                str(d / "sg.csv"),
+                "--exposure-target",
+                "0.8",
+                "--illuminants-out",
+                str(d / "L.csv"),
+                "-o",
+                str(d / "R.csv"),
+            ]
+        )
+        == 0
+    )
+    assert (
+        main(
+            [
+                "calibrate",
+                "--responses",
+                str(d / "R.csv"),
+                "--illuminants",
+                str(d / "L.csv"),
+                "--reflectances",
+                str(d / "sg.csv"),
+                "--hold-out-every",
+                "5",
+                "-o",
+                str(d / "S.csv"),
+                "--stats",
+                str(d / "cal.json"),
+            ]
+        )
+        == 0
+    )
+    out = capsys.readouterr().out
+    assert "RGB" in out
+    stats = json.loads((d / "cal.json").read_text())
+    # Simulated at the 5D Mark III's noise: the paper's Table 1 level (0.24 % mean RGB)
+    assert stats["training"]["RGB"]["mean"] < 0.0024
+    assert stats["held_out"]["RGB"]["mean"] < 0.0030
+    sens = read_spectra_csv(d / "S.csv")
+    true = load_camera().values
+    est = sens.values / sens.values.max(axis=1, keepdims=True)
+    true = true / true.max(axis=1, keepdims=True)
+    assert np.sqrt(np.mean((est - true) ** 2)) < 0.03
+    target = resource_path("charts", "neugebauer_cmy_model.csv")
+    assert (
+        main(
+            [
+                "simulate-responses",
+                "--sensitivities",
+                str(d / "cam.csv"),
+                "--illuminants",
+                str(d / "L.csv"),
+                "--reflectances",
+                str(target),
+                "--seed",
+                "3",
+                "-o",
+                str(d / "T.csv"),
+            ]
+        )
+        == 0
+    )
+    assert (
+        main(
+            [
+                "estimate",
+                "--responses",
+                str(d / "T.csv"),
+                "--illuminants",
+                str(d / "L.csv"),
+                "--sensitivities",
+                str(d / "S.csv"),
+                "-o",
+                str(d / "E.csv"),
+            ]
+        )
+        == 0
+    )
+    assert (
+        main(
+            [
+                "evaluate",
+                "--estimated",
+                str(d / "E.csv"),
+                "--reference",
+                str(target),
+                "--stats",
+                str(d / "t2.json"),
+            ]
+        )
+        == 0
+    )
+    t2 = json.loads((d / "t2.json").read_text())
+    assert t2["average"]["delta_e00"] < 2.0
+
+
+@pytest.mark.parametrize(
+    ("mutate", "fragment"),
+    [
+        (lambda t: t.replace("patch,illuminant", "pach,illuminant"), "missing column"),
+        (lambda t: t.replace(",LED450,", ",LED999,"), "LED999"),
+        (lambda t: t.replace("\nA1,", "\nZZ9,"), "ZZ9"),
+    ],
+)
+def test_bad_input_is_one_line_exit_2(files, capsys, mutate, fragment) -> None:
+    d = files
+    main(
+        [
+            "simulate-responses",
+            "--sensitivities",
+            str(d / "cam.csv"),
+            "--illuminants",
+            str(d / "leds.csv"),
+            "--reflectances",
+            str(d / "sg.csv"),
+            "--no-noise",
+            "-o",
+            str(d / "ok.csv"),
+        ]
+    )
+    capsys.readouterr()
+    bad = d / "bad.csv"
+    bad.write_text(mutate((d / "ok.csv").read_text()))
+    code = main(
+        [
+            "calibrate",
+            "--responses",
+            str(bad),
+            "--illuminants",
+            str(d / "leds.csv"),
+            "--reflectances",
+            str(d / "sg.csv"),
+            "-o",
+            str(d / "never.csv"),
+        ]
+    )
+    err = capsys.readouterr().err
+    assert code == 2
+    assert len(err.strip().splitlines()) == 1 and fragment in err
+    assert "Traceback" not in err
+    assert not (d / "never.csv").exists()
+
+
+def test_short_wavelength_range_is_reported(files, tmp_path, capsys) -> None:
+    short = tmp_path / "short.csv"
+    short.write_text("wavelength_nm,R,G,B\n420,1,1,1\n700,1,1,1\n")
+    code = main(
+        [
+            "simulate-responses",
+            "--sensitivities",
+            str(short),
+            "--illuminants",
+            str(files / "leds.csv"),
+            "--reflectances",
+            str(files / "sg.csv"),
+            "-o",
+            str(tmp_path / "x.csv"),
+        ]
+    )
+    err = capsys.readouterr().err
+    assert code == 2 and "too short for the grid" in err and str(short) in err

@@ -1,0 +1,125 @@
+"""``tunespec demo | capture | process | run`` from the command line.
+
+The crash test runs ``tunespec capture`` in a child process, kills it with SIGKILL in
+the middle of the sequence, resumes the session and checks that nothing captured
+before the kill changed and nothing is missing.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from tunespec.app.cli import main
+from tunespec.core.datasets import resource_path
+from tunespec.core.responses import read_responses_csv
+from tunespec.core.session import MANIFEST_NAME, Session
+
+LAYOUT = resource_path("layouts", "neugebauer_cmy.json")
+#: Wall-clock budget of the killed capture (a safety net, not a timing assertion).
+KILL_DEADLINE_S = 120.0
+#: Frames the child must have committed before it is killed.
+KILL_AFTER_FRAMES = 8
+
+
+def _frames_in(manifest: Path) -> int:
+    try:
+        return len(json.loads(manifest.read_text())["frames"])
+    except (FileNotFoundError, json.JSONDecodeError, KeyError):
+        return 0
+
+
+def test_sigkill_mid_capture_then_resume(tmp_path, capsys) -> None:
+    out = tmp_path / "session"
+    # realtime: the simulated camera really waits each exposure, so the child is
+    # still capturing when it is killed
+    args = [
+        "capture", "--light", "sim", "--camera", "sim?realtime=1",
+        "--resolution", "384x256", "--layout", str(LAYOUT), "--out", str(out),
+        "--exposure", "0.05",
+    ]  # fmt: skip
+    child = subprocess.Popen(
+        [sys.executable, "-m", "tunespec.app.cli", *args],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+    )
+    try:
+        deadline = time.monotonic() + KILL_DEADLINE_S
+        while _frames_in(out / MANIFEST_NAME) < KILL_AFTER_FRAMES:
+            assert child.poll() is None, child.stderr.read().decode()
+            assert time.monotonic() < deadline, "the capture did not start in time"
+            time.sleep(0.01)
+        os.kill(child.pid, signal.SIGKILL)
+        child.wait()
+    finally:
+        if child.poll() is None:
+            child.kill()
+            child.wait()
+        child.stderr.close()
+    assert child.returncode == -signal.SIGKILL
+
+    killed = Session.open(out)
+    done = {f.id: (f, killed.path_of(f).read_bytes()) for f in killed.frames}
+    missing_before = killed.missing()
+    assert done and missing_before, "the kill should land mid-sequence"
+    # a resume refuses without --resume ...
+    assert main(["capture", "--light", "sim", "--out", str(out)]) == 2
+    # ... and with it takes only what is missing (no realtime needed now)
+    resume_args = ["capture", "--light", "sim", "--camera", "sim",
+                   "--resolution", "384x256", "--out", str(out), "--resume"]  # fmt: skip
+    assert main(resume_args) == 0
+    resumed = Session.open(out)
+    assert resumed.missing() == []
+    assert {f.id for f in missing_before} <= {f.id for f in resumed.frames}
+    for fid, (rec, data) in done.items():
+        now = resumed.frame(fid)
+        assert now == rec  # same record: checksum, time, exposure
+        assert resumed.path_of(now).read_bytes() == data
+    assert not list((out / "tmp").iterdir())
+    capsys.readouterr()
+
+
+def test_retake_one_frame_then_process(tmp_path, capsys) -> None:
+    out = tmp_path / "s"
+    base = ["capture", "--light", "sim", "--resolution", "384x256", "--out", str(out)]
+    assert main([*base, "--layout", str(LAYOUT), "--exposure", "2",
+                 "--channels", "LED450,WHITE_WARM"]) == 0  # fmt: skip
+    before = {f.id: f.sha256 for f in Session.open(out).frames}
+    assert main([*base, "--retake", "white_LED450"]) == 0
+    after = {f.id: f.sha256 for f in Session.open(out).frames}
+    assert after.pop("white_LED450") != before.pop("white_LED450")
+    assert after == before
+    assert "1 frame(s) captured" in capsys.readouterr().out
+
+    assert main(["process", str(out), "-o", str(tmp_path / "r.csv")]) == 0
+    r = read_responses_csv(tmp_path / "r.csv")
+    assert r.rgb.shape == (8, 2, 3) and r.illuminants == ("LED450", "WHITE_WARM")
+    assert (tmp_path / "r_illuminants.csv").is_file()
+    assert "corners (auto)" in capsys.readouterr().out
+
+
+def test_capture_input_errors_exit_2(tmp_path, capsys) -> None:
+    assert main(["capture", "--light", "sim", "--out", str(tmp_path / "x")]) == 2
+    assert "--layout" in capsys.readouterr().err
+    assert main(["capture", "--light", "nope", "--layout", str(LAYOUT),
+                 "--out", str(tmp_path / "y")]) == 2  # fmt: skip
+    assert main(["process", str(tmp_path / "none"), "-o", str(tmp_path / "r.csv")]) == 2
+
+
+@pytest.mark.slow
+def test_demo_command_prints_both_tables(tmp_path, capsys) -> None:
+    out = tmp_path / "demo"
+    rc = main(["demo", "--out", str(out), "--resolution", "512x340", "--no-report"])
+    text = capsys.readouterr().out
+    assert rc == 0
+    assert "Table 1" in text and "Table 2" in text and "average" in text
+    assert (out / "summary.json").is_file()
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["table1_rgb_rms_mean"] <= 0.0024
