@@ -1,1 +1,3 @@
-"""panels package."""
+"""panels package (importing it applies the Qt binding work-arounds)."""
+
+import tunespec.app.qt_compat  # noqa: F401

@@ -1,1 +1,3 @@
-"""plots package."""
+"""plots package (importing it applies the Qt binding work-arounds)."""
+
+import tunespec.app.qt_compat  # noqa: F401

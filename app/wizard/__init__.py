@@ -1,1 +1,3 @@
-"""wizard package."""
+"""wizard package (importing it applies the Qt binding work-arounds)."""
+
+import tunespec.app.qt_compat  # noqa: F401

@@ -1,0 +1,529 @@
+"""Edit a :class:`~tunespec.core.layout.TargetLayout` over a captured frame.
+
+The frame is shown with four draggable corner handles (TL, TR, BR, BL) and the patch
+grid with its ROIs drawn through the layout's homography. Rows, columns, margins,
+patch and ROI fractions are editable; corners can be found automatically (the core's
+corner finder runs in a :class:`~tunespec.app.workers.Worker`) and then corrected by
+dragging. Layouts load from and save to JSON through ``TargetLayout.load/save``.
+
+All geometry (homography, ROI quads) comes from ``core.layout``; this module only
+draws it and turns mouse drags into new corners.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyqtgraph as pg
+from numpy.typing import NDArray
+from PySide6.QtCore import QPointF, Signal, Slot
+from PySide6.QtWidgets import (
+    QCheckBox,
+    QDoubleSpinBox,
+    QFileDialog,
+    QFormLayout,
+    QGroupBox,
+    QHBoxLayout,
+    QLabel,
+    QPushButton,
+    QSpinBox,
+    QVBoxLayout,
+    QWidget,
+)
+
+from tunespec.app.plots.frame_plot import FramePlot, FramePreview
+from tunespec.app.workers import Worker
+from tunespec.core.errors import TuneSpecError
+from tunespec.core.layout import TargetLayout
+
+__all__ = ["CORNER_NAMES", "TargetLayoutEditor", "find_target_corners"]
+
+log = logging.getLogger(__name__)
+
+CORNER_NAMES = ("TL", "TR", "BR", "BL")
+_GRID_PEN = pg.mkPen((0, 220, 255), width=1)
+_ROI_PEN = pg.mkPen((255, 220, 0), width=2)
+_OUTLINE_PEN = pg.mkPen((0, 255, 0), width=2)
+_SELECTED_PEN = pg.mkPen((255, 60, 60), width=3)
+
+#: ``finder(frame, layout) -> (4, 2) corners`` (TL, TR, BR, BL in mosaic pixels).
+CornerFinder = Callable[..., Any]
+
+
+def find_target_corners(
+    frame: Any,
+    target_layout: TargetLayout,
+    *,
+    progress: Any = None,
+    should_stop: Any = None,
+) -> NDArray[np.float64]:
+    """The core's corner finder on a frame's green plane, in mosaic pixels.
+
+    ``core.homography.locate_target`` works in the coordinates of the image it is
+    given (planes); the layout keeps mosaic pixels.
+    """
+    from tunespec.core.homography import locate_target
+    from tunespec.core.raw import plane_to_full_px
+
+    corners_plane, _fit = locate_target(frame.planes[1], target_layout)
+    return plane_to_full_px(corners_plane)
+
+
+def _polylines(quads: NDArray[np.float64]) -> tuple[NDArray, NDArray]:
+    """Closed quads (n, 4, 2) as x, y arrays with NaN breaks for one curve item."""
+    closed = np.concatenate(
+        [quads, quads[:, :1], np.full((len(quads), 1, 2), np.nan)], 1
+    )
+    flat = closed.reshape(-1, 2)
+    return flat[:, 0], flat[:, 1]
+
+
+class TargetLayoutEditor(QWidget):
+    """The target-layout editor.
+
+    Parameters
+    ----------
+    target_layout
+        The layout to start with.
+    corner_finder
+        Automatic corner finder, ``finder(frame, layout, progress=, should_stop=)``
+        returning (4, 2) mosaic-pixel corners (default :func:`find_target_corners`);
+        None disables the button.
+    """
+
+    #: The layout changed (corners, grid or fractions): the new ``TargetLayout``.
+    layout_changed = Signal(object)
+    #: A patch was clicked: its name.
+    patch_selected = Signal(str)
+    #: A layout file was loaded: its path.
+    layout_loaded = Signal(str)
+
+    def __init__(
+        self,
+        target_layout: TargetLayout,
+        *,
+        corner_finder: CornerFinder | None = find_target_corners,
+        parent: QWidget | None = None,
+    ) -> None:
+        super().__init__(parent)
+        self._layout = target_layout
+        self._corner_finder = corner_finder
+        self._finder_worker: Worker | None = None
+        self._updating = False
+        self.selected_patch: str | None = None
+        self.last_dir = ""
+
+        self.frame_plot = FramePlot()
+        vb = self.frame_plot.view_box
+        self.grid_item = pg.PlotCurveItem(pen=_GRID_PEN, connect="finite")
+        self.roi_item = pg.PlotCurveItem(pen=_ROI_PEN, connect="finite")
+        self.outline_item = pg.PlotCurveItem(pen=_OUTLINE_PEN, connect="finite")
+        self.selected_item = pg.PlotCurveItem(pen=_SELECTED_PEN, connect="finite")
+        for z, item in enumerate(
+            (self.grid_item, self.roi_item, self.outline_item, self.selected_item), 2
+        ):
+            item.setZValue(z)
+            vb.addItem(item)
+        self.handles: list[pg.TargetItem] = []
+        for name in CORNER_NAMES:
+            handle = pg.TargetItem(
+                pos=(0, 0),
+                size=16,
+                symbol="s",
+                pen=pg.mkPen((255, 255, 255), width=2),
+                brush=(0, 200, 0, 120),
+                hoverBrush=(255, 255, 0, 180),
+                movable=True,
+                label=name,
+                labelOpts={"color": (255, 255, 255), "offset": (10, 10)},
+            )
+            handle.setZValue(10)
+            handle.sigPositionChanged.connect(self._on_handle_position_changed)
+            handle.sigPositionChangeFinished.connect(self._on_handle_drag_finished)
+            vb.addItem(handle)
+            self.handles.append(handle)
+        self.name_items: list[pg.TextItem] = []
+        vb.scene().sigMouseClicked.connect(self._on_scene_mouse_clicked)
+
+        self.name_label = QLabel()
+        self.rows_spin = QSpinBox(minimum=1, maximum=100)
+        self.cols_spin = QSpinBox(minimum=1, maximum=26)
+        self.margin_spins = [
+            QDoubleSpinBox(
+                minimum=0.0, maximum=1000.0, decimals=2, singleStep=0.5, suffix=" mm"
+            )
+            for _ in range(4)
+        ]
+        self.patch_fraction_spin = QDoubleSpinBox(
+            minimum=0.05, maximum=1.0, decimals=3, singleStep=0.01
+        )
+        self.roi_fraction_spin = QDoubleSpinBox(
+            minimum=1.0, maximum=100.0, decimals=1, singleStep=1.0, suffix=" % of area"
+        )
+        self.names_check = QCheckBox("Show patch names")
+        self.load_button = QPushButton("Load…")
+        self.save_button = QPushButton("Save…")
+        self.find_button = QPushButton("Find corners")
+        self.find_button.setToolTip(
+            "Find the target's corners automatically, then drag to correct"
+        )
+        self.reset_button = QPushButton("Reset corners")
+        self.status_label = QLabel()
+        self.status_label.setWordWrap(True)
+        self.corners_label = QLabel()
+        self.corners_label.setWordWrap(True)
+
+        form = QFormLayout()
+        form.addRow("Target", self.name_label)
+        form.addRow("Rows", self.rows_spin)
+        form.addRow("Columns", self.cols_spin)
+        for label, spin in zip(
+            ("Left", "Top", "Right", "Bottom"), self.margin_spins, strict=True
+        ):
+            form.addRow(f"{label} margin", spin)
+        form.addRow("Patch / cell", self.patch_fraction_spin)
+        form.addRow("ROI", self.roi_fraction_spin)
+        form.addRow(self.names_check)
+        box = QGroupBox("Layout")
+        box.setLayout(form)
+        buttons = QHBoxLayout()
+        buttons.addWidget(self.load_button)
+        buttons.addWidget(self.save_button)
+        corners = QHBoxLayout()
+        corners.addWidget(self.find_button)
+        corners.addWidget(self.reset_button)
+        side = QVBoxLayout()
+        side.addWidget(box)
+        side.addLayout(buttons)
+        side.addLayout(corners)
+        side.addWidget(self.corners_label)
+        side.addWidget(self.status_label)
+        side.addStretch(1)
+        side_widget = QWidget()
+        side_widget.setLayout(side)
+        side_widget.setMaximumWidth(300)
+        main = QHBoxLayout(self)
+        main.setContentsMargins(2, 2, 2, 2)
+        main.addWidget(self.frame_plot, 1)
+        main.addWidget(side_widget)
+
+        self.rows_spin.valueChanged.connect(self._on_geometry_edited)
+        self.cols_spin.valueChanged.connect(self._on_geometry_edited)
+        for spin in self.margin_spins:
+            spin.valueChanged.connect(self._on_geometry_edited)
+        self.patch_fraction_spin.valueChanged.connect(self._on_geometry_edited)
+        self.roi_fraction_spin.valueChanged.connect(self._on_geometry_edited)
+        self.names_check.toggled.connect(self._on_names_check_toggled)
+        self.load_button.clicked.connect(self._on_load_button_clicked)
+        self.save_button.clicked.connect(self._on_save_button_clicked)
+        self.find_button.clicked.connect(self._on_find_button_clicked)
+        self.reset_button.clicked.connect(self._on_reset_button_clicked)
+        self.set_corner_finder(corner_finder)
+        self.set_target_layout(target_layout)
+
+    # -- public API -------------------------------------------------------------------
+    @property
+    def target_layout(self) -> TargetLayout:
+        """The layout as edited now."""
+        return self._layout
+
+    def set_target_layout(
+        self, target_layout: TargetLayout, *, emit: bool = False
+    ) -> None:
+        """Show and edit ``target_layout`` (corners are kept if it has none)."""
+        if (
+            target_layout.corners_px is None
+            and self._layout.corners_px is not None
+            and self.frame_plot.image_size is not None
+        ):
+            target_layout = target_layout.with_corners(self._layout.corners_px)
+        self._layout = target_layout
+        self._updating = True
+        try:
+            self.name_label.setText(target_layout.name)
+            self.rows_spin.setValue(target_layout.rows)
+            self.cols_spin.setValue(target_layout.cols)
+            for spin, m in zip(self.margin_spins, target_layout.margin_mm, strict=True):
+                spin.setValue(m)
+            self.patch_fraction_spin.setValue(target_layout.patch_fraction)
+            self.roi_fraction_spin.setValue(100.0 * target_layout.roi_fraction)
+            self.names_check.setChecked(target_layout.n_patches <= 48)
+        finally:
+            self._updating = False
+        if target_layout.corners_px is None and self.frame_plot.image_size is not None:
+            self._layout = target_layout.with_corners(self.default_corners())
+        self._sync_handles()
+        self._redraw()
+        if emit:
+            self.layout_changed.emit(self._layout)
+
+    def set_corner_finder(self, finder: CornerFinder | None) -> None:
+        """Use ``finder`` for "Find corners" (None disables it)."""
+        self._corner_finder = finder
+        self.find_button.setEnabled(finder is not None)
+
+    def set_corners(self, corners_px: Any, *, emit: bool = True) -> None:
+        """Move the corners to ``corners_px`` (4, 2) TL, TR, BR, BL mosaic pixels."""
+        self._layout = self._layout.with_corners(np.asarray(corners_px, dtype=float))
+        self._sync_handles()
+        self._redraw()
+        if emit:
+            self.layout_changed.emit(self._layout)
+
+    def show_preview(self, preview: FramePreview) -> None:
+        """Show a frame; a layout without corners gets default ones inside it."""
+        self.frame_plot.show_preview(preview)
+        if self._layout.corners_px is None:
+            # placeholders to drag from, not corners anybody chose: not emitted
+            self.set_corners(self.default_corners(), emit=False)
+
+    def default_corners(self) -> NDArray[np.float64]:
+        """A rectangle inset 10 % into the frame, with the target's aspect ratio."""
+        size = self.frame_plot.image_size or (640, 480)
+        w, h = size
+        aspect = self._layout.width_mm / self._layout.height_mm
+        bw, bh = 0.8 * w, 0.8 * h
+        if bw / bh > aspect:
+            bw = bh * aspect
+        else:
+            bh = bw / aspect
+        x0, y0 = (w - bw) / 2, (h - bh) / 2
+        return np.array([[x0, y0], [x0 + bw, y0], [x0 + bw, y0 + bh], [x0, y0 + bh]])
+
+    def handle_positions(self) -> NDArray[np.float64]:
+        """Where the four handles are, (4, 2) mosaic pixels."""
+        return np.array([[h.pos().x(), h.pos().y()] for h in self.handles])
+
+    def select_patch(self, name: str | None) -> None:
+        """Outline patch ``name`` (None clears)."""
+        self.selected_patch = name
+        self._redraw_selection()
+
+    # -- drawing ------------------------------------------------------------------
+    def _sync_handles(self) -> None:
+        corners = self._layout.corners_px
+        self._updating = True
+        try:
+            for handle, c in zip(self.handles, corners or [(0, 0)] * 4, strict=True):
+                handle.setVisible(corners is not None)
+                handle.setPos(QPointF(float(c[0]), float(c[1])))
+        finally:
+            self._updating = False
+        self._show_corners_text()
+
+    def _show_corners_text(self) -> None:
+        c = self._layout.corners_px
+        self.corners_label.setText(
+            "Corners: not set"
+            if c is None
+            else "Corners (px): "
+            + ", ".join(
+                f"{n} ({x:.0f}, {y:.0f})"
+                for n, (x, y) in zip(CORNER_NAMES, c, strict=True)
+            )
+        )
+
+    def _redraw(self) -> None:
+        lay = self._layout
+        for item in self.name_items:
+            self.frame_plot.view_box.removeItem(item)
+        self.name_items.clear()
+        try:
+            if lay.corners_px is None:
+                raise TuneSpecError("no corners")
+            H = lay.homography()
+            from tunespec.core.layout import apply_homography
+
+            patches = apply_homography(H, lay.patch_quads_mm(1.0))
+            rois = lay.roi_quads_px()
+            outline = apply_homography(H, lay.outer_corners_mm()[None])
+        except TuneSpecError:
+            for item in (
+                self.grid_item,
+                self.roi_item,
+                self.outline_item,
+                self.selected_item,
+            ):
+                item.setData([], [])
+            self._quads_px = None
+            return
+        self._quads_px = patches
+        self.grid_item.setData(*_polylines(patches))
+        self.roi_item.setData(*_polylines(rois))
+        self.outline_item.setData(*_polylines(outline))
+        if self.names_check.isChecked():
+            centres = patches.mean(axis=1)
+            for name, (x, y) in zip(lay.patch_names, centres, strict=True):
+                text = pg.TextItem(name, color=(255, 255, 255), anchor=(0.5, 1.3))
+                text.setPos(x, y)
+                text.setZValue(6)
+                self.frame_plot.view_box.addItem(text)
+                self.name_items.append(text)
+        self._redraw_selection()
+
+    def _redraw_selection(self) -> None:
+        quads = getattr(self, "_quads_px", None)
+        name = self.selected_patch
+        if quads is None or name not in self._layout.patch_names:
+            self.selected_item.setData([], [])
+            return
+        i = self._layout.patch_names.index(name)
+        self.selected_item.setData(*_polylines(quads[i : i + 1]))
+
+    def patch_at(self, x: float, y: float) -> str | None:
+        """The patch whose quad contains mosaic pixel (x, y), or None."""
+        quads = getattr(self, "_quads_px", None)
+        if quads is None:
+            return None
+        # inside a convex quad: the point is on the same side of all four edges
+        edges = np.roll(quads, -1, axis=1) - quads
+        rel = np.array([x, y])[None, None, :] - quads
+        cross = edges[..., 0] * rel[..., 1] - edges[..., 1] * rel[..., 0]
+        inside = np.all(cross >= 0, axis=1) | np.all(cross <= 0, axis=1)
+        hits = np.flatnonzero(inside)
+        return self._layout.patch_names[hits[0]] if hits.size else None
+
+    # -- slots --------------------------------------------------------------------
+    @Slot(object)
+    def _on_handle_position_changed(self, _handle: Any) -> None:
+        if self._updating:
+            return
+        self._layout = self._layout.with_corners(self.handle_positions())
+        self._show_corners_text()
+        self._redraw()
+        self.layout_changed.emit(self._layout)
+
+    @Slot(object)
+    def _on_handle_drag_finished(self, _handle: Any) -> None:
+        log.info("target corners set by hand: %s", self._layout.corners_px)
+
+    @Slot()
+    def _on_geometry_edited(self) -> None:
+        if self._updating:
+            return
+        lay = self._layout
+        rows, cols = self.rows_spin.value(), self.cols_spin.value()
+        names = (
+            lay.patch_names
+            if rows * cols == lay.n_patches and (rows, cols) == (lay.rows, lay.cols)
+            else ()
+        )
+        try:
+            new = replace(
+                lay,
+                rows=rows,
+                cols=cols,
+                margin_mm=tuple(s.value() for s in self.margin_spins),
+                patch_fraction=self.patch_fraction_spin.value(),
+                roi_fraction=self.roi_fraction_spin.value() / 100.0,
+                patch_names=names,
+            )
+        except TuneSpecError as exc:
+            self.status_label.setText(f"Not applied: {exc}")
+            return
+        self.status_label.setText("")
+        self._layout = new
+        self._redraw()
+        self.layout_changed.emit(new)
+
+    @Slot(bool)
+    def _on_names_check_toggled(self, _on: bool) -> None:
+        self._redraw()
+
+    @Slot(object)
+    def _on_scene_mouse_clicked(self, event: Any) -> None:
+        vb = self.frame_plot.view_box
+        if not vb.sceneBoundingRect().contains(event.scenePos()):
+            return
+        p = vb.mapSceneToView(event.scenePos())
+        name = self.patch_at(p.x(), p.y())
+        if name is not None:
+            self.select_patch(name)
+            self.patch_selected.emit(name)
+
+    @Slot()
+    def _on_load_button_clicked(self) -> None:
+        path, _ = QFileDialog.getOpenFileName(
+            self, "Load target layout", self.last_dir, "Target layouts (*.json)"
+        )
+        if path:
+            self.load(path)
+
+    @Slot()
+    def _on_save_button_clicked(self) -> None:
+        path, _ = QFileDialog.getSaveFileName(
+            self, "Save target layout", self.last_dir, "Target layouts (*.json)"
+        )
+        if path:
+            self.save(path)
+
+    def load(self, path: str | Path) -> None:
+        """Load a layout JSON file (errors are shown, not raised)."""
+        try:
+            lay = TargetLayout.load(path)
+        except TuneSpecError as exc:
+            self.status_label.setText(f"Cannot load: {exc}")
+            log.error("cannot load layout: %s", exc)
+            return
+        self.last_dir = str(Path(path).parent)
+        self.set_target_layout(lay, emit=True)
+        self.status_label.setText(f"Loaded {Path(path).name}")
+        self.layout_loaded.emit(str(path))
+
+    def save(self, path: str | Path) -> None:
+        """Save the layout as JSON (errors are shown, not raised)."""
+        try:
+            self._layout.save(path)
+        except OSError as exc:
+            self.status_label.setText(f"Cannot save: {exc}")
+            log.error("cannot save layout: %s", exc)
+            return
+        self.last_dir = str(Path(path).parent)
+        self.status_label.setText(f"Saved {Path(path).name}")
+        log.info("layout saved to %s", path)
+
+    @Slot()
+    def _on_reset_button_clicked(self) -> None:
+        self.set_corners(self.default_corners())
+
+    @Slot()
+    def _on_find_button_clicked(self) -> None:
+        self.find_corners()
+
+    def find_corners(self) -> Worker | None:
+        """Run the automatic corner finder on the shown frame (in a worker)."""
+        preview = self.frame_plot.preview
+        if self._corner_finder is None or preview is None or preview.frame is None:
+            self.status_label.setText("Take a frame of the target first.")
+            return None
+        if self._finder_worker is not None:
+            return self._finder_worker
+        self.status_label.setText("Finding corners…")
+        self.find_button.setEnabled(False)
+        worker = Worker(self._corner_finder, preview.frame, self._layout)
+        worker.signals.returned.connect(self._on_finder_returned)
+        worker.signals.errored.connect(self._on_finder_errored)
+        worker.signals.finished.connect(self._on_finder_finished)
+        self._finder_worker = worker
+        return worker.start()
+
+    @Slot(object)
+    def _on_finder_returned(self, corners: Any) -> None:
+        self.set_corners(np.asarray(corners, dtype=float).reshape(4, 2))
+        self.status_label.setText("Corners found; drag a handle to correct.")
+        log.info("target corners found automatically")
+
+    @Slot(object)
+    def _on_finder_errored(self, exc: Exception) -> None:
+        self.status_label.setText(f"Corners not found: {exc}. Place them by hand.")
+        log.warning("automatic corner finding failed: %s", exc)
+
+    @Slot()
+    def _on_finder_finished(self) -> None:
+        self._finder_worker = None
+        self.find_button.setEnabled(self._corner_finder is not None)

@@ -1,0 +1,396 @@
+"""The operator's workstation: devices, measurement wizard, layout editor, spectra, log.
+
+The window composes the widgets and wires their signals; every widget gets its
+model or service in ``__init__`` (the device controller, the measurement), and the
+window holds no measurement logic of its own.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+from PySide6.QtCore import QSettings, Qt, Slot
+from PySide6.QtGui import QAction, QCloseEvent, QKeySequence
+from PySide6.QtWidgets import (
+    QDockWidget,
+    QFileDialog,
+    QGridLayout,
+    QMainWindow,
+    QMessageBox,
+    QTabWidget,
+    QWidget,
+)
+
+import tunespec.app.qt_compat  # noqa: F401 (before any signal)
+from tunespec.app.editors.target_layout_editor import TargetLayoutEditor
+from tunespec.app.panels.device_panel import DevicePanel, format_error
+from tunespec.app.panels.log_panel import LogPanel
+from tunespec.app.panels.stats_table_panel import (
+    show_table1,
+    show_table2,
+    table1_panel,
+    table2_panel,
+)
+from tunespec.app.plots.reflectance_plot import ReflectancePlot
+from tunespec.app.plots.sensitivity_plot import SensitivityPlot
+from tunespec.app.plots.spd_plot import SpdPlot
+from tunespec.app.settings import AppSettings
+from tunespec.app.wizard.measurement import Measurement
+from tunespec.app.wizard.wizard_panel import WizardPanel
+from tunespec.app.workers import BenchInfo, DeviceController, Throttle, Worker
+
+__all__ = ["MainWindow"]
+
+log = logging.getLogger(__name__)
+
+TAB_MEASUREMENT, TAB_LAYOUT, TAB_SPECTRA, TAB_TABLES = range(4)
+
+
+class MainWindow(QMainWindow):
+    """The TuneSpec main window.
+
+    Parameters
+    ----------
+    settings
+        Persistent settings (:class:`AppSettings` or a ``QSettings``); default the
+        user's.
+    opener
+        Opens a bench from two spec strings (default: ``tunespec.devices.registry``);
+        tests inject their own.
+    sim_options
+        Override the stored simulated-bench options (tests: ``realtime=False`` and
+        a small resolution).
+    """
+
+    def __init__(
+        self,
+        settings: AppSettings | QSettings | None = None,
+        *,
+        opener: Any = None,
+        sim_options: dict[str, Any] | None = None,
+        parent: QWidget | None = None,
+    ) -> None:
+        super().__init__(parent)
+        if not isinstance(settings, AppSettings):
+            settings = AppSettings(settings)
+        self.settings = settings
+        self.setWindowTitle("TuneSpec — spectral reflectance workstation")
+        self.resize(1400, 900)
+
+        self.controller = DeviceController(opener)
+        self._truth: dict[str, Any] = {}
+        self._last_preview: dict[str, Any] = {}
+        options = {**settings.sim_options(), **(sim_options or {})}
+        self.measurement = Measurement(self.controller, settings)
+
+        self.log_panel = LogPanel()
+        self.device_panel = DevicePanel(
+            self.controller,
+            light_specs=_spec_choices("light", settings.get("devices/light_spec")),
+            camera_specs=_spec_choices("camera", settings.get("devices/camera_spec")),
+            sim_options=options,
+        )
+        self.measurement.connector = self.device_panel.connect_devices
+        self.measurement.sim_options = options
+        self.wizard_panel = WizardPanel(self.measurement)
+        self.layout_editor = TargetLayoutEditor(self.measurement.chart_layout)
+        self.spd_plot = SpdPlot()
+        self.sensitivity_plot = SensitivityPlot()
+        self.reflectance_plot = ReflectancePlot()
+        self.table1_panel = table1_panel()
+        self.table2_panel = table2_panel()
+
+        spectra = QWidget()
+        grid = QGridLayout(spectra)
+        grid.addWidget(self.spd_plot, 0, 0)
+        grid.addWidget(self.sensitivity_plot, 0, 1)
+        grid.addWidget(self.reflectance_plot, 1, 0, 1, 2)
+        tables = QWidget()
+        tgrid = QGridLayout(tables)
+        tgrid.addWidget(self.table1_panel, 0, 0)
+        tgrid.addWidget(self.table2_panel, 0, 1)
+        self.tabs = QTabWidget()
+        self.tabs.addTab(self.wizard_panel, "Measurement")
+        self.tabs.addTab(self.layout_editor, "Target layout")
+        self.tabs.addTab(spectra, "Spectra")
+        self.tabs.addTab(tables, "Tables")
+        self.setCentralWidget(self.tabs)
+
+        self.device_dock = QDockWidget("Devices", self)
+        self.device_dock.setObjectName("device_dock")
+        self.device_dock.setWidget(self.device_panel)
+        self.addDockWidget(Qt.DockWidgetArea.LeftDockWidgetArea, self.device_dock)
+        # the live view gets its own dock so the channel list keeps its height
+        self.live_dock = QDockWidget("Live view", self)
+        self.live_dock.setObjectName("live_dock")
+        self.live_dock.setWidget(self.device_panel.frame_plot)
+        self.addDockWidget(Qt.DockWidgetArea.LeftDockWidgetArea, self.live_dock)
+        self.splitDockWidget(self.device_dock, self.live_dock, Qt.Orientation.Vertical)
+        self.log_dock = QDockWidget("Log", self)
+        self.log_dock.setObjectName("log_dock")
+        self.log_dock.setWidget(self.log_panel)
+        self.addDockWidget(Qt.DockWidgetArea.BottomDockWidgetArea, self.log_dock)
+        self.resizeDocks([self.log_dock], [150], Qt.Orientation.Vertical)
+        self._build_menus()
+
+        # redraw at most ~20 Hz however fast the devices report
+        self._spd_throttle = Throttle(self.spd_plot.show_spd)
+        self._frame_throttle = Throttle(self.layout_editor.show_preview)
+        c = self.controller
+        c.devices_opened.connect(self._on_controller_devices_opened)
+        c.devices_closed.connect(self._on_controller_devices_closed)
+        c.spd_measured.connect(self._on_controller_spd_measured)
+        c.frame_acquired.connect(self._on_controller_frame_acquired)
+        c.errored.connect(self._on_controller_errored)
+        m = self.measurement
+        m.layout_needed.connect(self._on_measurement_layout_needed)
+        m.calibrated.connect(self._on_measurement_calibrated)
+        m.estimated.connect(self._on_measurement_estimated)
+        self.layout_editor.layout_changed.connect(self._on_layout_editor_layout_changed)
+        self.layout_editor.layout_loaded.connect(self._on_layout_editor_layout_loaded)
+        self.layout_editor.patch_selected.connect(self.reflectance_plot.select_patch)
+        self.reflectance_plot.patch_selected.connect(self.layout_editor.select_patch)
+        self.table2_panel.row_selected.connect(self.reflectance_plot.select_patch)
+        self._restore_settings()
+        # the first capture would otherwise import (and, without .pyc files, compile)
+        # the pipeline on the device thread while the GUI waits for the GIL
+        self.preloaded = False
+        self._preload = Worker(_preload_pipeline, hooks=False)
+        self._preload.signals.finished.connect(self._on_preload_finished)
+        self._preload.start()
+        log.info("TuneSpec workstation ready")
+
+    # -- menus ------------------------------------------------------------------------
+    def _build_menus(self) -> None:
+        file_menu = self.menuBar().addMenu("&File")
+        self.new_action = QAction(
+            "&New measurement…", self, shortcut=QKeySequence.StandardKey.New
+        )
+        self.open_action = QAction(
+            "&Open / resume measurement…", self, shortcut=QKeySequence.StandardKey.Open
+        )
+        self.quit_action = QAction(
+            "&Quit", self, shortcut=QKeySequence.StandardKey.Quit
+        )
+        file_menu.addAction(self.new_action)
+        file_menu.addAction(self.open_action)
+        file_menu.addSeparator()
+        file_menu.addAction(self.quit_action)
+        dev_menu = self.menuBar().addMenu("&Devices")
+        self.connect_sim_action = QAction("Connect the &simulated bench", self)
+        self.all_off_action = QAction(
+            "&All LEDs off", self, shortcut=QKeySequence("Ctrl+0")
+        )
+        dev_menu.addAction(self.connect_sim_action)
+        dev_menu.addAction(self.all_off_action)
+        view_menu = self.menuBar().addMenu("&View")
+        view_menu.addAction(self.device_dock.toggleViewAction())
+        view_menu.addAction(self.live_dock.toggleViewAction())
+        view_menu.addAction(self.log_dock.toggleViewAction())
+        help_menu = self.menuBar().addMenu("&Help")
+        about = QAction("&About TuneSpec", self)
+        help_menu.addAction(about)
+        self.new_action.triggered.connect(self._on_new_action_triggered)
+        self.open_action.triggered.connect(self._on_open_action_triggered)
+        self.quit_action.triggered.connect(self.close)
+        self.connect_sim_action.triggered.connect(self._on_connect_sim_action_triggered)
+        self.all_off_action.triggered.connect(self._on_all_off_action_triggered)
+        about.triggered.connect(self._on_about_action_triggered)
+
+    # -- settings ---------------------------------------------------------------------
+    def _restore_settings(self) -> None:
+        s = self.settings
+        geometry, state = s.get("ui/geometry"), s.get("ui/state")
+        if geometry:
+            self.restoreGeometry(geometry)
+        if state:
+            self.restoreState(state)
+        self.tabs.setCurrentIndex(min(max(0, s.get("ui/tab")), self.tabs.count() - 1))
+
+    def save_settings(self) -> None:
+        """Store window and device choices."""
+        s = self.settings
+        s.set("ui/geometry", self.saveGeometry())
+        s.set("ui/state", self.saveState())
+        s.set("ui/tab", self.tabs.currentIndex())
+        s.set("devices/light_spec", self.device_panel.light_spec_combo.currentText())
+        s.set("devices/camera_spec", self.device_panel.camera_spec_combo.currentText())
+        self.measurement.save_settings()
+        self.measurement.save()
+        s.sync()
+
+    # -- slots: menus -----------------------------------------------------------------
+    @Slot()
+    def _on_new_action_triggered(self) -> None:
+        folder = QFileDialog.getExistingDirectory(
+            self,
+            "Folder for the new measurement",
+            self.settings.get("session/root_dir"),
+        )
+        if folder:
+            self.wizard_panel.new_measurement(folder)
+
+    @Slot()
+    def _on_open_action_triggered(self) -> None:
+        folder = QFileDialog.getExistingDirectory(
+            self, "Open a measurement to resume", self.settings.get("session/last_dir")
+        )
+        if folder:
+            self.wizard_panel.open_measurement(folder)
+            self.tabs.setCurrentIndex(TAB_MEASUREMENT)
+
+    @Slot()
+    def _on_connect_sim_action_triggered(self) -> None:
+        if not self.device_panel.connected:
+            self.device_panel.light_spec_combo.setCurrentText("sim")
+            self.device_panel.camera_spec_combo.setCurrentText("sim")
+            self.device_panel.connect_devices()
+
+    @Slot()
+    def _on_all_off_action_triggered(self) -> None:
+        self.wizard_panel.abort()
+        self.controller.all_off()
+
+    @Slot()
+    def _on_about_action_triggered(self) -> None:
+        QMessageBox.about(
+            self,
+            "About TuneSpec",
+            "TuneSpec: spectral reflectance from an RGB camera and a spectrally "
+            "tunable LED light source (Image Engineering CAL1, Canon EOS 5D Mark III).",
+        )
+
+    # -- slots: devices and measurement ----------------------------------------------
+    @Slot(object)
+    def _on_controller_devices_opened(self, info: BenchInfo) -> None:
+        self.spd_plot.set_channel_names([c.name for c in info.channels])
+        self._truth = dict(info.extra.get("truth", {}))
+        self.statusBar().showMessage("Devices connected", 5000)
+
+    @Slot()
+    def _on_controller_devices_closed(self) -> None:
+        self.statusBar().showMessage("Devices closed", 5000)
+
+    @Slot(object, object)
+    def _on_controller_spd_measured(self, spd: Any, levels: Any) -> None:
+        self._spd_throttle(spd, levels)
+
+    @Slot(object)
+    def _on_controller_frame_acquired(self, preview: Any) -> None:
+        self._last_preview[self.measurement.current_target] = preview
+        self._frame_throttle(preview)
+
+    @Slot(object)
+    def _on_controller_errored(self, exc: Any) -> None:
+        self.statusBar().showMessage(f"Device error: {format_error(exc)}", 15000)
+
+    @Slot(object)
+    def _on_measurement_layout_needed(self, target_layout: Any) -> None:
+        # the editor shows the last frame taken of that target, not of the other one
+        preview = self._last_preview.get(self.measurement.current_target)
+        if preview is not None:
+            self.layout_editor.show_preview(preview)
+        self.layout_editor.set_target_layout(target_layout)
+
+    @Slot(object)
+    def _on_layout_editor_layout_changed(self, target_layout: Any) -> None:
+        self.measurement.set_current_layout(target_layout)
+
+    @Slot(str)
+    def _on_layout_editor_layout_loaded(self, path: str) -> None:
+        # the next measurement starts from the layout file the operator chose
+        self.settings.set(f"layout/{self.measurement.current_target}_path", path)
+
+    @Slot(object)
+    def _on_measurement_calibrated(self, result: Any) -> None:
+        show_table1(self.table1_panel, result)
+        reference = self._truth.get("sensitivity")
+        label = "true (simulator)"
+        if reference is None:
+            reference, label = _reference_sensitivity(), "database"
+        self.sensitivity_plot.show_sensitivity(
+            result.sensitivity,
+            reference,
+            label=f"estimated ({result.method})",
+            reference_label=label,
+        )
+
+    @Slot(object)
+    def _on_measurement_estimated(self, result: Any) -> None:
+        show_table2(self.table2_panel, result)
+        per_patch = {}
+        t = result.table2
+        if t is not None:
+            per_patch = {
+                n: f"CIEDE2000 {d:.2f}, spectral RMS {r:.4f}"
+                for n, d, r in zip(t.names, t.delta_e00, t.spectral_rms, strict=True)
+            }
+        self.reflectance_plot.set_data(result.reflectance, result.reference, per_patch)
+
+    @Slot()
+    def _on_preload_finished(self) -> None:
+        self.preloaded = True
+
+    # -- closing ----------------------------------------------------------------------
+    def closeEvent(self, event: QCloseEvent) -> None:
+        """Abort what runs, switch the light off, close the devices, save settings."""
+        self.save_settings()
+        self.wizard_panel.shutdown()
+        self.controller.shutdown()
+        self.log_panel.detach()
+        super().closeEvent(event)
+
+
+#: Modules the measurement steps need, imported in the background at start-up.
+PIPELINE_MODULES = (
+    "tunespec.devices.workflow",
+    "tunespec.devices.sim.camera",
+    "tunespec.devices.sim.light",
+    "tunespec.devices.dng",
+    "tunespec.core.raw",
+    "tunespec.core.homography",
+    "tunespec.core.sensitivity",
+    "tunespec.core.stats",
+    "tunespec.core.wiener",
+    "tunespec.core.colorimetry",
+    "tunespec.core.export",
+)
+
+
+def _preload_pipeline() -> None:
+    """Import :data:`PIPELINE_MODULES` (pool thread)."""
+    import importlib
+
+    for name in PIPELINE_MODULES:
+        importlib.import_module(name)
+
+
+def _reference_sensitivity() -> Any:
+    """The database curves of the bench's camera model (the simulator's truth)."""
+    from tunespec.core.datasets import DEFAULT_CAMERA, load_camera
+
+    try:
+        return load_camera(DEFAULT_CAMERA)
+    except Exception as exc:
+        log.debug("no reference sensitivity: %s", exc)
+        return None
+
+
+def _spec_choices(role: str, remembered: str) -> list[str]:
+    """Spec strings offered for ``role`` (``"light"`` or ``"camera"``).
+
+    The remembered spec comes first, then the simulated bench, then the usual
+    hardware specs as examples to edit. (The registry has no hardware discovery yet,
+    so ``sim`` stays the default until the operator picks hardware.)
+    """
+    hardware = (
+        ["cal1:///dev/ttyUSB0", "cal1+socket://127.0.0.1:5025"]
+        if role == "light"
+        else ["gphoto2"]
+    )
+    choices = [remembered] if remembered else []
+    for spec in ("sim", *hardware):
+        if spec not in choices:
+            choices.append(spec)
+    return choices

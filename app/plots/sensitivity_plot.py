@@ -1,0 +1,58 @@
+"""Estimated camera spectral sensitivities (paper Fig. 4)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from PySide6.QtWidgets import QWidget
+
+from tunespec.app.plots.spectra_plot import CHANNEL_COLOURS, SpectraPlot
+
+__all__ = ["SensitivityPlot"]
+
+
+class SensitivityPlot(SpectraPlot):
+    """R, G, B sensitivities, optionally with a reference set dashed.
+
+    Both sets are scaled to a peak of 1 for display: the estimate is on the absolute
+    scale of the responses, a database curve on its own.
+    """
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__("Camera sensitivities", "relative sensitivity", None, parent)
+        self.set_message("Calibrate to see the estimated sensitivities.")
+        self.sensitivity: Any = None
+
+    def show_sensitivity(
+        self,
+        sensitivity: Any,
+        reference: Any = None,
+        *,
+        label: str = "estimated",
+        reference_label: str = "reference",
+    ) -> None:
+        """Plot ``sensitivity`` (``Spectra`` R, G, B) and a dashed ``reference``."""
+        self.sensitivity = sensitivity
+        self.clear()
+        for spectra, dashed, tag in (
+            (sensitivity, False, "estimated"),
+            (reference, True, reference_label),
+        ):
+            if spectra is None:
+                continue
+            values = np.asarray(spectra.values, dtype=float)
+            peak = float(np.max(values)) or 1.0
+            for name, row in zip(spectra.names, values, strict=True):
+                self.add_curve(
+                    f"{name} {tag}",
+                    spectra.wavelength_nm,
+                    row / peak,
+                    colour=CHANNEL_COLOURS.get(name, (0, 0, 0)),
+                    dashed=dashed,
+                    width=1.5 if dashed else 2.0,
+                )
+        text = label
+        if reference is not None:
+            text += f"; dashed: {reference_label}"
+        self.set_message(text + " (each set scaled to a peak of 1)")

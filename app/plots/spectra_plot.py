@@ -1,0 +1,107 @@
+"""The base of every spectral plot: a pyqtgraph plot with wavelength on x.
+
+Subclasses (:class:`~tunespec.app.plots.spd_plot.SpdPlot`,
+:class:`~tunespec.app.plots.sensitivity_plot.SensitivityPlot`,
+:class:`~tunespec.app.plots.reflectance_plot.ReflectancePlot`) only decide what
+curves to show; drawing and clearing are shared here.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import pyqtgraph as pg
+from numpy.typing import ArrayLike
+from PySide6.QtCore import Qt
+from PySide6.QtWidgets import QLabel, QVBoxLayout, QWidget
+
+__all__ = ["CHANNEL_COLOURS", "SpectraPlot"]
+
+#: Pens for R, G, B curves.
+CHANNEL_COLOURS = {"R": (214, 39, 40), "G": (44, 160, 44), "B": (31, 119, 180)}
+
+
+class SpectraPlot(QWidget):
+    """A titled plot of spectra against wavelength in nm.
+
+    Parameters
+    ----------
+    title
+        Shown above the plot.
+    y_label, y_units
+        Left axis label and unit.
+    """
+
+    def __init__(
+        self,
+        title: str,
+        y_label: str,
+        y_units: str | None = None,
+        parent: QWidget | None = None,
+    ) -> None:
+        super().__init__(parent)
+        self.plot_widget = pg.PlotWidget(background="w")
+        self.plot_item = self.plot_widget.getPlotItem()
+        self.plot_item.setLabel("bottom", "wavelength", units="nm")
+        self.plot_item.setLabel("left", y_label, units=y_units)
+        self.plot_item.showGrid(x=True, y=True, alpha=0.25)
+        # SI prefixes on "nm" would print "knm"-style nonsense when zoomed out
+        self.plot_item.getAxis("bottom").enableAutoSIPrefix(False)
+        self.legend = self.plot_item.addLegend(offset=(-10, 10))
+        self.title_label = QLabel(title)
+        self.title_label.setAlignment(Qt.AlignmentFlag.AlignCenter)
+        self.title_label.setStyleSheet("font-weight: bold")
+        self.message_label = QLabel("")
+        self.message_label.setWordWrap(True)
+        layout = QVBoxLayout(self)
+        layout.setContentsMargins(2, 2, 2, 2)
+        layout.addWidget(self.title_label)
+        layout.addWidget(self.plot_widget, 1)
+        layout.addWidget(self.message_label)
+        self.curves: dict[str, pg.PlotDataItem] = {}
+
+    def clear(self) -> None:
+        """Remove every curve."""
+        self.plot_item.clear()
+        self.legend.clear()
+        self.curves.clear()
+
+    def add_curve(
+        self,
+        name: str,
+        wavelength_nm: ArrayLike,
+        values: ArrayLike,
+        *,
+        colour: Sequence[int] | str = "k",
+        dashed: bool = False,
+        width: float = 2.0,
+    ) -> pg.PlotDataItem:
+        """Draw one curve; a curve of the same name is updated in place (cheap)."""
+        style = Qt.PenStyle.DashLine if dashed else Qt.PenStyle.SolidLine
+        pen = pg.mkPen(colour, width=width, style=style)
+        x = np.asarray(wavelength_nm, dtype=float)
+        y = np.asarray(values, dtype=float)
+        item = self.curves.get(name)
+        if item is None:
+            item = self.plot_item.plot(x, y, pen=pen, name=name)
+            self.curves[name] = item
+        else:
+            item.setData(x, y)
+            item.setPen(pen)
+        return item
+
+    def remove_curve(self, name: str) -> None:
+        """Remove the curve called ``name`` (if shown)."""
+        item = self.curves.pop(name, None)
+        if item is not None:
+            self.plot_item.removeItem(item)
+            self.legend.removeItem(item)
+
+    def set_title(self, text: str) -> None:
+        """Change the title above the plot."""
+        self.title_label.setText(text)
+
+    def set_message(self, text: str) -> None:
+        """A line under the plot (what is shown, or why nothing is)."""
+        self.message_label.setText(text)

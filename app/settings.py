@@ -1,0 +1,108 @@
+"""Persistent GUI settings: one typed wrapper around :class:`QSettings`.
+
+Every key the GUI stores is declared here with its default, so a missing or
+malformed value falls back instead of breaking start-up. Tests pass a
+:class:`QSettings` on a temporary INI file (or redirect the default location).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from PySide6.QtCore import QByteArray, QSettings
+
+import tunespec.app.qt_compat  # noqa: F401 (before any signal)
+
+__all__ = ["DEFAULTS", "AppSettings"]
+
+ORGANIZATION = "TuneSpec"
+APPLICATION = "TuneSpec"
+
+#: key -> default; the default's type is the stored type.
+DEFAULTS: dict[str, Any] = {
+    "devices/light_spec": "sim",
+    "devices/camera_spec": "sim",
+    "sim/realtime": True,
+    "sim/width_px": 1536,
+    "sim/height_px": 1024,
+    "sim/seed": 0,
+    "session/last_dir": "",
+    "session/root_dir": "",
+    "layout/chart_path": "",
+    "layout/sample_path": "",
+    "capture/exposure": "auto",
+    "capture/iso": 100,
+    "capture/n_darks": 1,
+    "calibration/method": "",  # "": the library's default method
+    "calibration/threshold_rgb_mean": 0.005,
+    "estimate/reference_path": "",
+    "ui/tab": 0,
+    "ui/geometry": QByteArray(),
+    "ui/state": QByteArray(),
+}
+
+
+@dataclass
+class AppSettings:
+    """Typed access to the stored settings.
+
+    Parameters
+    ----------
+    qsettings
+        Where they live; ``None`` is the user's INI file of organisation and
+        application ``TuneSpec`` (e.g. ``~/.config/TuneSpec/TuneSpec.ini``).
+    """
+
+    qsettings: QSettings | None = None
+
+    def __post_init__(self) -> None:
+        if self.qsettings is None:
+            # INI everywhere (readable, and QSettings.setPath can redirect it in tests)
+            self.qsettings = QSettings(
+                QSettings.Format.IniFormat,
+                QSettings.Scope.UserScope,
+                ORGANIZATION,
+                APPLICATION,
+            )
+
+    def get(self, key: str) -> Any:
+        """The stored value of ``key`` converted to its default's type."""
+        default = DEFAULTS[key]
+        value = self.qsettings.value(key, default)
+        if value is None:
+            return default
+        try:
+            if isinstance(default, bool):
+                return (
+                    value
+                    if isinstance(value, bool)
+                    else str(value).lower() in ("1", "true", "yes")
+                )
+            if isinstance(default, int):
+                return int(value)
+            if isinstance(default, float):
+                return float(value)
+            if isinstance(default, str):
+                return str(value)
+        except (TypeError, ValueError):
+            return default
+        return value
+
+    def set(self, key: str, value: Any) -> None:
+        """Store ``value`` under ``key`` (which must be declared in :data:`DEFAULTS`)."""
+        if key not in DEFAULTS:
+            raise KeyError(f"undeclared setting {key!r}")
+        self.qsettings.setValue(key, value)
+
+    def sync(self) -> None:
+        """Write to disk now."""
+        self.qsettings.sync()
+
+    def sim_options(self) -> dict[str, Any]:
+        """Keyword options for opening the simulated bench."""
+        return {
+            "realtime": self.get("sim/realtime"),
+            "resolution": (self.get("sim/width_px"), self.get("sim/height_px")),
+            "seed": self.get("sim/seed"),
+        }

@@ -1,0 +1,146 @@
+"""Wizard step 5: estimate the camera sensitivities from the chart (Table 1)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from PySide6.QtWidgets import QComboBox, QDoubleSpinBox, QFormLayout, QWidget
+
+from tunespec.app.panels.stats_table_panel import show_table1, table1_panel
+from tunespec.app.wizard.measurement import (
+    CALIBRATION_DIR,
+    CHART_DIR,
+    CalibrationResult,
+    calibrate_job,
+)
+from tunespec.app.wizard.step_page import StepPage
+from tunespec.app.workers import Worker
+
+__all__ = ["CalibratePage"]
+
+CORNER_CHOICES = (
+    ("found automatically in the images", "auto"),
+    ("as set in the target-layout editor", "editor"),
+)
+
+
+def _methods() -> tuple[tuple[str, ...], str]:
+    """The sensitivity methods and the library's default one."""
+    import inspect
+
+    from tunespec.core.sensitivity import (
+        SENSITIVITY_METHODS,
+        estimate_camera_sensitivity,
+    )
+
+    default = (
+        inspect.signature(estimate_camera_sensitivity).parameters["method"].default
+    )
+    return tuple(SENSITIVITY_METHODS), str(default)
+
+
+class CalibratePage(StepPage):
+    """Processes the chart session and estimates the sensitivities; shows Table 1
+    with a pass/fail verdict on its RGB mean."""
+
+    key = "calibrate"
+    inputs = ("dark", "white", "target")
+
+    def __init__(self, measurement: Any, parent: QWidget | None = None) -> None:
+        super().__init__(
+            measurement,
+            "Calibrate",
+            "The chart frames are dark-corrected and flat-fielded, the patches "
+            "located, and the camera sensitivities estimated. Table 1 compares the "
+            "captured responses with those the sensitivities predict (Eq. 1).",
+            start_text="Calibrate",
+        )
+        m = measurement
+        self.corners_combo = QComboBox()
+        for label, value in CORNER_CHOICES:
+            self.corners_combo.addItem(label, value)
+        self.method_combo = QComboBox()
+        methods, default = _methods()
+        for method in methods:
+            label = f"{method} (default)" if method == default else method
+            self.method_combo.addItem(label, method)
+        i = self.method_combo.findData(m.method or default)
+        self.method_combo.setCurrentIndex(max(0, i))
+        self.threshold_spin = QDoubleSpinBox(
+            decimals=4,
+            minimum=0.0001,
+            maximum=0.1,
+            singleStep=0.0005,
+            value=m.threshold,
+        )
+        self.threshold_spin.setToolTip(
+            "Pass if Table 1's RGB mean error is at most this"
+        )
+        form = QFormLayout()
+        form.addRow("Chart corners", self.corners_combo)
+        form.addRow("Method", self.method_combo)
+        form.addRow("Pass if RGB mean ≤", self.threshold_spin)
+        self.body.addLayout(form)
+        self.table_panel = table1_panel()
+        self.body.addWidget(self.table_panel, 1)
+        m.calibrated.connect(self._on_measurement_calibrated)
+
+    def refresh(self) -> None:
+        """The editor shows the chart."""
+        self.measurement.edit_target("chart")
+
+    def can_start(self) -> str | None:
+        """The chart session must be complete."""
+        if not self.measurement.phase_complete("chart", None):
+            return "Take the dark, white and chart frames first (steps 2-4)."
+        return None
+
+    def make_job(self) -> Worker:
+        """A pool worker processing the chart and estimating the sensitivities."""
+        m = self.measurement
+        m.method = self.method_combo.currentData()
+        m.threshold = self.threshold_spin.value()
+        m.save()
+        return Worker(
+            calibrate_job,
+            m.path(CHART_DIR),
+            m.path(CALIBRATION_DIR),
+            m.chart_layout,
+            corners=self.corners_combo.currentData(),
+            method=m.method,
+            threshold=m.threshold,
+        )
+
+    def accept_result(self, result: CalibrationResult) -> str:
+        """Store the calibration, show Table 1 and the found corners."""
+        m = self.measurement
+        m.calibration = result
+        m.chart_layout = result.layout
+        m.save()
+        m.layout_needed.emit(result.layout)
+        m.calibrated.emit(result)
+        verdict = "PASS" if result.passed else "FAIL"
+        text = (
+            f"{verdict}: RGB mean error {result.rgb_mean:.4f} (threshold "
+            f"{result.threshold:.4f}), {result.table1.n_stimuli} stimuli, "
+            f"{result.elapsed_s:.1f} s."
+        )
+        if not result.passed:
+            text += " Check the corners and the saturation, then recalibrate."
+        if result.warnings:
+            text += " Note: " + "; ".join(result.warnings[:3])
+        return text
+
+    def restore(self) -> bool:
+        """Done if the measurement folder holds a calibration."""
+        result = self.measurement.restore_calibration()
+        if result is None:
+            return False
+        self.mark_done(
+            f"Calibration restored: RGB mean error {result.rgb_mean:.4f} "
+            f"({'PASS' if result.passed else 'FAIL'})."
+        )
+        return True
+
+    def _on_measurement_calibrated(self, result: CalibrationResult) -> None:
+        show_table1(self.table_panel, result)

@@ -1,0 +1,142 @@
+"""Wizard steps 2-4: dark frame, white background, chart under all LEDs."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from PySide6.QtWidgets import (
+    QComboBox,
+    QDoubleSpinBox,
+    QFormLayout,
+    QHBoxLayout,
+    QSpinBox,
+    QWidget,
+)
+
+from tunespec.app.wizard.measurement import (
+    CHART_DIR,
+    CaptureOptions,
+    PhaseResult,
+    capture_job,
+)
+from tunespec.app.wizard.step_page import StepPage
+from tunespec.app.workers import DeviceJob
+
+__all__ = ["CapturePage"]
+
+_NOUN = {
+    "dark": "dark frame(s)",
+    "white": "white-background frames",
+    "target": "chart frames",
+}
+
+
+class CapturePage(StepPage):
+    """One phase of the chart session's capture sequence.
+
+    Parameters
+    ----------
+    measurement
+        The shared measurement.
+    kind
+        ``"dark"``, ``"white"`` or ``"target"`` (a frame kind of ``core.session``).
+    title, description
+        Shown to the operator.
+    """
+
+    def __init__(
+        self,
+        measurement: Any,
+        kind: str,
+        title: str,
+        description: str,
+        parent: QWidget | None = None,
+    ) -> None:
+        super().__init__(measurement, title, description, start_text="Take frames")
+        self.kind = kind
+        self.key = kind
+        self.options_widget: QWidget | None = None
+        if kind == "dark":
+            self._build_options()
+
+    def _build_options(self) -> None:
+        """Exposure, ISO and darks: set before the first frame of the session."""
+        opts = self.measurement.capture_options
+        self.exposure_combo = QComboBox()
+        self.exposure_combo.addItem("automatic (metered per LED)", "auto")
+        self.exposure_combo.addItem("fixed", "fixed")
+        self.exposure_spin = QDoubleSpinBox(
+            decimals=3, minimum=0.001, maximum=30.0, value=6.0, suffix=" s"
+        )
+        self.iso_spin = QSpinBox(
+            minimum=50, maximum=6400, value=opts.iso, singleStep=100
+        )
+        self.darks_spin = QSpinBox(minimum=1, maximum=16, value=opts.n_darks)
+        if opts.exposure != "auto":
+            self.exposure_combo.setCurrentIndex(1)
+            self.exposure_spin.setValue(float(opts.exposure))
+        row = QHBoxLayout()
+        row.addWidget(self.exposure_combo)
+        row.addWidget(self.exposure_spin)
+        form = QFormLayout()
+        form.addRow("Exposure", row)
+        form.addRow("ISO", self.iso_spin)
+        form.addRow("Dark frames", self.darks_spin)
+        self.options_widget = QWidget()
+        self.options_widget.setLayout(form)
+        self.body.addWidget(self.options_widget)
+        self.body.addStretch(1)
+
+    def capture_options(self) -> CaptureOptions:
+        """The options as set on the page (or the measurement's)."""
+        if self.options_widget is None:
+            return self.measurement.capture_options
+        fixed = self.exposure_combo.currentData() == "fixed"
+        return CaptureOptions(
+            self.exposure_spin.value() if fixed else "auto",
+            self.iso_spin.value(),
+            self.darks_spin.value(),
+        )
+
+    def refresh(self) -> None:
+        """Show the chart in the layout editor; lock options once frames exist."""
+        self.measurement.edit_target("chart")
+        if self.options_widget is not None:
+            started = self.measurement.folder is not None and self.measurement.session(
+                "chart"
+            )
+            self.options_widget.setEnabled(not started)
+
+    def can_start(self) -> str | None:
+        """Devices must be connected."""
+        if not self.measurement.controller.is_open:
+            return "Connect the devices first (step 1)."
+        return None
+
+    def make_job(self) -> DeviceJob:
+        """A device job capturing this phase of the chart session."""
+        m = self.measurement
+        if self.options_widget is not None and m.session("chart") is None:
+            m.capture_options = self.capture_options()
+        root = m.path(CHART_DIR)
+        m.save()
+        return DeviceJob(
+            capture_job, root, m.chart_layout, m.capture_options, self.kind
+        )
+
+    def accept_result(self, result: PhaseResult) -> str:
+        """Summary line for the operator."""
+        text = (
+            f"{len(result.captured)} frame(s) taken in {result.elapsed_s:.1f} s; the "
+            f"session holds {result.n_frames} {_NOUN[self.kind]}."
+        )
+        if result.warnings:
+            text += " Note: " + "; ".join(result.warnings)
+        return text
+
+    def restore(self) -> bool:
+        """Done if the chart session already holds every frame of this kind."""
+        if self.measurement.phase_complete("chart", self.kind):
+            self.mark_done(f"All {_NOUN[self.kind]} are in the session (resumed).")
+            return True
+        return False

@@ -1,0 +1,901 @@
+"""The measurement the wizard works on: its folder, sessions, results and jobs.
+
+A measurement folder holds everything of one operator run::
+
+    MEASUREMENT/
+      measurement.json   what the wizard needs to resume (layouts, capture options)
+      chart/             capture session of the chart (tunespec.core.session)
+      sample/            capture session of the sample target
+      calibration/       estimated sensitivities and Table 1 (calibrate step)
+      estimate/          estimated reflectances and Table 2 (estimate step)
+      export/            the exports and the report (export step)
+
+The job functions at the bottom run off the GUI thread (device jobs on the device
+thread, the others on the pool). They only call the documented APIs of
+``tunespec.devices`` and ``tunespec.core`` and return frozen results; the pages store
+those in :class:`Measurement` on the GUI thread.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from PySide6.QtCore import QObject, Signal
+
+from tunespec.app.settings import AppSettings
+from tunespec.app.workers import DeviceContext, DeviceController
+from tunespec.core.datasets import resource_path
+from tunespec.core.errors import InputError
+from tunespec.core.layout import TargetLayout
+from tunespec.core.progress import Cancelled, ProgressFn, StopFn, check_stop
+from tunespec.core.spectra import (
+    DEFAULT_GRID,
+    Spectra,
+    read_spectra_csv,
+    write_spectra_csv,
+)
+
+__all__ = [
+    "CalibrationResult",
+    "CaptureOptions",
+    "EstimateResult",
+    "ExportResult",
+    "Measurement",
+    "PhaseResult",
+]
+
+log = logging.getLogger(__name__)
+
+MEASUREMENT_FILE = "measurement.json"
+MEASUREMENT_FORMAT = "tunespec-measurement"
+CHART_DIR, SAMPLE_DIR = "chart", "sample"
+CALIBRATION_DIR, ESTIMATE_DIR, EXPORT_DIR = "calibration", "estimate", "export"
+#: Capture kinds in the order of the capture sequence (devices.capture).
+PHASES = ("dark", "white", "target")
+
+
+# -- results ---------------------------------------------------------------------------
+@dataclass(frozen=True)
+class CaptureOptions:
+    """How the sessions are captured.
+
+    Parameters
+    ----------
+    exposure
+        ``"auto"`` (metered per LED on the white background) or seconds for all.
+    iso
+        ISO speed.
+    n_darks
+        Dark frames per distinct exposure.
+    """
+
+    exposure: str | float = "auto"
+    iso: int = 100
+    n_darks: int = 1
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"exposure": self.exposure, "iso": self.iso, "n_darks": self.n_darks}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> CaptureOptions:
+        """From :meth:`to_dict` (a malformed exposure falls back to ``"auto"``)."""
+        exposure: str | float = "auto"
+        with contextlib.suppress(TypeError, ValueError):
+            exposure = float(d.get("exposure", "auto"))
+        return cls(exposure, int(d.get("iso", 100)), int(d.get("n_darks", 1)))
+
+
+@dataclass(frozen=True)
+class PhaseResult:
+    """A capture step done.
+
+    Parameters
+    ----------
+    kind
+        ``"dark"``, ``"white"``, ``"target"`` or ``"all"`` (a whole session).
+    captured
+        Frame ids taken by this run.
+    n_frames
+        Frames of this kind the session now holds.
+    warnings
+        Notes from the capture (e.g. weak LEDs).
+    elapsed_s
+        Wall time of the run.
+    """
+
+    kind: str
+    captured: tuple[str, ...]
+    n_frames: int
+    warnings: tuple[str, ...] = ()
+    elapsed_s: float = 0.0
+
+
+@dataclass(frozen=True, eq=False)
+class CalibrationResult:
+    """The calibrate step: sensitivities and Table 1.
+
+    Parameters
+    ----------
+    sensitivity : Spectra R, G, B
+        Estimated sensitivities (absolute scale).
+    table1 : PredictionStats
+        Response prediction error on the fitted patches.
+    threshold
+        Pass/fail limit on Table 1's RGB mean (full scale).
+    method
+        Estimation method.
+    layout
+        The chart layout with the corners used (mosaic pixels).
+    excluded_patches
+        Patches left out of the fit (saturated).
+    warnings
+        Processing notes.
+    elapsed_s
+        Wall time of processing and estimation.
+    calibration, chart
+        ``workflow.Calibration`` and the processed chart session; ``None`` when the
+        result was restored from disk (the export step recomputes them).
+    """
+
+    sensitivity: Spectra
+    table1: Any
+    threshold: float
+    method: str
+    layout: TargetLayout
+    excluded_patches: tuple[str, ...] = ()
+    warnings: tuple[str, ...] = ()
+    elapsed_s: float = 0.0
+    calibration: Any = None
+    chart: Any = None
+
+    @property
+    def rgb_mean(self) -> float:
+        """Table 1's RGB mean, the number compared with :attr:`threshold`."""
+        return float(self.table1.mean[3])
+
+    @property
+    def passed(self) -> bool:
+        """Whether Table 1's RGB mean is within the threshold."""
+        return self.rgb_mean <= self.threshold
+
+
+@dataclass(frozen=True, eq=False)
+class EstimateResult:
+    """The estimate step: reflectances and, with references, Table 2.
+
+    Parameters
+    ----------
+    reflectance : Spectra
+        Estimated reflectances named by patch.
+    table2 : ReflectanceStats or None
+        Deviation from the references.
+    reference : Spectra or None
+        The references of the estimated patches.
+    layout
+        The sample layout with the corners used.
+    clipped
+        Patches whose estimate was clipped to [0, 1].
+    warnings
+        Processing notes.
+    elapsed_s
+        Wall time.
+    estimation, sample
+        ``workflow.Estimation`` and the processed sample session; ``None`` when
+        restored from disk.
+    """
+
+    reflectance: Spectra
+    table2: Any = None
+    reference: Spectra | None = None
+    layout: TargetLayout | None = None
+    clipped: tuple[str, ...] = ()
+    warnings: tuple[str, ...] = ()
+    elapsed_s: float = 0.0
+    estimation: Any = None
+    sample: Any = None
+
+
+@dataclass(frozen=True)
+class ExportResult:
+    """The export step: export kind -> file."""
+
+    paths: dict[str, Path] = field(default_factory=dict)
+    folder: Path | None = None
+
+
+# -- the model --------------------------------------------------------------------------
+class Measurement(QObject):
+    """State shared by the wizard pages; lives on the GUI thread.
+
+    Parameters
+    ----------
+    controller
+        The device controller (device jobs run there).
+    settings
+        Persistent settings (capture options, layouts, thresholds).
+    """
+
+    #: The measurement folder changed: the new folder.
+    folder_changed = Signal(object)
+    #: A page wants the layout editor to edit this layout (chart or sample).
+    layout_needed = Signal(object)
+    #: Calibration finished or restored: the :class:`CalibrationResult`.
+    calibrated = Signal(object)
+    #: Estimate finished or restored: the :class:`EstimateResult`.
+    estimated = Signal(object)
+
+    def __init__(
+        self, controller: DeviceController, settings: AppSettings | None = None
+    ) -> None:
+        super().__init__()
+        self.controller = controller
+        self.settings = settings or AppSettings()
+        self.folder: Path | None = None
+        self.chart_layout = _load_layout(
+            self.settings.get("layout/chart_path"), "colorchecker_sg.json"
+        )
+        self.sample_layout = _load_layout(
+            self.settings.get("layout/sample_path"), "neugebauer_cmy.json"
+        )
+        self.capture_options = CaptureOptions.from_dict(
+            {
+                "exposure": self.settings.get("capture/exposure"),
+                "iso": self.settings.get("capture/iso"),
+                "n_darks": self.settings.get("capture/n_darks"),
+            }
+        )
+        self.method = self.settings.get("calibration/method")
+        self.threshold = self.settings.get("calibration/threshold_rgb_mean")
+        ref = self.settings.get("estimate/reference_path")
+        self.reference_path: Path | None = Path(ref) if ref else None
+        self.current_target = "chart"
+        self.calibration: CalibrationResult | None = None
+        self.estimate: EstimateResult | None = None
+        self.export: ExportResult | None = None
+        #: Opens the devices when the connect step runs (the main window sets it to
+        #: its device panel's connect, so the specs chosen there are used).
+        self.connector: Callable[[], None] = self._default_connect
+        self.sim_options: dict[str, Any] = {}
+
+    # -- folder ---------------------------------------------------------------------
+    def require_folder(self) -> Path:
+        """The measurement folder; a fresh one is made in the settings' root if none."""
+        if self.folder is None:
+            root = self.settings.get("session/root_dir") or str(
+                Path.home() / "TuneSpec"
+            )
+            stamp = time.strftime("%Y%m%d-%H%M%S")
+            self.new(Path(root) / f"measurement-{stamp}")
+        assert self.folder is not None
+        return self.folder
+
+    def new(self, folder: str | Path) -> None:
+        """Start a new measurement in ``folder`` (empty or not yet existing)."""
+        folder = Path(folder)
+        if (folder / MEASUREMENT_FILE).exists():
+            raise InputError(
+                "a measurement already exists here: open it to resume", path=folder
+            )
+        if folder.exists() and any(folder.iterdir()):
+            raise InputError(
+                "the folder is not empty: choose an empty one", path=folder
+            )
+        folder.mkdir(parents=True, exist_ok=True)
+        self.folder = folder
+        self.calibration = self.estimate = self.export = None
+        self.save()
+        self.settings.set("session/last_dir", str(folder))
+        log.info("new measurement in %s", folder)
+        self.folder_changed.emit(folder)
+
+    def open(self, folder: str | Path) -> None:
+        """Reopen the measurement in ``folder`` (its pages then restore themselves)."""
+        folder = Path(folder)
+        path = folder / MEASUREMENT_FILE
+        try:
+            doc = json.loads(path.read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise InputError(
+                f"not a TuneSpec measurement (no {MEASUREMENT_FILE})", path=folder
+            ) from None
+        except json.JSONDecodeError as exc:
+            raise InputError(
+                f"not valid JSON: {exc.msg}", path=path, line=exc.lineno
+            ) from None
+        if doc.get("format") != MEASUREMENT_FORMAT:
+            raise InputError(
+                f"not a measurement file (format != {MEASUREMENT_FORMAT!r})", path=path
+            )
+        self.folder = folder
+        self.chart_layout = TargetLayout.from_dict(
+            doc["chart_layout"], source=str(path)
+        )
+        self.sample_layout = TargetLayout.from_dict(
+            doc["sample_layout"], source=str(path)
+        )
+        self.capture_options = CaptureOptions.from_dict(doc.get("capture", {}))
+        self.method = doc.get("method", self.method)
+        self.threshold = float(doc.get("threshold_rgb_mean", self.threshold))
+        ref = doc.get("reference_path")
+        self.reference_path = Path(ref) if ref else None
+        self.calibration = self.estimate = self.export = None
+        self.settings.set("session/last_dir", str(folder))
+        self.folder_changed.emit(folder)
+        self.layout_needed.emit(self.current_layout)
+
+    def save(self) -> None:
+        """Write ``measurement.json`` (atomically)."""
+        if self.folder is None:
+            return
+        from tunespec.core.session import atomic_write_text
+
+        doc = {
+            "format": MEASUREMENT_FORMAT,
+            "version": 1,
+            "chart_layout": self.chart_layout.to_dict(),
+            "sample_layout": self.sample_layout.to_dict(),
+            "capture": self.capture_options.to_dict(),
+            "method": self.method,
+            "threshold_rgb_mean": self.threshold,
+            "reference_path": str(self.reference_path) if self.reference_path else None,
+        }
+        atomic_write_text(
+            self.folder / MEASUREMENT_FILE, json.dumps(doc, indent=1) + "\n"
+        )
+
+    def save_settings(self) -> None:
+        """Remember the options for the next measurement."""
+        s = self.settings
+        s.set("capture/exposure", str(self.capture_options.exposure))
+        s.set("capture/iso", self.capture_options.iso)
+        s.set("capture/n_darks", self.capture_options.n_darks)
+        s.set("calibration/method", self.method)
+        s.set("calibration/threshold_rgb_mean", self.threshold)
+        s.set("estimate/reference_path", str(self.reference_path or ""))
+
+    def path(self, *parts: str) -> Path:
+        """A path inside the measurement folder."""
+        return self.require_folder().joinpath(*parts)
+
+    # -- layouts --------------------------------------------------------------------
+    @property
+    def current_layout(self) -> TargetLayout:
+        """The layout of the target in front of the camera now."""
+        return (
+            self.chart_layout if self.current_target == "chart" else self.sample_layout
+        )
+
+    def edit_target(self, which: str) -> None:
+        """Make ``"chart"`` or ``"sample"`` the layout the editor edits."""
+        if which != self.current_target:
+            self.current_target = which
+            self.layout_needed.emit(self.current_layout)
+
+    def set_current_layout(self, target_layout: TargetLayout) -> None:
+        """The editor changed the current target's layout.
+
+        Kept in memory (a drag changes it many times a second); written with the
+        measurement when a step starts or the window closes.
+        """
+        if self.current_target == "chart":
+            self.chart_layout = target_layout
+        else:
+            self.sample_layout = target_layout
+
+    # -- state on disk (for resume) -----------------------------------------------
+    def session(self, which: str) -> Any:
+        """The chart or sample session, or None if not started."""
+        from tunespec.core.session import MANIFEST_NAME, Session
+
+        if self.folder is None:
+            return None
+        root = self.folder / (CHART_DIR if which == "chart" else SAMPLE_DIR)
+        return Session.open(root) if (root / MANIFEST_NAME).exists() else None
+
+    def phase_complete(self, which: str, kind: str | None) -> bool:
+        """Whether the session holds every frame of ``kind`` (None: every frame)."""
+        session = self.session(which)
+        if session is None or not session.settings.resolved:
+            return False
+        return not any(kind in (None, s.kind) for s in session.missing(verify=False))
+
+    def restore_calibration(self) -> CalibrationResult | None:
+        """The calibration saved in the folder, or None."""
+        if self.folder is None:
+            return None
+        result = _read_calibration(self.folder / CALIBRATION_DIR)
+        if result is not None:
+            self.calibration = result
+            self.calibrated.emit(result)
+        return result
+
+    def restore_estimate(self) -> EstimateResult | None:
+        """The estimate saved in the folder, or None."""
+        if self.folder is None:
+            return None
+        result = _read_estimate(self.folder / ESTIMATE_DIR)
+        if result is not None:
+            self.estimate = result
+            self.estimated.emit(result)
+        return result
+
+    def restore_export(self) -> ExportResult | None:
+        """The exports in the folder, or None."""
+        if self.folder is None:
+            return None
+        folder = self.folder / EXPORT_DIR
+        index = folder / "exports.json"
+        if not index.is_file():
+            return None
+        paths = {k: folder / v for k, v in json.loads(index.read_text()).items()}
+        if not all(p.is_file() for p in paths.values()):
+            return None
+        self.export = ExportResult(paths, folder)
+        return self.export
+
+    def reference(self) -> Spectra | None:
+        """Reference reflectances for Table 2, or None.
+
+        The operator's file if chosen; on the simulated bench the sample's true
+        reflectances (what the simulated scene was built from).
+        """
+        if self.reference_path is not None:
+            return read_spectra_csv(self.reference_path)
+        session = self.session("sample")
+        light = (session.devices if session is not None else {}).get("light", {})
+        if light.get("vendor") == "TuneSpec":  # simulated bench: the truth is known
+            from tunespec.devices.registry import layout_reflectances
+
+            return layout_reflectances(self.sample_layout)
+        return None
+
+    # -- connecting -------------------------------------------------------------------
+    def _default_connect(self) -> None:
+        self.controller.open_devices("sim", "sim", **self.sim_options)
+
+
+# -- jobs ----------------------------------------------------------------------------------
+def _load_layout(path: str, shipped: str) -> TargetLayout:
+    if path:
+        try:
+            return TargetLayout.load(path)
+        except InputError as exc:
+            log.warning(
+                "cannot load the remembered layout, using the shipped one: %s", exc
+            )
+    return TargetLayout.load(resource_path("layouts", shipped))
+
+
+def _levels_of(light: Any, channel: str | None) -> np.ndarray | None:
+    names = [c.name for c in light.channels()]
+    if channel not in names:
+        return None
+    levels = np.zeros(len(names))
+    levels[names.index(channel)] = 1.0
+    return levels
+
+
+def _bench_showing(context: DeviceContext, target_layout: TargetLayout) -> Any:
+    """The bench with ``target_layout`` in front of the camera.
+
+    On hardware the operator places the target (the page told them, the stage asks);
+    on the simulated bench ``workflow.bench_for_target`` gives a camera looking at a
+    scene of that target, which then becomes the controller's bench.
+    """
+    from tunespec.devices.workflow import bench_for_target
+
+    bench = context.bench
+    shown = getattr(bench.stage, "layout", None)
+    if not bench.simulated or (shown is not None and shown.name == target_layout.name):
+        return bench
+    log.info("simulated bench: now showing %s", target_layout.name)
+    seed = int(context.options.get("seed", 0)) + 1
+    return context.replace_bench(bench_for_target(bench, target_layout, seed=seed))
+
+
+def capture_job(
+    context: DeviceContext,
+    root: Path,
+    target_layout: TargetLayout,
+    options: CaptureOptions,
+    kind: str | None,
+    *,
+    exposure: Any = None,
+    progress: ProgressFn | None = None,
+    should_stop: StopFn | None = None,
+) -> PhaseResult:
+    """Capture one phase (``kind``) of a session, or the whole session (None).
+
+    ``workflow.capture_target`` runs the capture sequence (resuming the session) and
+    is stopped as soon as every frame of ``kind`` is in: a cancelled capture keeps
+    its frames and the next phase resumes from there. A phase that is already
+    complete is taken again (its frames are marked bad first). Device thread.
+
+    Parameters
+    ----------
+    exposure
+        Overrides ``options.exposure`` (e.g. the chart's metered exposures for the
+        sample: same board, same LEDs).
+    """
+    from tunespec.core.session import MANIFEST_NAME, Session
+    from tunespec.devices.workflow import capture_target
+
+    t0 = time.monotonic()
+    bench = _bench_showing(context, target_layout)
+    light = bench.light
+
+    def session_now() -> Session | None:
+        return Session.open(root) if (root / MANIFEST_NAME).exists() else None
+
+    def missing_of_kind(session: Session | None) -> int:
+        if session is None or not session.settings.resolved:
+            return -1  # unknown until created and metered: not complete
+        return sum(kind in (None, s.kind) for s in session.missing(verify=False))
+
+    session = session_now()
+    if session is not None and missing_of_kind(session) == 0:
+        retake = [f.id for f in session.frames if kind in (None, f.kind)]
+        session.mark_bad(retake, "retaken by the operator")
+        log.info("retaking %d %s frame(s)", len(retake), kind or "")
+    todo = [max(0, missing_of_kind(session))]
+    steps = [0]
+    phase_done = [False]
+    captured: list[str] = []
+
+    def on_step(_fraction: float) -> None:
+        # capture() reports one step per metered channel and per frame
+        steps[0] += 1
+        if progress is not None:
+            progress(min(1.0, steps[0] / max(1, steps[0] + todo[0])))
+
+    def on_frame(record: Any, path: Path) -> None:
+        captured.append(record.id)
+        context.show_frame(path)
+        now = session_now()
+        if record.spd_file is not None and now is not None:
+            context.show_spd(now.read_spd(record), _levels_of(light, record.channel))
+        todo[0] = max(0, missing_of_kind(now))
+        if kind is not None and todo[0] == 0:
+            phase_done[0] = True
+
+    def stop() -> bool:
+        return phase_done[0] or bool(should_stop and should_stop())
+
+    if todo[0] == 0 and session is not None:
+        todo[0] = len(session.plan())
+    warnings: tuple[str, ...] = ()
+    try:
+        session, warnings = capture_target(
+            bench,
+            root,
+            target_layout,
+            exposure=options.exposure if exposure is None else exposure,
+            iso=options.iso,
+            n_darks=options.n_darks,
+            resume=True,
+            progress=on_step,
+            should_stop=stop,
+            on_frame=on_frame,
+        )
+    except Cancelled:
+        if not phase_done[0] or (should_stop and should_stop()):
+            raise
+        session = session_now()
+    assert session is not None
+    n_frames = sum(kind in (None, f.kind) and f.status == "ok" for f in session.frames)
+    return PhaseResult(
+        kind or "all", tuple(captured), n_frames, warnings, time.monotonic() - t0
+    )
+
+
+def _staged(progress: ProgressFn | None, lo: float, hi: float) -> ProgressFn | None:
+    """A progress callback mapping [0, 1] onto [lo, hi] of ``progress``."""
+    if progress is None:
+        return None
+    return lambda f: progress(lo + (hi - lo) * f)
+
+
+def _process(
+    session_root: Path,
+    target_layout: TargetLayout,
+    corners: str,
+    out_dir: Path | None,
+    progress: ProgressFn | None,
+    should_stop: StopFn | None,
+) -> Any:
+    """``workflow.process`` with corners ``"auto"`` (found) or ``"editor"`` (given)."""
+    from tunespec.core.session import Session
+    from tunespec.devices.workflow import process
+
+    given = corners == "editor"
+    return process(
+        Session.open(session_root),
+        out_dir=out_dir,
+        layout=target_layout if given else target_layout.with_corners(None),
+        corners="layout" if given else "auto",
+        progress=progress,
+        should_stop=should_stop,
+    )
+
+
+def calibrate_job(
+    chart_root: Path,
+    out_dir: Path,
+    chart_layout: TargetLayout,
+    *,
+    corners: str = "auto",
+    method: str | None = None,
+    threshold: float = 0.005,
+    progress: ProgressFn | None = None,
+    should_stop: StopFn | None = None,
+) -> CalibrationResult:
+    """Process the chart session and estimate the sensitivities (Table 1). Pool.
+
+    Parameters
+    ----------
+    corners
+        ``"auto"`` (found in the images) or ``"editor"`` (the layout's corners).
+    """
+    from tunespec.devices.registry import layout_reflectances
+    from tunespec.devices.workflow import calibrate
+
+    t0 = time.monotonic()
+    chart = _process(
+        chart_root,
+        chart_layout,
+        corners,
+        out_dir,
+        _staged(progress, 0, 0.6),
+        should_stop,
+    )
+    check_stop(should_stop)
+    cal = calibrate(
+        chart,
+        layout_reflectances(chart_layout, grid=DEFAULT_GRID),
+        method=method,
+        progress=_staged(progress, 0.6, 1.0),
+        should_stop=should_stop,
+    )
+    result = CalibrationResult(
+        sensitivity=cal.sensitivity,
+        table1=cal.table1,
+        threshold=float(threshold),
+        method=str(cal.estimate.method),
+        layout=chart.layout,
+        excluded_patches=tuple(cal.estimate.excluded_patches),
+        warnings=tuple(chart.warnings),
+        elapsed_s=time.monotonic() - t0,
+        calibration=cal,
+        chart=chart,
+    )
+    _write_calibration(out_dir, result)
+    return result
+
+
+def estimate_job(
+    sample_root: Path,
+    out_dir: Path,
+    sample_layout: TargetLayout,
+    sensitivity: Spectra,
+    reference: Spectra | None,
+    *,
+    corners: str = "auto",
+    progress: ProgressFn | None = None,
+    should_stop: StopFn | None = None,
+) -> EstimateResult:
+    """Process the sample session, estimate reflectances (Wiener) and Table 2. Pool."""
+    from tunespec.devices.workflow import estimate
+
+    t0 = time.monotonic()
+    sample = _process(
+        sample_root,
+        sample_layout,
+        corners,
+        out_dir,
+        _staged(progress, 0, 0.8),
+        should_stop,
+    )
+    check_stop(should_stop)
+    ref = None
+    if reference is not None:
+        names = [n for n in sample.responses.patches if n in reference.names]
+        ref = reference.select(names) if names else None
+    est = estimate(sample, sensitivity, reference=None)
+    table2 = None
+    if ref is not None:
+        from tunespec.devices.workflow import evaluate
+
+        table2 = evaluate(est.reflectance.select(ref.names), ref)
+    if progress is not None:
+        progress(1.0)
+    result = EstimateResult(
+        reflectance=est.reflectance,
+        table2=table2,
+        reference=ref,
+        layout=sample.layout,
+        clipped=tuple(est.wiener.clipped),
+        warnings=tuple(sample.warnings),
+        elapsed_s=time.monotonic() - t0,
+        estimation=type(est)(est.wiener, table2),
+        sample=sample,
+    )
+    _write_estimate(out_dir, result)
+    return result
+
+
+def export_job(
+    out_dir: Path,
+    folder: Path,
+    calibration: CalibrationResult,
+    estimated: EstimateResult,
+    devices: dict[str, dict[str, str]],
+    *,
+    progress: ProgressFn | None = None,
+    should_stop: StopFn | None = None,
+) -> ExportResult:
+    """Write every export and the report (``workflow.export``). Pool.
+
+    Results restored from disk lack the processed sessions; they are recomputed
+    from the sessions with the corners used then.
+    """
+    from tunespec.devices.registry import layout_reflectances
+    from tunespec.devices.workflow import calibrate, estimate, export
+
+    chart, cal = calibration.chart, calibration.calibration
+    if chart is None or cal is None:
+        chart = _process(
+            folder / CHART_DIR, calibration.layout, "editor", None, None, should_stop
+        )
+        cal = calibrate(
+            chart,
+            layout_reflectances(calibration.layout, grid=DEFAULT_GRID),
+            method=calibration.method,
+            should_stop=should_stop,
+        )
+    if progress is not None:
+        progress(0.3)
+    sample, est = estimated.sample, estimated.estimation
+    if sample is None or est is None:
+        assert estimated.layout is not None
+        sample = _process(
+            folder / SAMPLE_DIR, estimated.layout, "editor", None, None, should_stop
+        )
+        est = estimate(sample, cal.sensitivity, reference=None)
+        est = type(est)(est.wiener, estimated.table2)
+    if progress is not None:
+        progress(0.5)
+    check_stop(should_stop)
+    files = export(
+        out_dir,
+        calibration=cal,
+        estimation=est,
+        chart=chart,
+        sample=sample,
+        # the exports need a reference for every patch; Table 2 may cover fewer
+        reference=(
+            estimated.reference
+            if estimated.reference is not None
+            and set(estimated.reflectance.names) <= set(estimated.reference.names)
+            else None
+        ),
+        devices=devices,
+        settings={
+            "sensitivity method": calibration.method,
+            "Table 1 threshold (RGB mean)": f"{calibration.threshold:g}",
+            "chart corners": chart.corners_source,
+            "sample corners": sample.corners_source,
+        },
+        warnings=(*calibration.warnings, *estimated.warnings),
+    )
+    (Path(out_dir) / "exports.json").write_text(
+        json.dumps({k: Path(p).name for k, p in files.items()}, indent=1) + "\n"
+    )
+    if progress is not None:
+        progress(1.0)
+    return ExportResult({k: Path(p) for k, p in files.items()}, Path(out_dir))
+
+
+# -- what the steps leave on disk ----------------------------------------------------------
+def _write_calibration(out_dir: Path, result: CalibrationResult) -> None:
+    from tunespec.core.session import atomic_write_text
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    write_spectra_csv(result.sensitivity, out_dir / "sensitivity.csv")
+    doc = {
+        "table1": result.table1.as_dict(),
+        "threshold_rgb_mean": result.threshold,
+        "passed": result.passed,
+        "method": result.method,
+        "layout": result.layout.to_dict(),
+        "excluded_patches": list(result.excluded_patches),
+        "warnings": list(result.warnings),
+        # the CSV cannot hold it; workflow.estimate reads it from the meta
+        "spd_shift_nm": float(result.sensitivity.meta.get("spd_shift_nm", 0.0)),
+    }
+    # written last: its presence marks the step done
+    atomic_write_text(out_dir / "calibration.json", json.dumps(doc, indent=1) + "\n")
+
+
+def _read_calibration(folder: Path) -> CalibrationResult | None:
+    from tunespec.core.stats import STAT_ROWS, PredictionStats
+
+    try:
+        doc = json.loads((folder / "calibration.json").read_text())
+        sensitivity = read_spectra_csv(folder / "sensitivity.csv", allow_negative=True)
+        shift = repr(float(doc.get("spd_shift_nm", 0.0)))
+        sensitivity = Spectra(
+            sensitivity.wavelength_nm,
+            sensitivity.values,
+            sensitivity.names,
+            {**sensitivity.meta, "spd_shift_nm": shift},
+        )
+        t = doc["table1"]
+        table1 = PredictionStats(
+            mean=np.array([t[r]["mean"] for r in STAT_ROWS]),
+            max=np.array([t[r]["max"] for r in STAT_ROWS]),
+            p95=np.array([t[r]["p95"] for r in STAT_ROWS]),
+            n_stimuli=int(t["n_stimuli"]),
+        )
+        return CalibrationResult(
+            sensitivity=sensitivity,
+            table1=table1,
+            threshold=float(doc["threshold_rgb_mean"]),
+            method=str(doc["method"]),
+            layout=TargetLayout.from_dict(doc["layout"]),
+            excluded_patches=tuple(doc.get("excluded_patches", ())),
+            warnings=tuple(doc.get("warnings", ())),
+        )
+    except (OSError, ValueError, KeyError, InputError) as exc:
+        log.warning("no usable calibration in %s: %s", folder, exc)
+        return None
+
+
+def _write_estimate(out_dir: Path, result: EstimateResult) -> None:
+    from tunespec.core.session import atomic_write_text
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    write_spectra_csv(result.reflectance, out_dir / "reflectance.csv")
+    if result.reference is not None:
+        write_spectra_csv(result.reference, out_dir / "reference.csv")
+    doc = {
+        "layout": None if result.layout is None else result.layout.to_dict(),
+        "clipped": list(result.clipped),
+        "warnings": list(result.warnings),
+    }
+    atomic_write_text(out_dir / "estimate.json", json.dumps(doc, indent=1) + "\n")
+
+
+def _read_estimate(folder: Path) -> EstimateResult | None:
+    from tunespec.devices.workflow import evaluate
+
+    try:
+        doc = json.loads((folder / "estimate.json").read_text())
+        reflectance = read_spectra_csv(folder / "reflectance.csv")
+        reference = None
+        if (folder / "reference.csv").is_file():
+            reference = read_spectra_csv(folder / "reference.csv")
+        table2 = (
+            None
+            if reference is None
+            else evaluate(reflectance.select(reference.names), reference)
+        )
+        layout = doc.get("layout")
+        return EstimateResult(
+            reflectance=reflectance,
+            table2=table2,
+            reference=reference,
+            layout=None if layout is None else TargetLayout.from_dict(layout),
+            clipped=tuple(doc.get("clipped", ())),
+            warnings=tuple(doc.get("warnings", ())),
+        )
+    except (OSError, ValueError, KeyError, InputError) as exc:
+        log.warning("no usable estimate in %s: %s", folder, exc)
+        return None

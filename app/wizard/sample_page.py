@@ -1,0 +1,80 @@
+"""Wizard step 6: capture the sample target (its own dark, white and target frames)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from PySide6.QtWidgets import QWidget
+
+from tunespec.app.wizard.measurement import SAMPLE_DIR, PhaseResult, capture_job
+from tunespec.app.wizard.step_page import StepPage
+from tunespec.app.workers import DeviceJob
+
+__all__ = ["SamplePage"]
+
+
+class SamplePage(StepPage):
+    """Captures the whole sample session (metering, dark, white, sample frames).
+
+    On hardware the operator is asked to swap the white board and the sample when
+    the sequence needs it; on the simulated bench the scene changes by itself.
+    """
+
+    key = "sample"
+
+    def __init__(self, measurement: Any, parent: QWidget | None = None) -> None:
+        super().__init__(
+            measurement,
+            "Sample target",
+            "Take the chart away. The sample target is captured like the chart: "
+            "dark frame, white background and the <b>sample</b> under every LED; "
+            "you are asked when to put the white board and the sample in place.",
+            start_text="Capture sample",
+        )
+        self.body.addStretch(1)
+
+    def refresh(self) -> None:
+        """Show the sample's layout in the editor."""
+        self.measurement.edit_target("sample")
+
+    def can_start(self) -> str | None:
+        """Devices must be connected."""
+        if not self.measurement.controller.is_open:
+            return "Connect the devices first (step 1)."
+        return None
+
+    def make_job(self) -> DeviceJob:
+        """A device job capturing the whole sample session."""
+        m = self.measurement
+        root = m.path(SAMPLE_DIR)
+        m.save()
+        # same board, same LEDs: the chart's metered exposures suit the sample too
+        exposure = None
+        chart = m.session("chart")
+        if m.capture_options.exposure == "auto" and chart and chart.settings.resolved:
+            exposure = {c: t[0] for c, t in chart.settings.exposures_s.items()}
+        return DeviceJob(
+            capture_job,
+            root,
+            m.sample_layout,
+            m.capture_options,
+            None,
+            exposure=exposure,
+        )
+
+    def accept_result(self, result: PhaseResult) -> str:
+        """Summary line for the operator."""
+        text = (
+            f"{len(result.captured)} frame(s) taken in {result.elapsed_s:.1f} s; the "
+            f"sample session holds {result.n_frames} frames."
+        )
+        if result.warnings:
+            text += " Note: " + "; ".join(result.warnings)
+        return text
+
+    def restore(self) -> bool:
+        """Done if the sample session is complete."""
+        if self.measurement.phase_complete("sample", None):
+            self.mark_done("The sample session is complete (resumed).")
+            return True
+        return False

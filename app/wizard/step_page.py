@@ -1,0 +1,300 @@
+"""The base of every measurement-wizard page: run, show progress, abort, retake.
+
+A page runs one job (a :class:`~tunespec.app.workers.DeviceJob` on the device thread
+for captures, a :class:`~tunespec.app.workers.Worker` on the pool for numerics),
+shows its progress with the time remaining, and can be aborted (the light is
+switched off) and taken again. Subclasses say what job to make
+(:meth:`StepPage.make_job`) and what to do with its result
+(:meth:`StepPage.accept_result`).
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+from PySide6.QtCore import Qt, QTimer, Signal, Slot
+from PySide6.QtWidgets import (
+    QHBoxLayout,
+    QLabel,
+    QProgressBar,
+    QPushButton,
+    QVBoxLayout,
+    QWidget,
+)
+
+from tunespec.app.panels.device_panel import format_error
+from tunespec.app.workers import DeviceJob, ProgressClock, Worker
+from tunespec.core.progress import Cancelled
+
+__all__ = ["StepPage", "StepState"]
+
+log = logging.getLogger(__name__)
+
+
+class StepState:
+    """The states a step can be in (plain strings, for signals and tests)."""
+
+    PENDING = "pending"
+    RUNNING = "running"
+    DONE = "done"
+    FAILED = "failed"
+    ABORTED = "aborted"
+
+
+class StepPage(QWidget):
+    """One step of the measurement wizard.
+
+    Parameters
+    ----------
+    measurement
+        The :class:`~tunespec.app.wizard.measurement.Measurement` shared by all pages.
+    title
+        Short name in the step list ("Dark frame").
+    description
+        What the operator should do before starting, in plain words.
+    start_text
+        Label of the start button.
+    """
+
+    #: The step changed state: one of :class:`StepState`.
+    state_changed = Signal(str)
+    #: The step finished successfully: its result.
+    step_finished = Signal(object)
+
+    #: Update the remaining-time text at most this often (ms).
+    ETA_PERIOD_MS = 500
+    #: This step's name for :attr:`inputs` of later steps.
+    key = ""
+    #: Keys of the steps whose results this one uses: retaking one of them makes
+    #: this step pending again.
+    inputs: tuple[str, ...] = ()
+
+    def __init__(
+        self,
+        measurement: Any,
+        title: str,
+        description: str,
+        *,
+        start_text: str = "Start",
+        parent: QWidget | None = None,
+    ) -> None:
+        super().__init__(parent)
+        self.measurement = measurement
+        self.title = title
+        self.state = StepState.PENDING
+        self.job: Worker | DeviceJob | None = None
+        self.result: Any = None
+        self.clock = ProgressClock()
+        self._finish_state = StepState.FAILED
+
+        self.title_label = QLabel(title)
+        self.title_label.setStyleSheet("font-size: 15pt; font-weight: bold")
+        self.description_label = QLabel(description)
+        self.description_label.setWordWrap(True)
+        self.description_label.setTextFormat(Qt.TextFormat.RichText)
+        self.body = QVBoxLayout()
+        self.progress_bar = QProgressBar()
+        self.progress_bar.setRange(0, 1000)
+        self.progress_bar.setValue(0)
+        self.progress_bar.setFormat("%p %")
+        self.remaining_label = QLabel("")
+        self.start_button = QPushButton(start_text)
+        self.start_button.setDefault(True)
+        self.abort_button = QPushButton("Abort")
+        self.abort_button.setToolTip("Stop this step now; the light is switched off")
+        self.result_label = QLabel("")
+        self.result_label.setWordWrap(True)
+        self.result_label.setTextInteractionFlags(
+            Qt.TextInteractionFlag.TextSelectableByMouse
+        )
+        buttons = QHBoxLayout()
+        buttons.addWidget(self.start_button)
+        buttons.addWidget(self.abort_button)
+        buttons.addStretch(1)
+        progress = QHBoxLayout()
+        progress.addWidget(self.progress_bar, 1)
+        progress.addWidget(self.remaining_label)
+        layout = QVBoxLayout(self)
+        layout.addWidget(self.title_label)
+        layout.addWidget(self.description_label)
+        layout.addLayout(self.body, 1)
+        layout.addLayout(progress)
+        layout.addLayout(buttons)
+        layout.addWidget(self.result_label)
+        self._start_text = start_text
+        self.eta_timer = QTimer(self)
+        self.eta_timer.setInterval(self.ETA_PERIOD_MS)
+        self.eta_timer.timeout.connect(self._on_eta_timer_timeout)
+        self.start_button.clicked.connect(self._on_start_button_clicked)
+        self.abort_button.clicked.connect(self._on_abort_button_clicked)
+        self._update_buttons()
+
+    # -- for subclasses -------------------------------------------------------------
+    def make_job(self) -> Worker | DeviceJob:
+        """The job this step runs (not yet started). Raise to refuse with a message."""
+        raise NotImplementedError
+
+    def accept_result(self, result: Any) -> str:
+        """Store ``result`` in the measurement; returns the line shown to the operator."""
+        return "Done."
+
+    def can_start(self) -> str | None:
+        """``None`` if the step may start now, else why not (shown to the operator)."""
+        return None
+
+    def refresh(self) -> None:
+        """Update the page from the measurement (called when the page is shown)."""
+
+    def depends_on(self, other: StepPage) -> bool:
+        """Whether this step uses ``other``'s result."""
+        return other.key in self.inputs
+
+    def restore(self) -> bool:
+        """Mark the step done from results already on disk (resume); True if it was."""
+        return False
+
+    # -- running -----------------------------------------------------------------------
+    @property
+    def running(self) -> bool:
+        """Whether the step's job is running."""
+        return self.state == StepState.RUNNING
+
+    def start(self) -> Worker | DeviceJob | None:
+        """Start (or retake) the step; returns the job, or None if it cannot start."""
+        if self.running:
+            return self.job
+        why = self.can_start()
+        if why is None:
+            try:
+                job = self.make_job()
+            except Exception as exc:
+                why = format_error(exc)
+        if why is not None:
+            self.result_label.setStyleSheet("color: #c00000")
+            self.result_label.setText(why)
+            return None
+        self.job = job
+        job.signals.progressed.connect(self._on_job_progressed)
+        job.signals.returned.connect(self._on_job_returned)
+        job.signals.errored.connect(self._on_job_errored)
+        job.signals.finished.connect(self._on_job_finished)
+        self.clock.restart()
+        self.progress_bar.setValue(0)
+        self.remaining_label.setText("starting…")
+        self.result_label.setStyleSheet("")
+        self.result_label.setText("")
+        self._set_state(StepState.RUNNING)
+        self.eta_timer.start()
+        log.info("step %r started", self.title)
+        if isinstance(job, DeviceJob):
+            self.measurement.controller.submit(job)
+        else:
+            job.start()
+        return job
+
+    def abort(self) -> None:
+        """Stop the running job and switch the light off."""
+        if self.job is not None and self.running:
+            log.warning("step %r aborted by the operator", self.title)
+            self.job.abort()
+            self.remaining_label.setText("aborting…")
+        controller = getattr(self.measurement, "controller", None)
+        if controller is not None and controller.is_open:
+            controller.all_off()
+
+    def mark_done(self, text: str, result: Any = None) -> None:
+        """Mark the step done without running it (e.g. restored on resume)."""
+        self.result = result
+        self.progress_bar.setValue(1000)
+        self.remaining_label.setText("")
+        self.result_label.setStyleSheet("")
+        self.result_label.setText(text)
+        self._set_state(StepState.DONE)
+
+    def reset(self) -> None:
+        """Back to pending (a previous step was retaken)."""
+        if self.running:
+            return
+        self.result = None
+        self.progress_bar.setValue(0)
+        self.remaining_label.setText("")
+        self.result_label.setText("")
+        self._set_state(StepState.PENDING)
+
+    def _set_state(self, state: str) -> None:
+        self.state = state
+        self._update_buttons()
+        self.state_changed.emit(state)
+
+    def _update_buttons(self) -> None:
+        running = self.running
+        self.start_button.setEnabled(not running)
+        self.abort_button.setEnabled(running)
+        done = self.state in (StepState.DONE, StepState.FAILED, StepState.ABORTED)
+        self.start_button.setText("Retake" if done else self._start_text)
+
+    # -- slots ---------------------------------------------------------------------------
+    @Slot()
+    def _on_start_button_clicked(self) -> None:
+        self.start()
+
+    @Slot()
+    def _on_abort_button_clicked(self) -> None:
+        self.abort()
+
+    @Slot(float)
+    def _on_job_progressed(self, fraction: float) -> None:
+        self.clock.update(fraction)
+        self.progress_bar.setValue(round(1000 * fraction))
+
+    @Slot()
+    def _on_eta_timer_timeout(self) -> None:
+        if self.running:
+            remaining = self.clock.update(self.clock.fraction)
+            self.remaining_label.setText(
+                f"{ProgressClock.format_s(self.clock.elapsed_s)} elapsed, "
+                f"{ProgressClock.format_s(remaining)} left"
+            )
+
+    @Slot(object)
+    def _on_job_returned(self, result: Any) -> None:
+        try:
+            text = self.accept_result(result)
+        except Exception as exc:
+            log.exception("step %r: cannot use its result", self.title)
+            self._fail(format_error(exc))
+            return
+        self.result = result
+        self.progress_bar.setValue(1000)
+        self.result_label.setStyleSheet("")
+        self.result_label.setText(text)
+        log.info("step %r done in %.1f s", self.title, self.clock.elapsed_s)
+        self._finish_state = StepState.DONE
+
+    @Slot(object)
+    def _on_job_errored(self, exc: BaseException) -> None:
+        if isinstance(exc, Cancelled) or (self.job is not None and self.job.aborted):
+            self.result_label.setStyleSheet("color: #b06000")
+            self.result_label.setText("Aborted; the light is off. Retake when ready.")
+            self._finish_state = StepState.ABORTED
+            return
+        log.error("step %r failed: %s", self.title, exc)
+        self._fail(format_error(exc))
+
+    def _fail(self, text: str) -> None:
+        self.result_label.setStyleSheet("color: #c00000")
+        self.result_label.setText(f"Failed: {text}")
+        self._finish_state = StepState.FAILED
+
+    @Slot()
+    def _on_job_finished(self) -> None:
+        self.eta_timer.stop()
+        state = self._finish_state
+        self._finish_state = StepState.FAILED
+        elapsed = ProgressClock.format_s(self.clock.elapsed_s)
+        self.remaining_label.setText(f"{elapsed} elapsed")
+        self.job = None
+        self._set_state(state)
+        if state == StepState.DONE:
+            self.step_finished.emit(self.result)

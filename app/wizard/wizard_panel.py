@@ -1,0 +1,331 @@
+"""The measurement wizard: the operator's path from connecting to exporting.
+
+Steps: connect → dark → white background → chart under all LEDs → calibrate
+(Table 1 with a pass/fail threshold) → sample target → estimate (Table 2 when
+references are given) → export. Each step shows its progress and the time remaining,
+can be aborted (the LEDs go off) and taken again; retaking a step makes the steps
+after it pending again. A measurement lives in a folder; an interrupted one is
+reopened with :meth:`WizardPanel.open_measurement` and resumes at its first
+unfinished step.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Any
+
+from PySide6.QtCore import Qt, Signal, Slot
+from PySide6.QtGui import QBrush, QColor
+from PySide6.QtWidgets import (
+    QFileDialog,
+    QFrame,
+    QHBoxLayout,
+    QLabel,
+    QListWidget,
+    QListWidgetItem,
+    QPushButton,
+    QStackedWidget,
+    QVBoxLayout,
+    QWidget,
+)
+
+from tunespec.app.wizard.calibrate_page import CalibratePage
+from tunespec.app.wizard.capture_page import CapturePage
+from tunespec.app.wizard.connect_page import ConnectPage
+from tunespec.app.wizard.estimate_page import EstimatePage
+from tunespec.app.wizard.export_page import ExportPage
+from tunespec.app.wizard.sample_page import SamplePage
+from tunespec.app.wizard.step_page import StepPage, StepState
+
+__all__ = ["WizardPanel"]
+
+log = logging.getLogger(__name__)
+
+_STATE_MARK = {
+    StepState.PENDING: ("○", QColor(120, 120, 120)),
+    StepState.RUNNING: ("▶", QColor(0, 90, 200)),
+    StepState.DONE: ("✔", QColor(0, 128, 0)),
+    StepState.FAILED: ("✖", QColor(192, 0, 0)),
+    StepState.ABORTED: ("■", QColor(176, 96, 0)),
+}
+
+
+class WizardPanel(QWidget):
+    """Step list, the current step's page, Back/Next and the measurement folder.
+
+    Parameters
+    ----------
+    measurement
+        The :class:`~tunespec.app.wizard.measurement.Measurement` the steps work on.
+    """
+
+    #: The current step changed: its index.
+    step_changed = Signal(int)
+
+    def __init__(self, measurement: Any, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.measurement = measurement
+        m = measurement
+        self.connect_page = ConnectPage(m)
+        self.dark_page = CapturePage(
+            m,
+            "dark",
+            "Dark frame",
+            "Place the <b>white background board</b> in front of the camera and "
+            "darken the room. With automatic exposure the exposure of every LED is "
+            "metered on the board first; then the dark frame(s) are taken with all "
+            "LEDs off (paper: dark-current correction).",
+        )
+        self.white_page = CapturePage(
+            m,
+            "white",
+            "White background",
+            "Keep the <b>white background board</b> in place, nothing on it. One "
+            "frame per LED is taken for the flat field (Eq. 2).",
+        )
+        self.chart_page = CapturePage(
+            m,
+            "target",
+            "Chart under all LEDs",
+            "Put the <b>chart</b> (ColorChecker SG) flat on the board, fully in view. "
+            "One frame per LED is taken. Check its corners in the target-layout "
+            "editor while it runs.",
+        )
+        self.calibrate_page = CalibratePage(m)
+        self.sample_page = SamplePage(m)
+        self.estimate_page = EstimatePage(m)
+        self.export_page = ExportPage(m)
+        self.pages: list[StepPage] = [
+            self.connect_page,
+            self.dark_page,
+            self.white_page,
+            self.chart_page,
+            self.calibrate_page,
+            self.sample_page,
+            self.estimate_page,
+            self.export_page,
+        ]
+
+        self.folder_label = QLabel("No measurement folder yet.")
+        self.folder_label.setWordWrap(True)
+        self.new_button = QPushButton("New…")
+        self.open_button = QPushButton("Open / resume…")
+        self.step_list = QListWidget()
+        self.step_list.setMaximumWidth(230)
+        self.stack = QStackedWidget()
+        for page in self.pages:
+            self.step_list.addItem(QListWidgetItem(page.title))
+            self.stack.addWidget(page)
+        # the hardware stage asks the operator through here (white board / target)
+        self.prompt_label = QLabel()
+        self.prompt_label.setWordWrap(True)
+        self.prompt_button = QPushButton("Done — continue")
+        self.prompt_frame = QFrame()
+        self.prompt_frame.setObjectName("prompt_frame")
+        self.prompt_frame.setStyleSheet(
+            "#prompt_frame { background: #fff3cd; border: 2px solid #e0a800; }"
+        )
+        prompt_row = QHBoxLayout(self.prompt_frame)
+        prompt_row.addWidget(self.prompt_label, 1)
+        prompt_row.addWidget(self.prompt_button)
+        self.prompt_frame.hide()
+        self.back_button = QPushButton("◀ Back")
+        self.next_button = QPushButton("Next ▶")
+        top = QHBoxLayout()
+        top.addWidget(QLabel("Measurement:"))
+        top.addWidget(self.folder_label, 1)
+        top.addWidget(self.new_button)
+        top.addWidget(self.open_button)
+        nav = QHBoxLayout()
+        nav.addStretch(1)
+        nav.addWidget(self.back_button)
+        nav.addWidget(self.next_button)
+        right = QVBoxLayout()
+        right.addWidget(self.prompt_frame)
+        right.addWidget(self.stack, 1)
+        right.addLayout(nav)
+        middle = QHBoxLayout()
+        middle.addWidget(self.step_list)
+        middle.addLayout(right, 1)
+        layout = QVBoxLayout(self)
+        layout.addLayout(top)
+        layout.addLayout(middle, 1)
+
+        for i, page in enumerate(self.pages):
+            page.state_changed.connect(
+                lambda state, i=i: self._on_page_state_changed(i, state)
+            )
+            page.step_finished.connect(lambda _r, i=i: self._on_page_step_finished(i))
+        self.step_list.currentRowChanged.connect(self._on_step_list_row_changed)
+        self.back_button.clicked.connect(self._on_back_button_clicked)
+        self.next_button.clicked.connect(self._on_next_button_clicked)
+        self.new_button.clicked.connect(self._on_new_button_clicked)
+        self.open_button.clicked.connect(self._on_open_button_clicked)
+        m.folder_changed.connect(self._on_measurement_folder_changed)
+        m.controller.prompt_requested.connect(self._on_controller_prompt_requested)
+        self.prompt_button.clicked.connect(self._on_prompt_button_clicked)
+        for i in range(len(self.pages)):
+            self._show_state(i)
+        self.go_to(0)
+
+    # -- navigation -----------------------------------------------------------------
+    @property
+    def current_index(self) -> int:
+        """Index of the page shown."""
+        return self.stack.currentIndex()
+
+    @property
+    def current_page(self) -> StepPage:
+        """The page shown."""
+        return self.pages[self.current_index]
+
+    def go_to(self, index: int) -> None:
+        """Show step ``index``."""
+        index = max(0, min(index, len(self.pages) - 1))
+        if self.step_list.currentRow() != index:
+            self.step_list.setCurrentRow(index)  # re-enters through the slot
+            return
+        self.stack.setCurrentIndex(index)
+        self.pages[index].refresh()
+        self._update_nav()
+        self.step_changed.emit(index)
+
+    def first_unfinished(self) -> int:
+        """Index of the first step not done (the last step if all are)."""
+        for i, page in enumerate(self.pages):
+            if page.state != StepState.DONE:
+                return i
+        return len(self.pages) - 1
+
+    def _update_nav(self) -> None:
+        i = self.current_index
+        running = any(p.running for p in self.pages)
+        self.back_button.setEnabled(i > 0 and not running)
+        self.next_button.setEnabled(
+            i < len(self.pages) - 1
+            and self.pages[i].state == StepState.DONE
+            and not running
+        )
+        self.new_button.setEnabled(not running)
+        self.open_button.setEnabled(not running)
+
+    def _show_state(self, index: int) -> None:
+        page = self.pages[index]
+        mark, colour = _STATE_MARK[page.state]
+        item = self.step_list.item(index)
+        item.setText(f"{mark}  {index + 1}. {page.title}")
+        item.setForeground(QBrush(colour))
+
+    # -- measurement folder ---------------------------------------------------------
+    def new_measurement(self, folder: str | Path) -> bool:
+        """Start a new measurement in ``folder``; False (with a message) if refused."""
+        try:
+            self.measurement.new(folder)
+        except Exception as exc:
+            self._show_folder_error(exc)
+            return False
+        for page in self.pages[1:]:
+            page.reset()
+        self.go_to(0 if self.connect_page.state != StepState.DONE else 1)
+        return True
+
+    def open_measurement(self, folder: str | Path) -> bool:
+        """Reopen a measurement; steps already done are restored, and the wizard goes
+        to the first unfinished one."""
+        try:
+            self.measurement.open(folder)
+        except Exception as exc:
+            self._show_folder_error(exc)
+            return False
+        for page in self.pages[1:]:
+            page.reset()
+            if not page.restore():
+                break
+        self.go_to(self.first_unfinished())
+        log.info("measurement %s reopened at step %r", folder, self.current_page.title)
+        return True
+
+    def _show_folder_error(self, exc: Exception) -> None:
+        from tunespec.app.panels.device_panel import format_error
+
+        self.folder_label.setText(
+            f"<span style='color:#c00000'>{format_error(exc)}</span>"
+        )
+        log.error("measurement folder: %s", exc)
+
+    def abort(self) -> None:
+        """Abort the running step, if any."""
+        for page in self.pages:
+            if page.running:
+                page.abort()
+
+    def shutdown(self) -> None:
+        """Abort and wait for the pool jobs (window closing)."""
+        self.abort()
+        from PySide6.QtCore import QThreadPool
+
+        QThreadPool.globalInstance().waitForDone(10_000)
+
+    # -- slots ---------------------------------------------------------------------------
+    @Slot(str)
+    def _on_controller_prompt_requested(self, message: str) -> None:
+        self.prompt_label.setText(f"<b>{message}</b>")
+        self.prompt_frame.show()
+        self.prompt_button.setFocus()
+
+    @Slot()
+    def _on_prompt_button_clicked(self) -> None:
+        self.prompt_frame.hide()
+        self.measurement.controller.confirm_prompt()
+
+    def _on_page_state_changed(self, index: int, state: str) -> None:
+        self._show_state(index)
+        if state != StepState.RUNNING:
+            self.prompt_frame.hide()
+        if state in (StepState.RUNNING, StepState.PENDING):
+            # a retaken (or reset) step invalidates what was derived from it; a reset
+            # page reports PENDING in turn, so this follows the whole chain
+            for page in self.pages[index + 1 :]:
+                if page.state != StepState.PENDING and page.depends_on(
+                    self.pages[index]
+                ):
+                    page.reset()
+        self._update_nav()
+
+    def _on_page_step_finished(self, index: int) -> None:
+        self._update_nav()
+
+    @Slot(int)
+    def _on_step_list_row_changed(self, row: int) -> None:
+        if row >= 0:
+            self.go_to(row)
+
+    @Slot()
+    def _on_back_button_clicked(self) -> None:
+        self.go_to(self.current_index - 1)
+
+    @Slot()
+    def _on_next_button_clicked(self) -> None:
+        self.go_to(self.current_index + 1)
+
+    @Slot()
+    def _on_new_button_clicked(self) -> None:
+        folder = QFileDialog.getExistingDirectory(
+            self, "Folder for the new measurement"
+        )
+        if folder:
+            self.new_measurement(folder)
+
+    @Slot()
+    def _on_open_button_clicked(self) -> None:
+        folder = QFileDialog.getExistingDirectory(self, "Open a measurement to resume")
+        if folder:
+            self.open_measurement(folder)
+
+    @Slot(object)
+    def _on_measurement_folder_changed(self, folder: Any) -> None:
+        self.folder_label.setText(str(folder))
+        self.folder_label.setTextInteractionFlags(
+            Qt.TextInteractionFlag.TextSelectableByMouse
+        )

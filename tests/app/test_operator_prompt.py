@@ -1,0 +1,62 @@
+"""On hardware the stage is the operator: the wizard asks, the capture waits."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+from tests.app.helpers import caught
+from tests.app.test_workers import _FakeCamera, _FakeLight
+from tunespec.app.settings import AppSettings
+from tunespec.app.wizard.measurement import Measurement
+from tunespec.app.wizard.wizard_panel import WizardPanel
+from tunespec.app.workers import DeviceController, DeviceJob
+from tunespec.core.progress import Cancelled
+from tunespec.devices.registry import OperatorStage
+
+
+def _opener(light_spec, camera_spec, *, prompt, **options):
+    return SimpleNamespace(
+        light=_FakeLight(), camera=_FakeCamera(), stage=OperatorStage(prompt)
+    )
+
+
+def _present_white(context, *, progress, should_stop):
+    context.bench.stage.present("white")
+    return "white in place"
+
+
+def test_the_operator_is_asked_and_the_job_waits(qtbot, tmp_path):
+    controller = DeviceController(_opener)
+    wizard = WizardPanel(Measurement(controller, AppSettings()))
+    qtbot.addWidget(wizard)
+    wizard.show()
+    with caught(qtbot, controller.devices_opened):
+        controller.open_devices("cal1:///dev/null", "gphoto2")
+    job = DeviceJob(_present_white)
+    done = []
+    job.signals.returned.connect(done.append)
+    controller.submit(job)
+    qtbot.waitUntil(wizard.prompt_frame.isVisible)
+    assert "white background" in wizard.prompt_label.text()
+    assert not done  # waiting for the operator
+    wizard.prompt_button.click()
+    qtbot.waitUntil(lambda: done == ["white in place"])
+    assert not wizard.prompt_frame.isVisible()
+    controller.shutdown()
+
+
+def test_aborting_while_the_operator_is_asked(qtbot):
+    controller = DeviceController(_opener)
+    wizard = WizardPanel(Measurement(controller, AppSettings()))
+    qtbot.addWidget(wizard)
+    with caught(qtbot, controller.devices_opened):
+        controller.open_devices("cal1:///dev/null", "gphoto2")
+    job = DeviceJob(_present_white)
+    errors = []
+    job.signals.errored.connect(errors.append)
+    controller.submit(job)
+    qtbot.waitUntil(lambda: wizard.prompt_label.text() != "")
+    job.abort()
+    qtbot.waitUntil(lambda: bool(errors))
+    assert isinstance(errors[0], Cancelled)
+    controller.shutdown()

@@ -1,0 +1,125 @@
+"""TargetLayoutEditor: handles, grid overlay, editing and JSON round trip."""
+
+from __future__ import annotations
+
+import numpy as np
+import pyqtgraph as pg
+import pytest
+
+from tests.app.helpers import mouse_drag
+from tunespec.app.editors.target_layout_editor import TargetLayoutEditor
+from tunespec.app.plots.frame_plot import build_preview
+from tunespec.core.datasets import resource_path
+from tunespec.core.layout import TargetLayout
+
+
+class _Frame:
+    """A frame-like object: grey background with a dark rectangle (the target)."""
+
+    def __init__(self, h: int = 240, w: int = 320) -> None:
+        planes = np.full((3, h, w), 0.8, np.float32)
+        planes[:, 60:181, 40:281] = 0.2
+        self.planes = planes
+        self.saturated = np.zeros((h, w), bool)
+        self.saturated[0:4, 0:4] = True
+
+
+@pytest.fixture
+def editor(qtbot):
+    layout = TargetLayout.load(resource_path("layouts", "neugebauer_cmy.json"))
+    ed = TargetLayoutEditor(layout)
+    qtbot.addWidget(ed)
+    ed.resize(900, 600)
+    ed.show_preview(build_preview(_Frame()))
+    ed.show()
+    qtbot.waitExposed(ed)
+    return ed
+
+
+def test_default_corners_are_set_inside_the_frame(editor):
+    corners = np.asarray(editor.target_layout.corners_px)
+    assert corners.shape == (4, 2)
+    # the view is in mosaic pixels: twice the planes' 320 x 240
+    assert np.all((corners[:, 0] > 0) & (corners[:, 0] < 640))
+    assert np.all((corners[:, 1] > 0) & (corners[:, 1] < 480))
+    np.testing.assert_allclose(editor.handle_positions(), corners)
+
+
+def test_dragging_a_handle_moves_that_corner(editor, qtbot, monkeypatch):
+    monkeypatch.setitem(pg.CONFIG_OPTIONS, "mouseRateLimit", -1)
+    before = np.asarray(editor.target_layout.corners_px)
+    vb = editor.frame_plot.view_box
+    view = editor.frame_plot.graphics
+    target_xy = before[2] + np.array([-20.0, 15.0])  # move BR
+    start = view.mapFromScene(vb.mapViewToScene(pg.Point(*before[2])))
+    end = view.mapFromScene(vb.mapViewToScene(pg.Point(*target_xy)))
+    with qtbot.waitSignal(editor.layout_changed, timeout=2000):
+        mouse_drag(view.viewport(), start, end)
+    after = np.asarray(editor.target_layout.corners_px)
+    # the drag is quantised to screen pixels: allow two of them in image pixels
+    np.testing.assert_allclose(after[2], target_xy, atol=2 * max(vb.viewPixelSize()))
+    np.testing.assert_allclose(after[[0, 1, 3]], before[[0, 1, 3]])
+    np.testing.assert_allclose(editor.handle_positions(), after)
+    # the ROIs follow the new corners through the layout's homography
+    np.testing.assert_allclose(
+        editor.roi_item.getData()[0][:4], editor.target_layout.roi_quads_px()[0, :, 0]
+    )
+
+
+def test_editing_rows_cols_and_roi_fraction(editor, qtbot):
+    with qtbot.waitSignal(editor.layout_changed):
+        editor.roi_fraction_spin.setValue(10.0)
+    assert editor.target_layout.roi_fraction == pytest.approx(0.10)
+    with qtbot.waitSignal(editor.layout_changed):
+        editor.rows_spin.setValue(3)
+    lay = editor.target_layout
+    assert (lay.rows, lay.cols, lay.n_patches) == (3, 4, 12)
+    assert lay.patch_names[0] == "A1"  # names fall back to the SG scheme
+    with qtbot.waitSignal(editor.layout_changed):
+        editor.margin_spins[0].setValue(10.0)
+    assert editor.target_layout.margin_mm[0] == 10.0
+
+
+def test_impossible_margins_are_refused_plainly(editor):
+    before = editor.target_layout
+    editor.margin_spins[0].setValue(99.0)
+    assert editor.target_layout is before
+    assert "margins" in editor.status_label.text()
+
+
+def test_save_and_load_round_trip(editor, tmp_path):
+    editor.set_corners([[10, 20], [300, 25], [290, 220], [15, 210]])
+    path = tmp_path / "layout.json"
+    editor.save(path)
+    loaded = TargetLayout.load(path)
+    assert loaded == editor.target_layout
+    editor.set_corners([[0, 0], [100, 0], [100, 100], [0, 100]])
+    editor.load(path)
+    np.testing.assert_allclose(editor.handle_positions(), np.asarray(loaded.corners_px))
+
+
+def test_clicking_a_patch_selects_it(editor, qtbot):
+    quads = editor.target_layout.roi_quads_px()
+    centre = quads[5].mean(axis=0)
+    assert editor.patch_at(*centre) == editor.target_layout.patch_names[5]
+
+
+def test_core_corner_finder_finds_the_dark_rectangle(editor, qtbot):
+    assert editor.find_corners() is not None
+    qtbot.waitUntil(lambda: editor.find_button.isEnabled(), timeout=10_000)
+    # the rectangle spans planes x 40..280, y 60..180 -> mosaic 2u + 0.5 at the edges
+    corners = np.asarray(editor.target_layout.corners_px)
+    expected = np.array([[79.5, 119.5], [561.5, 119.5], [561.5, 361.5], [79.5, 361.5]])
+    np.testing.assert_allclose(corners, expected, atol=3.0)
+
+
+def test_automatic_corner_finder_runs_in_a_worker(editor, qtbot):
+    found = np.array([[40.0, 60.0], [280.0, 60.0], [280.0, 180.0], [40.0, 180.0]])
+
+    def finder(frame, layout, *, progress, should_stop):
+        return found
+
+    editor.set_corner_finder(finder)
+    assert editor.find_corners() is not None
+    qtbot.waitUntil(lambda: editor.find_button.isEnabled(), timeout=5000)
+    np.testing.assert_allclose(editor.target_layout.corners_px, found)
