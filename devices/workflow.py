@@ -624,22 +624,29 @@ def _run(
     # operator puts there (the stage asks)
     chart_bench = bench
 
-    def cap_chart(p: ProgressFn) -> Session:
-        s, w = capture_target(
-            chart_bench,
-            out / "chart",
-            chart_layout_,
-            exposure=exposure,
-            brackets=brackets,
-            iso=iso,
-            progress=p,
-            should_stop=should_stop,
-            on_frame=on_frame,
-        )
-        warnings.extend(f"chart capture: {x}" for x in w)
-        return s
+    def capturing(
+        which: str, on: Bench, layout: TargetLayout, exposure_: Any
+    ) -> Callable[[ProgressFn], Session]:
+        def run(p: ProgressFn) -> Session:
+            s, w = capture_target(
+                on,
+                out / which,
+                layout,
+                exposure=exposure_,
+                brackets=brackets,
+                iso=iso,
+                progress=p,
+                should_stop=should_stop,
+                on_frame=on_frame,
+            )
+            warnings.extend(f"{which} capture: {x}" for x in w)
+            return s
 
-    chart_session: Session = stages.timed("capture_chart", cap_chart)
+        return run
+
+    chart_session: Session = stages.timed(
+        "capture_chart", capturing("chart", chart_bench, chart_layout_, exposure)
+    )
     chart: ProcessedSession = stages.timed(
         "process_chart",
         lambda p: process(
@@ -669,22 +676,15 @@ def _run(
     # the same board and LEDs: the chart's metered exposures suit the sample too
     chart_exposures = {c: t[0] for c, t in chart_session.settings.exposures_s.items()}
 
-    def cap_sample(p: ProgressFn) -> Session:
-        s, w = capture_target(
+    sample_session: Session = stages.timed(
+        "capture_sample",
+        capturing(
+            "sample",
             sample_bench,
-            out / "sample",
             sample_layout_,
-            exposure=chart_exposures if exposure == "auto" else exposure,
-            brackets=brackets,
-            iso=iso,
-            progress=p,
-            should_stop=should_stop,
-            on_frame=on_frame,
-        )
-        warnings.extend(f"sample capture: {x}" for x in w)
-        return s
-
-    sample_session: Session = stages.timed("capture_sample", cap_sample)
+            chart_exposures if exposure == "auto" else exposure,
+        ),
+    )
     sample: ProcessedSession = stages.timed(
         "process_sample",
         lambda p: process(sample_session, progress=p, should_stop=should_stop),
