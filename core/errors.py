@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import json
 from os import PathLike
+from pathlib import Path
+from typing import Any
 
 
 class TuneSpecError(Exception):
@@ -33,3 +36,23 @@ class InputError(TuneSpecError, ValueError):
 
 class SingularSystemError(TuneSpecError, ArithmeticError):
     """A linear system that cannot be solved (too few or degenerate stimuli)."""
+
+
+def read_text(path: str | PathLike[str]) -> str:
+    """A text file's contents (UTF-8, a BOM tolerated); :class:`InputError` otherwise."""
+    try:
+        return Path(path).read_text(encoding="utf-8-sig")
+    except FileNotFoundError:
+        raise InputError("file not found", path=path) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read: {exc}", path=path) from None
+
+
+def read_json(path: str | PathLike[str]) -> Any:
+    """A JSON file's contents; :class:`InputError` with the line if it is invalid."""
+    try:
+        return json.loads(read_text(path))
+    except json.JSONDecodeError as exc:
+        raise InputError(
+            f"not valid JSON: {exc.msg}", path=path, line=exc.lineno
+        ) from None

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tunespec.core.errors import InputError
+from tunespec.core.errors import InputError, read_json
 
 __all__ = ["TargetLayout", "apply_homography", "homography_from_corners"]
 
@@ -199,14 +199,7 @@ class TargetLayout:
     @classmethod
     def load(cls, path: str | PathLike[str]) -> TargetLayout:
         path = Path(path)
-        try:
-            d = json.loads(path.read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            raise InputError("file not found", path=path) from None
-        except json.JSONDecodeError as exc:
-            raise InputError(
-                f"not valid JSON: {exc.msg}", path=path, line=exc.lineno
-            ) from None
+        d = read_json(path)
         if not isinstance(d, dict):
             raise InputError("expected a JSON object", path=path)
         return cls.from_dict(d, source=str(path))

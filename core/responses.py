@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from tunespec.core.errors import InputError
+from tunespec.core.errors import InputError, read_text
 
 __all__ = ["CHANNELS", "Responses", "read_responses_csv", "write_responses_csv"]
 
@@ -100,12 +100,7 @@ def read_responses_csv(path: str | PathLike[str]) -> Responses:
         duplicate or missing (patch, illuminant) pairs; each names the file and line.
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except FileNotFoundError:
-        raise InputError("file not found", path=path) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read: {exc}", path=path) from None
+    text = read_text(path)
     lines = text.splitlines()
     reader = csv.reader(lines)
     try:

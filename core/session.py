@@ -43,7 +43,7 @@ from os import PathLike
 from pathlib import Path
 from typing import Any
 
-from tunespec.core.errors import InputError
+from tunespec.core.errors import InputError, read_json
 from tunespec.core.layout import TargetLayout
 from tunespec.core.spectra import Spectra, read_spectra_csv, write_spectra_csv
 
@@ -463,16 +463,9 @@ class Session:
         """
         root = Path(root)
         path = root / MANIFEST_NAME
-        try:
-            m = json.loads(path.read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            raise InputError(
-                f"not a TuneSpec session (no {MANIFEST_NAME})", path=root
-            ) from None
-        except json.JSONDecodeError as exc:
-            raise InputError(
-                f"not valid JSON: {exc.msg}", path=path, line=exc.lineno
-            ) from None
+        if not path.exists():
+            raise InputError(f"not a TuneSpec session (no {MANIFEST_NAME})", path=root)
+        m = read_json(path)
         if not isinstance(m, dict) or m.get("format") != SESSION_FORMAT:
             raise InputError(
                 f"not a session manifest (format != {SESSION_FORMAT!r})", path=path

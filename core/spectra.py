@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tunespec.core.errors import InputError
+from tunespec.core.errors import InputError, read_text
 
 __all__ = [
     "DEFAULT_GRID",
@@ -234,12 +234,7 @@ def read_spectra_csv(
         With the file, the line and what was expected.
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except FileNotFoundError:
-        raise InputError("file not found", path=path) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read: {exc}", path=path) from None
+    text = read_text(path)
     rows = list(csv.reader(text.splitlines()))
     numbered = [(i + 1, r) for i, r in enumerate(rows) if any(c.strip() for c in r)]
     if not numbered:

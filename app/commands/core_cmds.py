@@ -11,7 +11,7 @@ import numpy as np
 
 from tunespec.app.cli import add_grid_option, progress_bar
 from tunespec.core.datasets import read_rawtoaces_json
-from tunespec.core.errors import InputError
+from tunespec.core.errors import InputError, read_json
 from tunespec.core.responses import Responses, read_responses_csv, write_responses_csv
 from tunespec.core.spectra import Grid, Spectra, read_spectra_csv, write_spectra_csv
 
@@ -163,10 +163,10 @@ def _meta_path(sensitivities: Path) -> Path:
 def _read_spd_shift(path: Path) -> float:
     if not path.exists():
         return 0.0
+    doc = read_json(path)
     try:
-        value = json.loads(path.read_text(encoding="utf-8")).get("spd_shift_nm", 0.0)
-        return float(value)
-    except (json.JSONDecodeError, AttributeError, TypeError, ValueError) as exc:
+        return float(doc.get("spd_shift_nm", 0.0))
+    except (AttributeError, TypeError, ValueError) as exc:
         raise InputError(
             f"expected a JSON object with spd_shift_nm: {exc}", path=path
         ) from None

@@ -10,12 +10,11 @@ report of whatever files it is given.
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 from typing import Any
 
 from tunespec.app.cli import grid_arg
-from tunespec.core.errors import InputError
+from tunespec.core.errors import InputError, read_json
 from tunespec.core.spectra import Grid, Spectra, read_spectra_csv
 
 __all__ = ["register"]
@@ -163,14 +162,7 @@ def cmd_export_rawtoaces(args: argparse.Namespace) -> int:
 
 
 def _table1_from_json(path: Path) -> tuple[Any, Any, tuple[str, ...]]:
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError("file not found", path=path) from None
-    except json.JSONDecodeError as exc:
-        raise InputError(
-            f"not valid JSON: {exc.msg}", path=path, line=exc.lineno
-        ) from None
+    doc = read_json(path)
     if not isinstance(doc, dict) or not isinstance(doc.get("training"), dict):
         raise InputError(
             "expected the statistics JSON of 'tunespec calibrate --stats' "

@@ -33,7 +33,7 @@ from PySide6.QtCore import QObject, Signal
 from tunespec.app.settings import AppSettings
 from tunespec.app.workers import DeviceContext, DeviceController
 from tunespec.core.datasets import resource_path
-from tunespec.core.errors import InputError
+from tunespec.core.errors import InputError, read_json
 from tunespec.core.layout import TargetLayout
 from tunespec.core.progress import Cancelled, ProgressFn, StopFn, check_stop
 from tunespec.core.spectra import (
@@ -300,16 +300,11 @@ class Measurement(QObject):
         """Reopen the measurement in ``folder`` (its pages then restore themselves)."""
         folder = Path(folder)
         path = folder / MEASUREMENT_FILE
-        try:
-            doc = json.loads(path.read_text(encoding="utf-8"))
-        except FileNotFoundError:
+        if not path.exists():
             raise InputError(
                 f"not a TuneSpec measurement (no {MEASUREMENT_FILE})", path=folder
-            ) from None
-        except json.JSONDecodeError as exc:
-            raise InputError(
-                f"not valid JSON: {exc.msg}", path=path, line=exc.lineno
-            ) from None
+            )
+        doc = read_json(path)
         if doc.get("format") != MEASUREMENT_FORMAT:
             raise InputError(
                 f"not a measurement file (format != {MEASUREMENT_FORMAT!r})", path=path
