@@ -7,6 +7,9 @@ TuneSpec again:
 ``sensitivities.csv``            estimated camera sensitivities, spectral CSV
                                  (``wavelength_nm,R,G,B``, absolute scale: Eq. 1 with
                                  them predicts the responses)
+``sensitivities.csv.meta.json``  what the CSV cannot hold: the estimator and the
+                                 fitted spectroradiometer shift (``spd_shift_nm``),
+                                 which ``tunespec estimate`` undoes on the SPDs
 ``sensitivities.json``           the same in the rawtoaces-data camera schema (as
                                  ``resources/cameras/*.json``), normalised to peak 1
 ``reflectances.csv``             estimated reflectances, spectral CSV (0..1)
@@ -46,7 +49,7 @@ import numpy as np
 
 from tunespec.core.cgats import CgatsTable, ti3_table, write_cgats
 from tunespec.core.colorimetry import lab_d50, xyz_d50
-from tunespec.core.errors import InputError
+from tunespec.core.errors import InputError, read_json
 from tunespec.core.responses import Responses, write_responses_csv
 from tunespec.core.spectra import Grid, Spectra, write_spectra_csv
 
@@ -57,17 +60,21 @@ if TYPE_CHECKING:
 __all__ = [
     "EXPORT_NAMES",
     "export_measurement",
+    "read_spd_shift",
     "reflectance_ti3",
+    "sensitivity_meta_path",
     "sensitivity_rawtoaces_document",
     "tunespec_version",
     "write_prediction_stats_csv",
     "write_reflectance_stats_csv",
     "write_sensitivity_json",
+    "write_sensitivity_meta",
 ]
 
 #: File name of each export kind (the keys of :func:`export_measurement`'s result).
 EXPORT_NAMES: dict[str, str] = {
     "sensitivities_csv": "sensitivities.csv",
+    "sensitivities_meta": "sensitivities.csv.meta.json",
     "sensitivities_json": "sensitivities.json",
     "reflectances_csv": "reflectances.csv",
     "reflectances_ti3": "reflectances.ti3",
@@ -80,6 +87,49 @@ EXPORT_NAMES: dict[str, str] = {
 }
 
 _TABLE1_ROWS = ("Red", "Green", "Blue", "RGB")
+
+
+def sensitivity_meta_path(sensitivity_csv: str | PathLike[str]) -> Path:
+    """``SENSITIVITIES.csv.meta.json``: what a sensitivities CSV cannot hold."""
+    p = Path(sensitivity_csv)
+    return p.with_name(p.name + ".meta.json")
+
+
+def write_sensitivity_meta(
+    sensitivity_csv: str | PathLike[str], sensitivity: Spectra
+) -> Path:
+    """Write the estimator and the fitted SPD shift beside a sensitivities CSV.
+
+    ``sensitivity.meta`` as :func:`~tunespec.core.sensitivity.estimate_camera_sensitivity`
+    fills it (``source``, ``spd_shift_nm``).
+    """
+    path = sensitivity_meta_path(sensitivity_csv)
+    doc = {
+        "estimated_by": sensitivity.meta.get("source", ""),
+        "spd_shift_nm": float(sensitivity.meta.get("spd_shift_nm", 0.0)),
+    }
+    path.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+    return path
+
+
+def read_spd_shift(sensitivity_csv: str | PathLike[str]) -> float:
+    """The SPD shift stored beside a sensitivities CSV (0 when there is none).
+
+    Raises
+    ------
+    InputError
+        The side file exists but is not a JSON object with a number ``spd_shift_nm``.
+    """
+    path = sensitivity_meta_path(sensitivity_csv)
+    if not path.exists():
+        return 0.0
+    doc = read_json(path)
+    try:
+        return float(doc.get("spd_shift_nm", 0.0))
+    except (AttributeError, TypeError, ValueError):
+        raise InputError(
+            "expected a JSON object with a number spd_shift_nm", path=path
+        ) from None
 
 
 def tunespec_version() -> str:
@@ -484,6 +534,8 @@ def export_measurement(
 
     if sensitivity is not None:
         write_spectra_csv(sensitivity, target("sensitivities_csv"))
+        write_sensitivity_meta(paths["sensitivities_csv"], sensitivity)
+        paths["sensitivities_meta"] = sensitivity_meta_path(paths["sensitivities_csv"])
         write_sensitivity_json(
             sensitivity,
             target("sensitivities_json"),

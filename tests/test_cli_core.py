@@ -74,6 +74,10 @@ def test_simulate_calibrate_estimate_evaluate(files, capsys) -> None:
     # Simulated at the 5D Mark III's noise: the paper's Table 1 level (0.24 % mean RGB)
     assert stats["training"]["RGB"]["mean"] < 0.0024
     assert stats["held_out"]["RGB"]["mean"] < 0.0030
+    meta = json.loads((d / "S.csv.meta.json").read_text())
+    # simulate-responses writes the true SPDs: the fitted shift is near zero
+    assert abs(meta["spd_shift_nm"]) < 0.3
+    assert stats["params"]["spd_shift_fitted"] is True
     sens = read_spectra_csv(d / "S.csv")
     true = load_camera().values
     est = sens.values / sens.values.max(axis=1, keepdims=True)

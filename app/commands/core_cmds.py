@@ -11,7 +11,8 @@ import numpy as np
 
 from tunespec.app.cli import add_grid_option, progress_bar
 from tunespec.core.datasets import read_rawtoaces_json
-from tunespec.core.errors import InputError, read_json
+from tunespec.core.errors import InputError
+from tunespec.core.export import read_spd_shift, write_sensitivity_meta
 from tunespec.core.responses import Responses, read_responses_csv, write_responses_csv
 from tunespec.core.spectra import Grid, Spectra, read_spectra_csv, write_spectra_csv
 
@@ -155,23 +156,6 @@ def read_sensitivities(path: Path, grid: Grid) -> Spectra:
     return Spectra(s.wavelength_nm, s.values, s.names, {**s.meta, "source": str(path)})
 
 
-def _meta_path(sensitivities: Path) -> Path:
-    """Where calibrate stores what the sensitivities CSV cannot hold."""
-    return sensitivities.with_name(sensitivities.name + ".meta.json")
-
-
-def _read_spd_shift(path: Path) -> float:
-    if not path.exists():
-        return 0.0
-    doc = read_json(path)
-    try:
-        return float(doc.get("spd_shift_nm", 0.0))
-    except (AttributeError, TypeError, ValueError) as exc:
-        raise InputError(
-            f"expected a JSON object with spd_shift_nm: {exc}", path=path
-        ) from None
-
-
 def _write_json(path: Path | None, data: dict[str, Any]) -> None:
     if path is not None:
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -225,10 +209,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         fit, illuminants, reflectances, progress=progress_bar("calibrating"), **kwargs
     )
     write_spectra_csv(est.sensitivity, args.output)
-    _write_json(
-        _meta_path(args.output),
-        {"method": est.method, "spd_shift_nm": est.spd_shift_nm},
-    )
+    write_sensitivity_meta(args.output, est.sensitivity)
     report = calibration_report(
         est, responses, illuminants, reflectances, held_out_patches=held
     )
@@ -263,7 +244,7 @@ def cmd_estimate(args: argparse.Namespace) -> int:
     sensitivity = read_sensitivities(args.sensitivities, args.grid)
     shift_nm = args.spd_shift_nm
     if shift_nm is None:
-        shift_nm = _read_spd_shift(_meta_path(args.sensitivities))
+        shift_nm = read_spd_shift(args.sensitivities)
     if shift_nm:
         illuminants = correct_spd_shift(illuminants, shift_nm)
     prior = (

@@ -34,6 +34,7 @@ from tunespec.app.settings import AppSettings
 from tunespec.app.workers import DeviceContext, DeviceController
 from tunespec.core.datasets import resource_path
 from tunespec.core.errors import InputError, read_json
+from tunespec.core.export import read_spd_shift, write_sensitivity_meta
 from tunespec.core.layout import TargetLayout
 from tunespec.core.progress import Cancelled, ProgressFn, StopFn, check_stop
 from tunespec.core.spectra import (
@@ -804,6 +805,8 @@ def _write_calibration(out_dir: Path, result: CalibrationResult) -> None:
 
     out_dir.mkdir(parents=True, exist_ok=True)
     write_spectra_csv(result.sensitivity, out_dir / "sensitivity.csv")
+    # the fitted SPD shift, which the CSV cannot hold (workflow.estimate needs it)
+    write_sensitivity_meta(out_dir / "sensitivity.csv", result.sensitivity)
     doc = {
         "table1": result.table1.as_dict(),
         "threshold_rgb_mean": result.threshold,
@@ -812,8 +815,6 @@ def _write_calibration(out_dir: Path, result: CalibrationResult) -> None:
         "layout": result.layout.to_dict(),
         "excluded_patches": list(result.excluded_patches),
         "warnings": list(result.warnings),
-        # the CSV cannot hold it; workflow.estimate reads it from the meta
-        "spd_shift_nm": float(result.sensitivity.meta.get("spd_shift_nm", 0.0)),
     }
     # written last: its presence marks the step done
     atomic_write_text(out_dir / "calibration.json", json.dumps(doc, indent=1) + "\n")
@@ -825,7 +826,7 @@ def _read_calibration(folder: Path) -> CalibrationResult | None:
     try:
         doc = json.loads((folder / "calibration.json").read_text())
         sensitivity = read_spectra_csv(folder / "sensitivity.csv", allow_negative=True)
-        shift = repr(float(doc.get("spd_shift_nm", 0.0)))
+        shift = repr(read_spd_shift(folder / "sensitivity.csv"))
         sensitivity = Spectra(
             sensitivity.wavelength_nm,
             sensitivity.values,

@@ -17,7 +17,10 @@ Geometry (resolution independent, so the same scene serves any camera resolution
 - The 45-degree illumination is not uniform: irradiance falls off quadratically from
   a point ``falloff_centre_frac`` of the image, by ``falloff`` (10 %, the paper's
   "irradiance-difference of approx. 10 % between center and margin") at
-  ``falloff_radius_mm`` (default: the chart's half-diagonal).
+  ``falloff_radius_mm`` (default :data:`FALLOFF_RADIUS_MM`, the half-diagonal of
+  the measurement area, a ColorChecker SG card). The fall-off belongs to the light
+  and the bench, not to the target: every target sees the same irradiance field, so
+  a calibration on the SG carries over to a sample captured later.
 
 Materials are numbered for the renderer: 0 the background board, 1 the chart's frame
 (the black card around and between the patches), ``2 + k`` the k-th patch of the
@@ -36,7 +39,13 @@ from tunespec.core.datasets import load_colorchecker_sg, resource_path
 from tunespec.core.layout import TargetLayout, homography_from_corners
 from tunespec.core.spectra import DEFAULT_GRID, Grid, Spectra, read_spectra_csv
 
-__all__ = ["BACKGROUND", "FRAME", "SimScene", "white_board_reflectance"]
+__all__ = [
+    "BACKGROUND",
+    "FALLOFF_RADIUS_MM",
+    "FRAME",
+    "SimScene",
+    "white_board_reflectance",
+]
 
 #: Material index of the background board.
 BACKGROUND = 0
@@ -61,6 +70,11 @@ def white_board_reflectance(wavelength_nm: ArrayLike) -> NDArray[np.float64]:
     """
     wl = np.asarray(wavelength_nm, dtype=np.float64)
     return 0.90 - 0.04 * np.exp(-(wl - 380.0) / 40.0)
+
+
+#: Default radius of the 10 % irradiance fall-off: the half-diagonal of the measured
+#: area, a ColorChecker SG card (279.4 x 215.9 mm).
+FALLOFF_RADIUS_MM = 0.5 * math.hypot(279.4, 215.9)
 
 
 class SimScene:
@@ -90,7 +104,7 @@ class SimScene:
     falloff
         Relative irradiance drop at ``falloff_radius_mm`` from the brightest point.
     falloff_radius_mm
-        Where the drop reaches ``falloff``; default the chart's half-diagonal.
+        Where the drop reaches ``falloff``; default :data:`FALLOFF_RADIUS_MM`.
     falloff_centre_frac
         The brightest point, as fractions of image width and height.
     presented
@@ -140,9 +154,7 @@ class SimScene:
         self.rotation_deg = float(rotation_deg)
         self.falloff = float(falloff)
         self.falloff_radius_mm = float(
-            falloff_radius_mm
-            if falloff_radius_mm is not None
-            else 0.5 * math.hypot(layout.width_mm, layout.height_mm)
+            FALLOFF_RADIUS_MM if falloff_radius_mm is None else falloff_radius_mm
         )
         self.falloff_centre_frac = (
             float(falloff_centre_frac[0]),

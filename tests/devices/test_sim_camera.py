@@ -409,3 +409,16 @@ def test_dng_write_is_atomic_over_an_existing_file(tmp_path: Path) -> None:
     )
     with rawpy.imread(str(target)) as raw:
         assert raw.raw_image_visible.max() == 7
+
+
+def test_irradiance_field_belongs_to_the_bench_not_the_target() -> None:
+    """A calibration on the SG carries over to a small sample: same fall-off."""
+    from tunespec.devices.sim.scene import FALLOFF_RADIUS_MM, SimScene
+
+    sg, cmy = SimScene.colorchecker_sg(), SimScene.neugebauer_cmy()
+    assert sg.falloff_radius_mm == cmy.falloff_radius_mm == FALLOFF_RADIUS_MM
+    xy = np.array([[768.0, 512.0], [300.0, 200.0]])
+    np.testing.assert_allclose(
+        sg.irradiance(xy[:, 0], xy[:, 1], 1536, 1024),
+        cmy.irradiance(xy[:, 0], xy[:, 1], 1536, 1024),
+    )
