@@ -147,6 +147,7 @@ class MainWindow(QMainWindow):
         m.layout_needed.connect(self._on_measurement_layout_needed)
         m.calibrated.connect(self._on_measurement_calibrated)
         m.estimated.connect(self._on_measurement_estimated)
+        m.result_cleared.connect(self._on_measurement_result_cleared)
         self.layout_editor.layout_changed.connect(self._on_layout_editor_layout_changed)
         self.layout_editor.layout_loaded.connect(self._on_layout_editor_layout_loaded)
         self.layout_editor.patch_selected.connect(self.reflectance_plot.select_patch)
@@ -328,6 +329,17 @@ class MainWindow(QMainWindow):
             }
         self.reflectance_plot.set_data(result.reflectance, result.reference, per_patch)
 
+    @Slot(str)
+    def _on_measurement_result_cleared(self, which: str) -> None:
+        # what another measurement or a retaken step made invalid is not shown
+        if which == "calibration":
+            self.table1_panel.clear_table("Not calibrated yet.")
+            self.sensitivity_plot.clear_data()
+        elif which == "estimate":
+            self.table2_panel.clear_table("Not estimated yet.")
+            self.reflectance_plot.clear_data()
+            self.layout_editor.select_patch(None)
+
     @Slot()
     def _on_preload_finished(self) -> None:
         self.preloaded = True
@@ -335,10 +347,15 @@ class MainWindow(QMainWindow):
     # -- closing ----------------------------------------------------------------------
     def closeEvent(self, event: QCloseEvent) -> None:
         """Abort what runs, switch the light off, close the devices, save settings."""
-        self.save_settings()
-        self.wizard_panel.shutdown()
-        self.controller.shutdown()
-        self.log_panel.detach()
+        try:
+            self.save_settings()
+        except Exception as exc:
+            # e.g. the measurement folder is gone: the devices must still be closed
+            log.error("cannot save the settings or the measurement: %s", exc)
+        finally:
+            self.wizard_panel.shutdown()
+            self.controller.shutdown()
+            self.log_panel.detach()
         super().closeEvent(event)
 
 

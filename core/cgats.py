@@ -536,6 +536,34 @@ def _count(tokens: list[tuple[str, bool]], *, path: str | None, lineno: int) -> 
     return int(tokens[1][0])
 
 
+def _take_fields(
+    tokens: list[tuple[str, bool]], fields: list[str], *, path: str | None, lineno: int
+) -> str:
+    """Append the field names of a format line; the parser's next state."""
+    for t, q in tokens:
+        if t == "END_DATA_FORMAT" and not q:
+            return "header"
+        if t in _RESERVED and not q:
+            raise InputError(
+                f"{t} inside BEGIN_DATA_FORMAT ... END_DATA_FORMAT "
+                "(END_DATA_FORMAT missing?)",
+                path=path,
+                line=lineno,
+            )
+        fields.append(t)
+    return "fields"
+
+
+def _check_fields(fields: list[str], *, path: str | None, lineno: int) -> None:
+    """Field names as :class:`CgatsTable` needs them, or an error naming the line."""
+    for name in fields:
+        if not _BARE_TOKEN.match(name) or name in _RESERVED:
+            raise InputError(f"bad CGATS field name {name!r}", path=path, line=lineno)
+    dup = sorted({f for f in fields if fields.count(f) > 1})
+    if dup:
+        raise InputError(f"duplicate field(s) {', '.join(dup)}", path=path, line=lineno)
+
+
 def parse_cgats(text: str, *, source: str | None = None) -> CgatsTable:
     """Parse CGATS text (the first table); see :func:`read_cgats`."""
     path = source
@@ -546,8 +574,8 @@ def parse_cgats(text: str, *, source: str | None = None) -> CgatsTable:
     rows: list[tuple[str, ...]] = []
     row_lines: list[int] = []
     quoted: set[int] = set()
-    n_fields = n_sets = None
-    n_fields_line = n_sets_line = 0
+    n_sets = None
+    n_sets_line = data_line = 0
     state = "id"
     fields_line = 0
     for lineno, line in enumerate(lines, start=1):
@@ -569,17 +597,20 @@ def parse_cgats(text: str, *, source: str | None = None) -> CgatsTable:
             if first == "KEYWORD":
                 continue  # declarations only; what follows defines the value
             if first == "NUMBER_OF_FIELDS":
-                n_fields = _count(tokens, path=path, lineno=lineno)
-                n_fields_line = lineno
+                # Checked for form only: Argyll trusts the format list, and some of
+                # its own reference files (ref/ColorChecker.ti2, ref/FograStrip3.ti1)
+                # declare one field more than they list.
+                _count(tokens, path=path, lineno=lineno)
             elif first == "NUMBER_OF_SETS":
                 n_sets = _count(tokens, path=path, lineno=lineno)
                 n_sets_line = lineno
             elif first == "BEGIN_DATA_FORMAT":
                 if fields:
                     raise InputError("second BEGIN_DATA_FORMAT", path=path, line=lineno)
-                state = "fields"
                 fields_line = lineno
-                fields += [t for t, _ in tokens[1:]]
+                state = _take_fields(tokens[1:], fields, path=path, lineno=lineno)
+                if state == "header":
+                    _check_fields(fields, path=path, lineno=fields_line)
             elif first == "BEGIN_DATA":
                 if not fields:
                     raise InputError(
@@ -588,6 +619,7 @@ def parse_cgats(text: str, *, source: str | None = None) -> CgatsTable:
                         line=lineno,
                     )
                 state = "data"
+                data_line = lineno
             elif first in ("END_DATA", "END_DATA_FORMAT"):
                 raise InputError(f"unexpected {first}", path=path, line=lineno)
             elif tokens[0][1]:
@@ -599,27 +631,9 @@ def parse_cgats(text: str, *, source: str | None = None) -> CgatsTable:
             else:
                 keywords[first] = " ".join(t for t, _ in tokens[1:])
         elif state == "fields":
-            for t, q in tokens:
-                if t == "END_DATA_FORMAT" and not q:
-                    state = "header"
-                    break
-                if t in _RESERVED and not q:
-                    raise InputError(
-                        f"{t} inside BEGIN_DATA_FORMAT ... END_DATA_FORMAT "
-                        "(END_DATA_FORMAT missing?)",
-                        path=path,
-                        line=lineno,
-                    )
-                fields.append(t)
-            if state == "fields":
-                continue
-            if n_fields is not None and n_fields != len(fields):
-                raise InputError(
-                    f"NUMBER_OF_FIELDS is {n_fields} but {len(fields)} fields are "
-                    "declared",
-                    path=path,
-                    line=n_fields_line,
-                )
+            state = _take_fields(tokens, fields, path=path, lineno=lineno)
+            if state == "header":
+                _check_fields(fields, path=path, lineno=fields_line)
         elif state == "data":
             if first == "END_DATA" and not tokens[0][1]:
                 if len(tokens) > 1:
@@ -650,7 +664,9 @@ def parse_cgats(text: str, *, source: str | None = None) -> CgatsTable:
             line=last,
         )
     if not rows:
-        raise InputError("no data sets between BEGIN_DATA and END_DATA", path=path)
+        raise InputError(
+            "no data sets between BEGIN_DATA and END_DATA", path=path, line=data_line
+        )
     if n_sets is not None and n_sets != len(rows):
         raise InputError(
             f"NUMBER_OF_SETS is {n_sets} but {len(rows)} sets follow",
@@ -693,8 +709,10 @@ def read_cgats(path: str | PathLike[str]) -> CgatsTable:
     InputError
         Naming the file and line: no identifier, an unterminated string, a row with the
         wrong number of values, a non-number in a numeric field (``RGB_*``, ``XYZ_*``,
-        ``LAB_*``, spectral), counts that disagree with ``NUMBER_OF_FIELDS`` or
-        ``NUMBER_OF_SETS``, a missing ``END_DATA_FORMAT`` or ``END_DATA``.
+        ``LAB_*``, spectral), duplicate field names, a ``NUMBER_OF_SETS`` that
+        disagrees with the data, a missing ``END_DATA_FORMAT`` or ``END_DATA``.
+        ``NUMBER_OF_FIELDS`` is not checked against the format list, as in Argyll
+        (its own ``ref/ColorChecker.ti2`` declares 9 fields and lists 8).
     """
     path = Path(path)
     try:

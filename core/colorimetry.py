@@ -3,9 +3,11 @@
 Tristimulus values follow the ICC / ArgyllCMS convention (ArgyllCMS ``spec2cie``):
 
 1. XYZ of the reflectance under the CIE D50 spectral power distribution with the CIE
-   1931 2° observer, by practice ASTM E308 on the spectra's own wavelength grid
-   (through colour-science's ``sd_to_XYZ(method="ASTM E308")``), normalised so that
-   the perfect reflector has Y = 100;
+   1931 2° observer by practice ASTM E308 (colour-science's
+   ``sd_to_XYZ(method="ASTM E308")``), normalised so that the perfect reflector has
+   Y = 100. As ArgyllCMS does, 1, 10 and 20 nm data are integrated on their own grid
+   (10 and 20 nm with the E308 weighting tables); any other grid, 5 nm included, is
+   interpolated linearly to 1 nm first (:func:`astm_e308_weights_d50`);
 2. CIELAB relative to the ICC PCS white D50 = (96.42, 100, 82.49) (ICC.1:2010, 6.3.4.3)
    rather than to the XYZ of the spectral D50 or to colour-science's default D50
    chromaticity (0.3457, 0.3585). The three whites differ by up to about 0.03 CIEDE2000,
@@ -34,17 +36,25 @@ from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any
 
-import colour
 import numpy as np
-from colour.utilities import ColourRuntimeWarning, ColourUsageWarning, ColourWarning
 from numpy.typing import ArrayLike, NDArray
 
 from tunespec.core.errors import InputError
 from tunespec.core.spectra import Grid, Spectra
 
+# colour-science 0.4 sets numpy's legacy="1.13" print options when it is imported,
+# which would change how every array in the process prints (reports, doctests);
+# np.printoptions() restores the caller's options on leaving the block.
+with np.printoptions():
+    import colour
+    from colour.utilities import (
+        ColourRuntimeWarning,
+        ColourUsageWarning,
+        ColourWarning,
+    )
+
 __all__ = [
     "ARGYLL_TABLE_STEPS_NM",
-    "ASTM_E308_STEPS_NM",
     "CMFS_NAME",
     "ICC_D50_XY",
     "ICC_D50_XYZ",
@@ -67,8 +77,6 @@ ICC_D50_XY = ICC_D50_XYZ[:2] / ICC_D50_XYZ.sum()
 ICC_D50_XY.flags.writeable = False
 #: The observer.
 CMFS_NAME = "CIE 1931 2 Degree Standard Observer"
-#: Measurement intervals ASTM E308 (and colour) tabulate.
-ASTM_E308_STEPS_NM = (1.0, 5.0, 10.0, 20.0)
 #: Grid steps integrated with colour's ASTM E308 path as they are (as ArgyllCMS does);
 #: other grids, 5 nm included, are interpolated linearly to 1 nm first.
 ARGYLL_TABLE_STEPS_NM = (1.0, 10.0, 20.0)
@@ -144,14 +152,27 @@ def _weights_cached(key: tuple[float, ...]) -> NDArray[np.float64]:
         wl_1nm = np.arange(
             math.ceil(wl[0] - _WL_TOL_NM), math.floor(wl[-1] + _WL_TOL_NM) + 1.0
         )
-        # Linear interpolation matrix P (n_1nm, n_wl); XYZ = (P r) @ W1 = r @ (P^T W1).
-        P = np.stack(
-            [np.interp(wl_1nm, wl, e) for e in np.eye(wl.size)],
-            axis=1,
-        )
-        W = P.T @ _probe_colour(wl_1nm)
+        W = _linear_interpolation_matrix(wl, wl_1nm).T @ _probe_colour(wl_1nm)
     W.flags.writeable = False
     return W
+
+
+def _linear_interpolation_matrix(
+    wl: NDArray[np.float64], at: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """``P`` (n_at, n_wl) with ``P @ r == np.interp(at, wl, r)`` for ``at`` in range.
+
+    Built from the two neighbours of each point (not by interpolating the n_wl unit
+    vectors, which costs O(n_wl^2) memory on a fine grid). ``XYZ = (P r) @ W1 =
+    r @ (P^T W1)``.
+    """
+    j = np.clip(np.searchsorted(wl, at, side="right") - 1, 0, wl.size - 2)
+    t = np.clip((at - wl[j]) / (wl[j + 1] - wl[j]), 0.0, 1.0)
+    P = np.zeros((at.size, wl.size))
+    rows = np.arange(at.size)
+    P[rows, j] = 1.0 - t
+    P[rows, j + 1] += t
+    return P
 
 
 def _probe_colour(wl: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -199,7 +220,11 @@ def _values_and_wavelengths(
 def xyz_d50(
     reflectance: Spectra | ArrayLike, wavelength_nm: ArrayLike | None = None
 ) -> NDArray[np.float64]:
-    """CIE XYZ under CIE D50, 1931 2° observer, ASTM E308 on the data's grid.
+    """CIE XYZ under CIE D50, 1931 2° observer, ASTM E308 as ArgyllCMS applies it.
+
+    1, 10 and 20 nm data are integrated on their own grid; other grids (5 nm
+    included) are interpolated linearly to 1 nm first, see
+    :func:`astm_e308_weights_d50`.
 
     Parameters
     ----------
@@ -226,7 +251,7 @@ def xyz_d50(
     --------
     >>> import numpy as np
     >>> xyz_d50(np.ones(71), np.arange(380.0, 731.0, 5.0)).round(3).tolist()
-    [96.422, 100.0, 82.521]
+    [96.424, 100.0, 82.513]
     """
     values, wl = _values_and_wavelengths(reflectance, wavelength_nm)
     return values @ astm_e308_weights_d50(wl)
@@ -274,7 +299,7 @@ def lab_d50(
     --------
     >>> import numpy as np
     >>> lab_d50(np.ones(71), np.arange(380.0, 731.0, 5.0)).round(3).tolist()
-    [100.0, 0.003, -0.025]
+    [100.0, 0.007, -0.019]
     """
     return xyz_to_lab_d50(xyz_d50(reflectance, wavelength_nm))
 

@@ -125,7 +125,9 @@ def load_led_set(grid: Grid = DEFAULT_GRID) -> Spectra:
 
 def load_training_reflectances_190(grid: Grid = DEFAULT_GRID) -> Spectra:
     """colour-science's 190-patch rawtoaces training reflectances (an independent set)."""
-    from colour.characterisation import read_training_data_rawtoaces_v1
+    # colour-science changes numpy's print options on import; keep the caller's.
+    with np.printoptions():
+        from colour.characterisation import read_training_data_rawtoaces_v1
 
     msds = read_training_data_rawtoaces_v1()
     s = Spectra(

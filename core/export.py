@@ -11,7 +11,9 @@ TuneSpec again:
                                  fitted spectroradiometer shift (``spd_shift_nm``),
                                  which ``tunespec estimate`` undoes on the SPDs
 ``sensitivities.json``           the same in the rawtoaces-data camera schema (as
-                                 ``resources/cameras/*.json``), normalised to peak 1
+                                 ``resources/cameras/*.json``), normalised to peak 1,
+                                 on 380-780 nm at 5 nm (all rawtoaces reads; 0 where
+                                 not estimated)
 ``reflectances.csv``             estimated reflectances, spectral CSV (0..1)
 ``reflectances.ti3``             ArgyllCMS CGATS: names, camera RGB (percent), XYZ and
                                  L*a*b* (D50, 2°), spectra (percent)
@@ -59,6 +61,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "EXPORT_NAMES",
+    "RAWTOACES_GRID",
     "export_measurement",
     "read_spd_shift",
     "reflectance_ti3",
@@ -87,6 +90,10 @@ EXPORT_NAMES: dict[str, str] = {
 }
 
 _TABLE1_ROWS = ("Red", "Green", "Blue", "RGB")
+
+#: The grid rawtoaces reads: ``Spst::loadSpst`` exits unless a camera file has exactly
+#: 81 samples, 380-780 nm at 5 nm (rawtoaces 1.x ``lib/rta.cpp``).
+RAWTOACES_GRID = Grid(380.0, 780.0, 5.0)
 
 
 def sensitivity_meta_path(sensitivity_csv: str | PathLike[str]) -> Path:
@@ -168,13 +175,14 @@ def sensitivity_rawtoaces_document(
     license: str = "",
     unique_identifier: str | None = None,
     created: datetime | str | None = None,
+    grid: Grid | None = RAWTOACES_GRID,
 ) -> dict[str, Any]:
     """Camera sensitivities as a rawtoaces-data JSON document (schema 1.0.0).
 
     Parameters
     ----------
     sensitivity : Spectra R, G, B
-        Sensitivities on any grid (keys are the wavelengths, ``"380"``, ``"382.5"``).
+        Sensitivities on any grid.
     manufacturer, model
         The camera, e.g. ``"Canon"``, ``"EOS 5D Mark III"``.
     normalize
@@ -186,6 +194,12 @@ def sensitivity_rawtoaces_document(
         A UUID; ``None`` makes a random one.
     created
         ``document_creation_date``; ``None`` is now (UTC).
+    grid
+        Wavelengths written (the keys, ``"380"``, ``"382.5"``): by default
+        :data:`RAWTOACES_GRID`, the only one rawtoaces accepts. The sensitivities are
+        interpolated linearly onto it and set to 0 where they were not estimated
+        (e.g. 735-780 nm from a 380-730 nm estimate), which ``comments`` says.
+        ``None`` writes the sensitivities' own wavelengths.
 
     Returns
     -------
@@ -209,16 +223,23 @@ def sensitivity_rawtoaces_document(
     if not np.all(np.isfinite(values)):
         raise InputError("sensitivities hold non-finite values")
     note = comments
+    wavelength_nm = rgb.wavelength_nm
+    if grid is not None:
+        values, padded = _onto_grid(wavelength_nm, values, grid)
+        wavelength_nm = grid.wavelength_nm
+        if padded:
+            zero = f"set to 0 at {padded} nm (not estimated)"
+            note = f"{note}; {zero}" if note else zero
     if normalize:
         peak = float(values.max())
         if peak <= 0:
             raise InputError("sensitivities are all zero or negative")
         values = values / peak
         scale = f"normalised to peak 1; multiply by {peak!r} for the absolute scale"
-        note = f"{comments}; {scale}" if comments else scale
+        note = f"{note}; {scale}" if note else scale
     data = {
         f"{wl:g}": [float(v) for v in values[:, j]]
-        for j, wl in enumerate(rgb.wavelength_nm)
+        for j, wl in enumerate(wavelength_nm)
     }
     return {
         "header": {
@@ -244,6 +265,31 @@ def sensitivity_rawtoaces_document(
             "data": {"main": data},
         },
     }
+
+
+def _onto_grid(
+    wavelength_nm: np.ndarray, values: np.ndarray, grid: Grid
+) -> tuple[np.ndarray, str]:
+    """``values`` (3, n_wl) linearly onto ``grid``, 0 outside the data's range.
+
+    Returns the values (3, grid.n) and the zero-filled ranges as text ("" if none).
+    """
+    target = grid.wavelength_nm
+    out = np.stack(
+        [np.interp(target, wavelength_nm, v, left=0.0, right=0.0) for v in values]
+    )
+    tol = 1e-6
+    outside = (target < wavelength_nm[0] - tol) | (target > wavelength_nm[-1] + tol)
+    ranges = []
+    for side in (
+        target[outside & (target < wavelength_nm[0])],
+        target[outside & (target > wavelength_nm[-1])],
+    ):
+        if side.size:
+            ranges.append(
+                f"{side[0]:g}-{side[-1]:g}" if side.size > 1 else f"{side[0]:g}"
+            )
+    return out, " and ".join(ranges)
 
 
 def write_sensitivity_json(

@@ -73,6 +73,10 @@ class TargetLayout:
             raise InputError(
                 f"layout {self.name!r}: patch_fraction and roi_fraction must be in (0, 1]"
             )
+        if len(self.margin_mm) != 4:
+            raise InputError(
+                f"layout {self.name!r}: margin_mm must be (left, top, right, bottom)"
+            )
         l, t, r, b = self.margin_mm
         if self.width_mm - l - r <= 0 or self.height_mm - t - b <= 0:
             raise InputError(f"layout {self.name!r}: margins leave no room for patches")
@@ -186,10 +190,11 @@ class TargetLayout:
             if kw.get("corners_px") is not None:
                 kw["corners_px"] = tuple(tuple(c) for c in kw["corners_px"])
             return cls(**kw)
-        except TypeError as exc:
-            raise InputError(f"bad layout: {exc}", path=source) from None
         except InputError as exc:
             raise InputError(exc.message, path=source) from None
+        except (TypeError, ValueError) as exc:
+            # e.g. three margins, a ragged corners_px or a string where a number goes
+            raise InputError(f"bad layout: {exc}", path=source) from None
 
     def save(self, path: str | PathLike[str]) -> None:
         Path(path).write_text(

@@ -74,6 +74,7 @@ __all__ = [
     "SATURATION_TOLERANCE",
     "ProcessedSession",
     "RoiSet",
+    "flat_window",
     "process_session",
     "write_processed",
 ]
@@ -93,6 +94,36 @@ _FLAT = "__flat_field_window__"
 
 
 Loader = Callable[[Path], RawFrame]
+
+
+def flat_window(
+    shape: tuple[int, int], window_px: int = FLAT_WINDOW_PX
+) -> tuple[int, int, int, int]:
+    """The centre window of Eq. 2's normalisation on planes of ``shape``.
+
+    Parameters
+    ----------
+    shape
+        Plane shape ``(rows, cols)``.
+    window_px
+        Side of the window in plane pixels (paper: 100), cut to the planes' size.
+
+    Returns
+    -------
+    (row0, row1, col0, col1)
+        The window ``[row0:row1, col0:col1]`` in plane pixels.
+
+    Examples
+    --------
+    >>> flat_window((512, 768))
+    (206, 306, 334, 434)
+    """
+    h, w = shape
+    win = min(int(window_px), h, w)
+    if win < 1:
+        raise InputError(f"flat-field window must be at least 1 px, got {window_px}")
+    r0, c0 = (h - win) // 2, (w - win) // 2
+    return r0, r0 + win, c0, c0 + win
 
 
 @dataclass(frozen=True, eq=False)
@@ -596,12 +627,33 @@ def process_session(
         report(progress, done / total)
         check_stop(should_stop)
 
+    retake = f"retake it (tunespec capture --out {session.root} --retake {{}})"
+    first_read: list[tuple[str, tuple[int, ...], str]] = []
+
     def read(rec: FrameRecord) -> RawFrame:
         check_stop(should_stop)
         try:
-            return load(session.path_of(rec))
+            frame = load(session.path_of(rec))
         except InputError as exc:
-            raise InputError(f"frame {rec.id}: {exc}") from None
+            raise InputError(
+                f"frame {rec.id}: {exc}; {retake.format(rec.id)}"
+            ) from None
+        # ROIs are rasterised once for one mosaic geometry: a frame of another size
+        # (resumed at another resolution or with another camera) would be read at
+        # the wrong photosites, or out of bounds
+        geometry = (frame.mosaic.shape, frame.cfa_pattern)
+        if not first_read:
+            first_read.append((rec.id, *geometry))
+        elif geometry != first_read[0][1:]:
+            ref_id, (h, w), cfa = first_read[0]
+            raise InputError(
+                f"frame {rec.id} is a {geometry[0][1]}x{geometry[0][0]} "
+                f"{geometry[1]} mosaic but frame {ref_id} is {w}x{h} {cfa}: all "
+                f"frames of a session need the same camera and raw size; "
+                f"{retake.format(rec.id)}",
+                path=session.manifest_path,
+            )
+        return frame
 
     # -- geometry: corners, then ROIs rasterised once ---------------------------------
     if isinstance(corners, str) and corners not in ("auto", "layout"):
@@ -637,12 +689,10 @@ def process_session(
     if first_white.id not in preloaded:
         preloaded[first_white.id] = read(first_white)
     shape = preloaded[first_white.id].shape
-    h, w = shape
-    win = min(window_px, h, w)
-    r0, c0 = (h - win) // 2, (w - win) // 2
+    r0, r1, c0, c1 = flat_window(shape, window_px)
     rois = RoiSet.from_quads(
         layout.patch_names, full_to_plane_px(layout.roi_quads_px()), shape
-    ).with_window(_FLAT, r0, r0 + win, c0, c0 + win)
+    ).with_window(_FLAT, r0, r1, c0, c1)
     n_px = rois.n_pixels
     n_patch = layout.n_patches
     n_patch_px = int(n_px[:n_patch].sum())
@@ -751,7 +801,7 @@ def process_session(
         stats={
             "frames_read": done,
             "roi_pixels_per_patch_min": int(n_px[:n_patch].min()),
-            "flat_window_px": win,
+            "flat_window_px": r1 - r0,
             "flat_fields_borrowed": n_borrowed,
         },
     )

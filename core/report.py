@@ -9,7 +9,8 @@ Contents, each shown when its data are given:
 
 - summary and provenance: TuneSpec version, creation time, session id, devices and
   serial numbers, settings, software versions, the data sets used and their licences
-  (by default the shipped ones, from ``resources/SOURCE.md``);
+  (by default the shipped ones, from ``resources/SOURCE.md``, and colour-science's CIE
+  data);
 - quality flags: saturated stimuli (from :class:`~tunespec.core.responses.Responses`
   ``saturated``), patches excluded from the sensitivity fit, clipped Wiener estimates,
   reflectances outside 0..1, and the caller's own flags;
@@ -64,6 +65,7 @@ if TYPE_CHECKING:
     from tunespec.core.stats import CalibrationReport, PredictionStats
 
 __all__ = [
+    "COLORIMETRY_DATA",
     "PAPER_TABLE1",
     "PAPER_TABLE2_AVERAGE",
     "DatasetInfo",
@@ -114,6 +116,15 @@ class DatasetInfo:
     name: str
     description: str
     licence: str
+
+
+#: Data every report uses that is not in ``tunespec.resources``: the colorimetry of
+#: Table 2, the swatches and the ``.ti3`` XYZ/L*a*b*.
+COLORIMETRY_DATA = DatasetInfo(
+    "colour-science",
+    "CIE 1931 2° colour-matching functions and CIE illuminant D50 (colorimetry)",
+    "BSD-3-Clause",
+)
 
 
 @dataclass(frozen=True)
@@ -170,7 +181,8 @@ class ReportData:
     flags
         More flags, as text (warnings) or :class:`Flag`.
     datasets
-        Data sets and licences; ``None`` lists the shipped ones.
+        Data sets and licences; ``None`` lists the shipped ones and
+        :data:`COLORIMETRY_DATA`.
     exports
         Export kind to file; relative paths are linked from the HTML.
     notes
@@ -222,7 +234,8 @@ def shipped_datasets() -> list[DatasetInfo]:
             continue
         if cells[0] in ("folder", "") or set(cells[0]) <= set("-: "):
             continue
-        name, what, licence = (c.replace("`", "") for c in cells)
+        # Markdown emphasis and code marks are for the file, not the report.
+        name, what, licence = (re.sub(r"[`*]", "", c) for c in cells)
         out.append(DatasetInfo(name, what, licence))
     return out
 
@@ -442,7 +455,7 @@ def _response_map_figure(responses: Responses) -> Figure:
     longest = max(len(n) for n in responses.illuminants)
     fig = _new_figure(
         (_A4_LANDSCAPE_IN[0], min(8.0, 2.5 + 0.06 * n_p)),
-        margins_in=(0.9, 0.4, 0.35 + 0.07 * longest, 0.4),
+        margins_in=(0.9, 0.9, 0.6 + 0.07 * longest, 0.4),
     )
     ax = fig.add_subplot()
     peak = responses.rgb.max(axis=2)
@@ -458,7 +471,10 @@ def _response_map_figure(responses: Responses) -> Figure:
     step = max(1, math.ceil(n_p / 40))
     ax.set_yticks(range(0, n_p, step), responses.patches[::step], fontsize=7)
     ax.set_title(title)
-    fig.colorbar(im, ax=ax, shrink=0.8, pad=0.01)
+    ax.set_xlabel("LED")
+    ax.set_ylabel("patch")
+    bar = fig.colorbar(im, ax=ax, shrink=0.8, pad=0.01)
+    bar.set_label("response (full scale = 1)")
     return fig
 
 
@@ -713,7 +729,9 @@ def _provenance_tables(report: ReportData) -> list[_Table]:
         tables.append(_Table("Settings", ("Setting", "Value"), rows))
     sw = tuple(_software_versions().items())
     tables.append(_Table("Software", ("Component", "Version"), sw))
-    datasets = shipped_datasets() if report.datasets is None else report.datasets
+    datasets = report.datasets
+    if datasets is None:
+        datasets = [*shipped_datasets(), COLORIMETRY_DATA]
     if datasets:
         rows = tuple((d.name, d.description, d.licence) for d in datasets)
         tables.append(
@@ -903,17 +921,27 @@ def _text_table(t: _Table) -> list[str]:
         max(len(h), *(len(r[j]) for r in t.rows)) if t.rows else len(h)
         for j, h in enumerate(t.header)
     ]
-    widths = [min(w, 60) for w in widths]
+    widths = [min(w, 48) for w in widths]
 
-    def fmt(cells: Sequence[str]) -> str:
+    def fmt(cells: Sequence[str]) -> list[str]:
+        # A long cell (a data set's description, a path) wraps onto more lines
+        # rather than losing its end: provenance must be complete on paper too.
+        wrapped = [
+            textwrap.wrap(c, w, break_on_hyphens=False) or [""]
+            for c, w in zip(cells, widths, strict=True)
+        ]
         out = []
-        for c, w in zip(cells, widths, strict=True):
-            c = c if len(c) <= w else c[: w - 1] + "…"
-            out.append(c.rjust(w) if _NUMERIC_CELL.match(c) else c.ljust(w))
-        return "  ".join(out).rstrip()
+        for k in range(max(len(c) for c in wrapped)):
+            parts = []
+            for c, w in zip(wrapped, widths, strict=True):
+                c = c[k] if k < len(c) else ""
+                parts.append(c.rjust(w) if _NUMERIC_CELL.match(c) else c.ljust(w))
+            out.append("  ".join(parts).rstrip())
+        return out
 
-    lines = [t.title, "", fmt(t.header), fmt(["-" * w for w in widths])]
-    lines += [fmt(r) for r in t.rows]
+    lines = [t.title, "", *fmt(t.header), *fmt(["-" * w for w in widths])]
+    for r in t.rows:
+        lines += fmt(r)
     if t.note:
         lines += ["", *textwrap.wrap(t.note, _WRAP)]
     return [*lines, ""]

@@ -54,6 +54,10 @@ class Responses:
         shape = (len(self.patches), len(self.illuminants))
         object.__setattr__(self, "patches", tuple(self.patches))
         object.__setattr__(self, "illuminants", tuple(self.illuminants))
+        for what, names in (("patch", self.patches), ("illuminant", self.illuminants)):
+            if len(set(names)) != len(names):
+                dup = sorted({n for n in names if names.count(n) > 1})
+                raise InputError(f"duplicate {what} names: {', '.join(dup[:8])}")
         rgb = np.asarray(self.rgb, dtype=np.float64)
         if rgb.shape != (*shape, 3):
             raise InputError(f"rgb shape {rgb.shape}, expected {(*shape, 3)}")
@@ -73,9 +77,17 @@ class Responses:
     def subset(
         self, patches: list[str] | None = None, illuminants: list[str] | None = None
     ) -> Responses:
-        """The responses of some patches and/or illuminants, in the given order."""
-        pi = [self.patches.index(p) for p in (patches or self.patches)]
-        ii = [self.illuminants.index(i) for i in (illuminants or self.illuminants)]
+        """The responses of some patches and/or illuminants, in the given order.
+
+        ``None`` keeps all of them; an empty list keeps none.
+
+        Raises
+        ------
+        InputError
+            Names that are not in the responses.
+        """
+        pi = _indices(self.patches, patches, "patch")
+        ii = _indices(self.illuminants, illuminants, "illuminant")
 
         def take(a: NDArray[np.float64] | None) -> NDArray[np.float64] | None:
             return None if a is None else a[np.ix_(pi, ii)]
@@ -88,6 +100,16 @@ class Responses:
             take(self.n_pixels),
             take(self.saturated),
         )
+
+
+def _indices(have: tuple[str, ...], names: list[str] | None, what: str) -> list[int]:
+    if names is None:
+        return list(range(len(have)))
+    missing = [n for n in names if n not in have]
+    if missing:
+        shown = ", ".join(missing[:8]) + (" ..." if len(missing) > 8 else "")
+        raise InputError(f"{len(missing)} {what} name(s) not in the responses: {shown}")
+    return [have.index(n) for n in names]
 
 
 def read_responses_csv(path: str | PathLike[str]) -> Responses:
@@ -103,28 +125,42 @@ def read_responses_csv(path: str | PathLike[str]) -> Responses:
     text = read_text(path)
     lines = text.splitlines()
     reader = csv.reader(lines)
-    try:
-        header = [h.strip() for h in next(reader)]
-    except StopIteration:
-        raise InputError("empty file, expected a responses CSV", path=path) from None
+    # Blank lines are skipped everywhere (as read_spectra_csv does); reader.line_num
+    # keeps the reported line numbers those of the file.
+    header: list[str] = []
+    for row in reader:
+        if any(c.strip() for c in row):
+            header = [h.strip() for h in row]
+            break
+    if not header:
+        raise InputError("empty file, expected a responses CSV", path=path)
+    header_line = reader.line_num
+    dup = sorted({h for h in header if header.count(h) > 1})
+    if dup:
+        raise InputError(
+            f"duplicate column(s) {', '.join(dup)}", path=path, line=header_line
+        )
     required = ["patch", "illuminant", *CHANNELS]
     missing = [c for c in required if c not in header]
     if missing:
         raise InputError(
             f"missing column(s) {', '.join(missing)}; expected patch,illuminant,R,G,B",
             path=path,
-            line=1,
+            line=header_line,
         )
     col = {h: i for i, h in enumerate(header)}
     has_std = all(c in col for c in _STD)
     if any(c in col for c in _STD) and not has_std:
-        raise InputError("give all of R_std,G_std,B_std or none", path=path, line=1)
+        raise InputError(
+            "give all of R_std,G_std,B_std or none", path=path, line=header_line
+        )
     has_n = "n_pixels" in col
     has_sat = "saturated" in col
     records: dict[tuple[str, str], tuple[list[float], list[float], float, float]] = {}
     patches: list[str] = []
     illums: list[str] = []
-    for lineno, row in enumerate(reader, start=2):
+    for row in reader:
+        lineno = reader.line_num
         if not any(c.strip() for c in row):
             continue
         if len(row) != len(header):

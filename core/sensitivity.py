@@ -25,9 +25,10 @@ Both return sensitivities on the absolute scale of the inputs, so that
 :func:`~tunespec.core.forward_model.render_rgb` with the given illuminants predicts
 the responses (:func:`predict_responses`).
 
-Optionally (``fit_spd_shift=True``) the estimation also finds a wavelength-scale error
-of the spectroradiometer that reported the illuminants, with the chart's known
-reflectances as the wavelength reference. Sensitivities cannot absorb such a shift, and
+The estimation also finds a wavelength-scale error of the spectroradiometer that
+reported the illuminants, with the chart's known reflectances as the wavelength
+reference (``fit_spd_shift``: by default on for ``"smooth"``, off for ``"pca"``, the
+paper's method as published). Sensitivities cannot absorb such a shift, and
 1 nm of it costs about 0.3 CIEDE2000 in the reflectances estimated later; the
 estimate then carries the shift (:attr:`SensitivityEstimate.spd_shift_nm`) and the
 sensitivities belong to the corrected spectra
@@ -60,7 +61,7 @@ from tunespec.core.errors import InputError, SingularSystemError
 from tunespec.core.forward_model import render_rgb
 from tunespec.core.progress import ProgressFn, StopFn, check_stop, report
 from tunespec.core.responses import CHANNELS, Responses
-from tunespec.core.simulate import check_same_grid
+from tunespec.core.simulate import check_rgb_sensitivity, check_same_grid
 from tunespec.core.spectra import Grid, Spectra
 
 __all__ = [
@@ -125,11 +126,12 @@ class SensitivityEstimate:
     excluded_patches
         Patches left out because some of their responses were saturated.
     spd_shift_nm
-        Wavelength-scale error of the spectroradiometer found by the fit
-        (``fit_spd_shift=True``; else 0): the reported spectra are the true ones
-        moved by this much towards longer wavelengths. ``sensitivity`` then belongs
-        to the *corrected* spectra, :meth:`correct_illuminants`; use those in Eq. 1
-        and in reflectance estimation.
+        Wavelength-scale error of the spectroradiometer found by the fit (0 when
+        no shift was fitted, see ``params["spd_shift_fitted"]``): the reported
+        spectra are the true ones moved by this much towards longer wavelengths.
+        ``sensitivity`` then belongs to the *corrected* spectra,
+        :meth:`correct_illuminants`; use those in Eq. 1 and in reflectance
+        estimation.
     """
 
     sensitivity: Spectra
@@ -342,11 +344,7 @@ def predict_responses(
     array([[[0.1, 0.1, 0.1]]])
     """
     check_same_grid(reflectances, illuminants, sensitivity)
-    if len(sensitivity) != 3:
-        raise InputError(
-            f"expected 3 sensitivity curves (R, G, B), got {len(sensitivity)}",
-            path=sensitivity.meta.get("source"),
-        )
+    check_rgb_sensitivity(sensitivity)
     refl = _select(reflectances, patches, "patch(es)")
     illum = _select(illuminants, illuminant_names, "illuminant(s)")
     rgb = render_rgb(
@@ -505,6 +503,7 @@ def _estimate_sensitivity_pca(
             )
         alpha = np.linalg.lstsq(B, problem.C[:, k], rcond=None)[0]
         S[k] = alpha @ P
+        _check_positive(S[k], k)
         used.append(int(P.shape[0]))
         explained.append(ev)
         report(progress, (k + 1) / 3)
@@ -549,6 +548,11 @@ def correct_spd_shift(illuminants: Spectra, spd_shift_nm: float) -> Spectra:
     Spectra
         Same names and grid; cubic-spline interpolation, clipped at 0.
 
+    Raises
+    ------
+    InputError
+        If ``spd_shift_nm`` is not finite.
+
     Examples
     --------
     >>> import numpy as np
@@ -559,6 +563,10 @@ def correct_spd_shift(illuminants: Spectra, spd_shift_nm: float) -> Spectra:
     >>> float(wl[np.argmax(fixed.values[0])])
     450.0
     """
+    if not np.isfinite(spd_shift_nm):
+        raise InputError(
+            f"spectroradiometer wavelength shift {spd_shift_nm} nm is not finite"
+        )
     values = _shift_values(illuminants.wavelength_nm, illuminants.values, spd_shift_nm)
     return illuminants.with_values(values)
 
@@ -597,21 +605,13 @@ def _fit_spd_shift(
     M = np.einsum("pikl,pm->iklm", Rw, problem.R, optimize=True)
     v = np.einsum("pikl,pik->ikl", Rw, C, optimize=True)
     cc = np.einsum("pik,pik->k", w2, C**2)
-    D2 = _second_difference(n)
-    Om = D2.T @ D2
-    Om *= n / np.trace(Om)
+    Om = _smoothness_penalty(n)
     penalties = []
     L0 = problem.L * problem.step_nm
     for k in range(3):
         G0 = np.einsum("il,im,ilm->lm", L0, L0, M[:, k], optimize=True)
         t = np.trace(G0) / n
-        Q = np.zeros((n, n))
-        if database:
-            P, _ = database_basis(
-                database, k, min(SMOOTH_PRIOR_COMPONENTS, len(database))
-            )
-            Q = np.eye(n) - P.T @ P
-            Q *= n / max(np.trace(Q), 1.0)
+        Q = _subspace_penalty(database, k, n)
         penalties.append(
             t
             * (
@@ -664,9 +664,45 @@ def _numerical_rank(A: NDArray[np.float64], rtol: float = 1e-7) -> int:
     return int(np.count_nonzero(ev > (rtol**2) * top))
 
 
+def _check_positive(s: NDArray[np.float64], channel: int) -> None:
+    """Refuse a sensitivity curve that is nowhere positive (zero or negative data)."""
+    if not np.any(s > 0):
+        raise SingularSystemError(
+            f"channel {CHANNELS[channel]}: no positive sensitivity fits the responses "
+            "(are they all zero or negative?)"
+        )
+
+
 def _second_difference(n: int) -> NDArray[np.float64]:
     """``D2`` (n - 2, n): ``(D2 s)[j] = s[j] - 2 s[j + 1] + s[j + 2]``."""
     return np.diff(np.eye(n), 2, axis=0)
+
+
+def _smoothness_penalty(n: int) -> NDArray[np.float64]:
+    """``D2' D2`` (n, n), scaled to trace ``n`` (mean diagonal 1) like the data term."""
+    D2 = _second_difference(n)
+    Om = D2.T @ D2
+    Om *= n / np.trace(Om)
+    return Om
+
+
+def _subspace_penalty(
+    database: Mapping[str, Spectra], channel: int, n: int
+) -> NDArray[np.float64]:
+    """``I - P' P`` (n, n), the squared distance to the database subspace of ``channel``.
+
+    ``P`` are the first :data:`SMOOTH_PRIOR_COMPONENTS` components
+    (:func:`database_basis`); the matrix is scaled to mean diagonal 1. An empty
+    database gives zeros (no subspace penalty).
+    """
+    if not database:
+        return np.zeros((n, n))
+    P, _ = database_basis(
+        database, channel, min(SMOOTH_PRIOR_COMPONENTS, len(database))
+    )
+    Q = np.eye(n) - P.T @ P
+    Q *= n / max(np.trace(Q), 1.0)
+    return Q
 
 
 def _nnls_quadratic(
@@ -736,9 +772,7 @@ def _estimate_sensitivity_smooth(
     """
     del n_components, explained_variance
     m, n = problem.A.shape
-    D2 = _second_difference(n)
-    Om_smooth = D2.T @ D2
-    Om_smooth *= n / np.trace(Om_smooth)
+    Om_smooth = _smoothness_penalty(n)
     use_prior = bool(database)
     S = np.zeros((3, n))
     lambdas: list[float] = []
@@ -753,13 +787,7 @@ def _estimate_sensitivity_smooth(
         t = np.trace(G) / n
         if not t > 0:
             raise SingularSystemError("the stimuli carry no light (all zero)")
-        Q_prior = np.zeros((n, n))
-        if use_prior:
-            P, _ = database_basis(
-                database, k, min(SMOOTH_PRIOR_COMPONENTS, len(database))
-            )
-            Q_prior = np.eye(n) - P.T @ P
-            Q_prior *= n / max(np.trace(Q_prior), 1.0)
+        Q_prior = _subspace_penalty(database, k, n)
         # GCV for every lambda from one generalised eigendecomposition: with
         # M = G + t mu Q_prior and V' M V = I, V' (t Om) V = diag(d), the regularised
         # normal matrix is H = V^-T (I + lambda diag(d)) V^-1. A tiny ridge keeps M
@@ -785,11 +813,7 @@ def _estimate_sensitivity_smooth(
         lam = float(SMOOTH_LAMBDAS[int(np.argmin(gcv))])
         H = M + lam * t * Om_smooth
         S[k] = _nnls_quadratic(H, b)
-        if not np.any(S[k] > 0):
-            raise SingularSystemError(
-                f"channel {CHANNELS[k]}: no positive sensitivity fits the responses "
-                "(are they all zero or negative?)"
-            )
+        _check_positive(S[k], k)
         lambdas.append(lam)
     params = {
         "lambda": lambdas,

@@ -40,7 +40,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from datetime import UTC, datetime
 from os import PathLike
-from pathlib import Path
+from pathlib import Path, PurePosixPath, PureWindowsPath
 from typing import Any
 
 from tunespec.core.errors import InputError, read_json
@@ -280,12 +280,32 @@ class CaptureSettings:
         return d
 
     @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> CaptureSettings:
+    def from_dict(
+        cls, d: Mapping[str, Any], *, source: str | PathLike[str] | None = None
+    ) -> CaptureSettings:
+        """Settings from their manifest form; :class:`InputError` if malformed."""
+        if not isinstance(d, Mapping):
+            raise InputError("bad capture settings: expected an object", path=source)
+        channels = d.get("channels")
+        # a string would split into one channel per character
+        if not isinstance(channels, list | tuple) or not all(
+            isinstance(c, str) for c in channels
+        ):
+            raise InputError(
+                "bad capture settings: channels must be a list of names", path=source
+            )
+        for key in ("exposures_s", "levels", "requested_s"):
+            if not isinstance(d.get(key, {}), Mapping):
+                raise InputError(
+                    f"bad capture settings: {key} must be an object", path=source
+                )
         keys = set(cls.__dataclass_fields__)
         try:
             return cls(**{k: v for k, v in d.items() if k in keys})
         except (TypeError, ValueError) as exc:
-            raise InputError(f"bad capture settings: {exc}") from None
+            raise InputError(f"bad capture settings: {exc}", path=source) from None
+        except InputError as exc:
+            raise InputError(exc.message, path=source) from None
 
 
 def plan_frames(settings: CaptureSettings) -> list[FrameSpec]:
@@ -378,6 +398,8 @@ class FrameRecord:
     def from_dict(
         cls, d: Mapping[str, Any], *, source: str | None = None
     ) -> FrameRecord:
+        if not isinstance(d, Mapping):
+            raise InputError("bad frame record: expected an object", path=source)
         keys = set(cls.__dataclass_fields__)
         try:
             rec = cls(**{k: v for k, v in d.items() if k in keys})
@@ -388,7 +410,54 @@ class FrameRecord:
                 f"frame {rec.id!r}: bad kind {rec.kind!r} or status {rec.status!r}",
                 path=source,
             )
+        problem = _record_problem(rec)
+        if problem:
+            raise InputError(f"frame {rec.id!r}: {problem}", path=source)
         return rec
+
+
+def _record_problem(rec: FrameRecord) -> str:
+    """What is wrong with a record's field types or paths ("" if nothing).
+
+    Processing and resume compare exposures and join paths, so a damaged manifest
+    must fail here with one line rather than deep inside them.
+    """
+
+    def real(v: object) -> bool:
+        return isinstance(v, int | float) and not isinstance(v, bool)
+
+    if not isinstance(rec.id, str) or not rec.id:
+        return "id must be a non-empty string"
+    if rec.channel is not None and not isinstance(rec.channel, str):
+        return "channel must be a string or null"
+    if not (real(rec.exposure_s) and math.isfinite(rec.exposure_s)):
+        return f"exposure_s must be a number, got {rec.exposure_s!r}"
+    if not (rec.exposure_s > 0):
+        return f"exposure_s must be > 0, got {rec.exposure_s!r}"
+    for name in ("iso", "bracket"):
+        v = getattr(rec, name)
+        if not isinstance(v, int) or isinstance(v, bool) or v < 0:
+            return f"{name} must be a non-negative integer, got {v!r}"
+    for name in ("file", "spd_file"):
+        v = getattr(rec, name)
+        if v is None and name == "spd_file":
+            continue
+        if not isinstance(v, str) or not _inside_session(v):
+            return f"{name} must be a path inside the session folder, got {v!r}"
+    if not isinstance(rec.sha256, str):
+        return "sha256 must be a string"
+    return ""
+
+
+def _inside_session(rel: str) -> bool:
+    """True for a relative path that stays inside the session folder."""
+    p = PurePosixPath(rel.replace("\\", "/"))
+    return (
+        bool(rel)
+        and not p.is_absolute()
+        and not PureWindowsPath(rel).anchor
+        and ".." not in p.parts
+    )
 
 
 class Session:
@@ -470,18 +539,39 @@ class Session:
             raise InputError(
                 f"not a session manifest (format != {SESSION_FORMAT!r})", path=path
             )
-        if int(m.get("version", 0)) > SESSION_VERSION:
+        version = m.get("version", 0)
+        if not isinstance(version, int) or isinstance(version, bool):
+            raise InputError(f"bad session version {version!r}", path=path)
+        if version > SESSION_VERSION:
             raise InputError(
-                f"session version {m.get('version')} is newer than this TuneSpec "
+                f"session version {version} is newer than this TuneSpec "
                 f"understands ({SESSION_VERSION})",
                 path=path,
             )
-        session = cls(root, m)
-        # validate eagerly so a damaged manifest fails here, naming the file
-        for d in m.get("frames", []):
-            FrameRecord.from_dict(d, source=str(path))
-        CaptureSettings.from_dict(m.get("settings", {}))
-        return session
+        # validate eagerly so a damaged manifest fails here, naming the file, and
+        # not later with a traceback from whatever reads the bad field first
+        if not isinstance(m.get("frames"), list):
+            raise InputError("damaged manifest: 'frames' must be a list", path=path)
+        for key in ("devices", "meta"):
+            if not isinstance(m.get(key, {}), dict):
+                raise InputError(
+                    f"damaged manifest: {key!r} must be an object", path=path
+                )
+        if "settings" not in m:
+            raise InputError("damaged manifest: no 'settings'", path=path)
+        records = [FrameRecord.from_dict(d, source=str(path)) for d in m["frames"]]
+        ids = [r.id for r in records]
+        if len(set(ids)) != len(ids):
+            raise InputError("damaged manifest: a frame id is listed twice", path=path)
+        CaptureSettings.from_dict(m["settings"], source=path)
+        layout = m.get("layout")
+        if layout is not None:
+            if not isinstance(layout, dict):
+                raise InputError(
+                    "damaged manifest: 'layout' must be an object or null", path=path
+                )
+            TargetLayout.from_dict(layout, source=str(path))
+        return cls(root, m)
 
     # -- manifest ----------------------------------------------------------------------
     @property

@@ -39,6 +39,7 @@ from tunespec.core.spectra import Grid, Spectra
 
 __all__ = [
     "NoiseModel",
+    "check_rgb_sensitivity",
     "check_same_grid",
     "perturb_spd",
     "scale_to_exposure",
@@ -133,6 +134,18 @@ def check_same_grid(*spectra: Spectra) -> None:
             )
 
 
+def check_rgb_sensitivity(sensitivity: Spectra) -> None:
+    """Raise :class:`InputError` unless ``sensitivity`` has exactly 3 curves (R, G, B).
+
+    The error names the sensitivity's ``meta["source"]``.
+    """
+    if len(sensitivity) != 3:
+        raise InputError(
+            f"expected 3 sensitivity curves (R, G, B), got {len(sensitivity)}",
+            path=sensitivity.meta.get("source"),
+        )
+
+
 def _describe_grid(s: Spectra) -> str:
     wl = s.wavelength_nm
     return f"{wl[0]:g}-{wl[-1]:g} nm, {wl.size} samples"
@@ -211,11 +224,7 @@ def simulate_responses(
     array([[[0.1, 0.1, 0.1]]])
     """
     check_same_grid(reflectances, illuminants, sensitivity)
-    if len(sensitivity) != 3:
-        raise InputError(
-            f"expected 3 sensitivity curves (R, G, B), got {len(sensitivity)}",
-            path=sensitivity.meta.get("source"),
-        )
+    check_rgb_sensitivity(sensitivity)
     gen = _rng(rng)
     c = render_rgb(
         reflectances.values,
@@ -237,7 +246,9 @@ def simulate_responses(
     sigma_px = noise.pixel_std(c)
     # Mean of the pixels after clipping at full scale: E[min(X, 1)] for
     # X ~ N(c, sigma) is c - sigma phi(z) - (c - 1) Phi(-z) with z = (1 - c) / sigma.
-    z = (1.0 - c) / sigma_px
+    # sigma_px is 0 only for a dark pixel without read noise: z = +inf, no tail.
+    with np.errstate(divide="ignore"):
+        z = (1.0 - c) / sigma_px
     tail = ndtr(-z)
     clipped_mean = (
         c - sigma_px * np.exp(-0.5 * z**2) / np.sqrt(2 * np.pi) - (c - 1) * tail
@@ -367,6 +378,7 @@ def scale_to_exposure(
            [0.025, 0.025]])
     """
     check_same_grid(reflectances, illuminants, sensitivity)
+    check_rgb_sensitivity(sensitivity)
     if not 0.0 < target <= 1.0:
         raise InputError(f"exposure target {target} must be in (0, 1]")
     c = render_rgb(

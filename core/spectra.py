@@ -27,6 +27,7 @@ from tunespec.core.errors import InputError, read_text
 
 __all__ = [
     "DEFAULT_GRID",
+    "MAX_GRID_SAMPLES",
     "Grid",
     "Spectra",
     "read_spectra_csv",
@@ -34,28 +35,43 @@ __all__ = [
 ]
 
 _WL_TOL_NM = 1e-6
+#: Most samples a :class:`Grid` may have (0.1 nm over 1000 nm). The estimators hold
+#: n_wl x n_wl matrices, so a mistyped step (``400:700:1e-9``) must be refused here
+#: rather than exhaust the memory later.
+MAX_GRID_SAMPLES = 10_001
 
 
 @dataclass(frozen=True)
 class Grid:
-    """An equidistant wavelength grid ``start_nm, start_nm + step_nm, ..., end_nm``."""
+    """An equidistant wavelength grid ``start_nm, start_nm + step_nm, ..., end_nm``.
+
+    Raises
+    ------
+    InputError
+        Non-finite values, ``END <= START``, ``STEP <= 0``, ``END - START`` not a
+        multiple of ``STEP`` (to 1e-6 nm), or more than :data:`MAX_GRID_SAMPLES`.
+    """
 
     start_nm: float
     end_nm: float
     step_nm: float
 
     def __post_init__(self) -> None:
+        bad = f"bad grid {self.start_nm:g}:{self.end_nm:g}:{self.step_nm:g}: "
+        values = (self.start_nm, self.end_nm, self.step_nm)
+        if not all(math.isfinite(v) for v in values):
+            raise InputError(bad + "START, END and STEP must be finite numbers")
         if not (self.step_nm > 0 and self.end_nm > self.start_nm):
-            raise InputError(
-                f"bad grid {self.start_nm}:{self.end_nm}:{self.step_nm}: "
-                "expected START < END and STEP > 0"
-            )
+            raise InputError(bad + "expected START < END and STEP > 0")
         n = (self.end_nm - self.start_nm) / self.step_nm
-        if abs(n - round(n)) > 1e-6:
+        if round(n) + 1 > MAX_GRID_SAMPLES:
             raise InputError(
-                f"bad grid {self.start_nm}:{self.end_nm}:{self.step_nm}: "
-                "END - START must be a multiple of STEP"
+                bad + f"{round(n) + 1} samples, at most {MAX_GRID_SAMPLES}"
             )
+        # The tolerance is in nm, not in samples: a step read back from sampled
+        # wavelengths (np.diff) carries rounding that grows with the sample count.
+        if abs(n - round(n)) * self.step_nm > _WL_TOL_NM:
+            raise InputError(bad + "END - START must be a multiple of STEP")
 
     @classmethod
     def parse(cls, text: str) -> Grid:
@@ -124,6 +140,8 @@ class Spectra:
                 f"spectra shape mismatch: {len(names)} names, {wl.size} wavelengths, "
                 f"values {vals.shape}"
             )
+        if not np.all(np.isfinite(wl)):
+            raise InputError("wavelengths must be finite")
         if wl.size > 1 and np.any(np.diff(wl) <= 0):
             raise InputError("wavelengths must be strictly increasing")
         if len(set(names)) != len(names):
@@ -193,7 +211,9 @@ class Spectra:
                 path=source,
             )
         target = grid.wavelength_nm
-        if wl.size == target.size and np.allclose(wl, target, atol=_WL_TOL_NM):
+        if wl.size == target.size and np.allclose(
+            wl, target, rtol=0.0, atol=_WL_TOL_NM
+        ):
             return Spectra(target, self.values, self.names, self.meta)
         out = np.stack([np.interp(target, wl, v) for v in self.values])
         return Spectra(target, out, self.names, self.meta)
@@ -274,12 +294,12 @@ def read_spectra_csv(
         except ValueError:
             bad = next(c for c in row if not _is_float(c))
             raise InputError(f"not a number: {bad!r}", path=path, line=lineno) from None
-        for name, v in zip(header, nums, strict=True):
+        for j, (name, v) in enumerate(zip(header, nums, strict=True)):
             if not math.isfinite(v):
                 raise InputError(
                     f"{name}: value {v} is not finite", path=path, line=lineno
                 )
-            if v < 0 and not allow_negative and name is not header[0]:
+            if v < 0 and not allow_negative and j > 0:
                 raise InputError(f"{name}: negative value {v}", path=path, line=lineno)
         if wl and nums[0] <= wl[-1]:
             raise InputError(

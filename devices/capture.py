@@ -349,7 +349,12 @@ def _resolve_exposures(
                 max_s=max_exposure_s,
             )
             start_s = t0
-            if level < LOW_SIGNAL_LEVEL:
+            if not math.isfinite(level):
+                warnings.append(
+                    f"{c}: metering did not settle in {METER_MAX_SHOTS} shots; using "
+                    f"{t0:g} s, check its frames for clipping or low signal"
+                )
+            elif level < LOW_SIGNAL_LEVEL:
                 warnings.append(
                     f"{c}: only {level:.1%} of full scale at the longest exposure "
                     f"allowed ({t0:g} s); its responses will be noisy"
@@ -462,6 +467,9 @@ def capture(
     captured: list[str] = []
     try:
         check_stop(should_stop)
+        # before metering: exposures metered at another ISO would be off by the ratio
+        if camera.iso != settings.iso:
+            camera.set_iso(settings.iso)
         metered = _resolve_exposures(
             session,
             light,
@@ -475,8 +483,6 @@ def capture(
         todo = session.missing(verify=resume or bool(retake))
         total[0] = done[0] + len(todo)
         skipped = len(session.plan()) - len(todo)
-        if camera.iso != settings.iso:
-            camera.set_iso(settings.iso)
         darks = [s for s in todo if s.kind == "dark"]
         if darks:
             light.all_off()

@@ -41,7 +41,7 @@ from tunespec.core.sensitivity import (
     correct_spd_shift,
     estimate_camera_sensitivity,
 )
-from tunespec.core.session import Session
+from tunespec.core.session import Session, atomic_write_text
 from tunespec.core.spectra import DEFAULT_GRID, Grid, Spectra, read_spectra_csv
 from tunespec.core.stats import CalibrationReport, PredictionStats, calibration_report
 from tunespec.core.wiener import WienerEstimate, wiener_reflectance
@@ -51,7 +51,6 @@ from tunespec.devices.registry import (
     Bench,
     layout_reflectances,
     open_bench,
-    open_camera,
     parse_resolution,
     sim_scene,
 )
@@ -243,38 +242,20 @@ def bench_for_target(
     """The bench with ``layout`` in front of the camera.
 
     On hardware the operator changes the target (the stage asks them), so the bench is
-    returned as it is. A simulated bench gets a new simulated camera (same model, same
-    light, same clock) looking at a scene with ``layout``.
+    returned as it is. A simulated bench gets the same simulated camera (same
+    constants, light and clock; :meth:`SimCamera.looking_at`) looking at a scene with
+    ``layout`` on the same board under the same light field
+    (:meth:`SimScene.bench_options`).
     """
     if not bench.simulated:
         return bench
-    old_scene = bench.stage
-    # the same bench: camera pose, field of view and the light's fall-off stay (the
-    # scene would otherwise scale the fall-off to the new chart's size, changing the
-    # flat field's reference window between sessions)
-    same = {
-        k: getattr(old_scene, k)
-        for k in (
-            "field_width_mm",
-            "centre_frac",
-            "keystone",
-            "rotation_deg",
-            "falloff",
-            "falloff_radius_mm",
-            "falloff_centre_frac",
-        )
-        if hasattr(old_scene, k)
-    }
+    # the same bench: camera pose, field of view, the light's fall-off, the white
+    # board and the camera's sensor constants stay; only the target changes (a
+    # scene or camera rebuilt from defaults would change the flat field and the
+    # sensitivities between the calibration and the sample)
+    same = bench.stage.bench_options()  # type: ignore[attr-defined]
     scene = sim_scene(layout, reflectances, **same)
-    old = bench.camera
-    camera = open_camera(
-        "sim",
-        light=bench.light,
-        scene=scene,
-        resolution=old.resolution,  # type: ignore[attr-defined]
-        seed=seed,
-        realtime=bool(getattr(old, "_realtime", False)),
-    )
+    camera = bench.camera.looking_at(scene, seed=seed)  # type: ignore[attr-defined]
     return Bench(bench.light, camera, scene, camera.truth())  # type: ignore[attr-defined]
 
 
@@ -573,14 +554,12 @@ def _true_sensitivity(bench: Bench, grid: Grid) -> Spectra:
     window (Eq. 2), so the responses carry the bench's shading (fall-off times
     vignetting) averaged over that window.
     """
-    from tunespec.core.processing import FLAT_WINDOW_PX
+    from tunespec.core.processing import flat_window
 
     cam = bench.camera
     width, height = cam.resolution  # type: ignore[attr-defined]
-    h2, w2 = height // 2, width // 2
-    win = min(FLAT_WINDOW_PX, h2, w2)
-    r0, c0 = (h2 - win) // 2, (w2 - win) // 2
-    yy, xx = np.mgrid[r0 : r0 + win, c0 : c0 + win]
+    r0, r1, c0, c1 = flat_window((height // 2, width // 2))
+    yy, xx = np.mgrid[r0:r1, c0:c1]
     xy = np.stack([2.0 * xx + 0.5, 2.0 * yy + 0.5], axis=-1)
     shading = float(np.mean(cam.shading(xy)))  # type: ignore[attr-defined]
     absolute = bench.truth["absolute_sensitivity"].resample(grid)
@@ -747,7 +726,7 @@ def _run(
         truth=truth,
     )
     summary = out / "summary.json"
-    summary.write_text(json.dumps(result.summary(), indent=2) + "\n", encoding="utf-8")
+    atomic_write_text(summary, json.dumps(result.summary(), indent=2) + "\n")
     files["summary_json"] = summary
     report(progress, 1.0)
     return result
@@ -901,6 +880,7 @@ def run_config(
     """
     cfg = dict(config) if isinstance(config, Mapping) else load_config(config)
     base = Path(cfg.get("_path", ".")).parent if "_path" in cfg else Path(".")
+    _check_config_strings(cfg)
 
     def rel(p: str | None) -> Path | None:
         return None if p is None else (base / p)
@@ -935,11 +915,18 @@ def run_config(
             if sample_path
             else sample_reference(grid)
         )
+    src = cfg.get("_path")
     exposure = cap.get("exposure", "auto")
     if not isinstance(exposure, str):
-        exposure = float(exposure)
+        exposure = _cfg_number(exposure, "capture.exposure", src)
     res = bench_cfg.get("resolution")
-    resolution = parse_resolution(res) if isinstance(res, str) else None
+    resolution = None if res is None else parse_resolution(res)
+    brackets = cap.get("brackets", [1.0])
+    if not isinstance(brackets, list | tuple):
+        raise InputError(
+            f"capture.brackets: expected a list of numbers, got {brackets!r}", path=src
+        )
+    seed = _cfg_int(bench_cfg.get("seed", 0), "bench.seed", src)
     out = base / str(cfg.get("out", "run"))
     t0 = time.perf_counter()
     with open_bench(
@@ -948,7 +935,7 @@ def run_config(
         layout=c_layout,
         reflectances=c_refl,
         resolution=resolution,
-        seed=int(bench_cfg.get("seed", 0)),
+        seed=seed,
         prompt=prompt,
     ) as bench:
         result = _run(
@@ -960,17 +947,64 @@ def run_config(
             sample_reflectances=s_refl,
             reference=reference,
             exposure=exposure,
-            brackets=tuple(float(b) for b in cap.get("brackets", (1.0,))),
-            iso=int(cap.get("iso", 100)),
-            seed=int(bench_cfg.get("seed", 0)),
+            brackets=tuple(_cfg_number(b, "capture.brackets", src) for b in brackets),
+            iso=_cfg_int(cap.get("iso", 100), "capture.iso", src),
+            seed=seed,
             method=cal_cfg.get("method"),
             prior=spectra(cfg.get("estimate", {}).get("prior")),
             grid=grid,
             estimation_grid=est_grid,
-            report_files=bool(cfg.get("export", {}).get("report", True)),
+            report_files=cfg.get("export", {}).get("report", True),
             progress=progress,
             should_stop=should_stop,
             on_frame=on_frame,
         )
     result.timings_s["total"] = time.perf_counter() - t0
     return result
+
+
+def _cfg_number(value: Any, key: str, source: str | None) -> float:
+    """A configuration value that must be a number (one-line error otherwise)."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise InputError(f"{key}: expected a number, got {value!r}", path=source)
+    return float(value)
+
+
+def _cfg_int(value: Any, key: str, source: str | None) -> int:
+    """A configuration value that must be an integer (one-line error otherwise)."""
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise InputError(f"{key}: expected an integer, got {value!r}", path=source)
+    return value
+
+
+#: Configuration keys whose values are text (paths, specs, grids, names).
+_CONFIG_STRINGS = {
+    "bench": ("light", "camera", "resolution"),
+    "chart": ("layout", "reflectances"),
+    "sample": ("layout", "reflectances", "reference"),
+    "calibrate": ("method", "grid"),
+    "estimate": ("prior", "grid"),
+}
+
+
+def _check_config_strings(cfg: Mapping[str, Any]) -> None:
+    """One-line errors for sections that are not tables or text keys that are not text."""
+    src = cfg.get("_path")
+    for section, keys in _CONFIG_STRINGS.items():
+        table = cfg.get(section, {})
+        if not isinstance(table, Mapping):
+            raise InputError(f"{section}: expected a table/object", path=src)
+        for key in keys:
+            value = table.get(key)
+            if value is not None and not isinstance(value, str):
+                raise InputError(
+                    f"{section}.{key}: expected a string, got {value!r}", path=src
+                )
+    out = cfg.get("out", "run")
+    if not isinstance(out, str | PathLike):
+        raise InputError(f"out: expected a folder name, got {out!r}", path=src)
+    report_files = cfg.get("export", {}).get("report", True)
+    if not isinstance(report_files, bool):
+        raise InputError(
+            f"export.report: expected true or false, got {report_files!r}", path=src
+        )

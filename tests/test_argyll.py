@@ -122,6 +122,27 @@ _COLVERIFY_ROW = re.compile(
 )
 
 
+ARGYLL_REF = Path("/usr/share/color/argyll/ref")
+
+
+@pytest.mark.skipif(
+    not ARGYLL_REF.is_dir(), reason="ArgyllCMS reference files not installed"
+)
+def test_reads_argyll_reference_files() -> None:
+    # Argyll's own chart files: .ti1/.ti2/.cie, tabs, comments, KEYWORD lines, and
+    # two (ColorChecker.ti2, FograStrip3.ti1) whose NUMBER_OF_FIELDS is one more than
+    # their format list, which Argyll accepts.
+    files = sorted(
+        p for p in ARGYLL_REF.iterdir() if p.suffix in (".ti1", ".ti2", ".cie")
+    )
+    assert files
+    for path in files:
+        t = read_cgats(path)
+        assert len(t) > 0 and len(t.sample_names) == len(t)
+    cc = read_cgats(ARGYLL_REF / "ColorChecker.ti2")
+    assert len(cc) == 24 and cc.xyz is not None and cc.xyz.shape == (24, 3)
+
+
 @requires_argyll
 def test_colverify_reproduces_our_delta_e(tmp_path: Path) -> None:
     sg = load_colorchecker_sg()
@@ -276,7 +297,9 @@ def test_cli_export_cgats(
     assert read_cgats(out).spectra() is None and read_cgats(out).rgb is None
 
 
-def test_cli_export_rawtoaces(files: dict[str, Path]) -> None:
+def test_cli_export_rawtoaces(
+    files: dict[str, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
     from tunespec.core.datasets import read_rawtoaces_json
     from tunespec.core.spectra import read_spectra_csv
 
@@ -297,7 +320,16 @@ def test_cli_export_rawtoaces(files: dict[str, Path]) -> None:
         == 0
     )
     back = read_rawtoaces_json(out)
-    np.testing.assert_array_equal(back.values, read_spectra_csv(files["cam"]).values)
+    cam = read_spectra_csv(files["cam"])
+    assert back.wavelength_nm.tolist() == list(range(380, 781, 5))  # as rawtoaces needs
+    np.testing.assert_array_equal(
+        back.resample(Grid(380.0, 730.0, 10.0)).values, cam.values
+    )
+    assert "81 wavelengths, 380-780 nm" in capsys.readouterr().out
+    keep = files["dir"] / "cam_native.json"
+    args = ("export-rawtoaces", "--sensitivities", files["cam"], "--keep-grid")
+    assert _cli(*args, "--absolute", "-o", keep) == 0
+    np.testing.assert_array_equal(read_rawtoaces_json(keep).values, cam.values)
     assert back.meta["model"] == "EOS 5D Mark III"
 
 
@@ -355,3 +387,40 @@ def test_cli_export_is_read_by_argyll(files: dict[str, Path]) -> None:
     )
     ours, argyll = read_cgats(out).lab, read_cgats(files["dir"] / "argyll_out.ti3").lab
     assert delta_e_2000(ours, argyll).max() < DE00_ARGYLL
+
+
+def test_cli_report_table1_undoes_the_fitted_spd_shift(
+    files: dict[str, Path], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Responses made under LEDs whose reported spectra are 3 nm off, and
+    # sensitivities whose .meta.json carries that shift (as 'calibrate' writes it):
+    # 'report --chart' must predict with the corrected spectra, as 'calibrate' did.
+    import json
+
+    from tunespec.core import report as report_module
+    from tunespec.core.export import sensitivity_meta_path
+    from tunespec.core.forward_model import render_rgb
+    from tunespec.core.responses import Responses, write_responses_csv
+    from tunespec.core.sensitivity import correct_spd_shift
+    from tunespec.core.spectra import read_spectra_csv, write_spectra_csv
+
+    d = files["dir"] / "shift"
+    d.mkdir()
+    cam, leds = read_spectra_csv(files["cam"]), read_spectra_csv(files["leds"])
+    sg = read_spectra_csv(files["refl"])
+    true_leds = correct_spd_shift(leds, 3.0)
+    rgb = render_rgb(sg.values, true_leds.values, cam.values, 10.0)
+    write_responses_csv(Responses(sg.names, leds.names, rgb), d / "resp.csv")
+    write_spectra_csv(cam, d / "cam.csv")
+    sensitivity_meta_path(d / "cam.csv").write_text(json.dumps({"spd_shift_nm": 3.0}))
+    seen = {}
+
+    def capture(out: Path, data: report_module.ReportData) -> tuple[Path, Path]:
+        seen["table1"] = data.table1
+        return out / "report.html", out / "report.pdf"
+
+    monkeypatch.setattr(report_module, "write_report", capture)
+    args = ("report", "-o", d, "--sensitivities", d / "cam.csv", "--chart")
+    args += (files["refl"], "--illuminants", files["leds"], "--responses")
+    assert _cli(*args, d / "resp.csv") == 0
+    assert seen["table1"].as_dict()["RGB"]["max"] < 1e-12

@@ -201,3 +201,76 @@ def test_short_wavelength_range_is_reported(files, tmp_path, capsys) -> None:
     )
     err = capsys.readouterr().err
     assert code == 2 and "too short for the grid" in err and str(short) in err
+
+
+def test_more_bad_input_is_one_line_exit_2(files, tmp_path, capsys) -> None:
+    d = files
+    main(
+        [
+            "simulate-responses",
+            "--sensitivities",
+            str(d / "cam.csv"),
+            "--illuminants",
+            str(d / "leds.csv"),
+            "--reflectances",
+            str(d / "sg.csv"),
+            "--no-noise",
+            "--exposure-target",
+            "0.8",
+            "--illuminants-out",
+            str(tmp_path / "L.csv"),
+            "-o",
+            str(tmp_path / "R.csv"),
+        ]
+    )
+    capsys.readouterr()
+    sg = read_spectra_csv(d / "sg.csv")
+    write_spectra_csv(sg.select(["A1", "B2"]), tmp_path / "ref.csv")
+    resp = ["--responses", str(tmp_path / "R.csv")]
+    illum = ["--illuminants", str(tmp_path / "L.csv")]
+    cases = [
+        (
+            [
+                "calibrate",
+                *resp,
+                *illum,
+                "--reflectances",
+                str(d / "sg.csv"),
+                "--hold-out-every",
+                "1",
+                "-o",
+                str(tmp_path / "S.csv"),
+            ],
+            "--hold-out-every 1: N must be at least 2",
+        ),
+        (
+            [
+                "estimate",
+                *resp,
+                *illum,
+                "--sensitivities",
+                str(d / "cam.csv"),
+                "--spd-shift-nm",
+                "nan",
+                "-o",
+                str(tmp_path / "E.csv"),
+            ],
+            "wavelength shift nan nm is not finite",
+        ),
+        (
+            [
+                "evaluate",
+                "--estimated",
+                str(d / "sg.csv"),
+                "--reference",
+                str(tmp_path / "ref.csv"),
+            ],
+            f"{tmp_path / 'ref.csv'}: reference reflectances: 138 estimated patch(es) "
+            "missing: A2, A3",
+        ),
+    ]
+    for argv, fragment in cases:
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert len(err.strip().splitlines()) == 1 and fragment in err, err
+    assert not (tmp_path / "S.csv").exists() and not (tmp_path / "E.csv").exists()

@@ -13,6 +13,7 @@ import sys
 import threading
 from typing import TextIO
 
+from tunespec.core.errors import InputError
 from tunespec.core.spectra import read_spectra_csv
 from tunespec.devices.cal1.emulator import Cal1Emulator
 from tunespec.devices.clock import RealClock
@@ -42,7 +43,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         ),
     )
     cal1.add_argument(
-        "--port", type=int, default=0, help="TCP port (default: a free one)"
+        "--port", type=_port, default=0, help="TCP port (default: a free one)"
     )
     cal1.add_argument(
         "--leds",
@@ -59,6 +60,17 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="start warmed up (as if switched on an hour ago)",
     )
     cal1.set_defaults(func=_emulate_cal1)
+
+
+def _port(text: str) -> int:
+    """argparse type: a TCP port 0-65535 (0 = any free one)."""
+    try:
+        port = int(text)
+    except ValueError:
+        port = -1
+    if not 0 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"expected a port 0-65535, got {text!r}")
+    return port
 
 
 def _emulate_cal1(args: argparse.Namespace) -> int:
@@ -83,9 +95,7 @@ def run_cal1_emulator(
     Raises
     ------
     InputError
-        For a bad LED file.
-    OSError
-        If the port cannot be bound (e.g. in use).
+        For a bad LED file, or a port that cannot be bound (e.g. in use).
     """
     out = out if out is not None else sys.stdout
     spectra = read_spectra_csv(leds) if leds else None
@@ -93,7 +103,14 @@ def run_cal1_emulator(
     power_on_s = clock.now_s() - WARM_POWER_ON_AGO_S if warm else None
     physics = LedPhysics(spectra, clock=clock, seed=seed, power_on_s=power_on_s)
     stop = stop if stop is not None else threading.Event()
-    with Cal1Emulator(port, physics) as emu:
+    try:
+        emulator = Cal1Emulator(port, physics)
+    except (OSError, OverflowError) as exc:
+        raise InputError(
+            f"cannot listen on 127.0.0.1:{port} ({exc}); choose another --port or "
+            "0 for a free one"
+        ) from None
+    with emulator as emu:
         source = leds or "shipped 22-LED CAL1 model"
         out.write(
             f"CAL1 emulator ({physics.n_channels} LEDs from {source}, seed {seed}) "

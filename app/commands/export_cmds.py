@@ -50,13 +50,21 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "export-rawtoaces",
         help="camera sensitivities as rawtoaces-data JSON",
         description="Write camera sensitivities (CSV with R, G, B columns) in the "
-        "rawtoaces-data camera JSON schema, normalised to peak 1.",
+        "rawtoaces-data camera JSON schema, normalised to peak 1, on 380-780 nm at "
+        "5 nm as rawtoaces requires (interpolated linearly; 0 where the file has "
+        "no data, which the header's comments say).",
     )
     p.add_argument("--sensitivities", required=True, type=Path, help="R,G,B CSV")
     p.add_argument("--manufacturer", default="", help='e.g. "Canon"')
     p.add_argument("--model", default="", help='e.g. "EOS 5D Mark III"')
     p.add_argument(
         "--absolute", action="store_true", help="keep the scale (no peak-1 norm)"
+    )
+    p.add_argument(
+        "--keep-grid",
+        action="store_true",
+        help="write the file's own wavelengths instead of 380-780 nm at 5 nm "
+        "(the only grid rawtoaces reads)",
     )
     p.add_argument("-o", "--output", required=True, type=Path, help="JSON file")
     p.set_defaults(func=cmd_export_rawtoaces)
@@ -144,9 +152,14 @@ def _read_sensitivities(path: Path, grid: Grid | None) -> Spectra:
 
 
 def cmd_export_rawtoaces(args: argparse.Namespace) -> int:
-    from tunespec.core.export import tunespec_version, write_sensitivity_json
+    from tunespec.core.export import (
+        RAWTOACES_GRID,
+        tunespec_version,
+        write_sensitivity_json,
+    )
 
     sens = _read_sensitivities(args.sensitivities, None)
+    grid = None if args.keep_grid else RAWTOACES_GRID
     write_sensitivity_json(
         sens,
         args.output,
@@ -154,9 +167,12 @@ def cmd_export_rawtoaces(args: argparse.Namespace) -> int:
         model=args.model,
         normalize=not args.absolute,
         measurement_equipment=f"TuneSpec {tunespec_version()}",
+        grid=grid,
     )
+    wl = sens.wavelength_nm if grid is None else grid.wavelength_nm
     print(
-        f"sensitivities ({sens.wavelength_nm.size} wavelengths) written to {args.output}"
+        f"sensitivities ({wl.size} wavelengths, {wl[0]:g}-{wl[-1]:g} nm) written to "
+        f"{args.output}"
     )
     return 0
 
@@ -211,7 +227,9 @@ def cmd_report(args: argparse.Namespace) -> int:
 def _table1_from_files(
     args: argparse.Namespace, data: dict[str, Any], grid: Grid | None
 ) -> Any:
+    from tunespec.core.export import read_spd_shift
     from tunespec.core.forward_model import render_rgb
+    from tunespec.core.sensitivity import correct_spd_shift
     from tunespec.core.stats import prediction_stats
 
     need = [n for n in ("sensitivity", "illuminants", "responses") if n not in data]
@@ -231,6 +249,12 @@ def _table1_from_files(
     )
     illum = data["illuminants"].resample(work, source=str(args.illuminants))
     illum = illum.select(responses.illuminants, source=str(args.illuminants))
+    # The SPD shift fitted with the sensitivities (their .meta.json) is undone on the
+    # LED spectra, as 'calibrate' did for its Table 1 and 'estimate' does.
+    if args.sensitivities.suffix.lower() != ".json":
+        shift_nm = read_spd_shift(args.sensitivities)
+        if shift_nm:
+            illum = correct_spd_shift(illum, shift_nm)
     sens = sens.resample(work, source=str(args.sensitivities))
     predicted = render_rgb(chart.values, illum.values, sens.values, work.step_nm)
     return prediction_stats(responses.rgb, predicted)

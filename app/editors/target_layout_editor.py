@@ -114,6 +114,7 @@ class TargetLayoutEditor(QWidget):
         self._layout = target_layout
         self._corner_finder = corner_finder
         self._finder_worker: Worker | None = None
+        self._finder_target = ""
         self._updating = False
         self.selected_patch: str | None = None
         self.last_dir = ""
@@ -505,6 +506,7 @@ class TargetLayoutEditor(QWidget):
             return self._finder_worker
         self.status_label.setText("Finding corners…")
         self.find_button.setEnabled(False)
+        self._finder_target = self._layout.name
         worker = Worker(self._corner_finder, preview.frame, self._layout)
         worker.signals.returned.connect(self._on_finder_returned)
         worker.signals.errored.connect(self._on_finder_errored)
@@ -514,6 +516,13 @@ class TargetLayoutEditor(QWidget):
 
     @Slot(object)
     def _on_finder_returned(self, corners: Any) -> None:
+        if self._layout.name != self._finder_target:
+            # the editor moved on to the other target while the finder ran
+            self.status_label.setText(
+                f"Corners found for {self._finder_target} not used: the editor now "
+                f"shows {self._layout.name}."
+            )
+            return
         self.set_corners(np.asarray(corners, dtype=float).reshape(4, 2))
         self.status_label.setText("Corners found; drag a handle to correct.")
         log.info("target corners found automatically")

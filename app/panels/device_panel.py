@@ -403,6 +403,9 @@ class DevicePanel(QWidget):
         self.info = None
         self.levels = np.zeros(0)
         self.status_timer.stop()
+        self.live_timer.stop()
+        self.live_check.setChecked(False)
+        self._live_pending = False
         self.channel_table.setRowCount(0)
         self.light_label.setText("—")
         self.camera_label.setText("—")
@@ -440,7 +443,7 @@ class DevicePanel(QWidget):
         if np.isfinite(status.temperature_c):
             parts.append(f"{status.temperature_c:.1f} °C")
         parts.append(f"on {status.on_time_s:.0f} s")
-        if status.message:
+        if status.message and status.message.lower() not in ("ready", "not ready"):
             parts.append(status.message)
         self.status_label.setText("Status: " + ", ".join(parts))
 
@@ -465,3 +468,6 @@ class DevicePanel(QWidget):
     def _on_controller_busy_changed(self, busy: bool) -> None:
         self.busy = busy
         self._update_enabled()
+        if not busy and self.live_check.isChecked() and not self._live_pending:
+            # a live view paused by a capture goes on afterwards
+            self.live_timer.start()

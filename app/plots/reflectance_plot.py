@@ -57,6 +57,17 @@ class ReflectancePlot(SpectraPlot):
         self.patch_combo.blockSignals(False)
         self.select_patch(current if current in estimated.names else estimated.names[0])
 
+    def clear_data(self) -> None:
+        """Forget the estimate (another measurement, or a retaken step)."""
+        self.estimated = self.reference = None
+        self.per_patch_text = {}
+        self.patch_combo.blockSignals(True)
+        self.patch_combo.clear()
+        self.patch_combo.blockSignals(False)
+        self.clear()
+        self.set_title("Reflectance")
+        self.set_message("Estimate reflectances to see them here.")
+
     def select_patch(self, name: str) -> None:
         """Show patch ``name``."""
         if self.estimated is None or name not in self.estimated.names:

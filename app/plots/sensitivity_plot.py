@@ -24,6 +24,12 @@ class SensitivityPlot(SpectraPlot):
         self.set_message("Calibrate to see the estimated sensitivities.")
         self.sensitivity: Any = None
 
+    def clear_data(self) -> None:
+        """Forget the shown sensitivities."""
+        self.sensitivity = None
+        self.clear()
+        self.set_message("Calibrate to see the estimated sensitivities.")
+
     def show_sensitivity(
         self,
         sensitivity: Any,

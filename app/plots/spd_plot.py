@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+import pyqtgraph as pg
 from PySide6.QtWidgets import QWidget
 
 from tunespec.app.plots.spectra_plot import SpectraPlot
@@ -51,7 +52,9 @@ class SpdPlot(SpectraPlot):
         peak = float(np.max(values[0])) if values.size else 0.0
         if peak > 0:
             wl = spd.wavelength_nm[int(np.argmax(values[0]))]
-            self.set_message(f"peak {peak:.3g} W sr⁻¹ m⁻² nm⁻¹ at {wl:g} nm")
+            # the same SI prefix as the axis (µW...), not "0.00076 W"
+            radiance = pg.siFormat(peak, precision=3, suffix="W sr⁻¹ m⁻² nm⁻¹")
+            self.set_message(f"peak {radiance} at {wl:g} nm")
         else:
             self.set_message("all channels off")
 

@@ -45,6 +45,7 @@ class CalibratePage(StepPage):
 
     key = "calibrate"
     inputs = ("dark", "white", "target")
+    produces = "calibration"
 
     def __init__(self, measurement: Any, parent: QWidget | None = None) -> None:
         super().__init__(
@@ -84,6 +85,8 @@ class CalibratePage(StepPage):
         self.table_panel = table1_panel()
         self.body.addWidget(self.table_panel, 1)
         m.calibrated.connect(self._on_measurement_calibrated)
+        m.result_cleared.connect(self._on_measurement_result_cleared)
+        m.folder_changed.connect(self._on_measurement_folder_changed)
 
     def refresh(self) -> None:
         """The editor shows the chart."""
@@ -144,3 +147,14 @@ class CalibratePage(StepPage):
 
     def _on_measurement_calibrated(self, result: CalibrationResult) -> None:
         show_table1(self.table_panel, result)
+
+    def _on_measurement_result_cleared(self, which: str) -> None:
+        if which == "calibration":
+            self.table_panel.clear_table("Not calibrated yet.")
+
+    def _on_measurement_folder_changed(self, _folder: object) -> None:
+        # the method and threshold of the measurement opened, not of the last one
+        m = self.measurement
+        i = self.method_combo.findData(m.method or _methods()[1])
+        self.method_combo.setCurrentIndex(max(0, i))
+        self.threshold_spin.setValue(m.threshold)

@@ -58,6 +58,7 @@ class CapturePage(StepPage):
         self.options_widget: QWidget | None = None
         if kind == "dark":
             self._build_options()
+            measurement.folder_changed.connect(self._on_measurement_folder_changed)
 
     def _build_options(self) -> None:
         """Exposure, ISO and darks: set before the first frame of the session."""
@@ -72,9 +73,11 @@ class CapturePage(StepPage):
             minimum=50, maximum=6400, value=opts.iso, singleStep=100
         )
         self.darks_spin = QSpinBox(minimum=1, maximum=16, value=opts.n_darks)
-        if opts.exposure != "auto":
-            self.exposure_combo.setCurrentIndex(1)
-            self.exposure_spin.setValue(float(opts.exposure))
+        self.exposure_spin.setToolTip("Exposure of every frame (fixed exposure only)")
+        # the seconds only count with a fixed exposure: greyed out otherwise
+        self.exposure_combo.currentIndexChanged.connect(self._on_exposure_combo_changed)
+        self._show_options(opts)
+        self._on_exposure_combo_changed()
         row = QHBoxLayout()
         row.addWidget(self.exposure_combo)
         row.addWidget(self.exposure_spin)
@@ -86,6 +89,21 @@ class CapturePage(StepPage):
         self.options_widget.setLayout(form)
         self.body.addWidget(self.options_widget)
         self.body.addStretch(1)
+
+    def _show_options(self, opts: CaptureOptions) -> None:
+        fixed = opts.exposure != "auto"
+        self.exposure_combo.setCurrentIndex(1 if fixed else 0)
+        if fixed:
+            self.exposure_spin.setValue(float(opts.exposure))
+        self.iso_spin.setValue(opts.iso)
+        self.darks_spin.setValue(opts.n_darks)
+
+    def _on_exposure_combo_changed(self, _index: int = 0) -> None:
+        self.exposure_spin.setEnabled(self.exposure_combo.currentData() == "fixed")
+
+    def _on_measurement_folder_changed(self, _folder: object) -> None:
+        # the options of the measurement opened, not those of the previous one
+        self._show_options(self.measurement.capture_options)
 
     def capture_options(self) -> CaptureOptions:
         """The options as set on the page (or the measurement's)."""
@@ -126,13 +144,7 @@ class CapturePage(StepPage):
 
     def accept_result(self, result: PhaseResult) -> str:
         """Summary line for the operator."""
-        text = (
-            f"{len(result.captured)} frame(s) taken in {result.elapsed_s:.1f} s; the "
-            f"session holds {result.n_frames} {_NOUN[self.kind]}."
-        )
-        if result.warnings:
-            text += " Note: " + "; ".join(result.warnings)
-        return text
+        return result.summary(_NOUN[self.kind])
 
     def restore(self) -> bool:
         """Done if the chart session already holds every frame of this kind."""

@@ -36,6 +36,7 @@ class EstimatePage(StepPage):
 
     key = "estimate"
     inputs = ("calibrate", "sample")
+    produces = "estimate"
 
     def __init__(self, measurement: Any, parent: QWidget | None = None) -> None:
         super().__init__(
@@ -66,6 +67,8 @@ class EstimatePage(StepPage):
         self.body.addWidget(self.table_panel, 1)
         self.reference_button.clicked.connect(self._on_reference_button_clicked)
         m.estimated.connect(self._on_measurement_estimated)
+        m.result_cleared.connect(self._on_measurement_result_cleared)
+        m.folder_changed.connect(self._on_measurement_folder_changed)
 
     def refresh(self) -> None:
         """The editor shows the sample."""
@@ -137,3 +140,11 @@ class EstimatePage(StepPage):
 
     def _on_measurement_estimated(self, result: EstimateResult) -> None:
         show_table2(self.table_panel, result)
+
+    def _on_measurement_result_cleared(self, which: str) -> None:
+        if which == "estimate":
+            self.table_panel.clear_table("Not estimated yet.")
+
+    def _on_measurement_folder_changed(self, _folder: object) -> None:
+        # the references of the measurement opened (make_job stores the field's text)
+        self.reference_edit.setText(str(self.measurement.reference_path or ""))

@@ -24,6 +24,7 @@ class ExportPage(StepPage):
 
     key = "export"
     inputs = ("calibrate", "estimate")
+    produces = "export"
 
     def __init__(self, measurement: Any, parent: QWidget | None = None) -> None:
         super().__init__(
@@ -40,6 +41,7 @@ class ExportPage(StepPage):
         self.body.addWidget(self.files_list, 1)
         self.body.addWidget(self.open_button)
         self.open_button.clicked.connect(self._on_open_button_clicked)
+        measurement.result_cleared.connect(self._on_measurement_result_cleared)
 
     def can_start(self) -> str | None:
         """Needs the calibration and the estimate."""
@@ -83,6 +85,11 @@ class ExportPage(StepPage):
         self.files_list.clear()
         self.files_list.addItems([p.name for p in result.paths.values()])
         self.open_button.setEnabled(result.folder is not None)
+
+    def _on_measurement_result_cleared(self, which: str) -> None:
+        if which == "export":
+            self.files_list.clear()
+            self.open_button.setEnabled(False)
 
     @Slot()
     def _on_open_button_clicked(self) -> None:

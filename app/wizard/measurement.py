@@ -118,6 +118,16 @@ class PhaseResult:
     warnings: tuple[str, ...] = ()
     elapsed_s: float = 0.0
 
+    def summary(self, noun: str, session: str = "session") -> str:
+        """The line shown to the operator: ``"...; the {session} holds n {noun}."``."""
+        text = (
+            f"{len(self.captured)} frame(s) taken in {self.elapsed_s:.1f} s; the "
+            f"{session} holds {self.n_frames} {noun}."
+        )
+        if self.warnings:
+            text += " Note: " + "; ".join(self.warnings)
+        return text
+
 
 @dataclass(frozen=True, eq=False)
 class CalibrationResult:
@@ -232,6 +242,9 @@ class Measurement(QObject):
     calibrated = Signal(object)
     #: Estimate finished or restored: the :class:`EstimateResult`.
     estimated = Signal(object)
+    #: A result is no longer valid (its inputs were retaken, or another measurement
+    #: was opened): ``"calibration"``, ``"estimate"`` or ``"export"``.
+    result_cleared = Signal(str)
 
     def __init__(
         self, controller: DeviceController, settings: AppSettings | None = None
@@ -291,7 +304,7 @@ class Measurement(QObject):
             )
         folder.mkdir(parents=True, exist_ok=True)
         self.folder = folder
-        self.calibration = self.estimate = self.export = None
+        self.forget_all()
         self.save()
         self.settings.set("session/last_dir", str(folder))
         log.info("new measurement in %s", folder)
@@ -322,10 +335,22 @@ class Measurement(QObject):
         self.threshold = float(doc.get("threshold_rgb_mean", self.threshold))
         ref = doc.get("reference_path")
         self.reference_path = Path(ref) if ref else None
-        self.calibration = self.estimate = self.export = None
+        self.forget_all()
         self.settings.set("session/last_dir", str(folder))
         self.folder_changed.emit(folder)
         self.layout_needed.emit(self.current_layout)
+
+    def forget(self, which: str) -> None:
+        """Drop the ``"calibration"``, ``"estimate"`` or ``"export"`` result (in
+        memory only: a step whose inputs were retaken must be run again)."""
+        if getattr(self, which) is not None:
+            setattr(self, which, None)
+            self.result_cleared.emit(which)
+
+    def forget_all(self) -> None:
+        """Drop every result (another measurement)."""
+        for which in ("calibration", "estimate", "export"):
+            self.forget(which)
 
     def save(self) -> None:
         """Write ``measurement.json`` (atomically)."""
@@ -431,7 +456,11 @@ class Measurement(QObject):
         index = folder / "exports.json"
         if not index.is_file():
             return None
-        paths = {k: folder / v for k, v in json.loads(index.read_text()).items()}
+        try:
+            paths = {k: folder / v for k, v in read_json(index).items()}
+        except (InputError, AttributeError, TypeError) as exc:
+            log.warning("no usable exports in %s: %s", folder, exc)
+            return None
         if not all(p.is_file() for p in paths.values()):
             return None
         self.export = ExportResult(paths, folder)

@@ -64,13 +64,7 @@ class SamplePage(StepPage):
 
     def accept_result(self, result: PhaseResult) -> str:
         """Summary line for the operator."""
-        text = (
-            f"{len(result.captured)} frame(s) taken in {result.elapsed_s:.1f} s; the "
-            f"sample session holds {result.n_frames} frames."
-        )
-        if result.warnings:
-            text += " Note: " + "; ".join(result.warnings)
-        return text
+        return result.summary("frames", "sample session")
 
     def restore(self) -> bool:
         """Done if the sample session is complete."""

@@ -69,6 +69,9 @@ class StepPage(QWidget):
     #: Keys of the steps whose results this one uses: retaking one of them makes
     #: this step pending again.
     inputs: tuple[str, ...] = ()
+    #: The :class:`Measurement` result this step makes (``"calibration"``...), which
+    #: is dropped when the step is reset, so later steps cannot use a stale one.
+    produces: str | None = None
 
     def __init__(
         self,
@@ -217,8 +220,11 @@ class StepPage(QWidget):
         if self.running:
             return
         self.result = None
+        if self.produces is not None:
+            self.measurement.forget(self.produces)
         self.progress_bar.setValue(0)
         self.remaining_label.setText("")
+        self.result_label.setStyleSheet("")
         self.result_label.setText("")
         self._set_state(StepState.PENDING)
 

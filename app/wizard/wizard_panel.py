@@ -200,7 +200,7 @@ class WizardPanel(QWidget):
 
     def _update_nav(self) -> None:
         i = self.current_index
-        running = any(p.running for p in self.pages)
+        running = self.running
         self.back_button.setEnabled(i > 0 and not running)
         self.next_button.setEnabled(
             i < len(self.pages) - 1
@@ -218,8 +218,24 @@ class WizardPanel(QWidget):
         item.setForeground(QBrush(colour))
 
     # -- measurement folder ---------------------------------------------------------
+    @property
+    def running(self) -> bool:
+        """Whether a step is running."""
+        return any(p.running for p in self.pages)
+
+    def _refuse_while_running(self) -> bool:
+        # the File menu reaches here too: a running step still writes to the folder
+        if self.running:
+            self._show_folder_error(
+                RuntimeError("a step is running: abort it or let it finish first")
+            )
+            return True
+        return False
+
     def new_measurement(self, folder: str | Path) -> bool:
         """Start a new measurement in ``folder``; False (with a message) if refused."""
+        if self._refuse_while_running():
+            return False
         try:
             self.measurement.new(folder)
         except Exception as exc:
@@ -233,6 +249,8 @@ class WizardPanel(QWidget):
     def open_measurement(self, folder: str | Path) -> bool:
         """Reopen a measurement; steps already done are restored, and the wizard goes
         to the first unfinished one."""
+        if self._refuse_while_running():
+            return False
         try:
             self.measurement.open(folder)
         except Exception as exc:
@@ -247,11 +265,16 @@ class WizardPanel(QWidget):
         return True
 
     def _show_folder_error(self, exc: Exception) -> None:
+        from html import escape
+
         from tunespec.app.panels.device_panel import format_error
 
-        self.folder_label.setText(
-            f"<span style='color:#c00000'>{format_error(exc)}</span>"
-        )
+        text = str(exc) if isinstance(exc, RuntimeError) else format_error(exc)
+        html = f"<span style='color:#c00000'>{escape(text)}</span>"
+        if self.measurement.folder is not None:
+            # the measurement in use stays the one shown
+            html += f"<br>{escape(str(self.measurement.folder))}"
+        self.folder_label.setText(html)
         log.error("measurement folder: %s", exc)
 
     def abort(self) -> None:

@@ -97,10 +97,26 @@ def parse_cal1_spec(spec: str) -> str:
                 f"bad light source spec {spec!r}: unknown scheme cal1+{scheme}; "
                 f"known: {', '.join('cal1+' + s for s in URL_SCHEMES)}"
             )
+        if scheme.lower() == "socket":
+            _check_host_port(spec, rest)
         return f"{scheme.lower()}://{rest}"
     if not rest:
         raise InputError(f"bad light source spec {spec!r}: no serial port given")
     return rest
+
+
+def _check_host_port(spec: str, rest: str) -> None:
+    """InputError unless ``rest`` is ``HOST:PORT`` with a port in 1-65535.
+
+    pyserial reports a malformed socket URL with an unrelated message (its logging
+    options, or a comparison with ``None``), so it is checked here first.
+    """
+    host, sep, port = rest.partition("?")[0].rpartition(":")
+    if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise InputError(
+            f"bad light source spec {spec!r}: expected cal1+socket://HOST:PORT with a "
+            "port number 1-65535"
+        )
 
 
 class Cal1LightSource:

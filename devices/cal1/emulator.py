@@ -168,12 +168,6 @@ class Cal1Emulator:
         """Whether any channel is on."""
         return self.physics.lights_on
 
-    @property
-    def client_connected(self) -> bool:
-        """Whether a client is being served."""
-        with self._lock:
-            return self._client is not None
-
     def inject_fault(
         self,
         kind: FaultKind,
@@ -205,17 +199,6 @@ class Cal1Emulator:
         fault = _Fault(kind, command, skip, delay_s, payload, int(code), text)
         with self._lock:
             self._faults.append(fault)
-
-    @property
-    def pending_faults(self) -> int:
-        """Injected faults that have not happened yet."""
-        with self._lock:
-            return len(self._faults)
-
-    def clear_faults(self) -> None:
-        """Forget the injected faults that have not happened."""
-        with self._lock:
-            self._faults.clear()
 
     def close(self) -> None:
         """Stop serving, disconnect the client and release the port; idempotent."""

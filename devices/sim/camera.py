@@ -362,6 +362,37 @@ class SimCamera:
         self._closed = True
         self._maps.clear()
 
+    def looking_at(self, scene: SimScene, *, seed: int | None = None) -> SimCamera:
+        """The same camera (sensor, lens, light, clock, settings) facing ``scene``.
+
+        Everything that belongs to the camera and the bench is kept; only the scene
+        and, if given, the noise seed change. A bench that swaps targets must not
+        fall back to default camera constants.
+        """
+        self._check_open()
+        cam = SimCamera(
+            self._light,
+            scene,
+            sensitivity=self._sensitivity,
+            render_grid=self._grid,
+            resolution=(self._width, self._height),
+            clock=self._clock,
+            seed=self._seed if seed is None else int(seed),
+            realtime=self._realtime,
+            electrons_per_unit=self.electrons_per_unit,
+            dark_current_e_per_s=self.dark_current_e_per_s,
+            full_well_e=self.full_well_e,
+            read_noise_e=self.read_noise_e,
+            black_level=self.black_level,
+            white_level=self.white_level,
+            base_iso=self.base_iso,
+            focal_length_mm=self.focal_length_mm,
+            sensor_width_mm=self.sensor_width_mm,
+            exposure_s=self._exposure_s,
+            iso=self._iso,
+        )
+        return cam
+
     # -- rendering -------------------------------------------------------------------
     @property
     def resolution(self) -> tuple[int, int]:

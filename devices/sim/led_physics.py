@@ -47,7 +47,7 @@ import itertools
 import math
 import re
 import threading
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
@@ -147,10 +147,6 @@ class LedPhysicsParams:
             meter_noise_floor_rel=0.0,
             meter_dark_noise_w_sr_m2_nm=0.0,
         )
-
-    def with_changes(self, **changes: float) -> LedPhysicsParams:
-        """A copy with some parameters changed."""
-        return replace(self, **changes)  # type: ignore[arg-type]
 
 
 @dataclass(frozen=True)
@@ -443,29 +439,6 @@ class LedPhysics:
             self.emitted_over(t0_s, t1_s)[np.newaxis, :],
             ("emitted",),
             {"unit": RADIANCE_UNIT, "t0_s": repr(t0_s), "t1_s": repr(t1_s)},
-        )
-
-    def channel_spds(self, t_s: float | None = None) -> Spectra:
-        """Each channel's radiance at level 1 and the thermal state at ``t_s``.
-
-        Shape (n_channels, n_wl), named by channel; the emitted SPD is
-        ``levels @ values`` only if the levels do not change the thermal state.
-        """
-        t = self.clock.now_s() if t_s is None else float(t_s)
-        with self._lock:
-            seg = self._segment_at(t)
-            junction, load = self._thermal(seg, t)
-        gain, shift = self._gain_shift(t, junction, load)
-        rows = [
-            gain[k]
-            * np.interp(self._wl - shift[k], self._wl, self._nominal[k], 0.0, 0.0)
-            for k in range(self.n_channels)
-        ]
-        return Spectra(
-            self._wl,
-            np.array(rows) * self.params.peak_radiance_w_sr_m2_nm,
-            tuple(c.name for c in self.channels),
-            {"unit": RADIANCE_UNIT, "t_s": repr(t)},
         )
 
     # --- internal spectroradiometer ---------------------------------------------------

@@ -163,6 +163,29 @@ class SimScene:
         self._presented: Literal["white", "target"] = "target"
         self.present(presented)
 
+    def bench_options(self) -> dict[str, object]:
+        """The arguments that describe the bench, not the target on it.
+
+        Camera pose and field of view, the light's irradiance field and the white
+        background board: a scene for another target on the same bench takes these
+        (``SimScene(other_layout, refl, **scene.bench_options())``), so the flat
+        field and the shading stay those the calibration saw.
+        """
+        return {
+            "background": Spectra(
+                self.materials.wavelength_nm,
+                self.materials.values[BACKGROUND : BACKGROUND + 1],
+                ("background",),
+            ),
+            "field_width_mm": self.field_width_mm,
+            "centre_frac": self.centre_frac,
+            "keystone": self.keystone,
+            "rotation_deg": self.rotation_deg,
+            "falloff": self.falloff,
+            "falloff_radius_mm": self.falloff_radius_mm,
+            "falloff_centre_frac": self.falloff_centre_frac,
+        }
+
     # -- factories ---------------------------------------------------------------
     @classmethod
     def colorchecker_sg(cls, grid: Grid = DEFAULT_GRID, **kwargs: object) -> SimScene:

@@ -259,7 +259,17 @@ def _with(line_no: int, new: str | None) -> str:
         (_with(19, "A1 10 20 30 5,0 50 50 1 2 3"), 19, "SPEC_400: not a number"),
         (_with(17, "NUMBER_OF_SETS 3"), 17, "NUMBER_OF_SETS is 3 but 2 sets follow"),
         (_with(17, "NUMBER_OF_SETS many"), 17, "NUMBER_OF_SETS needs one"),
-        (_with(12, "NUMBER_OF_FIELDS 9"), 12, "NUMBER_OF_FIELDS is 9 but 10"),
+        (_with(14, "SAMPLE_ID RGB_R RGB_R RGB_B"), 13, "duplicate field(s) RGB_R"),
+        (_with(14, 'SAMPLE_ID "RGB R" RGB_G'), 13, "bad CGATS field name 'RGB R'"),
+        (
+            ARGYLL_OUTPUT.replace(
+                "A1 10 20 30 50 50 50 76.141 -0.283286 -0.301498 \n", ""
+            )
+            .replace("A2 10.5 20 30 60 50 50 76.0705 -0.0251469 0.0514406 \n", "")
+            .replace("NUMBER_OF_SETS 2", "NUMBER_OF_SETS 0"),
+            18,
+            "no data sets between BEGIN_DATA and END_DATA",
+        ),
         (_with(21, None), 20, "END_DATA missing"),  # the last line
         (_with(15, None), 16, "NUMBER_OF_SETS inside BEGIN_DATA_FORMAT"),
         (_with(21, "END_DATA junk"), 21, "text after END_DATA"),
@@ -275,6 +285,26 @@ def test_malformed_files_name_the_line(
         read_cgats(path)
     assert info.value.line == line
     assert str(info.value).startswith(f"{path}:{line}: ")
+
+
+def test_number_of_fields_is_not_checked_against_the_format_list() -> None:
+    # As in ArgyllCMS, whose own ref/ColorChecker.ti2 and ref/FograStrip3.ti1 say
+    # NUMBER_OF_FIELDS 9 and list 8 fields; the format list and the data decide.
+    for n in ("9", "11"):
+        t = parse_cgats(
+            ARGYLL_OUTPUT.replace("NUMBER_OF_FIELDS 10", f"NUMBER_OF_FIELDS {n}")
+        )
+        assert len(t.fields) == 10 and t.sample_names == ("A1", "A2")
+    with pytest.raises(InputError, match="NUMBER_OF_FIELDS needs one non-negative"):
+        parse_cgats(ARGYLL_OUTPUT.replace("NUMBER_OF_FIELDS 10", "NUMBER_OF_FIELDS x"))
+
+
+def test_format_on_one_line() -> None:
+    text = ARGYLL_OUTPUT.replace(
+        "BEGIN_DATA_FORMAT\nSAMPLE_ID", "BEGIN_DATA_FORMAT SAMPLE_ID"
+    ).replace("LAB_B \nEND_DATA_FORMAT", "LAB_B END_DATA_FORMAT")
+    t = parse_cgats(text)
+    assert t.fields == parse_cgats(ARGYLL_OUTPUT).fields and len(t) == 2
 
 
 def test_file_level_errors(tmp_path: Path) -> None:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
 import warnings
 
 import colour
@@ -306,3 +308,19 @@ def test_colorimetry_input_errors() -> None:
     wl = np.arange(400.0, 701.0, 10.0)
     out = xyz_d50(np.stack([np.full(31, np.nan), np.ones(31)]), wl)
     assert np.isnan(out[0]).all() and np.isfinite(out[1]).all()
+
+
+def test_importing_colorimetry_keeps_numpy_print_options() -> None:
+    # colour-science sets numpy's legacy="1.13" printing when imported; the core must
+    # not change how arrays print elsewhere (reports, doctests). A fresh interpreter,
+    # since colour is already imported here.
+    code = (
+        "import numpy as np\n"
+        "from tunespec.core import colorimetry, datasets\n"
+        "datasets.load_training_reflectances_190()\n"
+        "print(np.get_printoptions()['legacy'], repr(np.array([1.0])))\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    ).stdout
+    assert out.split() == ["False", "array([1.])"]

@@ -22,6 +22,7 @@ from tunespec.core.datasets import (
 from tunespec.core.errors import InputError
 from tunespec.core.export import (
     EXPORT_NAMES,
+    RAWTOACES_GRID,
     export_measurement,
     reflectance_ti3,
     sensitivity_rawtoaces_document,
@@ -99,13 +100,40 @@ def test_rawtoaces_json_normalised_keeps_the_scale_in_the_comment() -> None:
     s = Spectra(
         wl, [[1.0, 2.0, 4.0], [0.5, 0.5, 0.5], [8.0, 0.0, 1.0]], ("R", "G", "B")
     )
-    doc = sensitivity_rawtoaces_document(s, unique_identifier="x", created=CREATED)
+    doc = sensitivity_rawtoaces_document(
+        s, unique_identifier="x", created=CREATED, grid=None
+    )
     main = doc["spectral_data"]["data"]["main"]
     assert list(main) == ["400", "402.5", "405"]
     assert main["400"] == [0.125, 0.0625, 1.0]  # [1, 0.5, 8] / 8
     assert doc["header"]["comments"].endswith("multiply by 8.0 for the absolute scale")
     with pytest.raises(InputError, match="must be named R, G, B"):
         sensitivity_rawtoaces_document(s.with_values(s.values, ("X", "Y", "Z")))
+
+
+def test_rawtoaces_json_is_on_the_grid_rawtoaces_reads() -> None:
+    # rawtoaces' Spst::loadSpst exits unless there are 81 samples, 380-780 nm by 5.
+    # An estimate on the working grid 380:730:10 is interpolated onto it and set to
+    # 0 beyond 730 nm, which the comments say.
+    s = read_rawtoaces_json(resource_path("cameras", SHIPPED)).resample(
+        Grid.parse("380:730:10")
+    )
+    doc = sensitivity_rawtoaces_document(s, normalize=False, created=CREATED)
+    main = doc["spectral_data"]["data"]["main"]
+    assert list(main) == [str(w) for w in range(380, 781, 5)]
+    assert main["390"] == s.values[:, 1].tolist()  # on both grids: as it was
+    np.testing.assert_allclose(
+        main["395"],
+        0.5 * (s.values[:, 1] + s.values[:, 2]),
+        rtol=0,
+        atol=ATOL_ROUNDTRIP,
+    )
+    assert main["735"] == main["780"] == [0.0, 0.0, 0.0]
+    assert "set to 0 at 735-780 nm (not estimated)" in doc["header"]["comments"]
+    full = read_rawtoaces_json(resource_path("cameras", SHIPPED))
+    doc = sensitivity_rawtoaces_document(full, normalize=False, created=CREATED)
+    assert "set to 0" not in doc["header"]["comments"]
+    assert list(doc["spectral_data"]["data"]["main"].values()) == full.values.T.tolist()
 
 
 def test_colour_science_has_no_rawtoaces_json_reader() -> None:
@@ -217,8 +245,12 @@ def test_export_measurement_writes_everything_readable(
         read_spectra_csv(paths["sensitivities_csv"]).values, cam.values
     )
     js = read_rawtoaces_json(paths["sensitivities_json"])
+    assert js.wavelength_nm.tolist() == RAWTOACES_GRID.wavelength_nm.tolist()
     np.testing.assert_allclose(
-        js.values, cam.values / cam.values.max(), rtol=1e-15, atol=0
+        js.resample(Grid(380.0, 730.0, 10.0)).values,
+        cam.values / cam.values.max(),
+        rtol=1e-15,
+        atol=0,
     )
     np.testing.assert_array_equal(
         read_spectra_csv(paths["reflectances_csv"]).values, est.values

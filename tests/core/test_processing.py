@@ -19,6 +19,7 @@ from tunespec.core.layout import TargetLayout, apply_homography, homography_from
 from tunespec.core.processing import (
     ProcessedSession,
     RoiSet,
+    flat_window,
     process_session,
     write_processed,
 )
@@ -298,3 +299,40 @@ def test_channel_without_white_signal_borrows_the_flat_field(tmp_path) -> None:
     np.testing.assert_allclose(
         out.responses.rgb, _expected(patch_rgb, gains), atol=ATOL_QUANTISED
     )
+
+
+@pytest.mark.parametrize("pad", [2, -2])
+def test_a_frame_of_another_size_is_an_input_error(tmp_path, pad) -> None:
+    """A frame retaken at another raw size must not be read at the wrong photosites."""
+    session, _ = _make_session(tmp_path / "s", with_corners=True)
+
+    def loader(path: Path) -> RawFrame:
+        frame = _npy_loader(path)
+        if path.stem != "target_L1":
+            return frame
+        m = frame.mosaic
+        resized = np.pad(m, ((0, pad), (0, pad)), mode="edge") if pad > 0 else m[:pad]
+        return RawFrame(path, resized, "RGGB", np.full((2, 2), BLACK_DN), WHITE_DN)
+
+    with pytest.raises(InputError, match=r"target_L1.*mosaic.*retake") as info:
+        process_session(session, loader=loader)
+    assert "--retake target_L1" in str(info.value)
+
+
+def test_an_unreadable_frame_names_it_and_says_how_to_retake(tmp_path) -> None:
+    session, _ = _make_session(tmp_path / "s", with_corners=True)
+
+    def loader(path: Path) -> RawFrame:
+        if path.stem == "white_WHITE":
+            raise InputError("cannot read as a camera raw file", path=path)
+        return _npy_loader(path)
+
+    with pytest.raises(InputError, match=r"frame white_WHITE: .*--retake white_WHITE"):
+        process_session(session, loader=loader)
+
+
+def test_flat_window_is_centred_and_cut_to_the_planes() -> None:
+    assert flat_window((300, 400)) == (100, 200, 150, 250)
+    assert flat_window((60, 400)) == (0, 60, 170, 230)
+    with pytest.raises(InputError):
+        flat_window((300, 400), 0)

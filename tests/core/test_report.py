@@ -12,10 +12,16 @@ import numpy as np
 import pytest
 
 from tunespec.core.colorimetry import reflectance_stats
-from tunespec.core.datasets import load_camera, load_colorchecker_sg, load_led_set
+from tunespec.core.datasets import (
+    load_camera,
+    load_colorchecker_sg,
+    load_led_set,
+    resource_path,
+)
 from tunespec.core.export import tunespec_version
 from tunespec.core.forward_model import render_rgb
 from tunespec.core.report import (
+    COLORIMETRY_DATA,
     PATCHES_PER_FIGURE,
     Flag,
     ReportData,
@@ -229,6 +235,30 @@ def test_table1_from_calibration_stats_json() -> None:
 
 def test_shipped_datasets_and_licences() -> None:
     ds = {d.name: d for d in shipped_datasets()}
-    assert {"cameras/", "charts/", "leds/", "layouts/"} <= set(ds)
-    assert ds["charts/"].licence == "MIT"
+    # Every folder of tunespec.resources has a row (and its own SOURCE.md).
+    folders = {
+        f"{p.name}/" for p in resource_path().iterdir() if (p / "__init__.py").is_file()
+    }
+    assert folders == set(ds)
+    assert all((resource_path(f.rstrip("/")) / "SOURCE.md").is_file() for f in folders)
+    assert ds["charts/"].licence.startswith("MIT")
+    assert "Neugebauer" in ds["charts/"].description
     assert ds["cameras/"].licence.startswith("Apache-2.0")
+    assert ds["icons/"].licence.startswith("Apache-2.0")
+    assert not any("*" in d.description or "`" in d.description for d in ds.values())
+
+
+def test_pdf_tables_wrap_long_cells_instead_of_cutting_them() -> None:
+    from tunespec.core.report import _Table, _text_table
+
+    long = "a description " * 10
+    lines = _text_table(_Table("T", ("Name", "What"), (("x", long),)))
+    rows = lines[4:-1]  # title, blank, header, rule ... blank
+    assert len(rows) > 1 and rows[0].startswith("x     a description")
+    assert " ".join(ln[6:] for ln in rows).split() == long.split()
+    assert max(len(ln) for ln in lines) <= 6 + 48
+
+
+def test_default_provenance_names_the_colorimetry_data() -> None:
+    text = render_html(ReportData(), figures=[])
+    assert COLORIMETRY_DATA.licence in text and "colour-matching functions" in text

@@ -1,5 +1,7 @@
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -77,3 +79,52 @@ def test_layout_errors(tmp_path) -> None:
     with pytest.raises(InputError, match="not valid JSON") as err:
         TargetLayout.load(p)
     assert err.value.line == 1
+
+
+def test_responses_duplicate_columns_and_blank_lines(tmp_path) -> None:
+    p = tmp_path / "r.csv"
+    p.write_text("patch,illuminant,R,G,B,R\nA,L,1,2,3,4\n")
+    with pytest.raises(InputError, match="duplicate column") as err:
+        read_responses_csv(p)
+    assert err.value.line == 1
+    # Blank lines are skipped (before the header too); errors keep the file's lines.
+    p.write_text("\n\npatch,illuminant,R,G,B\nA,L,1,2,3\n\nB,L,1,2,x\n")
+    with pytest.raises(InputError, match="not a number") as err:
+        read_responses_csv(p)
+    assert err.value.line == 6
+    p.write_text("\npatch,illuminant,R,G,B\nA,L,0.1,0.2,0.3\n")
+    r = read_responses_csv(p)
+    assert r.patches == ("A",)
+    np.testing.assert_array_equal(r.rgb, [[[0.1, 0.2, 0.3]]])
+
+
+def test_responses_subset_and_names() -> None:
+    r = Responses(("A", "B", "C"), ("L1", "L2"), np.arange(18.0).reshape(3, 2, 3))
+    sub = r.subset(["C", "A"], ["L2"])
+    assert sub.patches == ("C", "A") and sub.illuminants == ("L2",)
+    np.testing.assert_array_equal(sub.rgb[:, 0], [[15.0, 16.0, 17.0], [3.0, 4.0, 5.0]])
+    assert r.subset([]).rgb.shape == (0, 2, 3)  # an empty list keeps nothing
+    assert r.subset().patches == r.patches
+    with pytest.raises(InputError, match=r"1 patch name\(s\) not in the responses: Z"):
+        r.subset(["A", "Z"])
+    with pytest.raises(InputError, match="illuminant name"):
+        r.subset(illuminants=["L9"])
+    with pytest.raises(InputError, match="duplicate patch names: A"):
+        Responses(("A", "A"), ("L1",), np.zeros((2, 1, 3)))
+
+
+@pytest.mark.parametrize(
+    ("change", "fragment"),
+    [
+        ({"margin_mm": [1, 2, 3]}, "margin_mm must be"),
+        ({"corners_px": [[1, 2], [3]]}, "bad layout"),
+        ({"rows": "x"}, "bad layout"),
+    ],
+)
+def test_layout_malformed_fields_are_input_errors(tmp_path, change, fragment) -> None:
+    doc = TargetLayout.load(resource_path("layouts", "colorchecker_sg.json")).to_dict()
+    p = tmp_path / "x.json"
+    p.write_text(json.dumps({**doc, **change}))
+    with pytest.raises(InputError, match=fragment) as err:
+        TargetLayout.load(p)
+    assert err.value.path == str(p)

@@ -554,3 +554,17 @@ def test_calibration_report_on_held_aside_patches(data) -> None:
         calibration_report(
             est, responses, reported, data["sg"], held_out_patches=["Z9"]
         )
+
+
+def test_correct_spd_shift_refuses_a_non_finite_shift(data) -> None:
+    with pytest.raises(InputError, match="shift nan nm is not finite"):
+        correct_spd_shift(data["leds"], float("nan"))
+
+
+def test_all_zero_responses_are_singular_for_every_method(data) -> None:
+    # "pca" used to return an all-zero sensitivity silently, "smooth" refused.
+    responses, leds, sg = _small_problem(data)
+    dark = Responses(responses.patches, responses.illuminants, 0.0 * responses.rgb)
+    for method in SENSITIVITY_METHODS:
+        with pytest.raises(SingularSystemError, match="channel R: no positive"):
+            estimate_camera_sensitivity(dark, leds, sg, method=method)

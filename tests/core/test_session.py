@@ -224,3 +224,52 @@ def test_clean_temp_removes_leftovers(tmp_path) -> None:
     s.temp_stem("x").with_suffix(".dng").write_bytes(b"half")
     s.clean_temp()
     assert not list((tmp_path / "s" / "tmp").iterdir())
+
+
+def _damaged(tmp_path, edit) -> Session:
+    """A committed session whose manifest ``edit(m)`` damaged on disk."""
+    s = Session.create(tmp_path / "s", settings=_settings(), layout=LAYOUT)
+    for spec in s.plan()[:2]:
+        _commit(s, spec)
+    m = json.loads(s.manifest_path.read_text())
+    edit(m)
+    s.manifest_path.write_text(json.dumps(m))
+    return s
+
+
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [
+        (lambda m: m.update(version="abc"), "bad session version"),
+        (lambda m: m.update(frames={"a": 1}), "'frames' must be a list"),
+        (lambda m: m.pop("frames"), "'frames' must be a list"),
+        (lambda m: m["frames"].append(3), "expected an object"),
+        (lambda m: m.update(settings=[1]), "expected an object"),
+        (lambda m: m.pop("settings"), "no 'settings'"),
+        # a string would silently become one channel per character
+        (lambda m: m["settings"].update(channels="L1"), "list of names"),
+        (lambda m: m["settings"].update(exposures_s=[1]), "exposures_s"),
+        (lambda m: m["settings"].update(levels=[1]), "levels"),
+        (lambda m: m.update(layout=5), "'layout' must be an object"),
+        (lambda m: m.update(devices=[1]), "'devices' must be an object"),
+        (lambda m: m["frames"][0].update(exposure_s="x"), "exposure_s"),
+        (lambda m: m["frames"][0].update(exposure_s=-1.0), "exposure_s"),
+        (lambda m: m["frames"][0].update(iso="100"), "iso"),
+        (lambda m: m["frames"][1].update(file="../../etc/passwd"), "inside"),
+        (lambda m: m["frames"][1].update(file="/etc/passwd"), "inside"),
+        (lambda m: m["frames"][1].update(spd_file="C:/x.csv"), "inside"),
+        (lambda m: m["frames"].append(m["frames"][0]), "listed twice"),
+    ],
+)
+def test_a_damaged_manifest_fails_on_open_with_one_line(
+    tmp_path, edit, message
+) -> None:
+    s = _damaged(tmp_path, edit)
+    with pytest.raises(InputError, match=message) as info:
+        Session.open(s.root)
+    assert str(s.manifest_path) in str(info.value)
+
+
+def test_an_intact_manifest_still_opens(tmp_path) -> None:
+    s = _damaged(tmp_path, lambda m: None)
+    assert [f.id for f in Session.open(s.root).frames] == [f.id for f in s.frames]

@@ -188,3 +188,23 @@ def test_noise_model_validates() -> None:
     with pytest.raises(InputError):
         NoiseModel(n_pixels=1)
     assert NoiseModel().mean_std(np.array(0.0)) == pytest.approx(30 / 67_000 / 20)
+
+
+def test_a_black_patch_without_read_noise_is_exactly_dark() -> None:
+    # sigma_px = 0 there: no divide-by-zero warning (an error under filterwarnings),
+    # no NaN, no noise, no saturation.
+    refl, illum, sens = _flat_scene(0.4, 2)
+    refl = refl.with_values([[0.0, 0.0], [0.5, 0.5]])
+    noise = NoiseModel(read_noise_e=0.0, flat_field_residual=0.0)
+    r = simulate_responses(refl, illum, sens, noise=noise, rng=0)
+    np.testing.assert_array_equal(r.rgb[0], 0.0)
+    np.testing.assert_array_equal(r.rgb_std[0], 0.0)
+    assert r.saturated[0, 0] == 0.0
+    assert np.all(r.rgb_std[1] > 0)  # the lit patch keeps its shot noise
+
+
+def test_exposure_needs_rgb_sensitivities() -> None:
+    refl, illum, _ = _flat_scene(0.3, 2)
+    two = Spectra(WL, np.ones((2, 2)), ("R", "G"), {"source": "sens.csv"})
+    with pytest.raises(InputError, match=r"^sens\.csv: expected 3 sensitivity curves"):
+        scale_to_exposure(refl, illum, two)

@@ -1,5 +1,7 @@
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -12,7 +14,13 @@ from tunespec.core.datasets import (
 )
 from tunespec.core.errors import InputError
 from tunespec.core.forward_model import lighting_matrix, render_rgb
-from tunespec.core.spectra import Grid, Spectra, read_spectra_csv, write_spectra_csv
+from tunespec.core.spectra import (
+    MAX_GRID_SAMPLES,
+    Grid,
+    Spectra,
+    read_spectra_csv,
+    write_spectra_csv,
+)
 
 
 def test_grid_parse_and_errors() -> None:
@@ -87,3 +95,35 @@ def test_forward_model_matches_lighting_matrix() -> None:
     np.testing.assert_allclose(r @ F.T, c.reshape(5, -1), atol=ATOL_EXACT)
     # Eq. 1 by hand for one patch/illuminant/channel
     assert c[2, 7, 1] == pytest.approx(5.0 * np.sum(S[1] * i[7] * r[2]), rel=1e-12)
+
+
+def test_grid_refuses_non_finite_and_oversized_grids() -> None:
+    for args in (
+        (400.0, math.inf, 5.0),
+        (math.nan, 700.0, 5.0),
+        (400.0, 700.0, math.nan),
+    ):
+        with pytest.raises(InputError, match="finite"):
+            Grid(*args)
+    # A mistyped step would otherwise allocate n_wl x n_wl matrices later.
+    with pytest.raises(InputError, match="300000000001 samples, at most 10001"):
+        Grid.parse("400:700:1e-9")
+    assert Grid(400.0, 700.0, 0.03).n == MAX_GRID_SAMPLES
+
+
+def test_grid_accepts_a_step_read_back_from_sampled_wavelengths() -> None:
+    # np.diff of 400 + 0.03 k carries rounding (step 0.029999999999973): the
+    # multiple-of-STEP check has a tolerance (1e-6 nm), so reconstructing the grid of
+    # sampled spectra (as reflectance_stats and wiener_reflectance do) works.
+    wl = 400.0 + 0.03 * np.arange(MAX_GRID_SAMPLES)
+    step = float(np.diff(wl)[-1])
+    g = Grid(float(wl[0]), float(wl[-1]), step)
+    assert g.n == MAX_GRID_SAMPLES
+    np.testing.assert_allclose(g.wavelength_nm, wl, rtol=0, atol=1e-9)
+    with pytest.raises(InputError, match="multiple of STEP"):
+        Grid(400.0, 700.0, 0.031)
+
+
+def test_spectra_refuse_non_finite_wavelengths() -> None:
+    with pytest.raises(InputError, match="finite"):
+        Spectra(np.array([400.0, np.nan, 420.0]), np.ones((1, 3)), ("a",))

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import io
+import socket
 import threading
 from collections.abc import Iterator
 
@@ -248,3 +249,20 @@ def test_cli_emulator_serves_until_stopped() -> None:
         stop.set()
         server.join(10.0)
     assert not server.is_alive()
+
+
+def test_cli_emulator_port_in_use_is_one_line(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    from tunespec.app.cli import EXIT_INPUT, main
+
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        assert main(["emulate", "cal1", "--port", str(port)]) == EXIT_INPUT
+    err = capsys.readouterr().err
+    assert "cannot listen on 127.0.0.1" in err
+    assert "Traceback" not in err
+    with pytest.raises(SystemExit):
+        main(["emulate", "cal1", "--port", "99999"])

@@ -436,7 +436,20 @@ def test_parse_cal1_spec(spec: str, url: str) -> None:
 
 
 @pytest.mark.parametrize(
-    "spec", ["cal1", "cal1://", "sim", "cal1+ftp://x", "/dev/ttyUSB0"]
+    "spec",
+    [
+        "cal1",
+        "cal1://",
+        "sim",
+        "cal1+ftp://x",
+        "/dev/ttyUSB0",
+        # pyserial would answer these with unrelated messages
+        "cal1+socket://127.0.0.1",
+        "cal1+socket://127.0.0.1:abc",
+        "cal1+socket://127.0.0.1:0",
+        "cal1+socket://127.0.0.1:70000",
+        "cal1+socket://:5025",
+    ],
 )
 def test_parse_cal1_spec_rejects(spec: str) -> None:
     with pytest.raises(InputError, match="spec"):

@@ -125,6 +125,29 @@ def test_auto_exposure_puts_the_white_board_near_three_quarters(
     assert not list((session.root / "tmp").iterdir())
 
 
+def test_auto_exposure_is_metered_at_the_sessions_iso(tmp_path, bench) -> None:
+    """The camera starts at ISO 100; a session at ISO 400 must meter at ISO 400."""
+    assert bench.camera.iso == 100
+    session = _session(tmp_path, bench, exposure="auto", iso=400, channels=CHANNELS[2:])
+    capture(session, bench.light, bench.camera, bench.stage)
+    frame = load_raw(session.path_of(session.frame(f"white_{CHANNELS[2]}")))
+    assert frame.iso == 400
+    level = float(np.percentile(frame.planes.max(axis=0), 99.5))
+    assert METERED_LEVEL_BAND[0] < level < METERED_LEVEL_BAND[1], level
+
+
+def test_unsettled_metering_is_reported(tmp_path, bench, monkeypatch) -> None:
+    import tunespec.devices.capture as capture_module
+
+    monkeypatch.setattr(
+        capture_module, "meter_exposure", lambda *a, **k: (2.0, float("nan"))
+    )
+    session = _session(tmp_path, bench, exposure="auto", channels=CHANNELS[:1])
+    result = capture(session, bench.light, bench.camera, bench.stage)
+    assert any("did not settle" in w for w in result.warnings)
+    assert session.settings.exposures_s[CHANNELS[0]] == (2.0,)
+
+
 def test_metering_recovers_from_clipping_and_darkness(tmp_path) -> None:
     class Cam:
         exposure_s = 1.0

@@ -148,3 +148,64 @@ def test_cancel_stops_the_demo_and_keeps_frames(tmp_path) -> None:
             should_stop=lambda: len(seen) >= 5,
         )
     assert len(Session.open(tmp_path / "d" / "chart").frames) == 5
+
+
+@pytest.mark.parametrize(
+    ("text", "key"),
+    [
+        ('[capture]\niso = "abc"\n', "capture.iso"),
+        ('[capture]\nbrackets = "x"\n', "capture.brackets"),
+        ('[capture]\nbrackets = [1.0, "a"]\n', "capture.brackets"),
+        ("[capture]\nexposure = [1]\n", "capture.exposure"),
+        ('[bench]\nseed = "x"\n', "bench.seed"),
+        ("[bench]\nresolution = 5\n", "bench.resolution"),
+        ("[chart]\nlayout = 5\n", "chart.layout"),
+        ("[calibrate]\ngrid = 5\n", "calibrate.grid"),
+        ('[export]\nreport = "no"\n', "export.report"),
+    ],
+)
+def test_config_values_of_the_wrong_type_are_one_line_errors(
+    tmp_path, text, key
+) -> None:
+    cfg = tmp_path / "bad.toml"
+    cfg.write_text(text)
+    with pytest.raises(InputError, match=key) as info:
+        run_config(cfg)
+    assert "bad.toml" in str(info.value)
+    assert not (tmp_path / "run").exists()  # nothing captured
+
+
+def test_sample_bench_keeps_the_bench_and_camera_constants() -> None:
+    from tunespec.core.spectra import Spectra
+    from tunespec.devices.registry import open_bench
+    from tunespec.devices.workflow import bench_for_target, sample_layout
+
+    grey = Spectra(np.linspace(380.0, 780.0, 81), np.full((1, 81), 0.6), ("board",))
+    with open_bench(
+        "sim",
+        resolution=(256, 192),
+        scene_options={"background": grey, "falloff": 0.2, "keystone": 0.0},
+    ) as bench:
+        bench.camera.read_noise_e = 5.0  # the bench's own camera, not the default
+        bench.camera.electrons_per_unit = 1.0e5
+        sample = bench_for_target(bench, sample_layout(), seed=7)
+        try:
+            # the white board, the light field and the camera are the bench's
+            np.testing.assert_allclose(
+                sample.stage.materials.values[0],
+                np.interp(sample.stage.materials.wavelength_nm, [380, 780], [0.6, 0.6]),
+            )
+            assert sample.stage.falloff == 0.2
+            assert sample.stage.keystone == 0.0
+            assert sample.camera.read_noise_e == 5.0
+            assert sample.camera.electrons_per_unit == 1.0e5
+            assert sample.camera.resolution == (256, 192)
+            assert sample.truth["camera"]["seed"] == 7
+            xy = np.array([[10.0, 20.0], [128.0, 96.0]])
+            np.testing.assert_array_equal(
+                sample.camera.shading(xy), bench.camera.shading(xy)
+            )
+            # only the target changed
+            assert sample.stage.layout.name == sample_layout().name
+        finally:
+            sample.camera.close()
