@@ -26,6 +26,7 @@ __all__ = [
     "load_led_set",
     "load_training_reflectances_190",
     "read_rawtoaces_json",
+    "read_sensitivities",
     "resource_path",
 ]
 
@@ -78,6 +79,42 @@ def read_rawtoaces_json(path: str | PathLike[str]) -> Spectra:
         "source": str(path),
     }
     return Spectra(wl[order], vals[:, order], ("R", "G", "B"), meta)
+
+
+def read_sensitivities(path: str | PathLike[str], grid: Grid | None = None) -> Spectra:
+    """Camera sensitivities from a spectral CSV (R, G, B columns) or a rawtoaces JSON.
+
+    Parameters
+    ----------
+    path
+        ``.json``: the rawtoaces-data schema; anything else: a spectral CSV with at
+        least the columns ``R``, ``G``, ``B`` (others are ignored).
+    grid
+        Working grid to resample onto; ``None`` keeps the file's wavelengths.
+
+    Returns
+    -------
+    Spectra
+        Names ``R, G, B``; ``meta["source"]`` is the file.
+
+    Raises
+    ------
+    InputError
+        Naming the file: unreadable, a channel missing, a range too short for the grid.
+    """
+    path = Path(path)
+    if path.suffix.lower() == ".json":
+        s = read_rawtoaces_json(path)
+    else:
+        s = read_spectra_csv(path)
+        missing = [c for c in ("R", "G", "B") if c not in s.names]
+        if missing:
+            raise InputError(
+                f"missing column(s) {', '.join(missing)}; expected R, G, B", path=path
+            )
+        s = s.select(["R", "G", "B"])
+    s = Spectra(s.wavelength_nm, s.values, s.names, {**s.meta, "source": str(path)})
+    return s if grid is None else s.resample(grid, source=str(path))
 
 
 @lru_cache(maxsize=1)

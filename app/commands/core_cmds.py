@@ -10,11 +10,11 @@ from typing import Any
 import numpy as np
 
 from tunespec.app.cli import add_grid_option, progress_bar
-from tunespec.core.datasets import read_rawtoaces_json
+from tunespec.core.datasets import read_sensitivities
 from tunespec.core.errors import InputError
 from tunespec.core.export import read_spd_shift, write_sensitivity_meta
 from tunespec.core.responses import Responses, read_responses_csv, write_responses_csv
-from tunespec.core.spectra import Grid, Spectra, read_spectra_csv, write_spectra_csv
+from tunespec.core.spectra import Spectra, read_spectra_csv, write_spectra_csv
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -139,21 +139,6 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     add_grid_option(p)
     p.add_argument("-o", "--output", required=True, type=Path)
     p.set_defaults(func=cmd_simulate)
-
-
-def read_sensitivities(path: Path, grid: Grid) -> Spectra:
-    """Sensitivities from a spectral CSV with R, G, B columns or a rawtoaces JSON."""
-    if path.suffix.lower() == ".json":
-        s = read_rawtoaces_json(path).resample(grid, source=str(path))
-    else:
-        s = read_spectra_csv(path, grid)
-        missing = [c for c in ("R", "G", "B") if c not in s.names]
-        if missing:
-            raise InputError(
-                f"missing column(s) {', '.join(missing)}; expected R, G, B", path=path
-            )
-        s = s.select(["R", "G", "B"])
-    return Spectra(s.wavelength_nm, s.values, s.names, {**s.meta, "source": str(path)})
 
 
 def _write_json(path: Path | None, data: dict[str, Any]) -> None:

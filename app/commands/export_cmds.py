@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from tunespec.app.cli import grid_arg
+from tunespec.core.datasets import read_sensitivities
 from tunespec.core.errors import InputError, read_json
 from tunespec.core.spectra import Grid, Spectra, read_spectra_csv
 
@@ -136,21 +137,6 @@ def cmd_export_cgats(args: argparse.Namespace) -> int:
     return 0
 
 
-def _read_sensitivities(path: Path, grid: Grid | None) -> Spectra:
-    from tunespec.core.datasets import read_rawtoaces_json
-
-    if path.suffix.lower() == ".json":
-        s = read_rawtoaces_json(path)
-        return s if grid is None else s.resample(grid, source=str(path))
-    s = read_spectra_csv(path, grid)
-    missing = [c for c in ("R", "G", "B") if c not in s.names]
-    if missing:
-        raise InputError(
-            f"missing column(s) {', '.join(missing)}; expected R, G, B", path=path
-        )
-    return s.select(["R", "G", "B"], source=str(path))
-
-
 def cmd_export_rawtoaces(args: argparse.Namespace) -> int:
     from tunespec.core.export import (
         RAWTOACES_GRID,
@@ -158,7 +144,7 @@ def cmd_export_rawtoaces(args: argparse.Namespace) -> int:
         write_sensitivity_json,
     )
 
-    sens = _read_sensitivities(args.sensitivities, None)
+    sens = read_sensitivities(args.sensitivities, None)
     grid = None if args.keep_grid else RAWTOACES_GRID
     write_sensitivity_json(
         sens,
@@ -199,9 +185,9 @@ def cmd_report(args: argparse.Namespace) -> int:
     if args.reference:
         data["reflectance_reference"] = read_spectra_csv(args.reference, grid)
     if args.sensitivities:
-        data["sensitivity"] = _read_sensitivities(args.sensitivities, grid)
+        data["sensitivity"] = read_sensitivities(args.sensitivities, grid)
     if args.reference_sensitivities:
-        data["sensitivity_reference"] = _read_sensitivities(
+        data["sensitivity_reference"] = read_sensitivities(
             args.reference_sensitivities, grid
         )
     if args.illuminants:
