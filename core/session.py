@@ -654,6 +654,17 @@ class Session:
                 return FrameRecord.from_dict(d)
         return None
 
+    def fingerprint(self) -> str:
+        """SHA-256 over the ids and checksums of the frames with status ok.
+
+        Results computed from a session store it; when a frame is retaken or marked
+        bad the fingerprint changes, so stale results can be recognised.
+        """
+        h = hashlib.sha256()
+        for f in sorted(self.ok_frames(), key=lambda f: f.id):
+            h.update(f"{f.id}:{f.sha256}\n".encode())
+        return h.hexdigest()
+
     def ok_frames(self, kind: str | None = None) -> list[FrameRecord]:
         """Frames with status ok (of one ``kind`` if given)."""
         return [f for f in self.frames if f.status == "ok" and kind in (None, f.kind)]

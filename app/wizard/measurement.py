@@ -432,7 +432,9 @@ class Measurement(QObject):
         """The calibration saved in the folder, or None."""
         if self.folder is None:
             return None
-        result = _read_calibration(self.folder / CALIBRATION_DIR)
+        result = _read_calibration(
+            self.folder / CALIBRATION_DIR, self.folder / CHART_DIR
+        )
         if result is not None:
             self.calibration = result
             self.calibrated.emit(result)
@@ -442,7 +444,7 @@ class Measurement(QObject):
         """The estimate saved in the folder, or None."""
         if self.folder is None:
             return None
-        result = _read_estimate(self.folder / ESTIMATE_DIR)
+        result = _read_estimate(self.folder / ESTIMATE_DIR, self.folder / SAMPLE_DIR)
         if result is not None:
             self.estimate = result
             self.estimated.emit(result)
@@ -701,7 +703,7 @@ def calibrate_job(
         calibration=cal,
         chart=chart,
     )
-    _write_calibration(out_dir, result)
+    _write_calibration(out_dir, result, _fingerprint(chart_root))
     return result
 
 
@@ -752,7 +754,7 @@ def estimate_job(
         estimation=type(est)(est.wiener, table2),
         sample=sample,
     )
-    _write_estimate(out_dir, result)
+    _write_estimate(out_dir, result, _fingerprint(sample_root))
     return result
 
 
@@ -829,7 +831,31 @@ def export_job(
 
 
 # -- what the steps leave on disk ----------------------------------------------------------
-def _write_calibration(out_dir: Path, result: CalibrationResult) -> None:
+def _fingerprint(session_root: Path) -> str | None:
+    """The session's :meth:`~tunespec.core.session.Session.fingerprint` (None: none)."""
+    from tunespec.core.session import Session
+
+    try:
+        return Session.open(session_root).fingerprint()
+    except InputError:
+        return None
+
+
+def _is_current(doc: dict[str, object], session_root: Path, what: str) -> bool:
+    """False (with a log line) if the session changed since ``doc`` was computed."""
+    saved = doc.get("session_fingerprint")
+    if saved is None or saved == _fingerprint(session_root):
+        return True
+    log.warning(
+        "the %s was computed from frames that have since been retaken: run it again",
+        what,
+    )
+    return False
+
+
+def _write_calibration(
+    out_dir: Path, result: CalibrationResult, fingerprint: str | None = None
+) -> None:
     from tunespec.core.session import atomic_write_text
 
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -844,16 +870,19 @@ def _write_calibration(out_dir: Path, result: CalibrationResult) -> None:
         "layout": result.layout.to_dict(),
         "excluded_patches": list(result.excluded_patches),
         "warnings": list(result.warnings),
+        "session_fingerprint": fingerprint,
     }
     # written last: its presence marks the step done
     atomic_write_text(out_dir / "calibration.json", json.dumps(doc, indent=1) + "\n")
 
 
-def _read_calibration(folder: Path) -> CalibrationResult | None:
+def _read_calibration(folder: Path, chart_root: Path) -> CalibrationResult | None:
     from tunespec.core.stats import STAT_ROWS, PredictionStats
 
     try:
         doc = json.loads((folder / "calibration.json").read_text())
+        if not _is_current(doc, chart_root, "calibration"):
+            return None
         sensitivity = read_spectra_csv(folder / "sensitivity.csv", allow_negative=True)
         shift = repr(read_spd_shift(folder / "sensitivity.csv"))
         sensitivity = Spectra(
@@ -883,7 +912,9 @@ def _read_calibration(folder: Path) -> CalibrationResult | None:
         return None
 
 
-def _write_estimate(out_dir: Path, result: EstimateResult) -> None:
+def _write_estimate(
+    out_dir: Path, result: EstimateResult, fingerprint: str | None = None
+) -> None:
     from tunespec.core.session import atomic_write_text
 
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -894,15 +925,18 @@ def _write_estimate(out_dir: Path, result: EstimateResult) -> None:
         "layout": None if result.layout is None else result.layout.to_dict(),
         "clipped": list(result.clipped),
         "warnings": list(result.warnings),
+        "session_fingerprint": fingerprint,
     }
     atomic_write_text(out_dir / "estimate.json", json.dumps(doc, indent=1) + "\n")
 
 
-def _read_estimate(folder: Path) -> EstimateResult | None:
+def _read_estimate(folder: Path, sample_root: Path) -> EstimateResult | None:
     from tunespec.devices.workflow import evaluate
 
     try:
         doc = json.loads((folder / "estimate.json").read_text())
+        if not _is_current(doc, sample_root, "estimate"):
+            return None
         reflectance = read_spectra_csv(folder / "reflectance.csv")
         reference = None
         if (folder / "reference.csv").is_file():

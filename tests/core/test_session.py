@@ -273,3 +273,15 @@ def test_a_damaged_manifest_fails_on_open_with_one_line(
 def test_an_intact_manifest_still_opens(tmp_path) -> None:
     s = _damaged(tmp_path, lambda m: None)
     assert [f.id for f in Session.open(s.root).frames] == [f.id for f in s.frames]
+
+
+def test_fingerprint_changes_when_a_frame_is_retaken(tmp_path) -> None:
+    s = Session.create(tmp_path / "s", settings=_settings(), layout=LAYOUT)
+    for spec in s.plan():
+        _commit(s, spec)
+    before = s.fingerprint()
+    assert Session.open(tmp_path / "s").fingerprint() == before  # stable on reopen
+    s.mark_bad("white_L2", "blurred")
+    assert s.fingerprint() != before
+    _commit(s, s.missing()[0], payload=b"retaken")
+    assert s.fingerprint() not in (before, "")
