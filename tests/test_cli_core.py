@@ -26,25 +26,35 @@ def files(tmp_path_factory):
     return d
 
 
+def _simulate(sensitivities, illuminants, reflectances, *options) -> int:
+    """``tunespec simulate-responses`` on three files, with further options."""
+    return main(
+        [
+            "simulate-responses",
+            "--sensitivities",
+            str(sensitivities),
+            "--illuminants",
+            str(illuminants),
+            "--reflectances",
+            str(reflectances),
+            *map(str, options),
+        ]
+    )
+
+
 def test_simulate_calibrate_estimate_evaluate(files, capsys) -> None:
     d = files
     assert (
-        main(
-            [
-                "simulate-responses",
-                "--sensitivities",
-                str(d / "cam.csv"),
-                "--illuminants",
-                str(d / "leds.csv"),
-                "--reflectances",
-                str(d / "sg.csv"),
-                "--exposure-target",
-                "0.8",
-                "--illuminants-out",
-                str(d / "L.csv"),
-                "-o",
-                str(d / "R.csv"),
-            ]
+        _simulate(
+            str(d / "cam.csv"),
+            str(d / "leds.csv"),
+            str(d / "sg.csv"),
+            "--exposure-target",
+            "0.8",
+            "--illuminants-out",
+            str(d / "L.csv"),
+            "-o",
+            str(d / "R.csv"),
         )
         == 0
     )
@@ -85,20 +95,14 @@ def test_simulate_calibrate_estimate_evaluate(files, capsys) -> None:
     assert np.sqrt(np.mean((est - true) ** 2)) < 0.03
     target = resource_path("charts", "neugebauer_cmy_model.csv")
     assert (
-        main(
-            [
-                "simulate-responses",
-                "--sensitivities",
-                str(d / "cam.csv"),
-                "--illuminants",
-                str(d / "L.csv"),
-                "--reflectances",
-                str(target),
-                "--seed",
-                "3",
-                "-o",
-                str(d / "T.csv"),
-            ]
+        _simulate(
+            str(d / "cam.csv"),
+            str(d / "L.csv"),
+            str(target),
+            "--seed",
+            "3",
+            "-o",
+            str(d / "T.csv"),
         )
         == 0
     )
@@ -146,19 +150,13 @@ def test_simulate_calibrate_estimate_evaluate(files, capsys) -> None:
 )
 def test_bad_input_is_one_line_exit_2(files, capsys, mutate, fragment) -> None:
     d = files
-    main(
-        [
-            "simulate-responses",
-            "--sensitivities",
-            str(d / "cam.csv"),
-            "--illuminants",
-            str(d / "leds.csv"),
-            "--reflectances",
-            str(d / "sg.csv"),
-            "--no-noise",
-            "-o",
-            str(d / "ok.csv"),
-        ]
+    _simulate(
+        str(d / "cam.csv"),
+        str(d / "leds.csv"),
+        str(d / "sg.csv"),
+        "--no-noise",
+        "-o",
+        str(d / "ok.csv"),
     )
     capsys.readouterr()
     bad = d / "bad.csv"
@@ -186,18 +184,12 @@ def test_bad_input_is_one_line_exit_2(files, capsys, mutate, fragment) -> None:
 def test_short_wavelength_range_is_reported(files, tmp_path, capsys) -> None:
     short = tmp_path / "short.csv"
     short.write_text("wavelength_nm,R,G,B\n420,1,1,1\n700,1,1,1\n")
-    code = main(
-        [
-            "simulate-responses",
-            "--sensitivities",
-            str(short),
-            "--illuminants",
-            str(files / "leds.csv"),
-            "--reflectances",
-            str(files / "sg.csv"),
-            "-o",
-            str(tmp_path / "x.csv"),
-        ]
+    code = _simulate(
+        str(short),
+        str(files / "leds.csv"),
+        str(files / "sg.csv"),
+        "-o",
+        str(tmp_path / "x.csv"),
     )
     err = capsys.readouterr().err
     assert code == 2 and "too short for the grid" in err and str(short) in err
@@ -205,23 +197,17 @@ def test_short_wavelength_range_is_reported(files, tmp_path, capsys) -> None:
 
 def test_more_bad_input_is_one_line_exit_2(files, tmp_path, capsys) -> None:
     d = files
-    main(
-        [
-            "simulate-responses",
-            "--sensitivities",
-            str(d / "cam.csv"),
-            "--illuminants",
-            str(d / "leds.csv"),
-            "--reflectances",
-            str(d / "sg.csv"),
-            "--no-noise",
-            "--exposure-target",
-            "0.8",
-            "--illuminants-out",
-            str(tmp_path / "L.csv"),
-            "-o",
-            str(tmp_path / "R.csv"),
-        ]
+    _simulate(
+        str(d / "cam.csv"),
+        str(d / "leds.csv"),
+        str(d / "sg.csv"),
+        "--no-noise",
+        "--exposure-target",
+        "0.8",
+        "--illuminants-out",
+        str(tmp_path / "L.csv"),
+        "-o",
+        str(tmp_path / "R.csv"),
     )
     capsys.readouterr()
     sg = read_spectra_csv(d / "sg.csv")

@@ -880,7 +880,7 @@ def _read_calibration(folder: Path, chart_root: Path) -> CalibrationResult | Non
     from tunespec.core.stats import STAT_ROWS, PredictionStats
 
     try:
-        doc = json.loads((folder / "calibration.json").read_text())
+        doc = read_json(folder / "calibration.json")
         if not _is_current(doc, chart_root, "calibration"):
             return None
         sensitivity = read_spectra_csv(folder / "sensitivity.csv", allow_negative=True)
@@ -934,7 +934,7 @@ def _read_estimate(folder: Path, sample_root: Path) -> EstimateResult | None:
     from tunespec.devices.workflow import evaluate
 
     try:
-        doc = json.loads((folder / "estimate.json").read_text())
+        doc = read_json(folder / "estimate.json")
         if not _is_current(doc, sample_root, "estimate"):
             return None
         reflectance = read_spectra_csv(folder / "reflectance.csv")
