@@ -48,6 +48,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from tunespec.core.cgats import CgatsTable, ti3_table, write_cgats
 from tunespec.core.colorimetry import lab_d50, xyz_d50
@@ -63,11 +64,13 @@ __all__ = [
     "EXPORT_NAMES",
     "RAWTOACES_GRID",
     "export_measurement",
+    "read_sensitivity_meta",
     "read_spd_shift",
     "reflectance_ti3",
     "sensitivity_meta_path",
     "sensitivity_rawtoaces_document",
     "tunespec_version",
+    "write_colorimetry_csv",
     "write_prediction_stats_csv",
     "write_reflectance_stats_csv",
     "write_sensitivity_json",
@@ -103,7 +106,9 @@ def sensitivity_meta_path(sensitivity_csv: str | PathLike[str]) -> Path:
 
 
 def write_sensitivity_meta(
-    sensitivity_csv: str | PathLike[str], sensitivity: Spectra
+    sensitivity_csv: str | PathLike[str],
+    sensitivity: Spectra,
+    covariance: NDArray[np.float64] | None = None,
 ) -> Path:
     """Write the estimator and the fitted SPD shift beside a sensitivities CSV.
 
@@ -111,12 +116,79 @@ def write_sensitivity_meta(
     fills it (``source``, ``spd_shift_nm``).
     """
     path = sensitivity_meta_path(sensitivity_csv)
-    doc = {
+    doc: dict[str, Any] = {
         "estimated_by": sensitivity.meta.get("source", ""),
         "spd_shift_nm": float(sensitivity.meta.get("spd_shift_nm", 0.0)),
     }
-    path.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+    if "led_correction" in sensitivity.meta:
+        doc["led_correction"] = json.loads(sensitivity.meta["led_correction"])
+    if covariance is not None:
+        wl = sensitivity.wavelength_nm
+        doc["covariance"] = {
+            "parameters": "s_R, s_G, s_B at wavelength_nm, then log gain and "
+            "shift_nm of each LED in led_correction order",
+            "wavelength_nm": [float(x) for x in wl],
+            "values": [[float(f"{v:.7g}") for v in row] for row in covariance],
+        }
+    path.write_text(json.dumps(doc, indent=1, allow_nan=False) + "\n", encoding="utf-8")
     return path
+
+
+#: Columns of the colorimetry CSV written beside estimated reflectances.
+COLORIMETRY_COLUMNS = (
+    "patch", "X", "Y", "Z", "L", "a", "b", "u_X", "u_Y", "u_Z", "u_L", "u_a", "u_b",
+)
+
+
+def write_colorimetry_csv(path: str | PathLike[str], names: tuple[str, ...], unc: Any) -> Path:
+    """CIE XYZ and CIELAB (D50) with their standard uncertainties, one row per patch.
+
+    Columns :data:`COLORIMETRY_COLUMNS`: ``X, Y, Z`` (0-100), ``L, a, b`` and ``u_*``
+    the standard uncertainty of each (k = 1; a 95 % interval is +-1.96 u).
+    ``unc`` is a :class:`tunespec.core.uncertainty.ReflectanceUncertainty`.
+    """
+    path = Path(path)
+    rows = [COLORIMETRY_COLUMNS]
+    for j, name in enumerate(names):
+        vals = [*unc.xyz[j], *unc.lab[j], *unc.xyz_std[j], *unc.lab_std[j]]
+        rows.append((name, *(f"{float(v):.6g}" for v in vals)))
+    with path.open("w", newline="", encoding="utf-8") as fh:
+        csv.writer(fh).writerows(rows)
+    return path
+
+
+def read_sensitivity_meta(sensitivity_csv: str | PathLike[str]) -> dict[str, Any]:
+    """The side file of a sensitivities CSV as a dict (``{}`` when there is none).
+
+    Keys: ``spd_shift_nm``, and from a ``"bayes"`` calibration ``led_correction``
+    and ``covariance`` (an array); ``meta_path`` names the file for messages.
+    """
+    path = sensitivity_meta_path(sensitivity_csv)
+    if not path.exists():
+        return {}
+    doc = read_json(path)
+    if not isinstance(doc, dict):
+        raise InputError("expected a JSON object", path=path)
+    out: dict[str, Any] = {"meta_path": str(path), "spd_shift_nm": read_spd_shift(sensitivity_csv)}
+    if "led_correction" in doc:
+        out["led_correction"] = doc["led_correction"]
+    cov = doc.get("covariance")
+    if cov is not None:
+        try:
+            values = np.asarray(cov["values"], dtype=np.float64)
+            wl = np.asarray(cov["wavelength_nm"], dtype=np.float64)
+        except (KeyError, TypeError, ValueError):
+            raise InputError(
+                "covariance: expected {'wavelength_nm': [...], 'values': [[...]]}",
+                path=path,
+            ) from None
+        if values.ndim != 2 or values.shape[0] != values.shape[1] or not np.all(
+            np.isfinite(values)
+        ):
+            raise InputError("covariance: expected a finite square matrix", path=path)
+        out["covariance"] = values
+        out["covariance_wavelength_nm"] = wl
+    return out
 
 
 def read_spd_shift(sensitivity_csv: str | PathLike[str]) -> float:

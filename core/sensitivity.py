@@ -46,6 +46,8 @@ as a method for choosing a good ridge parameter", Technometrics 21 (1979) 215-22
 
 from __future__ import annotations
 
+import json
+import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -61,6 +63,7 @@ from tunespec.core.errors import InputError, SingularSystemError
 from tunespec.core.forward_model import render_rgb
 from tunespec.core.progress import ProgressFn, StopFn, check_stop, report
 from tunespec.core.responses import CHANNELS, Responses
+from tunespec.core.sensitivity_bayes import LedCorrection, fit_bayes
 from tunespec.core.simulate import check_rgb_sensitivity, check_same_grid
 from tunespec.core.spectra import Grid, Spectra
 
@@ -72,6 +75,8 @@ __all__ = [
     "SMOOTH_RELATIVE_ERROR",
     "SPD_SHIFT_RANGE_NM",
     "SensitivityEstimate",
+    "calibration_from_files",
+    "correct_illuminants_from_meta",
     "correct_spd_shift",
     "database_basis",
     "estimate_camera_sensitivity",
@@ -139,13 +144,28 @@ class SensitivityEstimate:
     params: dict[str, Any] = field(default_factory=dict)
     excluded_patches: tuple[str, ...] = ()
     spd_shift_nm: float = 0.0
+    led_correction: LedCorrection | None = None
+    covariance: NDArray[np.float64] | None = None
+
+    @property
+    def std(self) -> NDArray[np.float64] | None:
+        """Standard uncertainty of each sensitivity sample, (3, n_wl), if known."""
+        if self.covariance is None:
+            return None
+        n = self.sensitivity.wavelength_nm.size
+        return np.sqrt(np.maximum(np.diag(self.covariance)[: 3 * n], 0.0)).reshape(3, n)
 
     def correct_illuminants(self, illuminants: Spectra) -> Spectra:
-        """The illuminant spectra with the fitted wavelength shift undone.
+        """The illuminant spectra with the fitted metering errors undone.
 
-        Returns ``illuminants`` itself when no shift was fitted, else
-        :func:`correct_spd_shift` ``(illuminants, self.spd_shift_nm)``.
+        With a per-LED self-calibration (:attr:`led_correction`) each LED it knows is
+        corrected by its own gain and offset and any other spectrum by the common
+        offset; otherwise the fitted common shift is undone
+        (:func:`correct_spd_shift`). Returns ``illuminants`` itself when nothing was
+        fitted.
         """
+        if self.led_correction is not None:
+            return self.led_correction.apply(illuminants)
         if self.spd_shift_nm == 0.0:
             return illuminants
         return correct_spd_shift(illuminants, self.spd_shift_nm)
@@ -571,6 +591,84 @@ def correct_spd_shift(illuminants: Spectra, spd_shift_nm: float) -> Spectra:
     return illuminants.with_values(values)
 
 
+def correct_illuminants_from_meta(
+    illuminants: Spectra, meta: Mapping[str, Any], spd_shift_nm: float | None = None
+) -> Spectra:
+    """Undo the light source's metering errors that a calibration found.
+
+    The one place that applies them: the per-LED corrections of a ``"bayes"``
+    calibration (``meta["led_correction"]``, a :class:`LedCorrection` as JSON or a
+    dict) or else the common wavelength shift (``spd_shift_nm`` if given, else
+    ``meta["spd_shift_nm"]``). ``meta`` is a sensitivity's ``Spectra.meta`` or the
+    ``.meta.json`` beside a sensitivities CSV.
+
+    Raises
+    ------
+    InputError
+        A malformed correction or shift (naming ``meta["source"]``).
+    """
+    source = meta.get("meta_path") or meta.get("source")
+    doc = meta.get("led_correction")
+    if doc is not None and spd_shift_nm is None:
+        if isinstance(doc, str):
+            try:
+                doc = json.loads(doc)
+            except json.JSONDecodeError:
+                raise InputError("led_correction is not valid JSON", path=source) from None
+        return LedCorrection.from_dict(doc, path=source).apply(illuminants)
+    if spd_shift_nm is None:
+        try:
+            spd_shift_nm = float(meta.get("spd_shift_nm", 0.0))
+        except (TypeError, ValueError):
+            raise InputError("spd_shift_nm is not a number", path=source) from None
+    if not spd_shift_nm:
+        return illuminants
+    return correct_spd_shift(illuminants, spd_shift_nm)
+
+
+def calibration_from_files(
+    sensitivity_csv: str | os.PathLike[str], meta: Mapping[str, Any]
+) -> SensitivityEstimate:
+    """A calibration back from ``calibrate``'s CSV and the side file's ``meta``.
+
+    ``meta`` as :func:`tunespec.core.export.read_sensitivity_meta` returns it; the
+    sensitivities stay on their own grid (the covariance's).
+
+    Raises
+    ------
+    InputError
+        The covariance does not fit the sensitivities and LED corrections.
+    """
+    from tunespec.core.datasets import read_sensitivities
+
+    sens = read_sensitivities(sensitivity_csv)
+    source = meta.get("meta_path")
+    corr = None
+    if "led_correction" in meta:
+        doc = meta["led_correction"]
+        corr = LedCorrection.from_dict(json.loads(doc) if isinstance(doc, str) else doc, path=source)
+    cov = meta.get("covariance")
+    if cov is not None:
+        n_led = len(corr.names) if corr is not None else 0
+        expected = 3 * sens.wavelength_nm.size + 2 * n_led
+        wl = np.asarray(meta.get("covariance_wavelength_nm", sens.wavelength_nm))
+        if cov.shape != (expected, expected) or wl.shape != sens.wavelength_nm.shape or not np.allclose(
+            wl, sens.wavelength_nm
+        ):
+            raise InputError(
+                f"covariance is {cov.shape[0]} x {cov.shape[1]}; the sensitivities and "
+                f"LED corrections need {expected} x {expected} on their grid",
+                path=source,
+            )
+    return SensitivityEstimate(
+        sens,
+        "bayes" if corr is not None else "unknown",
+        spd_shift_nm=float(meta.get("spd_shift_nm", 0.0)),
+        led_correction=corr,
+        covariance=cov,
+    )
+
+
 def _fit_spd_shift(
     problem: _Problem,
     database: dict[str, Spectra],
@@ -828,10 +926,68 @@ def _estimate_sensitivity_smooth(
     return S, params
 
 
-_MethodFn = Callable[..., tuple[NDArray[np.float64], dict[str, Any]]]
+def _estimate_sensitivity_bayes(
+    problem: _Problem,
+    database: dict[str, Spectra],
+    *,
+    fit_shift: bool,
+    self_calibrate: bool,
+    illuminant_names: tuple[str, ...],
+    should_stop: StopFn | None,
+) -> tuple[NDArray[np.float64], dict[str, Any], LedCorrection, NDArray[np.float64]]:
+    """Empirical Bayes with per-LED self-calibration (:mod:`.sensitivity_bayes`).
+
+    The database prior is the subspace of the first :data:`SMOOTH_PRIOR_COMPONENTS`
+    components per channel; its weight, like the smoothness weight, is chosen per
+    calibration by the evidence (0 included), so it is used only when this camera's
+    data support it.
+    """
+    n_p = len(problem.patches)
+    n_i = problem.L.shape[0]
+    bases: list[NDArray[np.float64] | None] = [
+        database_basis(database, k, min(SMOOTH_PRIOR_COMPONENTS, len(database)))[0]
+        if database
+        else None
+        for k in range(3)
+    ]
+    fit = fit_bayes(
+        problem.wavelength_nm,
+        problem.L,
+        problem.R,
+        problem.C.reshape(n_p, n_i, 3),
+        problem.var.reshape(n_p, n_i, 3),
+        problem.step_nm,
+        bases,
+        mode="per-led" if self_calibrate else ("common" if fit_shift else "none"),
+        should_stop=should_stop,
+    )
+    n = problem.wavelength_nm.size
+    sd = np.sqrt(np.maximum(np.diag(fit.covariance), 0.0))
+    correction = LedCorrection(
+        illuminant_names,
+        tuple(float(g) for g in fit.gain),
+        tuple(float(d) for d in fit.shift_nm),
+        fit.shift0_nm,
+        tuple(float(g * u) for g, u in zip(fit.gain, sd[3 * n : 3 * n + n_i], strict=True))
+        if self_calibrate
+        else (),
+        tuple(float(u) for u in sd[3 * n + n_i :]) if self_calibrate else (),
+    )
+    params = {
+        **fit.params,
+        "prior_components": min(SMOOTH_PRIOR_COMPONENTS, len(database)) if database else 0,
+        "relative_error": SMOOTH_RELATIVE_ERROR,
+        "roi_noise_weights": problem.has_roi_noise,
+        "database_size": len(database),
+    }
+    return fit.S, params, correction, fit.covariance
+
+
+_MethodFn = Callable[..., Any]
 
 #: Sensitivity estimation methods by name (colour-science's ``*_METHODS`` pattern).
 SENSITIVITY_METHODS: dict[str, _MethodFn] = {
+    "bayes": _estimate_sensitivity_bayes,
     "pca": _estimate_sensitivity_pca,
     "smooth": _estimate_sensitivity_smooth,
 }
@@ -842,12 +998,13 @@ def estimate_camera_sensitivity(
     illuminants: Spectra,
     reflectances: Spectra,
     *,
-    method: str = "smooth",
+    method: str = "bayes",
     database: Mapping[str, Spectra] | None = None,
     exclude: str | Iterable[str] | None = None,
     n_components: int = 4,
     explained_variance: float | None = None,
     fit_spd_shift: bool | None = None,
+    self_calibrate: bool | None = None,
     progress: ProgressFn | None = None,
     should_stop: StopFn | None = None,
 ) -> SensitivityEstimate:
@@ -949,19 +1106,39 @@ def estimate_camera_sensitivity(
         raise InputError("method 'pca' needs a camera database (it is empty)")
     shift_nm, shift_at_bound = 0.0, False
     if fit_spd_shift is None:
-        fit_spd_shift = method == "smooth"
-    if fit_spd_shift:
+        fit_spd_shift = method in ("smooth", "bayes")
+    if self_calibrate is None:
+        self_calibrate = method == "bayes" and fit_spd_shift
+    elif self_calibrate and method != "bayes":
+        raise InputError(f"per-LED self-calibration needs method 'bayes', not {method!r}")
+    if fit_spd_shift and method != "bayes":
         shift_nm, shift_at_bound = _fit_spd_shift(problem, db, should_stop)
-        problem = problem.shifted(shift_nm)
         report(progress, 0.2)
-    S, params = SENSITIVITY_METHODS[method](
-        problem,
-        db,
-        n_components=n_components,
-        explained_variance=explained_variance,
-        progress=None if progress is None else _scaled(progress, 0.2 * fit_spd_shift),
-        should_stop=should_stop,
-    )
+    correction: LedCorrection | None = None
+    covariance = None
+    if method == "bayes":
+        S, params, correction, covariance = _estimate_sensitivity_bayes(
+            problem,
+            db,
+            fit_shift=bool(fit_spd_shift),
+            self_calibrate=bool(self_calibrate),
+            illuminant_names=tuple(responses.illuminants),
+            should_stop=should_stop,
+        )
+        shift_nm = float(correction.common_shift_nm)
+        shift_at_bound = abs(shift_nm) >= SPD_SHIFT_RANGE_NM
+    else:
+        problem = problem.shifted(shift_nm)
+        S, params = SENSITIVITY_METHODS[method](
+            problem,
+            db,
+            n_components=n_components,
+            explained_variance=explained_variance,
+            progress=None
+            if progress is None
+            else _scaled(progress, 0.2 * fit_spd_shift),
+            should_stop=should_stop,
+        )
     params = {
         **params,
         "n_stimuli": int(problem.C.shape[0]),
@@ -974,14 +1151,18 @@ def estimate_camera_sensitivity(
         "spd_shift_at_bound": shift_at_bound,
     }
     report(progress, 1.0)
-    sens = Spectra(
-        problem.wavelength_nm,
-        S,
-        CHANNELS,
-        {"source": f"estimated ({method})", "spd_shift_nm": repr(shift_nm)},
-    )
+    meta = {"source": f"estimated ({method})", "spd_shift_nm": repr(shift_nm)}
+    if correction is not None:
+        meta["led_correction"] = json.dumps(correction.as_dict())
+    sens = Spectra(problem.wavelength_nm, S, CHANNELS, meta)
     return SensitivityEstimate(
-        sens, method, params, problem.excluded_patches, spd_shift_nm=shift_nm
+        sens,
+        method,
+        params,
+        problem.excluded_patches,
+        spd_shift_nm=shift_nm,
+        led_correction=correction,
+        covariance=covariance,
     )
 
 

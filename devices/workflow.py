@@ -38,7 +38,7 @@ from tunespec.core.processing import ProcessedSession, process_session, write_pr
 from tunespec.core.progress import ProgressFn, StopFn, report
 from tunespec.core.sensitivity import (
     SensitivityEstimate,
-    correct_spd_shift,
+    correct_illuminants_from_meta,
     estimate_camera_sensitivity,
 )
 from tunespec.core.session import Session, atomic_write_text
@@ -405,11 +405,9 @@ def estimate(
     ``sensitivity.meta["spd_shift_nm"]`` (0 when absent).
     """
     prior = prior if prior is not None else load_colorchecker_sg(grid)
-    if spd_shift_nm is None:
-        spd_shift_nm = float(sensitivity.meta.get("spd_shift_nm", 0.0))
-    illuminants = sample.illuminants
-    if spd_shift_nm:
-        illuminants = correct_spd_shift(illuminants, spd_shift_nm)
+    illuminants = correct_illuminants_from_meta(
+        sample.illuminants, sensitivity.meta, spd_shift_nm
+    )
     est = wiener_reflectance(
         sample.responses,
         illuminants.resample(grid),

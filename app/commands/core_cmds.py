@@ -12,9 +12,9 @@ import numpy as np
 from tunespec.app.cli import add_grid_option, progress_bar
 from tunespec.core.datasets import read_sensitivities
 from tunespec.core.errors import InputError
-from tunespec.core.export import read_spd_shift, write_sensitivity_meta
+from tunespec.core.export import read_sensitivity_meta, write_sensitivity_meta
 from tunespec.core.responses import Responses, read_responses_csv, write_responses_csv
-from tunespec.core.spectra import Spectra, read_spectra_csv, write_spectra_csv
+from tunespec.core.spectra import Grid, Spectra, read_spectra_csv, write_spectra_csv
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -201,7 +201,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         fit, illuminants, reflectances, progress=progress_bar("calibrating"), **kwargs
     )
     write_spectra_csv(est.sensitivity, args.output)
-    write_sensitivity_meta(args.output, est.sensitivity)
+    write_sensitivity_meta(args.output, est.sensitivity, est.covariance)
     report = calibration_report(
         est, responses, illuminants, reflectances, held_out_patches=held
     )
@@ -210,6 +210,14 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     print(report.format_text())
     if est.spd_shift_nm:
         print(f"spectroradiometer wavelength shift fitted: {est.spd_shift_nm:+.2f} nm")
+    corr = est.led_correction
+    if corr is not None and corr.gain_std:
+        print("light source self-calibration (gain, wavelength offset per LED):")
+        for j, name in enumerate(corr.names):
+            print(
+                f"  {name:<12} gain {corr.gain[j]:.4f} +- {corr.gain_std[j]:.4f}   "
+                f"offset {corr.shift_nm[j]:+.2f} +- {corr.shift_std_nm[j]:.2f} nm"
+            )
     print(f"sensitivities written to {args.output}")
     _write_json(
         args.stats,
@@ -225,17 +233,14 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
 def cmd_estimate(args: argparse.Namespace) -> int:
     from tunespec.core.datasets import load_colorchecker_sg
-    from tunespec.core.sensitivity import correct_spd_shift
+    from tunespec.core.sensitivity import correct_illuminants_from_meta
     from tunespec.core.wiener import wiener_reflectance
 
     responses = read_responses_csv(args.responses)
-    illuminants = read_spectra_csv(args.illuminants, args.grid)
+    reported = read_spectra_csv(args.illuminants, args.grid)
     sensitivity = read_sensitivities(args.sensitivities, args.grid)
-    shift_nm = args.spd_shift_nm
-    if shift_nm is None:
-        shift_nm = read_spd_shift(args.sensitivities)
-    if shift_nm:
-        illuminants = correct_spd_shift(illuminants, shift_nm)
+    meta = read_sensitivity_meta(args.sensitivities)
+    illuminants = correct_illuminants_from_meta(reported, meta, args.spd_shift_nm)
     prior = (
         read_spectra_csv(args.prior, args.grid)
         if args.prior
@@ -251,6 +256,8 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         clip=not args.no_clip,
     )
     write_spectra_csv(est.reflectance, args.output)
+    if "covariance" in meta and args.spd_shift_nm is None and args.noise_std is None:
+        _write_uncertainty(args, est, responses, prior, meta)
     if est.clipped:
         print(
             f"clipped to [0, 1]: {est.n_clipped_samples} sample(s) in "
@@ -259,6 +266,27 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         )
     print(f"{len(est.reflectance)} reflectances written to {args.output}")
     return 0
+
+
+def _write_uncertainty(
+    args: argparse.Namespace, est: Any, responses: Responses, prior: Spectra, meta: dict
+) -> None:
+    """Standard uncertainties beside the reflectances (see the README's formats)."""
+    from tunespec.core.export import write_colorimetry_csv
+    from tunespec.core.sensitivity import calibration_from_files
+    from tunespec.core.uncertainty import reflectance_uncertainty
+
+    calibration = calibration_from_files(args.sensitivities, meta)
+    wl = calibration.sensitivity.wavelength_nm
+    reported = read_spectra_csv(
+        args.illuminants, Grid(float(wl[0]), float(wl[-1]), calibration.sensitivity.step_nm)
+    )
+    unc = reflectance_uncertainty(est, responses, reported, calibration, prior)
+    u_path = args.output.with_name(args.output.stem + "_uncertainty.csv")
+    write_spectra_csv(est.reflectance.with_values(unc.reflectance_std), u_path)
+    lab_path = args.output.with_name(args.output.stem + "_colorimetry.csv")
+    write_colorimetry_csv(lab_path, est.reflectance.names, unc)
+    print(f"standard uncertainties written to {u_path} and {lab_path}")
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:

@@ -213,9 +213,9 @@ def cmd_report(args: argparse.Namespace) -> int:
 def _table1_from_files(
     args: argparse.Namespace, data: dict[str, Any], grid: Grid | None
 ) -> Any:
-    from tunespec.core.export import read_spd_shift
+    from tunespec.core.export import read_sensitivity_meta
     from tunespec.core.forward_model import render_rgb
-    from tunespec.core.sensitivity import correct_spd_shift
+    from tunespec.core.sensitivity import correct_illuminants_from_meta
     from tunespec.core.stats import prediction_stats
 
     need = [n for n in ("sensitivity", "illuminants", "responses") if n not in data]
@@ -238,9 +238,8 @@ def _table1_from_files(
     # The SPD shift fitted with the sensitivities (their .meta.json) is undone on the
     # LED spectra, as 'calibrate' did for its Table 1 and 'estimate' does.
     if args.sensitivities.suffix.lower() != ".json":
-        shift_nm = read_spd_shift(args.sensitivities)
-        if shift_nm:
-            illum = correct_spd_shift(illum, shift_nm)
+        meta = read_sensitivity_meta(args.sensitivities)
+        illum = correct_illuminants_from_meta(illum, meta)
     sens = sens.resample(work, source=str(args.sensitivities))
     predicted = render_rgb(chart.values, illum.values, sens.values, work.step_nm)
     return prediction_stats(responses.rgb, predicted)

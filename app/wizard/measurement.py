@@ -34,7 +34,7 @@ from tunespec.app.settings import AppSettings
 from tunespec.app.workers import DeviceContext, DeviceController
 from tunespec.core.datasets import resource_path
 from tunespec.core.errors import InputError, read_json
-from tunespec.core.export import read_spd_shift, write_sensitivity_meta
+from tunespec.core.export import read_sensitivity_meta, write_sensitivity_meta
 from tunespec.core.layout import TargetLayout
 from tunespec.core.progress import Cancelled, ProgressFn, StopFn, check_stop
 from tunespec.core.spectra import (
@@ -884,12 +884,15 @@ def _read_calibration(folder: Path, chart_root: Path) -> CalibrationResult | Non
         if not _is_current(doc, chart_root, "calibration"):
             return None
         sensitivity = read_spectra_csv(folder / "sensitivity.csv", allow_negative=True)
-        shift = repr(read_spd_shift(folder / "sensitivity.csv"))
+        side = read_sensitivity_meta(folder / "sensitivity.csv")
+        extra = {"spd_shift_nm": repr(side.get("spd_shift_nm", 0.0))}
+        if "led_correction" in side:
+            extra["led_correction"] = json.dumps(side["led_correction"])
         sensitivity = Spectra(
             sensitivity.wavelength_nm,
             sensitivity.values,
             sensitivity.names,
-            {**sensitivity.meta, "spd_shift_nm": shift},
+            {**sensitivity.meta, **extra},
         )
         t = doc["table1"]
         table1 = PredictionStats(

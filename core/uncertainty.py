@@ -1,0 +1,411 @@
+"""Standard uncertainty of estimated reflectances and their D50 colorimetry.
+
+Three sources of error reach a Wiener estimate ``r = m + W (c - F m)``,
+``W = K F' (F K F' + K_e)^-1`` (Eq. 5):
+
+1. what the responses cannot see: the part of the reflectance outside what the
+   camera and the LEDs resolve, drawn from the prior (mean ``m``, covariance ``K``);
+2. the noise of the responses: photon and read noise of the ROI mean
+   (``rgb_std^2 / n_pixels``) and the flat-field residual of Eq. 2
+   (:data:`FLAT_FIELD_RESIDUAL` of the response);
+3. the calibration: the joint covariance ``Sigma`` of the sensitivities and the
+   light-source corrections (:attr:`SensitivityEstimate.covariance`) moves the
+   responses by ``J Sigma J'`` with ``J = d c / d theta`` at the estimate (Eq. 1
+   differentiated).
+
+For the linear estimator actually used (whatever ``K_e`` Eq. 6 gave it), the error
+covariance is the sandwich::
+
+    E = (I - W F) K (I - W F)' + W (N + J Sigma J') W'
+
+with ``N`` the true response noise covariance. ``E`` is propagated to CIE XYZ (D50,
+ASTM E308 weights, exactly linear) and to CIELAB by the Jacobian of the CIELAB
+formulas (first order, as GUM Supplement 2 / JCGM 102 allows for small
+uncertainties).
+
+References
+----------
+Trichromatic Reflectance Capture Using a Tunable Light Source (the paper in
+``shared/reference``), Eq. 1, 5 and 6. JCGM 100:2008 (GUM), Sec. 5 (law of propagation
+of uncertainty); JCGM 102:2011 (GUM Supplement 2, multivariate models).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tunespec.core.colorimetry import astm_e308_weights_d50, xyz_to_lab_d50
+from tunespec.core.errors import InputError
+from tunespec.core.forward_model import lighting_matrix
+from tunespec.core.responses import Responses
+from tunespec.core.sensitivity import SensitivityEstimate
+from tunespec.core.sensitivity_bayes import _corrected
+from tunespec.core.spectra import Spectra
+from tunespec.core.wiener import WienerEstimate, _prior_moments
+
+__all__ = [
+    "FLAT_FIELD_RESIDUAL",
+    "ReflectanceUncertainty",
+    "calibration_response_covariance",
+    "fit_generic_prior",
+    "lab_covariance",
+    "matern32",
+    "reflectance_uncertainty",
+]
+
+#: Relative standard deviation of a response that flat-fielding (Eq. 2) leaves: the
+#: irradiance ratio between white reference and target is known to about 0.3 %.
+FLAT_FIELD_RESIDUAL = 0.003
+#: Correlation lengths (nm) tried for the generic prior component (Matern 3/2).
+GENERIC_LENGTHS_NM = (10.0, 20.0, 40.0, 80.0)
+#: Standard deviations tried for it (reflectance units).
+GENERIC_SIGMAS = np.concatenate([[0.0], np.logspace(-3.0, np.log10(0.3), 15)])
+_CHUNK = 256
+
+
+def matern32(
+    wavelength_nm: NDArray[np.float64], length_nm: float
+) -> NDArray[np.float64]:
+    """Matern-3/2 correlation matrix of a spectrum on ``wavelength_nm``.
+
+    ``k(d) = (1 + sqrt(3) d / l) exp(-sqrt(3) d / l)`` (Rasmussen & Williams 2006,
+    Eq. 4.17): once differentiable curves, as reflectances are.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> K = matern32(np.array([400.0, 410.0]), 10.0)
+    >>> round(float(K[0, 1]), 4)
+    0.4834
+    """
+    d = (
+        np.abs(wavelength_nm[:, None] - wavelength_nm[None, :])
+        * np.sqrt(3.0)
+        / length_nm
+    )
+    return (1.0 + d) * np.exp(-d)
+
+
+def fit_generic_prior(
+    F: NDArray[np.float64],
+    K: NDArray[np.float64],
+    mean: NDArray[np.float64],
+    rgb: NDArray[np.float64],
+    noise: NDArray[np.float64],
+    wavelength_nm: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], float]:
+    """How far each measured target reaches beyond the prior: ``(sigma_p, length_nm)``.
+
+    The prior reflectances (e.g. the SG's 140) span fewer spectra than the world;
+    the error of a Wiener estimate outside that span is what the prior cannot
+    predict. For each target the prior covariance is widened to ``K + sigma_p^2 M_l``
+    with ``M_l`` a Matern-3/2 correlation (:func:`matern32`): ``l`` maximises the
+    marginal likelihood of the measured responses of the whole batch,
+    ``c_p - F m ~ N(0, F (K + sigma_p^2 M_l) F' + N_p)``, and ``sigma_p`` that of
+    each target's own responses -- a target unlike the prior widens its own
+    interval, one like it keeps ``sigma_p = 0``. No reference values are used.
+
+    Parameters
+    ----------
+    F : (3 n_i, n_wl)
+    K : (n_wl, n_wl), mean (n_wl,)
+    rgb : (n_p, 3 n_i)
+    noise : (n_p, 3 n_i, 3 n_i)
+        Response covariance of each target (noise and calibration).
+    wavelength_nm : (n_wl,)
+
+    Returns
+    -------
+    sigma : (n_p,)
+    length_nm : float
+    """
+    y = rgb - F @ mean
+    base = F @ K @ F.T
+    best_total, best = np.inf, (np.zeros(rgb.shape[0]), GENERIC_LENGTHS_NM[0])
+    for length in GENERIC_LENGTHS_NM:
+        FMF = F @ matern32(wavelength_nm, length) @ F.T
+        nll = np.full((GENERIC_SIGMAS.size, rgb.shape[0]), np.inf)
+        for j, sigma in enumerate(GENERIC_SIGMAS):
+            for lo in range(0, rgb.shape[0], _CHUNK):
+                hi = min(lo + _CHUNK, rgb.shape[0])
+                C = base[None] + sigma**2 * FMF[None] + noise[lo:hi]
+                try:
+                    Lc = np.linalg.cholesky(C)
+                except np.linalg.LinAlgError:
+                    continue
+                z = np.linalg.solve(Lc, y[lo:hi, :, None])[..., 0]
+                nll[j, lo:hi] = np.sum(z**2, axis=1) + 2.0 * np.sum(
+                    np.log(np.diagonal(Lc, axis1=1, axis2=2)), axis=1
+                )
+        pick = np.argmin(nll, axis=0)
+        total = float(np.sum(nll[pick, np.arange(rgb.shape[0])]))
+        if total < best_total:
+            best_total, best = total, (GENERIC_SIGMAS[pick], float(length))
+    return best
+
+
+@dataclass(frozen=True, eq=False)
+class ReflectanceUncertainty:
+    """Uncertainties of a :class:`~tunespec.core.wiener.WienerEstimate`.
+
+    ``covariance`` (n_p, n_wl, n_wl) of the reflectance error; ``reflectance_std``
+    (n_p, n_wl) its diagonal's root; ``xyz``, ``lab`` (n_p, 3) of the (clipped)
+    estimate under D50 and ``xyz_std``, ``lab_std`` (n_p, 3) their standard
+    uncertainties; ``lab_covariance`` (n_p, 3, 3).
+    """
+
+    covariance: NDArray[np.float64]
+    reflectance_std: NDArray[np.float64]
+    xyz: NDArray[np.float64]
+    xyz_std: NDArray[np.float64]
+    lab: NDArray[np.float64]
+    lab_std: NDArray[np.float64]
+    lab_covariance: NDArray[np.float64]
+    generic_sigma: NDArray[np.float64] | None = None
+    generic_length_nm: float = 0.0
+
+
+def _hold_resample(
+    wl_from: NDArray[np.float64],
+    values: NDArray[np.float64],
+    wl_to: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    return np.stack([np.interp(wl_to, wl_from, v) for v in values])
+
+
+def calibration_response_covariance(
+    calibration: SensitivityEstimate,
+    illuminants: Spectra,
+    reflectance: Spectra,
+) -> NDArray[np.float64]:
+    """Covariance of the responses that the calibration's uncertainty causes.
+
+    ``J Sigma J'`` per sample, with ``J`` the derivative of Eq. 1 with respect to
+    the sensitivities, the LEDs' log gains and their wavelength offsets, at the
+    given reflectances.
+
+    Parameters
+    ----------
+    calibration
+        With :attr:`~SensitivityEstimate.covariance` (method ``"bayes"``).
+    illuminants : Spectra, (n_i, n_wl')
+        The target capture's spectra as the light source reported them (not
+        corrected), any grid covering the calibration's.
+    reflectance : Spectra, (n_p, n_wl'')
+        The (estimated) reflectances, any grid; held constant beyond its ends.
+
+    Returns
+    -------
+    (n_p, 3 n_i, 3 n_i)
+        Rows illuminant-major ``(i1 R, i1 G, i1 B, i2 R, ...)`` as Eq. 5's ``c``.
+
+    Raises
+    ------
+    InputError
+        If the calibration carries no covariance.
+    """
+    cov = calibration.covariance
+    if cov is None:
+        raise InputError(
+            f"the {calibration.method!r} calibration carries no uncertainty; "
+            "calibrate with method 'bayes'"
+        )
+    sens = calibration.sensitivity
+    wl = sens.wavelength_nm
+    step = sens.step_nm
+    n = wl.size
+    rep = _hold_resample(illuminants.wavelength_nm, illuminants.values, wl)
+    corr = calibration.led_correction
+    names = list(illuminants.names)
+    n_i = len(names)
+    gains = np.ones(n_i)
+    shifts = np.full(n_i, calibration.spd_shift_nm)
+    rows = np.full(n_i, -1)
+    if corr is not None:
+        index = {name: j for j, name in enumerate(corr.names)}
+        for j, name in enumerate(names):
+            if name in index:
+                rows[j] = index[name]
+                gains[j] = corr.gain[index[name]]
+                shifts[j] = corr.shift_nm[index[name]]
+            else:
+                shifts[j] = corr.common_shift_nm
+    Lc, dL = _corrected(wl, rep, gains, shifts)
+    R = _hold_resample(reflectance.wavelength_nm, reflectance.values, wl)
+    n_p = R.shape[0]
+    # Sigma = U U' (U from the eigen-decomposition, rank <= its size).
+    e, V = np.linalg.eigh(cov)
+    keep = e > e.max() * 1e-14
+    U = V[:, keep] * np.sqrt(e[keep])
+    N = U.shape[1]
+    S = sens.values
+    n_led = len(corr.names) if corr is not None else 0
+    out = np.empty((n_p, 3 * n_i, 3 * n_i))
+    for lo in range(0, n_p, _CHUNK):
+        hi = min(lo + _CHUNK, n_p)
+        A = R[lo:hi, None, :] * Lc[None] * step  # (P, n_i, n)
+        dA = R[lo:hi, None, :] * dL[None] * step
+        JU = np.empty((hi - lo, n_i, 3, N))
+        pred = np.einsum("pil,kl->pik", A, S)
+        dpred = np.einsum("pil,kl->pik", dA, S)
+        for k in range(3):
+            JU[:, :, k, :] = (A.reshape(-1, n) @ U[k * n : (k + 1) * n]).reshape(
+                hi - lo, n_i, N
+            )
+        for j in range(n_i):
+            if rows[j] >= 0 and cov.shape[0] > 3 * n:
+                ug = U[3 * n + rows[j]]
+                ud = U[3 * n + n_led + rows[j]]
+                JU[:, j, :, :] += pred[:, j, :, None] * ug + dpred[:, j, :, None] * ud
+        JU = JU.reshape(hi - lo, 3 * n_i, N)
+        out[lo:hi] = JU @ JU.transpose(0, 2, 1)
+    return out
+
+
+def lab_covariance(
+    xyz: NDArray[np.float64], xyz_cov: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """CIELAB (ICC D50 white) covariance from an XYZ covariance, first order.
+
+    The Jacobian of :func:`~tunespec.core.colorimetry.xyz_to_lab_d50` is taken by
+    central differences (step 1e-4 of Y = 100), which is exact to ~1e-8 for these
+    smooth formulas.
+
+    Parameters
+    ----------
+    xyz : (n, 3)
+    xyz_cov : (n, 3, 3)
+
+    Returns
+    -------
+    (n, 3, 3)
+    """
+    h = 1e-4
+    J = np.empty((xyz.shape[0], 3, 3))
+    for j in range(3):
+        d = np.zeros(3)
+        d[j] = h
+        J[:, :, j] = (xyz_to_lab_d50(xyz + d) - xyz_to_lab_d50(xyz - d)) / (2 * h)
+    return J @ xyz_cov @ J.transpose(0, 2, 1)
+
+
+def reflectance_uncertainty(
+    wiener: WienerEstimate,
+    responses: Responses,
+    illuminants: Spectra,
+    calibration: SensitivityEstimate,
+    prior: Spectra,
+) -> ReflectanceUncertainty:
+    """Error covariance of a Wiener estimate, with the calibration's uncertainty.
+
+    Parameters
+    ----------
+    wiener
+        The estimate, computed by :func:`~tunespec.core.wiener.wiener_reflectance`
+        with ``calibration.correct_illuminants(illuminants)`` and
+        ``calibration.sensitivity``, both on the estimate's grid, and ``prior``.
+    responses
+        The responses it was computed from (``rgb_std`` and ``n_pixels`` give the
+        noise; without them only the calibration and prior terms count).
+    illuminants
+        The target capture's spectra as reported (uncorrected), any grid covering
+        the calibration's.
+    calibration
+        The sensitivity estimate; its covariance (``"bayes"``) adds the
+        calibration term, else that term is left out.
+    prior
+        The prior reflectances the estimate used.
+
+    Returns
+    -------
+    ReflectanceUncertainty
+    """
+    refl = wiener.reflectance
+    wl = refl.wavelength_nm
+    step = refl.step_nm
+    p = wiener.params
+    corrected = calibration.correct_illuminants(illuminants)
+    L = _hold_resample(
+        corrected.wavelength_nm, corrected.select(responses.illuminants).values, wl
+    )
+    S = _hold_resample(
+        calibration.sensitivity.wavelength_nm, calibration.sensitivity.values, wl
+    )
+    F = lighting_matrix(L, S, step)
+    m_rows = F.shape[0]
+    pv = _hold_resample(prior.wavelength_nm, prior.values, wl)
+    _, K = _prior_moments(pv, bool(p.get("center_prior", True)))
+    n_p = len(responses.patches)
+    used = wiener.noise_variance.reshape(n_p, m_rows)
+    rgb = responses.rgb.reshape(n_p, m_rows)
+    true_var = (FLAT_FIELD_RESIDUAL * rgb) ** 2
+    if responses.rgb_std is not None:
+        n_pix = (
+            responses.n_pixels
+            if responses.n_pixels is not None
+            else np.ones(responses.rgb.shape[:2])
+        )
+        true_var = true_var + (responses.rgb_std**2 / n_pix[..., None]).reshape(
+            n_p, m_rows
+        )
+    if responses.saturated is not None:
+        sat = (np.nan_to_num(responses.saturated, nan=0.0) > 0)[..., None]
+        true_var = np.where(
+            np.broadcast_to(sat, responses.rgb.shape).reshape(n_p, m_rows),
+            0.0,
+            true_var,
+        )
+    cal = None
+    if calibration.covariance is not None:
+        unclipped = Spectra(wl, np.clip(refl.values, 0.0, 1.5), refl.names)
+        cal = calibration_response_covariance(
+            calibration, illuminants.select(responses.illuminants), unclipped
+        )
+    noise_all = np.zeros((n_p, m_rows, m_rows))
+    idx = np.arange(m_rows)
+    noise_all[:, idx, idx] = true_var
+    if cal is not None:
+        noise_all += cal
+    mean, _ = _prior_moments(pv, bool(p.get("center_prior", True)))
+    sigma, length = fit_generic_prior(F, K, mean, rgb, noise_all, wl)
+    IM = matern32(wl, length)
+    FK = F @ K
+    G = FK @ F.T
+    n = wl.size
+    cov = np.empty((n_p, n, n))
+    eye = np.eye(n)
+    for lo in range(0, n_p, _CHUNK):
+        hi = min(lo + _CHUNK, n_p)
+        A = np.repeat(G[None], hi - lo, axis=0)
+        A[:, idx, idx] += used[lo:hi]
+        # W' = A^-1 F K  (A symmetric), W = (A^-1 F K)'
+        Wt = np.linalg.solve(A, np.broadcast_to(FK, (hi - lo, *FK.shape)))
+        W = Wt.transpose(0, 2, 1)
+        IWF = eye - W @ F
+        E = (
+            IWF
+            @ (K[None] + sigma[lo:hi, None, None] ** 2 * IM[None])
+            @ IWF.transpose(0, 2, 1)
+        )
+        E += W @ noise_all[lo:hi] @ Wt
+        cov[lo:hi] = 0.5 * (E + E.transpose(0, 2, 1))
+    T = astm_e308_weights_d50(wl)  # (n, 3), XYZ = r @ T
+    xyz = refl.values @ T
+    xyz_cov = T.T[None] @ cov @ T[None]
+    lab = xyz_to_lab_d50(xyz)
+    lab_cov = lab_covariance(xyz, xyz_cov)
+    std = np.sqrt(np.maximum(np.diagonal(cov, axis1=1, axis2=2), 0.0))
+    return ReflectanceUncertainty(
+        covariance=cov,
+        reflectance_std=std,
+        xyz=xyz,
+        xyz_std=np.sqrt(np.maximum(np.diagonal(xyz_cov, axis1=1, axis2=2), 0.0)),
+        lab=lab,
+        lab_std=np.sqrt(np.maximum(np.diagonal(lab_cov, axis1=1, axis2=2), 0.0)),
+        lab_covariance=lab_cov,
+        generic_sigma=sigma,
+        generic_length_nm=length,
+    )
