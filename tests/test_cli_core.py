@@ -14,6 +14,7 @@ from tunespec.core.datasets import (
     load_led_set,
     resource_path,
 )
+from tunespec.core.export import COLORIMETRY_COLUMNS
 from tunespec.core.spectra import read_spectra_csv, write_spectra_csv
 
 
@@ -122,6 +123,16 @@ def test_simulate_calibrate_estimate_evaluate(files, capsys) -> None:
         )
         == 0
     )
+    # the 'bayes' calibration carries a covariance: uncertainties beside the estimate
+    assert len(meta["led_correction"]["leds"]) == 22
+    unc = read_spectra_csv(d / "E_uncertainty.csv")
+    assert unc.names == read_spectra_csv(d / "E.csv").names
+    assert np.all(unc.values > 0) and np.all(unc.values < 0.2)
+    rows = (d / "E_colorimetry.csv").read_text().splitlines()
+    assert rows[0].split(",") == list(COLORIMETRY_COLUMNS)
+    assert len(rows) == 1 + len(unc.names)
+    u_lab = np.array([[float(x) for x in r.split(",")[10:13]] for r in rows[1:]])
+    assert np.all(u_lab > 0.005) and np.all(u_lab < 3.0)
     assert (
         main(
             [

@@ -32,7 +32,20 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument(
         "--reflectances", required=True, type=Path, help="chart reflectances"
     )
-    p.add_argument("--method", choices=sorted(SENSITIVITY_METHODS), default="smooth")
+    p.add_argument(
+        "--method",
+        choices=sorted(SENSITIVITY_METHODS),
+        default="bayes",
+        help="bayes (default): evidence-chosen priors and per-LED self-calibration "
+        "with uncertainties; smooth: the previous default; pca: the paper's Eq. 4",
+    )
+    p.add_argument(
+        "--self-calibrate",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="bayes: fit each LED's gain and wavelength offset with the sensitivities "
+        "(default on); saved in OUTPUT.meta.json and applied by 'tunespec estimate'",
+    )
     p.add_argument("--components", type=int, default=4, help="pca: components (4)")
     p.add_argument(
         "--explained-variance",
@@ -50,7 +63,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         action=argparse.BooleanOptionalAction,
         default=None,
         help="also fit the spectroradiometer's wavelength shift (default: on for "
-        "smooth, off for pca); saved beside the output as OUTPUT.meta.json, where "
+        "bayes and smooth, off for pca); saved beside the output as OUTPUT.meta.json, where "
         "'tunespec estimate' picks it up",
     )
     p.add_argument(
@@ -193,6 +206,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         "exclude": args.exclude_camera,
         "fit_spd_shift": args.fit_spd_shift,
     }
+    if args.self_calibrate is not None:
+        kwargs["self_calibrate"] = args.self_calibrate
     if args.method == "pca":
         # explained_variance, when given, takes precedence over n_components.
         kwargs["n_components"] = args.components
