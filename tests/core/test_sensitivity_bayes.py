@@ -52,7 +52,7 @@ def bench():
         np.stack(
             [
                 np.interp(wl - d, wl, v) * g
-                for v, d, g in zip(leds.values, shifts, gains)
+                for v, d, g in zip(leds.values, shifts, gains, strict=True)
             ]
         )
     )
