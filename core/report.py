@@ -187,6 +187,15 @@ class ReportData:
         Export kind to file; relative paths are linked from the HTML.
     notes
         Free text shown under the summary.
+    sensitivity_std : (3, n_wl)
+        Standard uncertainty of ``sensitivity`` (same units); drawn as a 95 % band.
+    reflectance_std : (n, n_wl)
+        Standard uncertainty of ``reflectance``; drawn as a 95 % band.
+    lab, lab_std : (n, 3)
+        CIELAB (D50) of ``reflectance`` and its standard uncertainty (a table).
+    led_correction
+        :class:`tunespec.core.sensitivity_bayes.LedCorrection`: the light source's
+        per-LED corrections found by the calibration (a table).
     """
 
     title: str = "TuneSpec measurement report"
@@ -197,6 +206,11 @@ class ReportData:
     illuminants: Spectra | None = None
     sensitivity: Spectra | None = None
     sensitivity_reference: Spectra | None = None
+    sensitivity_std: NDArray[np.float64] | None = None
+    reflectance_std: NDArray[np.float64] | None = None
+    lab: NDArray[np.float64] | None = None
+    lab_std: NDArray[np.float64] | None = None
+    led_correction: Any = None
     sensitivity_reference_label: str = "reference"
     sensitivity_method: str | None = None
     reflectance: Spectra | None = None
@@ -432,16 +446,21 @@ def _sensitivity_figure(report: ReportData) -> Figure:
     fig = _new_figure((_A4_LANDSCAPE_IN[0], 5.0), margins_in=(0.8, 1.7, 0.6, 0.4))
     ax = fig.add_subplot()
     ref = report.sensitivity_reference
-    for name, v in zip(est.names, _peak_normalised(est), strict=True):
+    peak = float(np.max(est.values)) or 1.0
+    for k, (name, v) in enumerate(zip(est.names, _peak_normalised(est), strict=True)):
         c = _CHANNEL_COLOURS.get(name)
         ax.plot(est.wavelength_nm, v, color=c, lw=1.8, label=f"{name} estimated")
+        if report.sensitivity_std is not None:
+            u = 1.96 * report.sensitivity_std[k] / peak
+            ax.fill_between(est.wavelength_nm, v - u, v + u, color=c, alpha=0.25, lw=0)
     if ref is not None:
         for name, v in zip(ref.names, _peak_normalised(ref), strict=True):
             c = _CHANNEL_COLOURS.get(name)
             label = f"{name} {report.sensitivity_reference_label}"
             ax.plot(ref.wavelength_nm, v, color=c, lw=1.2, ls="--", label=label)
     method = f" ({report.sensitivity_method})" if report.sensitivity_method else ""
-    ax.set_title(f"Estimated camera sensitivities{method}, normalised to peak 1")
+    band = ", 95 % bands" if report.sensitivity_std is not None else ""
+    ax.set_title(f"Estimated camera sensitivities{method}, normalised to peak 1{band}")
     ax.set_xlabel("wavelength (nm)")
     ax.set_ylabel("relative sensitivity")
     ax.set_xlim(est.wavelength_nm[0], est.wavelength_nm[-1])
@@ -539,13 +558,25 @@ def _patch_grid_figures(report: ReportData) -> Iterator[tuple[str, Figure]]:
         fig = _new_figure((_A4_LANDSCAPE_IN[0], height), margins_in=None)
         ax = fig.add_axes((0.035, 0.55 / height, 0.955, 1 - 1.15 / height))
         ax.set_axis_off()
-        est_lines, ref_lines, frames, grid = [], [], [], []
+        est_lines, ref_lines, frames, grid, bands = [], [], [], [], []
         for pos, i in enumerate(chunk):
             r, c = divmod(pos, cols)
             x0, y0 = c * (1 + gap_x), (rows - 1 - r) * (1 + gap_y)
             x = x0 + (wl - wl[0]) / span
             name = names[i]
             est_lines.append(np.column_stack([x, y0 + est.values[i] / y_top]))
+            if report.reflectance_std is not None:
+                u = 1.96 * report.reflectance_std[i]
+                lo = np.clip(est.values[i] - u, 0.0, y_top) / y_top
+                hi = np.clip(est.values[i] + u, 0.0, y_top) / y_top
+                bands.append(
+                    np.concatenate(
+                        [
+                            np.column_stack([x, y0 + lo]),
+                            np.column_stack([x, y0 + hi])[::-1],
+                        ]
+                    )
+                )
             if ref is not None and name in ref.names:
                 xr = x0 + (ref.wavelength_nm - wl[0]) / span
                 keep = (xr >= x0 - 1e-9) & (xr <= x0 + 1 + 1e-9)
@@ -575,6 +606,12 @@ def _patch_grid_figures(report: ReportData) -> Iterator[tuple[str, Figure]]:
             ax.text(x0, y0 + 1.03, title, fontsize=6.5, va="bottom", ha="left")
         ax.add_collection(LineCollection(grid, colors="0.88", linewidths=0.5))
         ax.add_collection(LineCollection(frames, colors="0.55", linewidths=0.6))
+        if bands:
+            from matplotlib.collections import PolyCollection
+
+            ax.add_collection(
+                PolyCollection(bands, facecolors="0.55", edgecolors="none", alpha=0.35)
+            )
         ax.add_collection(LineCollection(est_lines, colors="black", linewidths=1.1))
         if ref_lines:
             ax.add_collection(
@@ -585,6 +622,12 @@ def _patch_grid_figures(report: ReportData) -> Iterator[tuple[str, Figure]]:
         ax.set_xlim(-0.02, cols * (1 + gap_x) - gap_x + 0.02)
         ax.set_ylim(-0.04, rows * (1 + gap_y) - gap_y + 0.22)
         handles = [Line2D([], [], color="black", lw=1.1, label="estimated")]
+        if bands:
+            handles.append(
+                Rectangle(
+                    (0, 0), 1, 1, facecolor="0.55", alpha=0.35, label="95 % interval"
+                )
+            )
         if ref_lines:
             handles.append(
                 Line2D([], [], color="tab:red", lw=0.9, ls="--", label="reference")
@@ -707,6 +750,51 @@ def _result_tables(report: ReportData) -> list[_Table]:
         tables.append(_table1(held, title, paper=False))
     if report.table2 is not None:
         tables.append(_table2(report.table2))
+    if (
+        report.lab is not None
+        and report.lab_std is not None
+        and report.reflectance is not None
+    ):
+        rows = tuple(
+            (
+                name,
+                *(
+                    f"{report.lab[i, j]:.2f} ± {1.96 * report.lab_std[i, j]:.2f}"
+                    for j in range(3)
+                ),
+            )
+            for i, name in enumerate(report.reflectance.names)
+        )
+        tables.append(
+            _Table(
+                "CIELAB (D50) with 95 % intervals",
+                ("Patch", "L*", "a*", "b*"),
+                rows,
+                note="± is the expanded uncertainty (k = 1.96): sensor noise, the "
+                "flat-field residual, the calibration (sensitivities and light-source "
+                "corrections) and what the LEDs cannot resolve, propagated to first order.",
+            )
+        )
+    corr = report.led_correction
+    if corr is not None and corr.gain_std:
+        rows = tuple(
+            (
+                name,
+                f"{corr.gain[j]:.4f} ± {corr.gain_std[j]:.4f}",
+                f"{corr.shift_nm[j]:+.2f} ± {corr.shift_std_nm[j]:.2f}",
+            )
+            for j, name in enumerate(corr.names)
+        )
+        tables.append(
+            _Table(
+                "Light source self-calibration (per LED)",
+                ("LED", "Gain (true / reported)", "Wavelength offset (nm)"),
+                rows,
+                note="Fitted with the sensitivities, the chart's reflectances as the "
+                "reference; applied to the sample's spectra. ± is one standard "
+                f"uncertainty; common offset {corr.common_shift_nm:+.2f} nm.",
+            )
+        )
     return tables
 
 

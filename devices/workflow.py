@@ -32,7 +32,11 @@ import numpy as np
 from tunespec.core.colorimetry import ReflectanceStats, reflectance_stats
 from tunespec.core.datasets import load_colorchecker_sg, resource_path
 from tunespec.core.errors import InputError
-from tunespec.core.export import export_measurement
+from tunespec.core.export import (
+    export_measurement,
+    write_colorimetry_csv,
+    write_sensitivity_meta,
+)
 from tunespec.core.layout import TargetLayout
 from tunespec.core.processing import ProcessedSession, process_session, write_processed
 from tunespec.core.progress import ProgressFn, StopFn, report
@@ -42,8 +46,15 @@ from tunespec.core.sensitivity import (
     estimate_camera_sensitivity,
 )
 from tunespec.core.session import Session, atomic_write_text
-from tunespec.core.spectra import DEFAULT_GRID, Grid, Spectra, read_spectra_csv
+from tunespec.core.spectra import (
+    DEFAULT_GRID,
+    Grid,
+    Spectra,
+    read_spectra_csv,
+    write_spectra_csv,
+)
 from tunespec.core.stats import CalibrationReport, PredictionStats, calibration_report
+from tunespec.core.uncertainty import ReflectanceUncertainty, reflectance_uncertainty
 from tunespec.core.wiener import WienerEstimate, wiener_reflectance
 from tunespec.devices.capture import FrameCallback, capture, new_session
 from tunespec.devices.registry import (
@@ -136,6 +147,7 @@ class Estimation:
 
     wiener: WienerEstimate
     table2: ReflectanceStats | None = None
+    uncertainty: ReflectanceUncertainty | None = None
 
     @property
     def reflectance(self) -> Spectra:
@@ -396,13 +408,17 @@ def estimate(
     reference: Spectra | None = None,
     grid: Grid = ESTIMATION_GRID,
     spd_shift_nm: float | None = None,
+    calibration: SensitivityEstimate | None = None,
 ) -> Estimation:
     """Wiener reflectances of the sample (Eq. 5-6; prior default: the SG) and Table 2.
 
     ``spd_shift_nm`` is the spectroradiometer's wavelength shift fitted at calibration
     (``SensitivityEstimate.spd_shift_nm``); the sample's SPDs come from the same
     instrument, so it is undone on them too. ``None`` takes it from
-    ``sensitivity.meta["spd_shift_nm"]`` (0 when absent).
+    ``sensitivity.meta`` (the per-LED corrections of a ``"bayes"`` calibration, else
+    its common shift; :func:`~tunespec.core.sensitivity.correct_illuminants_from_meta`).
+    With ``calibration`` carrying a covariance, the standard uncertainties of the
+    reflectances and their CIELAB are computed too (:mod:`tunespec.core.uncertainty`).
     """
     prior = prior if prior is not None else load_colorchecker_sg(grid)
     illuminants = correct_illuminants_from_meta(
@@ -415,7 +431,12 @@ def estimate(
         prior.resample(grid),
     )
     table2 = None if reference is None else evaluate(est.reflectance, reference)
-    return Estimation(est, table2)
+    unc = None
+    if calibration is not None and calibration.covariance is not None:
+        unc = reflectance_uncertainty(
+            est, sample.responses, sample.illuminants, calibration, prior.resample(grid)
+        )
+    return Estimation(est, table2, unc)
 
 
 def evaluate(estimated: Spectra, reference: Spectra) -> ReflectanceStats:
@@ -466,6 +487,23 @@ def export(
             model=cam.get("model", ""),
         )
     )
+    if calibration.estimate.covariance is not None:
+        write_sensitivity_meta(
+            files["sensitivities_csv"],
+            calibration.sensitivity,
+            calibration.estimate.covariance,
+        )
+    unc = estimation.uncertainty
+    if unc is not None:
+        names = estimation.reflectance.names
+        files["reflectances_uncertainty_csv"] = out / "reflectances_uncertainty.csv"
+        write_spectra_csv(
+            estimation.reflectance.with_values(unc.reflectance_std),
+            files["reflectances_uncertainty_csv"],
+        )
+        files["colorimetry_csv"] = write_colorimetry_csv(
+            out / "colorimetry.csv", names, unc
+        )
     if report:
         from tunespec.core.report import ReportData, write_report
 
@@ -485,6 +523,11 @@ def export(
             responses=chart.responses,
             excluded_patches=tuple(calibration.estimate.excluded_patches),
             clipped_patches=tuple(estimation.wiener.clipped),
+            sensitivity_std=calibration.estimate.std,
+            reflectance_std=None if unc is None else unc.reflectance_std,
+            lab=None if unc is None else unc.lab,
+            lab_std=None if unc is None else unc.lab_std,
+            led_correction=calibration.estimate.led_correction,
             flags=tuple(warnings),
             exports={k: p.name for k, p in files.items()},
         )
@@ -675,6 +718,7 @@ def _run(
             prior=prior,
             reference=reference,
             grid=estimation_grid,
+            calibration=cal.estimate,
         ),
     )
     truth: dict[str, Any] = {}
