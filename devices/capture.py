@@ -38,6 +38,7 @@ from tunespec.core.session import (
     FrameRecord,
     FrameSpec,
     Session,
+    SessionLock,
     with_exposures,
 )
 from tunespec.core.spectra import Spectra
@@ -428,12 +429,51 @@ def capture(
     InputError
         A session that already holds frames without ``resume``; channels the light
         source does not have.
+    SessionBusyError
+        Another process is capturing into the session (its lock names it); a lock
+        left by a killed capture is taken over, with a warning in the result.
     DeviceError
         From the devices; frames committed before it stay in the session.
     Cancelled
         When ``should_stop()`` turns true.
     """
-    retake = list(retake)
+    with SessionLock(session.root) as lock:
+        session.reload()
+        result = _capture_locked(
+            session,
+            light,
+            camera,
+            stage,
+            resume=resume,
+            retake=list(retake),
+            max_exposure_s=max_exposure_s,
+            progress=progress,
+            should_stop=should_stop,
+            on_frame=on_frame,
+        )
+    if lock.stale_holder is not None:
+        holder = lock.stale_holder
+        note = (
+            f"took over the lock of an interrupted capture (pid {holder.get('pid')} "
+            f"on {holder.get('host')}, started {holder.get('started_utc')})"
+        )
+        result = replace(result, warnings=(note, *result.warnings))
+    return result
+
+
+def _capture_locked(
+    session: Session,
+    light: LightSource,
+    camera: Camera,
+    stage: TargetStage,
+    *,
+    resume: bool,
+    retake: list[str],
+    max_exposure_s: float,
+    progress: ProgressFn | None,
+    should_stop: StopFn | None,
+    on_frame: FrameCallback | None,
+) -> CaptureResult:
     if session.frames and not (resume or retake):
         raise InputError(
             "the session already holds frames; resume it (--resume) or start a new one",

@@ -10,7 +10,7 @@ from pathlib import Path
 from tunespec.app.cli import progress_bar
 from tunespec.core.errors import InputError
 from tunespec.core.layout import TargetLayout
-from tunespec.core.session import Session
+from tunespec.core.session import Session, SessionLock
 
 __all__ = ["register"]
 
@@ -213,10 +213,19 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 
 def cmd_capture(args: argparse.Namespace) -> int:
+    resume = args.resume or bool(args.retake)
+    exists = (args.out / "manifest.json").is_file()
+    if resume and not exists:
+        raise InputError("no session to resume here", path=args.out)
+    # held from before the session is created until the capture ends
+    with SessionLock(args.out):
+        return _capture_cmd(args, resume)
+
+
+def _capture_cmd(args: argparse.Namespace, resume: bool) -> int:
     from tunespec.devices.capture import capture, new_session
     from tunespec.devices.registry import open_bench
 
-    resume = args.resume or bool(args.retake)
     exists = (args.out / "manifest.json").is_file()
     if exists and not resume:
         raise InputError(
