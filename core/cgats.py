@@ -71,6 +71,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tunespec.core.errors import InputError
+from tunespec.core.limits import MAX_ROWS, MAX_VALUE, read_bytes, shown
 from tunespec.core.spectra import Spectra
 
 __all__ = [
@@ -529,7 +530,8 @@ def write_cgats(table: CgatsTable, path: str | PathLike[str]) -> Path:
 
 
 def _count(tokens: list[tuple[str, bool]], *, path: str | None, lineno: int) -> int:
-    if len(tokens) != 2 or not tokens[1][0].isdigit():
+    t = tokens[1][0] if len(tokens) == 2 else ""
+    if not (t.isascii() and t.isdigit() and len(t) <= len(str(MAX_ROWS))):
         raise InputError(
             f"{tokens[0][0]} needs one non-negative integer", path=path, line=lineno
         )
@@ -647,6 +649,10 @@ def parse_cgats(text: str, *, source: str | None = None) -> CgatsTable:
                     path=path,
                     line=lineno,
                 )
+            if len(rows) >= MAX_ROWS:
+                raise InputError(
+                    f"more than {MAX_ROWS} data sets", path=path, line=lineno
+                )
             rows.append(tuple(t for t, _ in tokens))
             row_lines.append(lineno)
             quoted.update(j for j, (_, q) in enumerate(tokens) if q)
@@ -685,10 +691,17 @@ def parse_cgats(text: str, *, source: str | None = None) -> CgatsTable:
             if not _NUMBER.match(r[j]):
                 if must_be_number:
                     raise InputError(
-                        f"{name}: not a number: {r[j]!r}", path=path, line=lineno
+                        f"{name}: not a number: {shown(r[j])}", path=path, line=lineno
                     )
                 text_fields.add(name)
                 break
+            if not abs(float(r[j])) <= MAX_VALUE:
+                raise InputError(
+                    f"{name}: {shown(r[j])} is out of range (at most {MAX_VALUE:g} in "
+                    "magnitude)",
+                    path=path,
+                    line=lineno,
+                )
     assert file_id is not None
     return CgatsTable(
         file_id, keywords, tuple(fields), tuple(rows), frozenset(text_fields), source
@@ -715,12 +728,7 @@ def read_cgats(path: str | PathLike[str]) -> CgatsTable:
         (its own ``ref/ColorChecker.ti2`` declares 9 fields and lists 8).
     """
     path = Path(path)
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise InputError("file not found", path=path) from None
-    except OSError as exc:
-        raise InputError(f"cannot read: {exc}", path=path) from None
+    raw = read_bytes(path)
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError:

@@ -39,7 +39,6 @@ Tables 1 and 2; rawtoaces-data camera schema (``resources/cameras/SOURCE.md``).
 from __future__ import annotations
 
 import csv
-import json
 import uuid
 from collections.abc import Mapping
 from datetime import UTC, datetime
@@ -52,6 +51,7 @@ import numpy as np
 from tunespec.core.cgats import CgatsTable, ti3_table, write_cgats
 from tunespec.core.colorimetry import lab_d50, xyz_d50
 from tunespec.core.errors import InputError, read_json
+from tunespec.core.limits import dumps_json
 from tunespec.core.responses import Responses, write_responses_csv
 from tunespec.core.spectra import Grid, Spectra, write_spectra_csv
 
@@ -115,7 +115,7 @@ def write_sensitivity_meta(
         "estimated_by": sensitivity.meta.get("source", ""),
         "spd_shift_nm": float(sensitivity.meta.get("spd_shift_nm", 0.0)),
     }
-    path.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+    path.write_text(dumps_json(doc), encoding="utf-8")
     return path
 
 
@@ -303,7 +303,7 @@ def write_sensitivity_json(
     doc = sensitivity_rawtoaces_document(sensitivity, **header)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(doc, indent=4) + "\n", encoding="utf-8")
+    path.write_text(dumps_json(doc, indent=4), encoding="utf-8")
     return path
 
 

@@ -53,6 +53,7 @@ from typing import Any
 
 from tunespec.core.errors import InputError, read_json
 from tunespec.core.layout import TargetLayout
+from tunespec.core.limits import dumps_json, valid_name, valid_number
 from tunespec.core.spectra import Spectra, read_spectra_csv, write_spectra_csv
 
 __all__ = [
@@ -462,6 +463,15 @@ class CaptureSettings:
                 raise InputError(
                     f"bad capture settings: {key} must be an object", path=source
                 )
+        if len(channels) > MAX_CHANNELS:
+            raise InputError(
+                f"bad capture settings: {len(channels)} channels, at most "
+                f"{MAX_CHANNELS}",
+                path=source,
+            )
+        for c in channels:
+            valid_name(c, "settings.channels", path=source)
+        _check_setting_numbers(d, source)
         keys = set(cls.__dataclass_fields__)
         try:
             return cls(**{k: v for k, v in d.items() if k in keys})
@@ -469,6 +479,44 @@ class CaptureSettings:
             raise InputError(f"bad capture settings: {exc}", path=source) from None
         except InputError as exc:
             raise InputError(exc.message, path=source) from None
+
+
+#: Limits of a manifest's settings (far beyond any real session).
+MAX_CHANNELS = 256
+MAX_DARKS = 100
+MAX_BRACKETS = 16
+MAX_ISO = 10_000_000
+MANIFEST_MAX_EXPOSURE_S = 1e5
+MAX_FRAMES = 100_000
+
+
+def _check_setting_numbers(d: Mapping[str, Any], source: Any) -> None:
+    """Types and ranges of the numbers in a manifest's settings (one-line errors)."""
+
+    def check(value: Any, key: str, **kw: Any) -> None:
+        valid_number(value, f"settings.{key}", path=source, **kw)
+
+    check(d.get("iso", 100), "iso", lo=1, hi=MAX_ISO, integer=True)
+    check(d.get("n_darks", 1), "n_darks", lo=1, hi=MAX_DARKS, integer=True)
+    check(d.get("target_level", 0.75), "target_level", lo=0.05, hi=0.95)
+    factors = d.get("bracket_factors", [1.0])
+    if not isinstance(factors, list | tuple) or not 1 <= len(factors) <= MAX_BRACKETS:
+        raise InputError(
+            f"settings.bracket_factors: expected 1 to {MAX_BRACKETS} numbers",
+            path=source,
+        )
+    for f in factors:
+        check(f, "bracket_factors", lo=0, hi=1, lo_open=True)
+    for key in ("exposures_s", "requested_s"):
+        for ch, ts in dict(d.get(key, {})).items():
+            if not isinstance(ts, list | tuple) or len(ts) > MAX_BRACKETS:
+                raise InputError(
+                    f"settings.{key}.{ch}: expected a list of seconds", path=source
+                )
+            for t in ts:
+                check(t, f"{key}.{ch}", lo=0, hi=MANIFEST_MAX_EXPOSURE_S, lo_open=True)
+    for ch, v in dict(d.get("levels", {})).items():
+        check(v, f"levels.{ch}", lo=0, hi=1)
 
 
 def plan_frames(settings: CaptureSettings) -> list[FrameSpec]:
@@ -723,11 +771,19 @@ class Session:
         # not later with a traceback from whatever reads the bad field first
         if not isinstance(m.get("frames"), list):
             raise InputError("damaged manifest: 'frames' must be a list", path=path)
+        if len(m["frames"]) > MAX_FRAMES:
+            raise InputError(
+                f"damaged manifest: more than {MAX_FRAMES} frames", path=path
+            )
         for key in ("devices", "meta"):
             if not isinstance(m.get(key, {}), dict):
                 raise InputError(
                     f"damaged manifest: {key!r} must be an object", path=path
                 )
+        if not all(isinstance(v, dict) for v in m.get("devices", {}).values()):
+            raise InputError(
+                "damaged manifest: each of 'devices' must be an object", path=path
+            )
         if "settings" not in m:
             raise InputError("damaged manifest: no 'settings'", path=path)
         records = [FrameRecord.from_dict(d, source=str(path)) for d in m["frames"]]
@@ -761,7 +817,7 @@ class Session:
         state, so they never disagree.
         """
         m = self._m if manifest is None else manifest
-        atomic_write_text(self.manifest_path, json.dumps(m, indent=1) + "\n")
+        atomic_write_text(self.manifest_path, dumps_json(m, indent=1))
         self._m = m
 
     def _edited(self) -> dict[str, Any]:

@@ -32,6 +32,7 @@ from urllib.parse import parse_qs
 from tunespec.core.datasets import resource_path
 from tunespec.core.errors import InputError
 from tunespec.core.layout import TargetLayout
+from tunespec.core.limits import contained_path, shown
 from tunespec.core.spectra import DEFAULT_GRID, Grid, Spectra, read_spectra_csv
 from tunespec.devices.clock import Clock, RealClock, VirtualClock
 from tunespec.devices.protocols import Camera, LightSource, TargetStage
@@ -113,7 +114,8 @@ def layout_reflectances(
     """The patch reflectances a layout names in ``meta["reflectances"]``.
 
     A path is looked up relative to the layout file, then in the shipped resources
-    (``"charts/colorchecker_sg.csv"``).
+    (``"charts/colorchecker_sg.csv"``); it must stay inside one of them (no absolute
+    paths, no ``..`` out of them).
 
     Raises
     ------
@@ -126,14 +128,19 @@ def layout_reflectances(
             f"layout {layout.name!r} names no reflectances (meta.reflectances); the "
             "simulated camera needs them"
         )
-    candidates = []
+    bases = [resource_path()]
     if layout_path is not None:
-        candidates.append(Path(layout_path).parent / ref)
-    candidates.append(Path(ref))
+        bases.insert(0, Path(layout_path).parent)
+    # a path written in a file stays inside that file's folder or the resources
+    candidates = contained_path(ref, "meta.reflectances", bases=bases, path=layout_path)
     for c in candidates:
         if c.is_file():
             return read_spectra_csv(c, grid)
-    return read_spectra_csv(resource_path(*Path(ref).parts), grid)
+    raise InputError(
+        f"meta.reflectances: {shown(ref)} not found beside the layout or in the "
+        "shipped resources",
+        path=layout_path,
+    )
 
 
 def sim_scene(

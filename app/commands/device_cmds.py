@@ -13,6 +13,7 @@ import sys
 import threading
 from typing import TextIO
 
+from tunespec.app.cli import seed_arg
 from tunespec.core.errors import InputError
 from tunespec.core.spectra import read_spectra_csv
 from tunespec.devices.cal1.emulator import Cal1Emulator
@@ -52,7 +53,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "instead of the shipped 22-LED CAL1 model",
     )
     cal1.add_argument(
-        "--seed", type=int, default=0, help="unit and noise seed (default 0)"
+        "--seed", type=seed_arg, default=0, help="unit and noise seed (default 0)"
     )
     cal1.add_argument(
         "--warm",
