@@ -60,6 +60,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections import Counter
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -71,7 +72,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tunespec.core.errors import InputError
-from tunespec.core.limits import MAX_ROWS, MAX_VALUE, read_bytes, shown
+from tunespec.core.limits import MAX_COLUMNS, MAX_ROWS, MAX_VALUE, read_bytes, shown
 from tunespec.core.spectra import Spectra
 
 __all__ = [
@@ -344,7 +345,8 @@ class CgatsTable:
             return self.fields.index(name)
         except ValueError:
             raise InputError(
-                f"no field {name!r}; fields: {' '.join(self.fields)}", path=self.source
+                f"no field {shown(name)}; fields: {' '.join(self.fields)[:200]}",
+                path=self.source,
             ) from None
 
     def text_column(self, name: str) -> tuple[str, ...]:
@@ -558,10 +560,16 @@ def _take_fields(
 
 def _check_fields(fields: list[str], *, path: str | None, lineno: int) -> None:
     """Field names as :class:`CgatsTable` needs them, or an error naming the line."""
+    if len(fields) > MAX_COLUMNS:
+        raise InputError(
+            f"{len(fields)} fields, at most {MAX_COLUMNS}", path=path, line=lineno
+        )
     for name in fields:
-        if not _BARE_TOKEN.match(name) or name in _RESERVED:
-            raise InputError(f"bad CGATS field name {name!r}", path=path, line=lineno)
-    dup = sorted({f for f in fields if fields.count(f) > 1})
+        if not _BARE_TOKEN.match(name) or name in _RESERVED or len(name) > 256:
+            raise InputError(
+                f"bad CGATS field name {shown(name)}", path=path, line=lineno
+            )
+    dup = sorted(f for f, k in Counter(fields).items() if k > 1)
     if dup:
         raise InputError(f"duplicate field(s) {', '.join(dup)}", path=path, line=lineno)
 
@@ -626,7 +634,7 @@ def parse_cgats(text: str, *, source: str | None = None) -> CgatsTable:
                 raise InputError(f"unexpected {first}", path=path, line=lineno)
             elif tokens[0][1]:
                 raise InputError(
-                    f"expected a keyword, found the string {first!r}",
+                    f"expected a keyword, found the string {shown(first)}",
                     path=path,
                     line=lineno,
                 )
@@ -645,7 +653,7 @@ def parse_cgats(text: str, *, source: str | None = None) -> CgatsTable:
             if len(tokens) != len(fields):
                 raise InputError(
                     f"{len(tokens)} values, expected {len(fields)} (one per field: "
-                    f"{' '.join(fields[:6])}{' ...' if len(fields) > 6 else ''})",
+                    f"{' '.join(fields[:6])[:80]}{' ...' if len(fields) > 6 else ''})",
                     path=path,
                     line=lineno,
                 )

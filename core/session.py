@@ -53,7 +53,7 @@ from typing import Any
 
 from tunespec.core.errors import InputError, read_json
 from tunespec.core.layout import TargetLayout
-from tunespec.core.limits import dumps_json, valid_name, valid_number
+from tunespec.core.limits import MAX_NAME_CHARS, dumps_json, shown, valid_number
 from tunespec.core.spectra import Spectra, read_spectra_csv, write_spectra_csv
 
 __all__ = [
@@ -406,7 +406,7 @@ class CaptureSettings:
             raise InputError("capture settings: channels must be unique and non-empty")
         if self.exposure_mode not in EXPOSURE_MODES:
             raise InputError(
-                f"capture settings: exposure_mode {self.exposure_mode!r}, expected "
+                f"capture settings: exposure_mode {shown(self.exposure_mode)}, expected "
                 f"one of {', '.join(EXPOSURE_MODES)}"
             )
         f = self.bracket_factors
@@ -470,7 +470,12 @@ class CaptureSettings:
                 path=source,
             )
         for c in channels:
-            valid_name(c, "settings.channels", path=source)
+            if not _safe_name(c):
+                raise InputError(
+                    f"bad capture settings: channel {shown(c)} must be a short name "
+                    "without path separators",
+                    path=source,
+                )
         _check_setting_numbers(d, source)
         keys = set(cls.__dataclass_fields__)
         try:
@@ -622,12 +627,12 @@ class FrameRecord:
             raise InputError(f"bad frame record: {exc}", path=source) from None
         if rec.kind not in FRAME_KINDS or rec.status not in ("ok", "bad"):
             raise InputError(
-                f"frame {rec.id!r}: bad kind {rec.kind!r} or status {rec.status!r}",
+                f"frame {shown(rec.id)}: bad kind {shown(rec.kind)} or status {shown(rec.status)}",
                 path=source,
             )
         problem = _record_problem(rec)
         if problem:
-            raise InputError(f"frame {rec.id!r}: {problem}", path=source)
+            raise InputError(f"frame {shown(rec.id)}: {problem}", path=source)
         return rec
 
 
@@ -641,24 +646,27 @@ def _record_problem(rec: FrameRecord) -> str:
     def real(v: object) -> bool:
         return isinstance(v, int | float) and not isinstance(v, bool)
 
-    if not isinstance(rec.id, str) or not rec.id:
-        return "id must be a non-empty string"
-    if rec.channel is not None and not isinstance(rec.channel, str):
-        return "channel must be a string or null"
+    if not _safe_name(rec.id):
+        return "id must be a short name without path separators"
+    if rec.channel is not None and not _safe_name(rec.channel):
+        return "channel must be a short name without path separators, or null"
     if not (real(rec.exposure_s) and math.isfinite(rec.exposure_s)):
-        return f"exposure_s must be a number, got {rec.exposure_s!r}"
-    if not (rec.exposure_s > 0):
-        return f"exposure_s must be > 0, got {rec.exposure_s!r}"
-    for name in ("iso", "bracket"):
+        return f"exposure_s must be a number, got {shown(rec.exposure_s)}"
+    if not (0 < rec.exposure_s <= MANIFEST_MAX_EXPOSURE_S):
+        return (
+            f"exposure_s must be in (0, {MANIFEST_MAX_EXPOSURE_S:g}], got "
+            f"{shown(rec.exposure_s)}"
+        )
+    for name, hi in (("iso", MAX_ISO), ("bracket", MAX_BRACKETS)):
         v = getattr(rec, name)
-        if not isinstance(v, int) or isinstance(v, bool) or v < 0:
-            return f"{name} must be a non-negative integer, got {v!r}"
+        if not isinstance(v, int) or isinstance(v, bool) or not 0 <= v <= hi:
+            return f"{name} must be an integer in [0, {hi}], got {shown(v)}"
     for name in ("file", "spd_file"):
         v = getattr(rec, name)
         if v is None and name == "spd_file":
             continue
         if not isinstance(v, str) or not _inside_session(v):
-            return f"{name} must be a path inside the session folder, got {v!r}"
+            return f"{name} must be a path inside the session folder, got {shown(v)}"
     for name in ("sha256", "spd_sha256"):
         v = getattr(rec, name)
         if not (isinstance(v, str) or (v is None and name == "spd_sha256")):
@@ -668,11 +676,22 @@ def _record_problem(rec: FrameRecord) -> str:
     return ""
 
 
+def _safe_name(name: object) -> bool:
+    """A frame id or channel name: short, one line, usable inside a file name."""
+    return (
+        isinstance(name, str)
+        and 0 < len(name) <= MAX_NAME_CHARS
+        and not name.startswith(".")
+        and not any(c in name for c in "/\\\x00\n\r:")
+    )
+
+
 def _inside_session(rel: str) -> bool:
-    """True for a relative path that stays inside the session folder."""
+    """True for a short relative path that stays inside the session folder."""
     p = PurePosixPath(rel.replace("\\", "/"))
     return (
-        bool(rel)
+        0 < len(rel) <= 1024
+        and all(len(part.encode()) <= 255 for part in p.parts)
         and not p.is_absolute()
         and not PureWindowsPath(rel).anchor
         and ".." not in p.parts
@@ -760,7 +779,7 @@ class Session:
             )
         version = m.get("version", 0)
         if not isinstance(version, int) or isinstance(version, bool):
-            raise InputError(f"bad session version {version!r}", path=path)
+            raise InputError(f"bad session version {shown(version)}", path=path)
         if version > SESSION_VERSION:
             raise InputError(
                 f"session version {version} is newer than this TuneSpec "
@@ -920,6 +939,12 @@ class Session:
         recorded when the frame was committed; an SPD recorded without a checksum
         (older sessions) must at least be readable.
         """
+        try:
+            return self._problem(record, checksums)
+        except OSError as exc:  # a folder where a file was, a link loop, ...
+            return f"files of frame {record.id} cannot be read ({exc.strerror})"
+
+    def _problem(self, record: FrameRecord, checksums: bool) -> str:
         path = self.path_of(record)
         if not path.is_file():
             return f"raw file {record.file} is missing"

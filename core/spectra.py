@@ -97,7 +97,7 @@ class Grid:
             start, end, step = (float(p) for p in parts)
         except ValueError:
             raise InputError(
-                f"bad grid {text!r}: expected START:END:STEP in nm, e.g. 400:700:10"
+                f"bad grid {shown(text)}: expected START:END:STEP in nm, e.g. 400:700:10"
             ) from None
         return cls(start, end, step)
 

@@ -67,10 +67,10 @@ def parse_resolution(text: str) -> tuple[int, int]:
         w, h = (int(v) for v in text.lower().split("x"))
     except ValueError:
         raise InputError(
-            f"bad resolution {text!r}: expected WIDTHxHEIGHT, e.g. 768x512"
+            f"bad resolution {shown(text)}: expected WIDTHxHEIGHT, e.g. 768x512"
         ) from None
     if w < 64 or h < 64 or w % 2 or h % 2:
-        raise InputError(f"bad resolution {text!r}: even, at least 64x64")
+        raise InputError(f"bad resolution {shown(text)}: even, at least 64x64")
     return w, h
 
 
@@ -101,7 +101,7 @@ def open_light_source(
 
         return open_cal1(spec)
     raise InputError(
-        f"unknown light source {spec!r}: use sim, cal1:///dev/ttyUSB0 or "
+        f"unknown light source {shown(spec)}: use sim, cal1:///dev/ttyUSB0 or "
         "cal1+socket://HOST:PORT"
     )
 
@@ -206,7 +206,7 @@ def open_camera(
         unknown = set(opts) - {"resolution", "seed", "realtime"}
         if unknown:
             raise InputError(
-                f"bad camera spec {spec!r}: unknown option(s) {sorted(unknown)}"
+                f"bad camera spec {shown(spec)}: unknown option(s) {sorted(unknown)}"
             )
         res = resolution or parse_resolution(
             opts.get("resolution", "{}x{}".format(*DEFAULT_SIM_RESOLUTION))
@@ -215,7 +215,7 @@ def open_camera(
             seed_value = int(opts.get("seed", "0")) if seed is None else int(seed)
         except ValueError:
             raise InputError(
-                f"bad camera spec {spec!r}: seed must be an integer"
+                f"bad camera spec {shown(spec)}: seed must be an integer"
             ) from None
         rt = (
             opts.get("realtime", "0") in ("1", "true", "yes")
@@ -239,7 +239,7 @@ def open_camera(
         from tunespec.devices.canon.gphoto2_camera import Gphoto2Camera
 
         return Gphoto2Camera.open(spec)
-    raise InputError(f"unknown camera {spec!r}: use sim, gphoto2 or gphoto2:PORT")
+    raise InputError(f"unknown camera {shown(spec)}: use sim, gphoto2 or gphoto2:PORT")
 
 
 class OperatorStage:

@@ -78,6 +78,7 @@ __all__ = [
     "capture_sample",
     "capture_target",
     "chart_layout",
+    "check_config",
     "estimate",
     "evaluate",
     "export",
@@ -845,7 +846,7 @@ def load_config(path: str | PathLike[str]) -> dict[str, Any]:
     for key, value in cfg.items():
         if key not in known:
             raise InputError(
-                f"unknown section {key!r} (known: {', '.join(known)})", path=path
+                f"unknown section {shown(key)} (known: {', '.join(known)})", path=path
             )
         allowed = known[key]
         if allowed is not None:
@@ -878,7 +879,7 @@ def run_config(
     """
     cfg = dict(config) if isinstance(config, Mapping) else load_config(config)
     base = Path(cfg.get("_path", ".")).parent if "_path" in cfg else Path(".")
-    _check_config(cfg)
+    check_config(cfg)
 
     def rel(p: str | None) -> Path | None:
         return None if p is None else (base / p)
@@ -922,10 +923,11 @@ def run_config(
     brackets = cap.get("brackets", [1.0])
     if not isinstance(brackets, list | tuple):
         raise InputError(
-            f"capture.brackets: expected a list of numbers, got {brackets!r}", path=src
+            f"capture.brackets: expected a list of numbers, got {shown(brackets)}",
+            path=src,
         )
     seed = _cfg_int(bench_cfg.get("seed", 0), "bench.seed", src)
-    out = check_output_dir(base / str(cfg.get("out", "run")), "out")
+    out = base / str(cfg.get("out", "run"))
     t0 = time.perf_counter()
     with open_bench(
         light,
@@ -964,14 +966,14 @@ def run_config(
 def _cfg_number(value: Any, key: str, source: str | None) -> float:
     """A configuration value that must be a number (one-line error otherwise)."""
     if isinstance(value, bool) or not isinstance(value, int | float):
-        raise InputError(f"{key}: expected a number, got {value!r}", path=source)
+        raise InputError(f"{key}: expected a number, got {shown(value)}", path=source)
     return float(value)
 
 
 def _cfg_int(value: Any, key: str, source: str | None) -> int:
     """A configuration value that must be an integer (one-line error otherwise)."""
     if isinstance(value, bool) or not isinstance(value, int):
-        raise InputError(f"{key}: expected an integer, got {value!r}", path=source)
+        raise InputError(f"{key}: expected an integer, got {shown(value)}", path=source)
     return value
 
 
@@ -985,8 +987,16 @@ _CONFIG_STRINGS = {
 }
 
 
-def _check_config(cfg: Mapping[str, Any]) -> None:
-    """One-line errors for sections that are not tables or text keys that are not text."""
+def check_config(cfg: Mapping[str, Any]) -> None:
+    """Check every value of a configuration before anything runs.
+
+    Raises
+    ------
+    InputError
+        Naming the file and the key: a section that is not a table, a text key that
+        is not text, a bad seed, resolution, exposure, bracket, ISO, method or grid,
+        or an ``out`` that is an existing file.
+    """
     src = cfg.get("_path")
     for section, keys in _CONFIG_STRINGS.items():
         table = cfg.get(section, {})
@@ -996,11 +1006,16 @@ def _check_config(cfg: Mapping[str, Any]) -> None:
             value = table.get(key)
             if value is not None and not isinstance(value, str):
                 raise InputError(
-                    f"{section}.{key}: expected a string, got {value!r}", path=src
+                    f"{section}.{key}: expected a string, got {shown(value)}", path=src
                 )
     out = cfg.get("out", "run")
     if not isinstance(out, str | PathLike):
         raise InputError(f"out: expected a folder name, got {shown(out)}", path=src)
+    base = Path(src).parent if src else Path(".")
+    try:
+        check_output_dir(base / out, "out")
+    except InputError as exc:
+        raise InputError(exc.message, path=src) from None
     # every value checked before anything is captured (a typo must not cost a chart)
     bench = cfg.get("bench", {})
     valid_seed(bench.get("seed", 0), "bench.seed", path=src)
@@ -1049,5 +1064,6 @@ def _check_config(cfg: Mapping[str, Any]) -> None:
     report_files = cfg.get("export", {}).get("report", True)
     if not isinstance(report_files, bool):
         raise InputError(
-            f"export.report: expected true or false, got {report_files!r}", path=src
+            f"export.report: expected true or false, got {shown(report_files)}",
+            path=src,
         )
