@@ -12,8 +12,9 @@ light source spec                opens
 camera spec                      opens
 ===============================  ==================================================
 ``sim[?resolution=WxH&seed=N     :class:`~tunespec.devices.sim.camera.SimCamera`
-&realtime=1]``                   imaging a :class:`SimScene` (needs a simulated
-                                 light source: it renders with the true SPD)
+&realtime=1]``                   imaging a :class:`SimScene` (renders with the true
+                                 SPD of a simulated light, or with what another
+                                 light source reports: :class:`ReportedSpdLight`)
 ``gphoto2``, ``gphoto2:PORT``    a Canon EOS over USB (``gphoto2:usb:001,004``)
 ===============================  ==================================================
 
@@ -41,6 +42,7 @@ __all__ = [
     "DEFAULT_SIM_RESOLUTION",
     "Bench",
     "OperatorStage",
+    "ReportedSpdLight",
     "layout_reflectances",
     "open_bench",
     "open_camera",
@@ -242,6 +244,37 @@ def open_camera(
     raise InputError(f"unknown camera {shown(spec)}: use sim, gphoto2 or gphoto2:PORT")
 
 
+class ReportedSpdLight:
+    """What a simulated camera sees of a real light source: its reported SPD.
+
+    ``emitted_spd()`` is the light's own measurement (``measure_spd``), or zero when
+    it reports every level at 0 (a dark frame needs no measurement). Lets
+    ``--camera sim`` run with ``--light cal1+socket://...`` (the emulator) or a real
+    CAL1, exercising the driver end to end without a camera.
+
+    Parameters
+    ----------
+    light
+        The light source (its owner keeps controlling it).
+    """
+
+    def __init__(self, light: LightSource) -> None:
+        self._light = light
+        self._grid_nm: Any = DEFAULT_GRID.wavelength_nm
+
+    def emitted_spd(self) -> Spectra:
+        import numpy as np
+
+        levels = getattr(self._light, "levels", None)
+        if levels is not None and not np.any(np.asarray(levels()) > 0):
+            return Spectra(
+                self._grid_nm, np.zeros((1, len(self._grid_nm))), ("emitted",)
+            )
+        spd = self._light.measure_spd()
+        self._grid_nm = spd.wavelength_nm
+        return spd
+
+
 class OperatorStage:
     """The operator as the target stage: asks them to change what the camera sees.
 
@@ -345,25 +378,31 @@ def open_bench(
         from tunespec.devices.sim.light import open_sim_light
 
         head, opts = _split_spec(light)
-        if head not in ("sim", "sim://"):
-            raise InputError(
-                "the simulated camera needs the simulated light source (sim)"
+        src: Any
+        seen: Any
+        if head in ("sim", "sim://"):
+            # options in the spec win over the keyword defaults
+            src = seen = open_sim_light(
+                light,
+                seed=None if "seed" in opts else seed,
+                warm=None if "warm" in opts else warm,
             )
-        # options in the spec win over the keyword defaults
-        src = open_sim_light(
-            light,
-            seed=None if "seed" in opts else seed,
-            warm=None if "warm" in opts else warm,
-        )
-        if layout is None:
-            layout = TargetLayout.load(resource_path("layouts", "colorchecker_sg.json"))
-        scene = sim_scene(
-            layout, reflectances, layout_path=layout_path, **(scene_options or {})
-        )
+        else:
+            # a real driver (or the CAL1 emulator): the simulated camera sees what
+            # its spectroradiometer reports, so the driver runs end to end
+            src = open_light_source(light, seed=seed)
+            seen = ReportedSpdLight(src)
         try:
+            if layout is None:
+                layout = TargetLayout.load(
+                    resource_path("layouts", "colorchecker_sg.json")
+                )
+            scene = sim_scene(
+                layout, reflectances, layout_path=layout_path, **(scene_options or {})
+            )
             cam = open_camera(
                 cam_spec,
-                light=src,
+                light=seen,
                 scene=scene,
                 resolution=resolution,
                 seed=seed,
