@@ -5,18 +5,20 @@ Subcommands live in ``tunespec.app.commands.*`` modules, each with a
 the parsed namespace, returns an exit code). This module owns error handling: any
 :class:`~tunespec.core.errors.TuneSpecError` or
 :class:`~tunespec.devices.protocols.DeviceError` becomes one line on stderr and exit
-code 2 (input) or 3 (device); ``Cancelled``/Ctrl-C exit with 130. No Qt is imported.
+code 2 (input), 3 (device) or 4 (disk full); ``Cancelled``/Ctrl-C exit with 130; output
+paths declared by a command are checked before it runs. No Qt is imported.
 """
 
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import sys
 import time
 from collections.abc import Sequence
 
-from tunespec.core.errors import TuneSpecError
+from tunespec.core.errors import DiskFullError, TuneSpecError
 from tunespec.core.progress import Cancelled, ProgressFn
 from tunespec.core.spectra import DEFAULT_GRID, Grid
 
@@ -29,6 +31,7 @@ COMMAND_MODULES = (
 
 EXIT_INPUT = 2
 EXIT_DEVICE = 3
+EXIT_DISK_FULL = 4
 EXIT_CANCELLED = 130
 
 
@@ -38,6 +41,18 @@ def grid_arg(text: str) -> Grid:
         return Grid.parse(text)
     except TuneSpecError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def seed_arg(text: str) -> int:
+    """argparse type for ``--seed``: an integer in ``[0, 2**32 - 1]``."""
+    from tunespec.core.limits import valid_seed
+
+    try:
+        return valid_seed(int(text), "--seed")
+    except (ValueError, TuneSpecError) as exc:
+        raise argparse.ArgumentTypeError(
+            f"expected an integer from 0 to 4294967295, got {text!r}"
+        ) from exc
 
 
 def add_grid_option(parser: argparse.ArgumentParser) -> None:
@@ -115,7 +130,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
+        check_outputs(args)
         return int(args.func(args) or 0)
+    except DiskFullError as exc:
+        print(f"tunespec {args.command}: disk full: {exc}", file=sys.stderr)
+        return EXIT_DISK_FULL
     except TuneSpecError as exc:
         print(f"tunespec {args.command}: error: {exc}", file=sys.stderr)
         return EXIT_INPUT
@@ -125,6 +144,37 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (Cancelled, KeyboardInterrupt):
         print(f"tunespec {args.command}: cancelled", file=sys.stderr)
         return EXIT_CANCELLED
+    except OSError as exc:
+        # the last net: a file the checks could not foresee (a full disk while
+        # writing, a permission changed meanwhile) still ends in one line
+        if exc.errno == errno.ENOSPC:
+            err = DiskFullError.from_os_error(exc)
+            print(f"tunespec {args.command}: disk full: {err}", file=sys.stderr)
+            return EXIT_DISK_FULL
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(
+            f"tunespec {args.command}: error: {where}{exc.strerror or exc}",
+            file=sys.stderr,
+        )
+        return EXIT_INPUT
+
+
+def check_outputs(args: argparse.Namespace) -> None:
+    """Check the output paths a command declared, before it does any work.
+
+    Commands list them with ``set_defaults(output_files=(...), output_dirs=(...))``
+    (argparse destinations).
+    """
+    from tunespec.core.limits import check_output_dir, check_output_file
+
+    for attr in getattr(args, "output_files", ()):
+        value = getattr(args, attr, None)
+        if value is not None:
+            check_output_file(value, "--" + attr.replace("_", "-"))
+    for attr in getattr(args, "output_dirs", ()):
+        value = getattr(args, attr, None)
+        if value is not None:
+            check_output_dir(value, "--" + attr.replace("_", "-"))
 
 
 if __name__ == "__main__":

@@ -60,6 +60,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections import Counter
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -71,6 +72,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tunespec.core.errors import InputError
+from tunespec.core.limits import MAX_COLUMNS, MAX_ROWS, MAX_VALUE, read_bytes, shown
 from tunespec.core.spectra import Spectra
 
 __all__ = [
@@ -343,7 +345,8 @@ class CgatsTable:
             return self.fields.index(name)
         except ValueError:
             raise InputError(
-                f"no field {name!r}; fields: {' '.join(self.fields)}", path=self.source
+                f"no field {shown(name)}; fields: {' '.join(self.fields)[:200]}",
+                path=self.source,
             ) from None
 
     def text_column(self, name: str) -> tuple[str, ...]:
@@ -529,7 +532,8 @@ def write_cgats(table: CgatsTable, path: str | PathLike[str]) -> Path:
 
 
 def _count(tokens: list[tuple[str, bool]], *, path: str | None, lineno: int) -> int:
-    if len(tokens) != 2 or not tokens[1][0].isdigit():
+    t = tokens[1][0] if len(tokens) == 2 else ""
+    if not (t.isascii() and t.isdigit() and len(t) <= len(str(MAX_ROWS))):
         raise InputError(
             f"{tokens[0][0]} needs one non-negative integer", path=path, line=lineno
         )
@@ -556,10 +560,16 @@ def _take_fields(
 
 def _check_fields(fields: list[str], *, path: str | None, lineno: int) -> None:
     """Field names as :class:`CgatsTable` needs them, or an error naming the line."""
+    if len(fields) > MAX_COLUMNS:
+        raise InputError(
+            f"{len(fields)} fields, at most {MAX_COLUMNS}", path=path, line=lineno
+        )
     for name in fields:
-        if not _BARE_TOKEN.match(name) or name in _RESERVED:
-            raise InputError(f"bad CGATS field name {name!r}", path=path, line=lineno)
-    dup = sorted({f for f in fields if fields.count(f) > 1})
+        if not _BARE_TOKEN.match(name) or name in _RESERVED or len(name) > 256:
+            raise InputError(
+                f"bad CGATS field name {shown(name)}", path=path, line=lineno
+            )
+    dup = sorted(f for f, k in Counter(fields).items() if k > 1)
     if dup:
         raise InputError(f"duplicate field(s) {', '.join(dup)}", path=path, line=lineno)
 
@@ -624,7 +634,7 @@ def parse_cgats(text: str, *, source: str | None = None) -> CgatsTable:
                 raise InputError(f"unexpected {first}", path=path, line=lineno)
             elif tokens[0][1]:
                 raise InputError(
-                    f"expected a keyword, found the string {first!r}",
+                    f"expected a keyword, found the string {shown(first)}",
                     path=path,
                     line=lineno,
                 )
@@ -643,9 +653,13 @@ def parse_cgats(text: str, *, source: str | None = None) -> CgatsTable:
             if len(tokens) != len(fields):
                 raise InputError(
                     f"{len(tokens)} values, expected {len(fields)} (one per field: "
-                    f"{' '.join(fields[:6])}{' ...' if len(fields) > 6 else ''})",
+                    f"{' '.join(fields[:6])[:80]}{' ...' if len(fields) > 6 else ''})",
                     path=path,
                     line=lineno,
+                )
+            if len(rows) >= MAX_ROWS:
+                raise InputError(
+                    f"more than {MAX_ROWS} data sets", path=path, line=lineno
                 )
             rows.append(tuple(t for t, _ in tokens))
             row_lines.append(lineno)
@@ -685,10 +699,17 @@ def parse_cgats(text: str, *, source: str | None = None) -> CgatsTable:
             if not _NUMBER.match(r[j]):
                 if must_be_number:
                     raise InputError(
-                        f"{name}: not a number: {r[j]!r}", path=path, line=lineno
+                        f"{name}: not a number: {shown(r[j])}", path=path, line=lineno
                     )
                 text_fields.add(name)
                 break
+            if not abs(float(r[j])) <= MAX_VALUE:
+                raise InputError(
+                    f"{name}: {shown(r[j])} is out of range (at most {MAX_VALUE:g} in "
+                    "magnitude)",
+                    path=path,
+                    line=lineno,
+                )
     assert file_id is not None
     return CgatsTable(
         file_id, keywords, tuple(fields), tuple(rows), frozenset(text_fields), source
@@ -715,12 +736,7 @@ def read_cgats(path: str | PathLike[str]) -> CgatsTable:
         (its own ``ref/ColorChecker.ti2`` declares 9 fields and lists 8).
     """
     path = Path(path)
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise InputError("file not found", path=path) from None
-    except OSError as exc:
-        raise InputError(f"cannot read: {exc}", path=path) from None
+    raw = read_bytes(path)
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError:

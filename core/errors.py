@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import json
 from os import PathLike
-from pathlib import Path
 from typing import Any
 
 
@@ -34,25 +32,74 @@ class InputError(TuneSpecError, ValueError):
         super().__init__(where + message)
 
 
+class DiskFullError(TuneSpecError):
+    """No space left on the disk holding ``folder``.
+
+    ``str(err)`` names the folder, the free space and (when known) about how much
+    more is needed, on one line. Whatever was written before stays consistent.
+    """
+
+    def __init__(
+        self,
+        folder: str | PathLike[str],
+        *,
+        needed_bytes: int | None = None,
+        free_bytes: int | None = None,
+    ) -> None:
+        import shutil
+
+        self.folder = str(folder)
+        self.needed_bytes = needed_bytes
+        if free_bytes is None:
+            try:
+                free_bytes = shutil.disk_usage(self.folder).free
+            except OSError:
+                free_bytes = None
+        self.free_bytes = free_bytes
+        free = "" if free_bytes is None else f", {_mb(free_bytes)} free"
+        need = (
+            ""
+            if needed_bytes is None
+            else f"; about {_mb(needed_bytes)} more is needed"
+        )
+        super().__init__(
+            f"{self.folder}: no space left on the disk{free}{need}; free some space "
+            "and run the command again (a capture continues with --resume)"
+        )
+
+    @classmethod
+    def from_os_error(
+        cls,
+        exc: OSError,
+        *,
+        folder: str | PathLike[str] | None = None,
+        needed_bytes: int | None = None,
+    ) -> DiskFullError:
+        """From an ``ENOSPC`` error (its file's folder unless ``folder`` is given)."""
+        import os
+
+        if folder is None:
+            folder = os.path.dirname(os.fspath(exc.filename)) if exc.filename else "."
+        return cls(folder or ".", needed_bytes=needed_bytes)
+
+
+def _mb(n_bytes: int) -> str:
+    return f"{n_bytes / 1e6:.1f} MB"
+
+
 class SingularSystemError(TuneSpecError, ArithmeticError):
     """A linear system that cannot be solved (too few or degenerate stimuli)."""
 
 
 def read_text(path: str | PathLike[str]) -> str:
-    """A text file's contents (UTF-8, a BOM tolerated); :class:`InputError` otherwise."""
-    try:
-        return Path(path).read_text(encoding="utf-8-sig")
-    except FileNotFoundError:
-        raise InputError("file not found", path=path) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read: {exc}", path=path) from None
+    """A text file's contents within the limits of :mod:`tunespec.core.limits`."""
+    from tunespec.core.limits import read_text as _read_text
+
+    return _read_text(path)
 
 
 def read_json(path: str | PathLike[str]) -> Any:
-    """A JSON file's contents; :class:`InputError` with the line if it is invalid."""
-    try:
-        return json.loads(read_text(path))
-    except json.JSONDecodeError as exc:
-        raise InputError(
-            f"not valid JSON: {exc.msg}", path=path, line=exc.lineno
-        ) from None
+    """A JSON file's contents within the limits of :mod:`tunespec.core.limits`."""
+    from tunespec.core.limits import read_json as _read_json
+
+    return _read_json(path)

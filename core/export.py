@@ -53,6 +53,7 @@ from numpy.typing import NDArray
 from tunespec.core.cgats import CgatsTable, ti3_table, write_cgats
 from tunespec.core.colorimetry import lab_d50, xyz_d50
 from tunespec.core.errors import InputError, read_json
+from tunespec.core.limits import dumps_json
 from tunespec.core.responses import Responses, write_responses_csv
 from tunespec.core.spectra import Grid, Spectra, write_spectra_csv
 
@@ -130,7 +131,7 @@ def write_sensitivity_meta(
             "wavelength_nm": [float(x) for x in wl],
             "values": [[float(f"{v:.7g}") for v in row] for row in covariance],
         }
-    path.write_text(json.dumps(doc, indent=1, allow_nan=False) + "\n", encoding="utf-8")
+    path.write_text(dumps_json(doc), encoding="utf-8")
     return path
 
 
@@ -375,7 +376,7 @@ def write_sensitivity_json(
     doc = sensitivity_rawtoaces_document(sensitivity, **header)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(doc, indent=4) + "\n", encoding="utf-8")
+    path.write_text(dumps_json(doc, indent=4), encoding="utf-8")
     return path
 
 

@@ -12,8 +12,8 @@ the ColorChecker SG, A1 ... N10) or an explicit list in row-major order.
 
 from __future__ import annotations
 
-import json
 import math
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, replace
 from os import PathLike
 from pathlib import Path
@@ -23,10 +23,16 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tunespec.core.errors import InputError, read_json
+from tunespec.core.limits import dumps_json, valid_name, valid_number
 
 __all__ = ["TargetLayout", "apply_homography", "homography_from_corners"]
 
 LAYOUT_VERSION = 1
+#: Limits of a layout file: patches per side and in all, sizes in mm, corners in px.
+MAX_SIDE = 1000
+MAX_PATCHES = 10_000
+MAX_MM = 1e5
+MAX_PX = 1e6
 
 
 @dataclass(frozen=True)
@@ -72,6 +78,17 @@ class TargetLayout:
         if not (0 < self.patch_fraction <= 1 and 0 < self.roi_fraction <= 1):
             raise InputError(
                 f"layout {self.name!r}: patch_fraction and roi_fraction must be in (0, 1]"
+            )
+        numbers = (self.width_mm, self.height_mm, *self.margin_mm)
+        if not all(
+            isinstance(v, int | float)
+            and not isinstance(v, bool)
+            and math.isfinite(v)
+            and v >= 0
+            for v in numbers
+        ):
+            raise InputError(
+                f"layout {self.name!r}: sizes and margins must be finite numbers >= 0"
             )
         if len(self.margin_mm) != 4:
             raise InputError(
@@ -172,34 +189,42 @@ class TargetLayout:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any], *, source: str | None = None) -> TargetLayout:
+        """A layout from its JSON form, every field checked (:mod:`~.limits`).
+
+        Raises
+        ------
+        InputError
+            Naming the file and the key: another format, a newer or malformed
+            ``version``, a field of the wrong type or out of its range.
+        """
+        if not isinstance(d, Mapping):
+            raise InputError("bad layout: expected an object", path=source)
         if d.get("format") != "tunespec-layout":
             raise InputError(
                 "not a TuneSpec layout (format != 'tunespec-layout')", path=source
             )
-        if int(d.get("version", 0)) > LAYOUT_VERSION:
+        version = valid_number(
+            d.get("version", 0), "version", path=source, lo=0, hi=1e6, integer=True
+        )
+        if version > LAYOUT_VERSION:
             raise InputError(
-                f"layout version {d.get('version')} is newer than this "
+                f"layout version {version} is newer than this "
                 f"TuneSpec understands ({LAYOUT_VERSION})",
                 path=source,
             )
-        keys = set(cls.__dataclass_fields__)
         try:
-            kw = {k: v for k, v in d.items() if k in keys}
-            kw["margin_mm"] = tuple(kw.get("margin_mm", (0, 0, 0, 0)))
-            kw["patch_names"] = tuple(kw.get("patch_names", ()))
-            if kw.get("corners_px") is not None:
-                kw["corners_px"] = tuple(tuple(c) for c in kw["corners_px"])
+            kw = _checked_fields(d, source)
+        except InputError as exc:
+            raise InputError(f"bad layout: {exc.message}", path=source) from None
+        try:
             return cls(**kw)
         except InputError as exc:
             raise InputError(exc.message, path=source) from None
         except (TypeError, ValueError) as exc:
-            # e.g. three margins, a ragged corners_px or a string where a number goes
             raise InputError(f"bad layout: {exc}", path=source) from None
 
     def save(self, path: str | PathLike[str]) -> None:
-        Path(path).write_text(
-            json.dumps(self.to_dict(), indent=2) + "\n", encoding="utf-8"
-        )
+        Path(path).write_text(dumps_json(self.to_dict()), encoding="utf-8")
 
     @classmethod
     def load(cls, path: str | PathLike[str]) -> TargetLayout:
@@ -208,6 +233,65 @@ class TargetLayout:
         if not isinstance(d, dict):
             raise InputError("expected a JSON object", path=path)
         return cls.from_dict(d, source=str(path))
+
+
+def _checked_fields(d: Mapping[str, Any], source: str | None) -> dict[str, Any]:
+    """The dataclass fields of a layout document, each of the right type and range."""
+    kw: dict[str, Any] = {}
+    kw["name"] = valid_name(d.get("name"), "name", path=source)
+    for key in ("rows", "cols"):
+        kw[key] = valid_number(
+            d.get(key), key, path=source, lo=1, hi=MAX_SIDE, integer=True
+        )
+    if kw["rows"] * kw["cols"] > MAX_PATCHES:
+        raise InputError(
+            f"rows x cols: {kw['rows'] * kw['cols']} patches, at most {MAX_PATCHES}",
+            path=source,
+        )
+    for key in ("width_mm", "height_mm"):
+        kw[key] = float(
+            valid_number(d.get(key), key, path=source, lo=0, hi=MAX_MM, lo_open=True)
+        )
+    margin = d.get("margin_mm", [0, 0, 0, 0])
+    if not isinstance(margin, list | tuple) or len(margin) != 4:
+        raise InputError(
+            "margin_mm must be 4 numbers (left, top, right, bottom)", path=source
+        )
+    kw["margin_mm"] = tuple(
+        float(valid_number(m, "margin_mm", path=source, lo=0, hi=MAX_MM))
+        for m in margin
+    )
+    for key in ("patch_fraction", "roi_fraction"):
+        if key in d:
+            kw[key] = float(
+                valid_number(d[key], key, path=source, lo=0, hi=1, lo_open=True)
+            )
+    names = d.get("patch_names", [])
+    if not isinstance(names, list | tuple):
+        raise InputError("patch_names: expected a list of texts", path=source)
+    kw["patch_names"] = tuple(valid_name(n, "patch_names", path=source) for n in names)
+    corners = d.get("corners_px")
+    if corners is not None:
+        if (
+            not isinstance(corners, list | tuple)
+            or len(corners) != 4
+            or any(not isinstance(c, list | tuple) or len(c) != 2 for c in corners)
+        ):
+            raise InputError("corners_px: expected 4 (x, y) pairs or null", path=source)
+        kw["corners_px"] = tuple(
+            tuple(
+                float(valid_number(v, "corners_px", path=source, lo=-MAX_PX, hi=MAX_PX))
+                for v in c
+            )
+            for c in corners
+        )
+    meta = d.get("meta", {})
+    if not isinstance(meta, Mapping) or not all(
+        isinstance(v, str) for v in meta.values()
+    ):
+        raise InputError("meta: expected an object of texts", path=source)
+    kw["meta"] = dict(meta)
+    return kw
 
 
 def _sg_names(rows: int, cols: int) -> tuple[str, ...]:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import math
+from collections import Counter
 from dataclasses import dataclass
 from os import PathLike
 from pathlib import Path
@@ -18,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tunespec.core.errors import InputError, read_text
+from tunespec.core.limits import csv_rows, shown, valid_name, valid_number
 
 __all__ = ["CHANNELS", "Responses", "read_responses_csv", "write_responses_csv"]
 
@@ -122,23 +124,17 @@ def read_responses_csv(path: str | PathLike[str]) -> Responses:
         duplicate or missing (patch, illuminant) pairs; each names the file and line.
     """
     path = Path(path)
-    text = read_text(path)
-    lines = text.splitlines()
-    reader = csv.reader(lines)
-    # Blank lines are skipped everywhere (as read_spectra_csv does); reader.line_num
-    # keeps the reported line numbers those of the file.
-    header: list[str] = []
-    for row in reader:
-        if any(c.strip() for c in row):
-            header = [h.strip() for h in row]
-            break
-    if not header:
+    rows = csv_rows(read_text(path), path=path)  # blank lines skipped, numbered
+    if not rows:
         raise InputError("empty file, expected a responses CSV", path=path)
-    header_line = reader.line_num
-    dup = sorted({h for h in header if header.count(h) > 1})
+    header_line, header = rows[0]
+    header = [h.strip() for h in header]
+    dup = sorted(h for h, k in Counter(header).items() if k > 1)
     if dup:
         raise InputError(
-            f"duplicate column(s) {', '.join(dup)}", path=path, line=header_line
+            f"duplicate column(s) {', '.join(map(shown, dup))}",
+            path=path,
+            line=header_line,
         )
     required = ["patch", "illuminant", *CHANNELS]
     missing = [c for c in required if c not in header]
@@ -157,12 +153,10 @@ def read_responses_csv(path: str | PathLike[str]) -> Responses:
     has_n = "n_pixels" in col
     has_sat = "saturated" in col
     records: dict[tuple[str, str], tuple[list[float], list[float], float, float]] = {}
-    patches: list[str] = []
-    illums: list[str] = []
-    for row in reader:
-        lineno = reader.line_num
-        if not any(c.strip() for c in row):
-            continue
+    # dicts as ordered sets: a membership test per row stays O(1)
+    patches: dict[str, None] = {}
+    illums: dict[str, None] = {}
+    for lineno, row in rows[1:]:
         if len(row) != len(header):
             raise InputError(
                 f"{len(row)} fields, expected {len(header)}", path=path, line=lineno
@@ -170,24 +164,24 @@ def read_responses_csv(path: str | PathLike[str]) -> Responses:
         p, il = row[col["patch"]].strip(), row[col["illuminant"]].strip()
         if not p or not il:
             raise InputError("empty patch or illuminant name", path=path, line=lineno)
+        valid_name(p, "patch", path=path, line=lineno)
+        valid_name(il, "illuminant", path=path, line=lineno)
         if (p, il) in records:
             raise InputError(
-                f"duplicate row for patch {p!r} under {il!r}", path=path, line=lineno
+                f"duplicate row for patch {shown(p)} under {shown(il)}",
+                path=path,
+                line=lineno,
             )
 
-        def num(name: str, lineno: int = lineno, row: list[str] = row) -> float:
-            cell = row[col[name]]
+        def num(key: str, lineno: int = lineno, row: list[str] = row) -> float:
+            cell = row[col[key]]
             try:
                 v = float(cell)
             except ValueError:
                 raise InputError(
-                    f"{name}: not a number: {cell!r}", path=path, line=lineno
+                    f"{key}: not a number: {shown(cell)}", path=path, line=lineno
                 ) from None
-            if not math.isfinite(v):
-                raise InputError(
-                    f"{name}: value {cell} is not finite", path=path, line=lineno
-                )
-            return v
+            return float(valid_number(v, key, path=path, line=lineno))
 
         rgb = [num(c) for c in CHANNELS]
         std = [num(c) for c in _STD] if has_std else [math.nan] * 3
@@ -196,18 +190,17 @@ def read_responses_csv(path: str | PathLike[str]) -> Responses:
         npx = num("n_pixels") if has_n else math.nan
         sat = num("saturated") if has_sat else math.nan
         records[(p, il)] = (rgb, std, npx, sat)
-        if p not in patches:
-            patches.append(p)
-        if il not in illums:
-            illums.append(il)
+        patches.setdefault(p)
+        illums.setdefault(il)
     if not records:
         raise InputError("no data rows", path=path)
-    absent = [(p, i) for p in patches for i in illums if (p, i) not in records]
-    if absent:
-        p, i = absent[0]
+    n_absent = len(patches) * len(illums) - len(records)
+    if n_absent:
+        # stops at the first gap: the full product may be huge
+        p, i = next((p, i) for p in patches for i in illums if (p, i) not in records)
         raise InputError(
-            f"{len(absent)} (patch, illuminant) pair(s) missing, e.g. patch {p!r} "
-            f"under {i!r}: every patch needs a row for every illuminant",
+            f"{n_absent} (patch, illuminant) pair(s) missing, e.g. patch {shown(p)} "
+            f"under {shown(i)}: every patch needs a row for every illuminant",
             path=path,
         )
     rgb_a = np.array([[records[(p, i)][0] for i in illums] for p in patches])

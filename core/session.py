@@ -8,13 +8,19 @@ Layout of a session folder::
       frames/<id>.<ext>      raw files as the camera wrote them (``.dng``, ``.cr2``)
       frames/<id>.spd.csv    the light source's measured SPD around that exposure
       tmp/                   files being written (never referenced by the manifest)
+      session.lock           who is writing the session now (pid, host, start time)
 
 Crash safety: a frame is written to ``tmp/``, flushed to disk, moved into ``frames/``
 with :func:`os.replace` and only then entered into the manifest, which is itself
 rewritten atomically (temporary file, ``fsync``, ``os.replace``, ``fsync`` of the
 folder). A crash, a kill or a device error at any moment therefore leaves a manifest
-that lists only complete, checksummed frames; what is not listed is taken again on
-resume (:meth:`Session.missing`).
+that lists only complete, checksummed frames (the raw file and its SPD); what is not
+listed, or fails its checksums, is taken again on resume (:meth:`Session.missing`).
+
+One writer at a time: :class:`SessionLock` holds ``session.lock`` (an advisory
+``flock``, released by the kernel when its process dies, so a lock left by a killed
+capture is recognised as stale and taken over). Temp cleaning never follows links:
+a ``tmp`` that is a symbolic link is removed (the link, not what it points to).
 
 The frames a session needs follow from its :class:`CaptureSettings`
 (:func:`plan_frames`): dark frame(s) for each distinct exposure, then per LED channel
@@ -35,7 +41,9 @@ import hashlib
 import json
 import math
 import os
+import socket
 import tempfile
+import threading
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from datetime import UTC, datetime
@@ -45,10 +53,12 @@ from typing import Any
 
 from tunespec.core.errors import InputError, read_json
 from tunespec.core.layout import TargetLayout
+from tunespec.core.limits import MAX_NAME_CHARS, dumps_json, shown, valid_number
 from tunespec.core.spectra import Spectra, read_spectra_csv, write_spectra_csv
 
 __all__ = [
     "FRAME_KINDS",
+    "LOCK_NAME",
     "MANIFEST_NAME",
     "SESSION_FORMAT",
     "SESSION_VERSION",
@@ -56,6 +66,8 @@ __all__ = [
     "FrameRecord",
     "FrameSpec",
     "Session",
+    "SessionBusyError",
+    "SessionLock",
     "atomic_write_bytes",
     "atomic_write_text",
     "dark_id",
@@ -71,6 +83,7 @@ SESSION_VERSION = 1
 MANIFEST_NAME = "manifest.json"
 FRAMES_DIR = "frames"
 TMP_DIR = "tmp"
+LOCK_NAME = "session.lock"
 
 FRAME_KINDS: tuple[str, ...] = ("dark", "white", "target")
 EXPOSURE_MODES = ("fixed", "auto")
@@ -133,6 +146,157 @@ def sha256_file(path: str | PathLike[str], *, chunk_bytes: int = 1 << 20) -> str
 
 def _utc_now() -> str:
     return datetime.now(UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
+
+
+# -- one writer at a time --------------------------------------------------------------
+class SessionBusyError(InputError):
+    """Another process is writing the session (it holds ``session.lock``)."""
+
+
+#: Per process: real path of a session folder -> [open lock file descriptor, count].
+_HELD: dict[str, list[int]] = {}
+_HELD_GUARD = threading.Lock()
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OSError):
+        return True
+    return True
+
+
+class SessionLock:
+    """The lock of a session folder: one writing process at a time.
+
+    ``session.lock`` holds the holder's pid, host and start time (for the message
+    a second writer gets) and is locked with ``flock`` while held. The kernel drops a
+    ``flock`` when its process dies, so a lock file with content but no ``flock`` is
+    stale (its holder was killed): it is taken over and the old holder is kept in
+    :attr:`stale_holder`. The file is never deleted (deleting it would let two
+    processes lock two different files). Re-entrant within one process. Where
+    ``flock`` is missing (Windows), a holder on this host whose pid is gone is stale.
+
+    Parameters
+    ----------
+    root
+        The session folder (created if missing).
+    """
+
+    def __init__(self, root: str | PathLike[str]) -> None:
+        self.root = Path(root)
+        self.path = self.root / LOCK_NAME
+        self.stale_holder: dict[str, Any] | None = None
+        self._key: str | None = None
+
+    def acquire(self) -> SessionLock:
+        """Take the lock; :class:`SessionBusyError` naming the holder if taken."""
+        self.root.mkdir(parents=True, exist_ok=True)
+        key = os.path.realpath(self.root)
+        with _HELD_GUARD:
+            if key in _HELD:
+                _HELD[key][1] += 1
+                self._key = key
+                return self
+            flags = os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0)
+            try:
+                fd = os.open(self.path, flags, 0o644)
+            except OSError as exc:
+                raise InputError(
+                    f"cannot open the session lock: {exc.strerror}", path=self.path
+                ) from None
+            try:
+                previous = _read_holder(fd)
+                if not _try_lock(fd, previous):
+                    raise SessionBusyError(
+                        "the session is being written by another capture: "
+                        + _describe(previous)
+                        + "; wait for it to finish or stop it",
+                        path=self.root,
+                    )
+                if previous is not None and previous.get("pid") != os.getpid():
+                    self.stale_holder = previous
+                me = {
+                    "pid": os.getpid(),
+                    "host": socket.gethostname(),
+                    "started_utc": _utc_now(),
+                }
+                _write_holder(fd, json.dumps(me) + "\n")
+            except BaseException:
+                os.close(fd)
+                raise
+            _HELD[key] = [fd, 1]
+            self._key = key
+        return self
+
+    def release(self) -> None:
+        """Give the lock back (the last release of this process empties the file)."""
+        key, self._key = self._key, None
+        if key is None:
+            return
+        with _HELD_GUARD:
+            entry = _HELD.get(key)
+            if entry is None:
+                return
+            entry[1] -= 1
+            if entry[1] > 0:
+                return
+            del _HELD[key]
+            fd = entry[0]
+            with contextlib.suppress(OSError):
+                _write_holder(fd, "")
+            os.close(fd)  # drops the flock
+
+    def __enter__(self) -> SessionLock:
+        return self.acquire()
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+
+def _try_lock(fd: int, previous: dict[str, Any] | None) -> bool:
+    try:
+        import fcntl
+    except ImportError:  # Windows: judge by the recorded holder
+        if previous is None:
+            return True
+        same_host = previous.get("host") == socket.gethostname()
+        pid = previous.get("pid")
+        return same_host and isinstance(pid, int) and not _pid_alive(pid)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return False
+    return True
+
+
+def _read_holder(fd: int) -> dict[str, Any] | None:
+    try:
+        os.lseek(fd, 0, os.SEEK_SET)
+        data = os.read(fd, 4096)
+        holder = json.loads(data.decode("utf-8")) if data.strip() else None
+    except (OSError, ValueError):
+        return {"pid": "?", "host": "?", "started_utc": "?"}
+    return holder if isinstance(holder, dict) else None
+
+
+def _write_holder(fd: int, text: str) -> None:
+    # in place: replacing the file would hand the next process another inode to lock
+    os.ftruncate(fd, 0)
+    os.lseek(fd, 0, os.SEEK_SET)
+    os.write(fd, text.encode("utf-8"))
+    os.fsync(fd)
+
+
+def _describe(holder: dict[str, Any] | None) -> str:
+    if holder is None:
+        return "a process that has not written its name yet"
+    return (
+        f"pid {holder.get('pid', '?')} on host {holder.get('host', '?')} "
+        f"since {holder.get('started_utc', '?')}"
+    )
 
 
 # -- what to capture -------------------------------------------------------------------
@@ -242,7 +406,7 @@ class CaptureSettings:
             raise InputError("capture settings: channels must be unique and non-empty")
         if self.exposure_mode not in EXPOSURE_MODES:
             raise InputError(
-                f"capture settings: exposure_mode {self.exposure_mode!r}, expected "
+                f"capture settings: exposure_mode {shown(self.exposure_mode)}, expected "
                 f"one of {', '.join(EXPOSURE_MODES)}"
             )
         f = self.bracket_factors
@@ -299,6 +463,20 @@ class CaptureSettings:
                 raise InputError(
                     f"bad capture settings: {key} must be an object", path=source
                 )
+        if len(channels) > MAX_CHANNELS:
+            raise InputError(
+                f"bad capture settings: {len(channels)} channels, at most "
+                f"{MAX_CHANNELS}",
+                path=source,
+            )
+        for c in channels:
+            if not _safe_name(c):
+                raise InputError(
+                    f"bad capture settings: channel {shown(c)} must be a short name "
+                    "without path separators",
+                    path=source,
+                )
+        _check_setting_numbers(d, source)
         keys = set(cls.__dataclass_fields__)
         try:
             return cls(**{k: v for k, v in d.items() if k in keys})
@@ -306,6 +484,44 @@ class CaptureSettings:
             raise InputError(f"bad capture settings: {exc}", path=source) from None
         except InputError as exc:
             raise InputError(exc.message, path=source) from None
+
+
+#: Limits of a manifest's settings (far beyond any real session).
+MAX_CHANNELS = 256
+MAX_DARKS = 100
+MAX_BRACKETS = 16
+MAX_ISO = 10_000_000
+MANIFEST_MAX_EXPOSURE_S = 1e5
+MAX_FRAMES = 100_000
+
+
+def _check_setting_numbers(d: Mapping[str, Any], source: Any) -> None:
+    """Types and ranges of the numbers in a manifest's settings (one-line errors)."""
+
+    def check(value: Any, key: str, **kw: Any) -> None:
+        valid_number(value, f"settings.{key}", path=source, **kw)
+
+    check(d.get("iso", 100), "iso", lo=1, hi=MAX_ISO, integer=True)
+    check(d.get("n_darks", 1), "n_darks", lo=1, hi=MAX_DARKS, integer=True)
+    check(d.get("target_level", 0.75), "target_level", lo=0.05, hi=0.95)
+    factors = d.get("bracket_factors", [1.0])
+    if not isinstance(factors, list | tuple) or not 1 <= len(factors) <= MAX_BRACKETS:
+        raise InputError(
+            f"settings.bracket_factors: expected 1 to {MAX_BRACKETS} numbers",
+            path=source,
+        )
+    for f in factors:
+        check(f, "bracket_factors", lo=0, hi=1, lo_open=True)
+    for key in ("exposures_s", "requested_s"):
+        for ch, ts in dict(d.get(key, {})).items():
+            if not isinstance(ts, list | tuple) or len(ts) > MAX_BRACKETS:
+                raise InputError(
+                    f"settings.{key}.{ch}: expected a list of seconds", path=source
+                )
+            for t in ts:
+                check(t, f"{key}.{ch}", lo=0, hi=MANIFEST_MAX_EXPOSURE_S, lo_open=True)
+    for ch, v in dict(d.get("levels", {})).items():
+        check(v, f"levels.{ch}", lo=0, hi=1)
 
 
 def plan_frames(settings: CaptureSettings) -> list[FrameSpec]:
@@ -369,6 +585,9 @@ class FrameRecord:
         The measured SPD (CSV, relative path), ``None`` for darks.
     note
         Free text: why a frame is bad, what was retaken.
+    spd_sha256
+        Hex SHA-256 of the SPD file (``None`` for darks and for sessions written
+        before it was recorded: then the SPD is only checked to be readable).
     """
 
     id: str
@@ -383,6 +602,7 @@ class FrameRecord:
     status: str = "ok"
     spd_file: str | None = None
     note: str = ""
+    spd_sha256: str | None = None
 
     @property
     def spec(self) -> FrameSpec:
@@ -407,12 +627,12 @@ class FrameRecord:
             raise InputError(f"bad frame record: {exc}", path=source) from None
         if rec.kind not in FRAME_KINDS or rec.status not in ("ok", "bad"):
             raise InputError(
-                f"frame {rec.id!r}: bad kind {rec.kind!r} or status {rec.status!r}",
+                f"frame {shown(rec.id)}: bad kind {shown(rec.kind)} or status {shown(rec.status)}",
                 path=source,
             )
         problem = _record_problem(rec)
         if problem:
-            raise InputError(f"frame {rec.id!r}: {problem}", path=source)
+            raise InputError(f"frame {shown(rec.id)}: {problem}", path=source)
         return rec
 
 
@@ -426,34 +646,52 @@ def _record_problem(rec: FrameRecord) -> str:
     def real(v: object) -> bool:
         return isinstance(v, int | float) and not isinstance(v, bool)
 
-    if not isinstance(rec.id, str) or not rec.id:
-        return "id must be a non-empty string"
-    if rec.channel is not None and not isinstance(rec.channel, str):
-        return "channel must be a string or null"
+    if not _safe_name(rec.id):
+        return "id must be a short name without path separators"
+    if rec.channel is not None and not _safe_name(rec.channel):
+        return "channel must be a short name without path separators, or null"
     if not (real(rec.exposure_s) and math.isfinite(rec.exposure_s)):
-        return f"exposure_s must be a number, got {rec.exposure_s!r}"
-    if not (rec.exposure_s > 0):
-        return f"exposure_s must be > 0, got {rec.exposure_s!r}"
-    for name in ("iso", "bracket"):
+        return f"exposure_s must be a number, got {shown(rec.exposure_s)}"
+    if not (0 < rec.exposure_s <= MANIFEST_MAX_EXPOSURE_S):
+        return (
+            f"exposure_s must be in (0, {MANIFEST_MAX_EXPOSURE_S:g}], got "
+            f"{shown(rec.exposure_s)}"
+        )
+    for name, hi in (("iso", MAX_ISO), ("bracket", MAX_BRACKETS)):
         v = getattr(rec, name)
-        if not isinstance(v, int) or isinstance(v, bool) or v < 0:
-            return f"{name} must be a non-negative integer, got {v!r}"
+        if not isinstance(v, int) or isinstance(v, bool) or not 0 <= v <= hi:
+            return f"{name} must be an integer in [0, {hi}], got {shown(v)}"
     for name in ("file", "spd_file"):
         v = getattr(rec, name)
         if v is None and name == "spd_file":
             continue
         if not isinstance(v, str) or not _inside_session(v):
-            return f"{name} must be a path inside the session folder, got {v!r}"
-    if not isinstance(rec.sha256, str):
-        return "sha256 must be a string"
+            return f"{name} must be a path inside the session folder, got {shown(v)}"
+    for name in ("sha256", "spd_sha256"):
+        v = getattr(rec, name)
+        if not (isinstance(v, str) or (v is None and name == "spd_sha256")):
+            return f"{name} must be a string"
+    if rec.spd_sha256 is not None and rec.spd_file is None:
+        return "spd_sha256 without spd_file"
     return ""
 
 
+def _safe_name(name: object) -> bool:
+    """A frame id or channel name: short, one line, usable inside a file name."""
+    return (
+        isinstance(name, str)
+        and 0 < len(name) <= MAX_NAME_CHARS
+        and not name.startswith(".")
+        and not any(c in name for c in "/\\\x00\n\r:")
+    )
+
+
 def _inside_session(rel: str) -> bool:
-    """True for a relative path that stays inside the session folder."""
+    """True for a short relative path that stays inside the session folder."""
     p = PurePosixPath(rel.replace("\\", "/"))
     return (
-        bool(rel)
+        0 < len(rel) <= 1024
+        and all(len(part.encode()) <= 255 for part in p.parts)
         and not p.is_absolute()
         and not PureWindowsPath(rel).anchor
         and ".." not in p.parts
@@ -541,7 +779,7 @@ class Session:
             )
         version = m.get("version", 0)
         if not isinstance(version, int) or isinstance(version, bool):
-            raise InputError(f"bad session version {version!r}", path=path)
+            raise InputError(f"bad session version {shown(version)}", path=path)
         if version > SESSION_VERSION:
             raise InputError(
                 f"session version {version} is newer than this TuneSpec "
@@ -552,11 +790,19 @@ class Session:
         # not later with a traceback from whatever reads the bad field first
         if not isinstance(m.get("frames"), list):
             raise InputError("damaged manifest: 'frames' must be a list", path=path)
+        if len(m["frames"]) > MAX_FRAMES:
+            raise InputError(
+                f"damaged manifest: more than {MAX_FRAMES} frames", path=path
+            )
         for key in ("devices", "meta"):
             if not isinstance(m.get(key, {}), dict):
                 raise InputError(
                     f"damaged manifest: {key!r} must be an object", path=path
                 )
+        if not all(isinstance(v, dict) for v in m.get("devices", {}).values()):
+            raise InputError(
+                "damaged manifest: each of 'devices' must be an object", path=path
+            )
         if "settings" not in m:
             raise InputError("damaged manifest: no 'settings'", path=path)
         records = [FrameRecord.from_dict(d, source=str(path)) for d in m["frames"]]
@@ -573,6 +819,11 @@ class Session:
             TargetLayout.from_dict(layout, source=str(path))
         return cls(root, m)
 
+    def reload(self) -> None:
+        """Read the manifest again (another writer may have changed it before this
+        process took the lock)."""
+        self._m = Session.open(self.root)._m
+
     # -- manifest ----------------------------------------------------------------------
     @property
     def manifest_path(self) -> Path:
@@ -585,7 +836,7 @@ class Session:
         state, so they never disagree.
         """
         m = self._m if manifest is None else manifest
-        atomic_write_text(self.manifest_path, json.dumps(m, indent=1) + "\n")
+        atomic_write_text(self.manifest_path, dumps_json(m, indent=1))
         self._m = m
 
     def _edited(self) -> dict[str, Any]:
@@ -678,16 +929,50 @@ class Session:
         return plan_frames(self.settings)
 
     def verify(self, record: FrameRecord) -> bool:
-        """True if the frame's raw file exists and matches its checksum."""
+        """True if every file of the frame exists and matches its checksum."""
+        return self.problem(record) == ""
+
+    def problem(self, record: FrameRecord, *, checksums: bool = True) -> str:
+        """What is wrong with a frame's files ("" if nothing).
+
+        The raw file and the SPD must exist and (``checksums``) match the checksums
+        recorded when the frame was committed; an SPD recorded without a checksum
+        (older sessions) must at least be readable.
+        """
+        try:
+            return self._problem(record, checksums)
+        except OSError as exc:  # a folder where a file was, a link loop, ...
+            return f"files of frame {record.id} cannot be read ({exc.strerror})"
+
+    def _problem(self, record: FrameRecord, checksums: bool) -> str:
         path = self.path_of(record)
-        return path.is_file() and sha256_file(path) == record.sha256
+        if not path.is_file():
+            return f"raw file {record.file} is missing"
+        if checksums and sha256_file(path) != record.sha256:
+            return f"raw file {record.file} fails its checksum"
+        if record.spd_file is None:
+            return ""
+        spd = self.root / record.spd_file
+        if not spd.is_file():
+            return f"SPD file {record.spd_file} is missing"
+        if not checksums:
+            return ""
+        if record.spd_sha256 is not None:
+            if sha256_file(spd) != record.spd_sha256:
+                return f"SPD file {record.spd_file} fails its checksum"
+            return ""
+        try:
+            read_spectra_csv(spd)
+        except InputError:
+            return f"SPD file {record.spd_file} is not readable"
+        return ""
 
     def missing(self, *, verify: bool = True) -> list[FrameSpec]:
         """Planned frames that have no ok record, in capture order.
 
         A frame counts as missing when it was never recorded, is marked bad, was
-        recorded with other parameters than planned, its file is gone, or
-        (``verify``) its file fails its checksum.
+        recorded with other parameters than planned, its raw file or SPD is gone,
+        or (``verify``) one of them fails its checksum.
         """
         records = {f.id: f for f in self.frames}
         out = []
@@ -697,26 +982,38 @@ class Session:
                 rec is None
                 or rec.status != "ok"
                 or not _same_spec(rec.spec, spec)
-                or not self.path_of(rec).is_file()
-                or (verify and not self.verify(rec))
+                or self.problem(rec, checksums=verify)
             ):
                 out.append(spec)
         return out
 
+    def _tmp_dir(self) -> Path:
+        """``tmp/`` as a real folder inside the session (a link there is removed)."""
+        tmp = self.root / TMP_DIR
+        if tmp.is_symlink() or (tmp.exists() and not tmp.is_dir()):
+            tmp.unlink()  # the link itself, never what it points to
+        tmp.mkdir(parents=True, exist_ok=True)
+        return tmp
+
     def temp_stem(self, frame_id: str) -> Path:
         """Where a camera should write a frame before :meth:`commit_frame` (no suffix)."""
-        tmp = self.root / TMP_DIR
-        tmp.mkdir(parents=True, exist_ok=True)
-        return tmp / f"{frame_id}.{os.getpid()}"
+        return self._tmp_dir() / f"{frame_id}.{os.getpid()}"
 
     def clean_temp(self) -> None:
-        """Remove leftovers of interrupted writes (never referenced by the manifest)."""
+        """Remove leftovers of interrupted writes (never referenced by the manifest).
+
+        Only entries directly in the session's own ``tmp/`` are removed; links are
+        removed as links (never followed), folders are left alone.
+        """
         tmp = self.root / TMP_DIR
-        if tmp.is_dir():
-            for p in tmp.iterdir():
-                if p.is_file():
+        if not (tmp.is_symlink() or tmp.exists()):
+            return
+        tmp = self._tmp_dir()
+        with os.scandir(tmp) as entries:
+            for entry in entries:
+                if entry.is_symlink() or entry.is_file(follow_symlinks=False):
                     with contextlib.suppress(OSError):
-                        p.unlink()
+                        os.unlink(entry.path)
 
     def commit_frame(
         self,
@@ -752,16 +1049,24 @@ class Session:
         with open(src, "rb+") as fh:
             os.fsync(fh.fileno())
         frames = self.root / FRAMES_DIR
+        if frames.is_symlink():
+            raise InputError(
+                f"{FRAMES_DIR}/ is a link to another folder; frames are only written "
+                "inside the session folder",
+                path=self.root,
+            )
         frames.mkdir(parents=True, exist_ok=True)
         rel = f"{FRAMES_DIR}/{spec.id}{''.join(src.suffixes[-1:]).lower()}"
         digest = sha256_file(src)
-        spd_rel = None
+        spd_rel = spd_digest = None
         if spd is not None:
             spd_rel = f"{FRAMES_DIR}/{spec.id}.spd.csv"
-            tmp_spd = self.temp_stem(spec.id).with_suffix(".spd.csv")
+            # the stem ends in the pid: two processes never share a temp name
+            tmp_spd = Path(f"{self.temp_stem(spec.id)}.spd.csv")
             write_spectra_csv(spd, tmp_spd)
             with open(tmp_spd, "rb+") as fh:
                 os.fsync(fh.fileno())
+            spd_digest = sha256_file(tmp_spd)
             os.replace(tmp_spd, self.root / spd_rel)
         os.replace(src, self.root / rel)
         _fsync_dir(frames)
@@ -778,6 +1083,7 @@ class Session:
             status="ok",
             spd_file=spd_rel,
             note=note,
+            spd_sha256=spd_digest,
         )
         self._put(record)
         return record

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import csv
 import math
+from collections import Counter
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from os import PathLike
@@ -24,6 +25,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tunespec.core.errors import InputError, read_text
+from tunespec.core.limits import (
+    MAX_VALUE,
+    MAX_WAVELENGTH_NM,
+    csv_rows,
+    shown,
+    valid_name,
+)
 
 __all__ = [
     "DEFAULT_GRID",
@@ -89,7 +97,7 @@ class Grid:
             start, end, step = (float(p) for p in parts)
         except ValueError:
             raise InputError(
-                f"bad grid {text!r}: expected START:END:STEP in nm, e.g. 400:700:10"
+                f"bad grid {shown(text)}: expected START:END:STEP in nm, e.g. 400:700:10"
             ) from None
         return cls(start, end, step)
 
@@ -235,6 +243,7 @@ def read_spectra_csv(
     grid: Grid | None = None,
     *,
     allow_negative: bool = False,
+    max_value: float = MAX_VALUE,
 ) -> Spectra:
     """Read a spectral CSV and optionally resample it onto ``grid``.
 
@@ -247,6 +256,9 @@ def read_spectra_csv(
     allow_negative
         Accept negative values (e.g. signed basis functions); otherwise they are
         an error, as are NaN and empty cells.
+    max_value
+        Largest magnitude accepted (:data:`~tunespec.core.limits.MAX_REFLECTANCE`
+        for reflectances).
 
     Raises
     ------
@@ -255,15 +267,14 @@ def read_spectra_csv(
     """
     path = Path(path)
     text = read_text(path)
-    rows = list(csv.reader(text.splitlines()))
-    numbered = [(i + 1, r) for i, r in enumerate(rows) if any(c.strip() for c in r)]
+    numbered = csv_rows(text, path=path)
     if not numbered:
         raise InputError("empty file, expected a spectral CSV", path=path)
     line0, header = numbered[0]
     header = [h.strip() for h in header]
     if "wavelength" not in header[0].lower():
         raise InputError(
-            f"first column header is {header[0]!r}; expected one containing "
+            f"first column header is {shown(header[0])}; expected one containing "
             "'wavelength' (e.g. wavelength_nm)",
             path=path,
             line=line0,
@@ -275,8 +286,10 @@ def read_spectra_csv(
             path=path,
             line=line0,
         )
+    for n in names:
+        valid_name(n, "column name", path=path, line=line0)
     if len(set(names)) != len(names):
-        dup = sorted({n for n in names if names.count(n) > 1})
+        dup = sorted(n for n, k in Counter(names).items() if k > 1)
         raise InputError(
             f"duplicate column names: {', '.join(dup)}", path=path, line=line0
         )
@@ -293,14 +306,24 @@ def read_spectra_csv(
             nums = [float(c) for c in row]
         except ValueError:
             bad = next(c for c in row if not _is_float(c))
-            raise InputError(f"not a number: {bad!r}", path=path, line=lineno) from None
-        for j, (name, v) in enumerate(zip(header, nums, strict=True)):
+            raise InputError(
+                f"not a number: {shown(bad)}", path=path, line=lineno
+            ) from None
+        for j, (col, v) in enumerate(zip(header, nums, strict=True)):
             if not math.isfinite(v):
                 raise InputError(
-                    f"{name}: value {v} is not finite", path=path, line=lineno
+                    f"{col}: value {v} is not finite", path=path, line=lineno
                 )
             if v < 0 and not allow_negative and j > 0:
-                raise InputError(f"{name}: negative value {v}", path=path, line=lineno)
+                raise InputError(f"{col}: negative value {v}", path=path, line=lineno)
+            limit = MAX_WAVELENGTH_NM if j == 0 else max_value
+            if abs(v) > limit:
+                raise InputError(
+                    f"{shown(col)}: value {v:g} out of range (at most {limit:g} in "
+                    "magnitude)",
+                    path=path,
+                    line=lineno,
+                )
         if wl and nums[0] <= wl[-1]:
             raise InputError(
                 f"wavelength {nums[0]:g} nm is not above the previous row's {wl[-1]:g} nm",

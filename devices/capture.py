@@ -22,7 +22,9 @@ LEDs are switched off when the sequence ends, fails or is cancelled.
 from __future__ import annotations
 
 import contextlib
+import errno
 import math
+import shutil
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass, replace
 from os import PathLike
@@ -30,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tunespec.core.errors import InputError
+from tunespec.core.errors import DiskFullError, InputError
 from tunespec.core.layout import TargetLayout
 from tunespec.core.progress import ProgressFn, StopFn, check_stop, report
 from tunespec.core.session import (
@@ -38,6 +40,7 @@ from tunespec.core.session import (
     FrameRecord,
     FrameSpec,
     Session,
+    SessionLock,
     with_exposures,
 )
 from tunespec.core.spectra import Spectra
@@ -52,8 +55,10 @@ from tunespec.devices.protocols import (
 __all__ = [
     "CaptureResult",
     "FrameCallback",
+    "bytes_needed",
     "capture",
     "device_identities",
+    "free_space_warning",
     "meter_exposure",
     "new_session",
 ]
@@ -396,6 +401,7 @@ def capture(
     progress: ProgressFn | None = None,
     should_stop: StopFn | None = None,
     on_frame: FrameCallback | None = None,
+    on_warning: Callable[[str], None] | None = None,
 ) -> CaptureResult:
     """Run (or resume) the capture sequence of a session.
 
@@ -418,6 +424,10 @@ def capture(
         cancelled capture keeps every frame taken so far.
     on_frame
         Called with each committed frame's record and raw file path.
+    on_warning
+        Called with each warning as it arises (all are also in the result): a
+        lock taken over, too little free disk space for the frames to take, an LED
+        too weak.
 
     Returns
     -------
@@ -428,12 +438,139 @@ def capture(
     InputError
         A session that already holds frames without ``resume``; channels the light
         source does not have.
+    SessionBusyError
+        Another process is capturing into the session (its lock names it); a lock
+        left by a killed capture is taken over, with a warning in the result.
+    DiskFullError
+        The disk filled up; frames committed before stay in the session, the
+        manifest is consistent and a resume after freeing space goes on.
     DeviceError
         From the devices; frames committed before it stay in the session.
     Cancelled
         When ``should_stop()`` turns true.
     """
-    retake = list(retake)
+    warnings = _Warnings(on_warning)
+    with SessionLock(session.root) as lock:
+        session.reload()
+        if lock.stale_holder is not None:
+            holder = lock.stale_holder
+            warnings.append(
+                "took over the lock of an interrupted capture (pid "
+                f"{holder.get('pid')} on {holder.get('host')}, started "
+                f"{holder.get('started_utc')})"
+            )
+        try:
+            return _capture_locked(
+                session,
+                light,
+                camera,
+                stage,
+                resume=resume,
+                retake=list(retake),
+                max_exposure_s=max_exposure_s,
+                progress=progress,
+                should_stop=should_stop,
+                on_frame=on_frame,
+                warnings=warnings,
+            )
+        except OSError as exc:
+            if exc.errno != errno.ENOSPC:
+                raise
+            # the manifest lists only what was committed before; resume goes on
+            raise DiskFullError(
+                session.root, needed_bytes=bytes_needed(session, camera)
+            ) from None
+
+
+class _Warnings(list[str]):
+    """Warnings collected for the result and passed on at once to a callback."""
+
+    def __init__(self, callback: Callable[[str], None] | None) -> None:
+        super().__init__()
+        self._callback = callback
+
+    def append(self, warning: str) -> None:
+        super().append(warning)
+        if self._callback is not None:
+            self._callback(warning)
+
+
+#: Bytes assumed for a raw frame when neither the session nor the camera tells
+#: (a 5D Mark III CR2 is 25-35 MB).
+DEFAULT_FRAME_BYTES = 40_000_000
+#: Room kept for the manifest, SPD files and temp files.
+SPARE_BYTES = 5_000_000
+
+
+def frame_bytes(session: Session, camera: Camera | None = None) -> int:
+    """Expected size of one more frame (raw file and SPD), bytes.
+
+    The mean of the frames already in the session; else from the camera's
+    resolution (16-bit mosaic); else :data:`DEFAULT_FRAME_BYTES`.
+    """
+    sizes = []
+    for rec in session.ok_frames():
+        with contextlib.suppress(OSError):
+            size = session.path_of(rec).stat().st_size
+            if rec.spd_file is not None:
+                size += (session.root / rec.spd_file).stat().st_size
+            sizes.append(size)
+    if sizes:
+        return int(max(sizes))
+    resolution = getattr(camera, "resolution", None)
+    if isinstance(resolution, tuple) and len(resolution) == 2:
+        w, h = resolution
+        return int(w) * int(h) * 2 + 200_000
+    return DEFAULT_FRAME_BYTES
+
+
+def frames_to_take(session: Session) -> int:
+    """Frames a capture of ``session`` still has to take (an upper bound before the
+    exposures are metered: one dark per LED exposure)."""
+    settings = session.settings
+    if settings.resolved:
+        return len(session.missing(verify=False))
+    n_lit = 2 * len(settings.channels) * len(settings.bracket_factors)
+    ok = len(session.ok_frames())
+    return max(0, n_lit + (n_lit // 2) * settings.n_darks - ok)
+
+
+def bytes_needed(session: Session, camera: Camera | None = None) -> int:
+    """Disk space the rest of a capture needs, bytes (with some room to spare)."""
+    return frames_to_take(session) * frame_bytes(session, camera) + SPARE_BYTES
+
+
+def free_space_warning(session: Session, camera: Camera | None = None) -> str | None:
+    """A warning if the frames still to take do not fit on the session's disk."""
+    try:
+        free = shutil.disk_usage(session.root).free
+    except OSError:
+        return None
+    need = bytes_needed(session, camera)
+    if need <= free:
+        return None
+    return (
+        f"the {frames_to_take(session)} frame(s) still to take need about "
+        f"{need / 1e6:.0f} MB but only {free / 1e6:.0f} MB are free in "
+        f"{session.root}; the capture will stop when the disk is full (resume it "
+        "after freeing space)"
+    )
+
+
+def _capture_locked(
+    session: Session,
+    light: LightSource,
+    camera: Camera,
+    stage: TargetStage,
+    *,
+    resume: bool,
+    retake: list[str],
+    max_exposure_s: float,
+    progress: ProgressFn | None,
+    should_stop: StopFn | None,
+    on_frame: FrameCallback | None,
+    warnings: list[str],
+) -> CaptureResult:
     if session.frames and not (resume or retake):
         raise InputError(
             "the session already holds frames; resume it (--resume) or start a new one",
@@ -451,7 +588,9 @@ def capture(
     session.set_devices(device_identities(light, camera, stage))
     if retake:
         session.mark_bad(retake, "retake requested")
-    warnings: list[str] = []
+    space = free_space_warning(session, camera)
+    if space is not None:
+        warnings.append(space)
     n_meter = sum(c not in settings.exposures_s for c in settings.channels)
     # until the exposures are known, count every possible dark (an overestimate, so
     # the fraction never goes back when the real count replaces it)

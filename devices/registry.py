@@ -12,8 +12,9 @@ light source spec                opens
 camera spec                      opens
 ===============================  ==================================================
 ``sim[?resolution=WxH&seed=N     :class:`~tunespec.devices.sim.camera.SimCamera`
-&realtime=1]``                   imaging a :class:`SimScene` (needs a simulated
-                                 light source: it renders with the true SPD)
+&realtime=1]``                   imaging a :class:`SimScene` (renders with the true
+                                 SPD of a simulated light, or with what another
+                                 light source reports: :class:`ReportedSpdLight`)
 ``gphoto2``, ``gphoto2:PORT``    a Canon EOS over USB (``gphoto2:usb:001,004``)
 ===============================  ==================================================
 
@@ -32,6 +33,7 @@ from urllib.parse import parse_qs
 from tunespec.core.datasets import resource_path
 from tunespec.core.errors import InputError
 from tunespec.core.layout import TargetLayout
+from tunespec.core.limits import contained_path, shown
 from tunespec.core.spectra import DEFAULT_GRID, Grid, Spectra, read_spectra_csv
 from tunespec.devices.clock import Clock, RealClock, VirtualClock
 from tunespec.devices.protocols import Camera, LightSource, TargetStage
@@ -40,6 +42,7 @@ __all__ = [
     "DEFAULT_SIM_RESOLUTION",
     "Bench",
     "OperatorStage",
+    "ReportedSpdLight",
     "layout_reflectances",
     "open_bench",
     "open_camera",
@@ -66,10 +69,10 @@ def parse_resolution(text: str) -> tuple[int, int]:
         w, h = (int(v) for v in text.lower().split("x"))
     except ValueError:
         raise InputError(
-            f"bad resolution {text!r}: expected WIDTHxHEIGHT, e.g. 768x512"
+            f"bad resolution {shown(text)}: expected WIDTHxHEIGHT, e.g. 768x512"
         ) from None
     if w < 64 or h < 64 or w % 2 or h % 2:
-        raise InputError(f"bad resolution {text!r}: even, at least 64x64")
+        raise InputError(f"bad resolution {shown(text)}: even, at least 64x64")
     return w, h
 
 
@@ -100,7 +103,7 @@ def open_light_source(
 
         return open_cal1(spec)
     raise InputError(
-        f"unknown light source {spec!r}: use sim, cal1:///dev/ttyUSB0 or "
+        f"unknown light source {shown(spec)}: use sim, cal1:///dev/ttyUSB0 or "
         "cal1+socket://HOST:PORT"
     )
 
@@ -113,7 +116,8 @@ def layout_reflectances(
     """The patch reflectances a layout names in ``meta["reflectances"]``.
 
     A path is looked up relative to the layout file, then in the shipped resources
-    (``"charts/colorchecker_sg.csv"``).
+    (``"charts/colorchecker_sg.csv"``); it must stay inside one of them (no absolute
+    paths, no ``..`` out of them).
 
     Raises
     ------
@@ -126,14 +130,19 @@ def layout_reflectances(
             f"layout {layout.name!r} names no reflectances (meta.reflectances); the "
             "simulated camera needs them"
         )
-    candidates = []
+    bases = [resource_path()]
     if layout_path is not None:
-        candidates.append(Path(layout_path).parent / ref)
-    candidates.append(Path(ref))
+        bases.insert(0, Path(layout_path).parent)
+    # a path written in a file stays inside that file's folder or the resources
+    candidates = contained_path(ref, "meta.reflectances", bases=bases, path=layout_path)
     for c in candidates:
         if c.is_file():
             return read_spectra_csv(c, grid)
-    return read_spectra_csv(resource_path(*Path(ref).parts), grid)
+    raise InputError(
+        f"meta.reflectances: {shown(ref)} not found beside the layout or in the "
+        "shipped resources",
+        path=layout_path,
+    )
 
 
 def sim_scene(
@@ -199,7 +208,7 @@ def open_camera(
         unknown = set(opts) - {"resolution", "seed", "realtime"}
         if unknown:
             raise InputError(
-                f"bad camera spec {spec!r}: unknown option(s) {sorted(unknown)}"
+                f"bad camera spec {shown(spec)}: unknown option(s) {sorted(unknown)}"
             )
         res = resolution or parse_resolution(
             opts.get("resolution", "{}x{}".format(*DEFAULT_SIM_RESOLUTION))
@@ -208,7 +217,7 @@ def open_camera(
             seed_value = int(opts.get("seed", "0")) if seed is None else int(seed)
         except ValueError:
             raise InputError(
-                f"bad camera spec {spec!r}: seed must be an integer"
+                f"bad camera spec {shown(spec)}: seed must be an integer"
             ) from None
         rt = (
             opts.get("realtime", "0") in ("1", "true", "yes")
@@ -232,7 +241,38 @@ def open_camera(
         from tunespec.devices.canon.gphoto2_camera import Gphoto2Camera
 
         return Gphoto2Camera.open(spec)
-    raise InputError(f"unknown camera {spec!r}: use sim, gphoto2 or gphoto2:PORT")
+    raise InputError(f"unknown camera {shown(spec)}: use sim, gphoto2 or gphoto2:PORT")
+
+
+class ReportedSpdLight:
+    """What a simulated camera sees of a real light source: its reported SPD.
+
+    ``emitted_spd()`` is the light's own measurement (``measure_spd``), or zero when
+    it reports every level at 0 (a dark frame needs no measurement). Lets
+    ``--camera sim`` run with ``--light cal1+socket://...`` (the emulator) or a real
+    CAL1, exercising the driver end to end without a camera.
+
+    Parameters
+    ----------
+    light
+        The light source (its owner keeps controlling it).
+    """
+
+    def __init__(self, light: LightSource) -> None:
+        self._light = light
+        self._grid_nm: Any = DEFAULT_GRID.wavelength_nm
+
+    def emitted_spd(self) -> Spectra:
+        import numpy as np
+
+        levels = getattr(self._light, "levels", None)
+        if levels is not None and not np.any(np.asarray(levels()) > 0):
+            return Spectra(
+                self._grid_nm, np.zeros((1, len(self._grid_nm))), ("emitted",)
+            )
+        spd = self._light.measure_spd()
+        self._grid_nm = spd.wavelength_nm
+        return spd
 
 
 class OperatorStage:
@@ -338,25 +378,31 @@ def open_bench(
         from tunespec.devices.sim.light import open_sim_light
 
         head, opts = _split_spec(light)
-        if head not in ("sim", "sim://"):
-            raise InputError(
-                "the simulated camera needs the simulated light source (sim)"
+        src: Any
+        seen: Any
+        if head in ("sim", "sim://"):
+            # options in the spec win over the keyword defaults
+            src = seen = open_sim_light(
+                light,
+                seed=None if "seed" in opts else seed,
+                warm=None if "warm" in opts else warm,
             )
-        # options in the spec win over the keyword defaults
-        src = open_sim_light(
-            light,
-            seed=None if "seed" in opts else seed,
-            warm=None if "warm" in opts else warm,
-        )
-        if layout is None:
-            layout = TargetLayout.load(resource_path("layouts", "colorchecker_sg.json"))
-        scene = sim_scene(
-            layout, reflectances, layout_path=layout_path, **(scene_options or {})
-        )
+        else:
+            # a real driver (or the CAL1 emulator): the simulated camera sees what
+            # its spectroradiometer reports, so the driver runs end to end
+            src = open_light_source(light, seed=seed)
+            seen = ReportedSpdLight(src)
         try:
+            if layout is None:
+                layout = TargetLayout.load(
+                    resource_path("layouts", "colorchecker_sg.json")
+                )
+            scene = sim_scene(
+                layout, reflectances, layout_path=layout_path, **(scene_options or {})
+            )
             cam = open_camera(
                 cam_spec,
-                light=src,
+                light=seen,
                 scene=scene,
                 resolution=resolution,
                 seed=seed,

@@ -19,7 +19,6 @@ configuration on any bench, resuming sessions that already exist.
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -38,9 +37,20 @@ from tunespec.core.export import (
     write_sensitivity_meta,
 )
 from tunespec.core.layout import TargetLayout
+from tunespec.core.limits import (
+    check_output_dir,
+    dumps_json,
+    loads_json,
+    loads_toml,
+    read_text,
+    shown,
+    valid_number,
+    valid_seed,
+)
 from tunespec.core.processing import ProcessedSession, process_session, write_processed
 from tunespec.core.progress import ProgressFn, StopFn, report
 from tunespec.core.sensitivity import (
+    SENSITIVITY_METHODS,
     SensitivityEstimate,
     correct_illuminants_from_meta,
     estimate_camera_sensitivity,
@@ -79,6 +89,7 @@ __all__ = [
     "capture_sample",
     "capture_target",
     "chart_layout",
+    "check_config",
     "estimate",
     "evaluate",
     "export",
@@ -768,7 +779,7 @@ def _run(
         truth=truth,
     )
     summary = out / "summary.json"
-    atomic_write_text(summary, json.dumps(result.summary(), indent=2) + "\n")
+    atomic_write_text(summary, dumps_json(result.summary()))
     files["summary_json"] = summary
     report(progress, 1.0)
     return result
@@ -856,24 +867,12 @@ def load_config(path: str | PathLike[str]) -> dict[str, Any]:
     InputError
         Unreadable file, bad syntax, unknown sections or keys.
     """
-    import tomllib
-
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError("file not found", path=path) from None
-    try:
-        if path.suffix.lower() == ".toml":
-            cfg = tomllib.loads(text)
-        else:
-            cfg = json.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"not valid TOML: {exc}", path=path) from None
-    except json.JSONDecodeError as exc:
-        raise InputError(
-            f"not valid JSON: {exc.msg}", path=path, line=exc.lineno
-        ) from None
+    text = read_text(path)
+    if path.suffix.lower() == ".toml":
+        cfg = loads_toml(text, path=path)
+    else:
+        cfg = loads_json(text, path=path)
     if not isinstance(cfg, dict):
         raise InputError("expected a table/object at the top", path=path)
     known = {
@@ -889,7 +888,7 @@ def load_config(path: str | PathLike[str]) -> dict[str, Any]:
     for key, value in cfg.items():
         if key not in known:
             raise InputError(
-                f"unknown section {key!r} (known: {', '.join(known)})", path=path
+                f"unknown section {shown(key)} (known: {', '.join(known)})", path=path
             )
         allowed = known[key]
         if allowed is not None:
@@ -922,7 +921,7 @@ def run_config(
     """
     cfg = dict(config) if isinstance(config, Mapping) else load_config(config)
     base = Path(cfg.get("_path", ".")).parent if "_path" in cfg else Path(".")
-    _check_config_strings(cfg)
+    check_config(cfg)
 
     def rel(p: str | None) -> Path | None:
         return None if p is None else (base / p)
@@ -966,7 +965,8 @@ def run_config(
     brackets = cap.get("brackets", [1.0])
     if not isinstance(brackets, list | tuple):
         raise InputError(
-            f"capture.brackets: expected a list of numbers, got {brackets!r}", path=src
+            f"capture.brackets: expected a list of numbers, got {shown(brackets)}",
+            path=src,
         )
     seed = _cfg_int(bench_cfg.get("seed", 0), "bench.seed", src)
     out = base / str(cfg.get("out", "run"))
@@ -1008,14 +1008,14 @@ def run_config(
 def _cfg_number(value: Any, key: str, source: str | None) -> float:
     """A configuration value that must be a number (one-line error otherwise)."""
     if isinstance(value, bool) or not isinstance(value, int | float):
-        raise InputError(f"{key}: expected a number, got {value!r}", path=source)
+        raise InputError(f"{key}: expected a number, got {shown(value)}", path=source)
     return float(value)
 
 
 def _cfg_int(value: Any, key: str, source: str | None) -> int:
     """A configuration value that must be an integer (one-line error otherwise)."""
     if isinstance(value, bool) or not isinstance(value, int):
-        raise InputError(f"{key}: expected an integer, got {value!r}", path=source)
+        raise InputError(f"{key}: expected an integer, got {shown(value)}", path=source)
     return value
 
 
@@ -1029,8 +1029,16 @@ _CONFIG_STRINGS = {
 }
 
 
-def _check_config_strings(cfg: Mapping[str, Any]) -> None:
-    """One-line errors for sections that are not tables or text keys that are not text."""
+def check_config(cfg: Mapping[str, Any]) -> None:
+    """Check every value of a configuration before anything runs.
+
+    Raises
+    ------
+    InputError
+        Naming the file and the key: a section that is not a table, a text key that
+        is not text, a bad seed, resolution, exposure, bracket, ISO, method or grid,
+        or an ``out`` that is an existing file.
+    """
     src = cfg.get("_path")
     for section, keys in _CONFIG_STRINGS.items():
         table = cfg.get(section, {})
@@ -1040,13 +1048,64 @@ def _check_config_strings(cfg: Mapping[str, Any]) -> None:
             value = table.get(key)
             if value is not None and not isinstance(value, str):
                 raise InputError(
-                    f"{section}.{key}: expected a string, got {value!r}", path=src
+                    f"{section}.{key}: expected a string, got {shown(value)}", path=src
                 )
     out = cfg.get("out", "run")
     if not isinstance(out, str | PathLike):
-        raise InputError(f"out: expected a folder name, got {out!r}", path=src)
+        raise InputError(f"out: expected a folder name, got {shown(out)}", path=src)
+    base = Path(src).parent if src else Path(".")
+    try:
+        check_output_dir(base / out, "out")
+    except InputError as exc:
+        raise InputError(exc.message, path=src) from None
+    # every value checked before anything is captured (a typo must not cost a chart)
+    bench = cfg.get("bench", {})
+    valid_seed(bench.get("seed", 0), "bench.seed", path=src)
+    if bench.get("resolution") is not None:
+        try:
+            parse_resolution(bench["resolution"])
+        except InputError as exc:
+            raise InputError(f"bench.resolution: {exc.message}", path=src) from None
+    cap = cfg.get("capture", {})
+    if not isinstance(cap, Mapping):
+        raise InputError("capture: expected a table/object", path=src)
+    exposure = cap.get("exposure", "auto")
+    if isinstance(exposure, str):
+        if exposure != "auto":
+            raise InputError(
+                f'capture.exposure: expected "auto" or seconds, got {shown(exposure)}',
+                path=src,
+            )
+    else:
+        valid_number(exposure, "capture.exposure", path=src, lo=0, hi=1e4, lo_open=True)
+    brackets = cap.get("brackets", [1.0])
+    if not isinstance(brackets, list | tuple) or not 1 <= len(brackets) <= 16:
+        raise InputError(
+            f"capture.brackets: expected a list of 1 to 16 numbers, got {shown(brackets)}",
+            path=src,
+        )
+    for b in brackets:
+        valid_number(b, "capture.brackets", path=src, lo=0, hi=1, lo_open=True)
+    valid_number(
+        cap.get("iso", 100), "capture.iso", path=src, lo=1, hi=1e7, integer=True
+    )
+    method = cfg.get("calibrate", {}).get("method")
+    if method is not None and method not in SENSITIVITY_METHODS:
+        raise InputError(
+            f"calibrate.method: {shown(method)} is not one of "
+            f"{', '.join(SENSITIVITY_METHODS)}",
+            path=src,
+        )
+    for section in ("calibrate", "estimate"):
+        grid = cfg.get(section, {}).get("grid")
+        if grid is not None:
+            try:
+                Grid.parse(grid)
+            except InputError as exc:
+                raise InputError(f"{section}.grid: {exc.message}", path=src) from None
     report_files = cfg.get("export", {}).get("report", True)
     if not isinstance(report_files, bool):
         raise InputError(
-            f"export.report: expected true or false, got {report_files!r}", path=src
+            f"export.report: expected true or false, got {shown(report_files)}",
+            path=src,
         )

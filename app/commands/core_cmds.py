@@ -3,16 +3,16 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from tunespec.app.cli import add_grid_option, progress_bar
+from tunespec.app.cli import add_grid_option, progress_bar, seed_arg
 from tunespec.core.datasets import read_sensitivities
 from tunespec.core.errors import InputError
 from tunespec.core.export import read_sensitivity_meta, write_sensitivity_meta
+from tunespec.core.limits import MAX_REFLECTANCE, dumps_json
 from tunespec.core.responses import Responses, read_responses_csv, write_responses_csv
 from tunespec.core.spectra import Grid, Spectra, read_spectra_csv, write_spectra_csv
 
@@ -76,7 +76,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     add_grid_option(p)
     p.add_argument("-o", "--output", required=True, type=Path, help="sensitivities CSV")
     p.add_argument("--stats", type=Path, help="write the statistics as JSON")
-    p.set_defaults(func=cmd_calibrate)
+    p.set_defaults(func=cmd_calibrate, output_files=("output", "stats"))
 
     p = sub.add_parser(
         "estimate",
@@ -114,7 +114,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     add_grid_option(p)
     p.add_argument("-o", "--output", required=True, type=Path)
-    p.set_defaults(func=cmd_estimate)
+    p.set_defaults(func=cmd_estimate, output_files=("output",))
 
     p = sub.add_parser(
         "evaluate",
@@ -124,7 +124,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--reference", required=True, type=Path)
     add_grid_option(p)
     p.add_argument("--stats", type=Path, help="write the statistics as JSON")
-    p.set_defaults(func=cmd_evaluate)
+    p.set_defaults(func=cmd_evaluate, output_files=("stats",))
 
     p = sub.add_parser(
         "simulate-responses",
@@ -148,16 +148,16 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--n-pixels", type=int, default=400)
     p.add_argument("--flat-field-residual", type=float, default=0.003)
     p.add_argument("--no-noise", action="store_true")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=seed_arg, default=0)
     add_grid_option(p)
     p.add_argument("-o", "--output", required=True, type=Path)
-    p.set_defaults(func=cmd_simulate)
+    p.set_defaults(func=cmd_simulate, output_files=("output", "illuminants_out"))
 
 
 def _write_json(path: Path | None, data: dict[str, Any]) -> None:
     if path is not None:
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
+        path.write_text(dumps_json(data), encoding="utf-8")
 
 
 def _check_names(
@@ -187,7 +187,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         )
     responses = read_responses_csv(args.responses)
     illuminants = read_spectra_csv(args.illuminants, args.grid)
-    reflectances = read_spectra_csv(args.reflectances, args.grid)
+    reflectances = read_spectra_csv(
+        args.reflectances, args.grid, max_value=MAX_REFLECTANCE
+    )
     # The estimator checks the names of the patches it fits; checking all of them
     # here (held-aside ones included) fails before a fit of several seconds.
     _check_names(
@@ -257,7 +259,7 @@ def cmd_estimate(args: argparse.Namespace) -> int:
     meta = read_sensitivity_meta(args.sensitivities)
     illuminants = correct_illuminants_from_meta(reported, meta, args.spd_shift_nm)
     prior = (
-        read_spectra_csv(args.prior, args.grid)
+        read_spectra_csv(args.prior, args.grid, max_value=MAX_REFLECTANCE)
         if args.prior
         else load_colorchecker_sg(args.grid)
     )
@@ -307,8 +309,8 @@ def _write_uncertainty(
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from tunespec.core.colorimetry import reflectance_stats
 
-    estimated = read_spectra_csv(args.estimated, args.grid)
-    reference = read_spectra_csv(args.reference, args.grid)
+    estimated = read_spectra_csv(args.estimated, args.grid, max_value=MAX_REFLECTANCE)
+    reference = read_spectra_csv(args.reference, args.grid, max_value=MAX_REFLECTANCE)
     stats = reflectance_stats(estimated, reference)
     print(stats.format_table())
     _write_json(args.stats, stats.as_dict())
@@ -320,7 +322,9 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
     sensitivity = read_sensitivities(args.sensitivities, args.grid)
     illuminants = read_spectra_csv(args.illuminants, args.grid)
-    reflectances = read_spectra_csv(args.reflectances, args.grid)
+    reflectances = read_spectra_csv(
+        args.reflectances, args.grid, max_value=MAX_REFLECTANCE
+    )
     if args.exposure_target is not None:
         illuminants = scale_to_exposure(
             reflectances, illuminants, sensitivity, target=args.exposure_target

@@ -11,8 +11,10 @@ from __future__ import annotations
 import argparse
 import sys
 import threading
-from typing import TextIO
+from collections.abc import Mapping, Sequence
+from typing import Any, TextIO
 
+from tunespec.app.cli import seed_arg
 from tunespec.core.errors import InputError
 from tunespec.core.spectra import read_spectra_csv
 from tunespec.devices.cal1.emulator import Cal1Emulator
@@ -52,14 +54,64 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "instead of the shipped 22-LED CAL1 model",
     )
     cal1.add_argument(
-        "--seed", type=int, default=0, help="unit and noise seed (default 0)"
+        "--seed", type=seed_arg, default=0, help="unit and noise seed (default 0)"
     )
     cal1.add_argument(
         "--warm",
         action="store_true",
         help="start warmed up (as if switched on an hour ago)",
     )
+    cal1.add_argument(
+        "--fault",
+        action="append",
+        default=[],
+        type=_fault,
+        metavar="KIND[,command=CMD][,skip=N][,delay=S][,code=N]",
+        help="inject a fault once (repeatable, in order): KIND is delay (answer "
+        "after delay=S seconds), no_reply, drop (close the link), garbage (line "
+        "noise) or error (ERR code=N); command= limits it to one wire keyword "
+        "(e.g. MEAS:SPD?), skip=N serves N matching requests normally first",
+    )
+    cal1.add_argument(
+        "--disconnect-after",
+        type=int,
+        default=None,
+        metavar="N",
+        help="drop the connection on the request after the N-th",
+    )
     cal1.set_defaults(func=_emulate_cal1)
+
+
+FAULT_KINDS = ("delay", "no_reply", "drop", "garbage", "error")
+
+
+def _fault(text: str) -> dict[str, object]:
+    """argparse type of ``--fault``: ``KIND[,key=value...]`` -> inject_fault kwargs."""
+    kind, *opts = text.split(",")
+    kind = kind.strip().replace("-", "_")
+    if kind not in FAULT_KINDS:
+        raise argparse.ArgumentTypeError(
+            f"unknown fault {kind!r}: use {', '.join(FAULT_KINDS)}"
+        )
+    out: dict[str, object] = {"kind": kind}
+    for opt in opts:
+        key, _, value = opt.partition("=")
+        key = key.strip()
+        try:
+            if key == "command" and value:
+                out["command"] = value.strip()
+            elif key in ("skip", "code") and 0 <= int(value) <= 1_000_000:
+                out[key] = int(value)
+            elif key == "delay" and 0 <= float(value) <= 3600:
+                out["delay_s"] = float(value)
+            else:
+                raise ValueError
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"bad fault option {opt!r}: command=CMD, skip=N, delay=S (0-3600) "
+                "or code=N"
+            ) from None
+    return out
 
 
 def _port(text: str) -> int:
@@ -74,8 +126,13 @@ def _port(text: str) -> int:
 
 
 def _emulate_cal1(args: argparse.Namespace) -> int:
+    faults = list(args.fault)
+    if args.disconnect_after is not None:
+        if args.disconnect_after < 0:
+            raise InputError("--disconnect-after: expected N >= 0")
+        faults.append({"kind": "drop", "skip": args.disconnect_after})
     return run_cal1_emulator(
-        port=args.port, leds=args.leds, seed=args.seed, warm=args.warm
+        port=args.port, leds=args.leds, seed=args.seed, warm=args.warm, faults=faults
     )
 
 
@@ -87,8 +144,12 @@ def run_cal1_emulator(
     warm: bool = False,
     stop: threading.Event | None = None,
     out: TextIO | None = None,
+    faults: Sequence[Mapping[str, Any]] = (),
 ) -> int:
     """Serve a CAL1 emulator until Ctrl-C (or until ``stop`` is set); exit code 0.
+
+    ``faults`` are :meth:`Cal1Emulator.inject_fault` keyword sets, injected in order
+    before the first client connects.
 
     Prints the spec to connect with, e.g. ``cal1+socket://127.0.0.1:5025``.
 
@@ -111,6 +172,8 @@ def run_cal1_emulator(
             "0 for a free one"
         ) from None
     with emulator as emu:
+        for fault in faults:
+            emu.inject_fault(**fault)
         source = leds or "shipped 22-LED CAL1 model"
         out.write(
             f"CAL1 emulator ({physics.n_channels} LEDs from {source}, seed {seed}) "

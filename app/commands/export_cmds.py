@@ -16,6 +16,7 @@ from typing import Any
 from tunespec.app.cli import grid_arg
 from tunespec.core.datasets import read_sensitivities
 from tunespec.core.errors import InputError, read_json
+from tunespec.core.limits import MAX_REFLECTANCE
 from tunespec.core.spectra import Grid, Spectra, read_spectra_csv
 
 __all__ = ["register"]
@@ -45,7 +46,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     p.add_argument("--descriptor", default="TuneSpec reflectances", help="DESCRIPTOR")
     p.add_argument("-o", "--output", required=True, type=Path, help=".ti3 file")
-    p.set_defaults(func=cmd_export_cgats)
+    p.set_defaults(func=cmd_export_cgats, output_files=("output",))
 
     p = sub.add_parser(
         "export-rawtoaces",
@@ -68,7 +69,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "(the only grid rawtoaces reads)",
     )
     p.add_argument("-o", "--output", required=True, type=Path, help="JSON file")
-    p.set_defaults(func=cmd_export_rawtoaces)
+    p.set_defaults(func=cmd_export_rawtoaces, output_files=("output",))
 
     p = sub.add_parser(
         "report",
@@ -101,7 +102,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     p.add_argument("--session-id", help="session identifier shown in the report")
     _add_optional_grid(p)
-    p.set_defaults(func=cmd_report)
+    p.set_defaults(func=cmd_report, output_dirs=("out",))
 
 
 def _add_optional_grid(parser: argparse.ArgumentParser) -> None:
@@ -119,7 +120,9 @@ def cmd_export_cgats(args: argparse.Namespace) -> int:
     from tunespec.core.export import reflectance_ti3
     from tunespec.core.responses import read_responses_csv
 
-    reflectance = read_spectra_csv(args.reflectances, args.grid)
+    reflectance = read_spectra_csv(
+        args.reflectances, args.grid, max_value=MAX_REFLECTANCE
+    )
     responses = None if args.responses is None else read_responses_csv(args.responses)
     if args.illuminant and responses is None:
         raise InputError("--illuminant needs --responses")
@@ -181,9 +184,13 @@ def cmd_report(args: argparse.Namespace) -> int:
     grid = args.grid
     data: dict[str, Any] = {"title": args.title, "session_id": args.session_id}
     if args.reflectances:
-        data["reflectance"] = read_spectra_csv(args.reflectances, grid)
+        data["reflectance"] = read_spectra_csv(
+            args.reflectances, grid, max_value=MAX_REFLECTANCE
+        )
     if args.reference:
-        data["reflectance_reference"] = read_spectra_csv(args.reference, grid)
+        data["reflectance_reference"] = read_spectra_csv(
+            args.reference, grid, max_value=MAX_REFLECTANCE
+        )
     if args.sensitivities:
         data["sensitivity"] = read_sensitivities(args.sensitivities, grid)
     if args.reference_sensitivities:

@@ -7,10 +7,11 @@ import sys
 import time
 from pathlib import Path
 
-from tunespec.app.cli import progress_bar
+from tunespec.app.cli import progress_bar, seed_arg
 from tunespec.core.errors import InputError
 from tunespec.core.layout import TargetLayout
-from tunespec.core.session import Session
+from tunespec.core.limits import check_output_file
+from tunespec.core.session import Session, SessionLock
 
 __all__ = ["register"]
 
@@ -60,7 +61,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "truth. Re-running on the same folder resumes it.",
     )
     p.add_argument("--out", type=Path, default=Path("tunespec-demo"), help="folder")
-    p.add_argument("--seed", type=int, default=0, help="simulation seed (0)")
+    p.add_argument("--seed", type=seed_arg, default=0, help="simulation seed (0)")
     p.add_argument(
         "--resolution",
         type=_resolution,
@@ -70,7 +71,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         f"{DEMO_RESOLUTION[1]}; the 5D Mark III has 5760x3840)",
     )
     p.add_argument("--no-report", action="store_true", help="skip the HTML/PDF report")
-    p.set_defaults(func=cmd_demo)
+    p.set_defaults(func=cmd_demo, output_dirs=("out",))
 
     p = sub.add_parser(
         "capture",
@@ -132,8 +133,8 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         metavar="WxH",
         help="simulated camera resolution",
     )
-    p.add_argument("--seed", type=int, default=0, help="simulation seed")
-    p.set_defaults(func=cmd_capture)
+    p.add_argument("--seed", type=seed_arg, default=0, help="simulation seed")
+    p.set_defaults(func=cmd_capture, output_dirs=("out",))
 
     p = sub.add_parser(
         "process",
@@ -171,7 +172,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="leave out channels with missing frames",
     )
     p.add_argument("--verify", action="store_true", help="check file checksums first")
-    p.set_defaults(func=cmd_process)
+    p.set_defaults(func=cmd_process, output_files=("output", "illuminants_out"))
 
     p = sub.add_parser(
         "run",
@@ -213,10 +214,19 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 
 def cmd_capture(args: argparse.Namespace) -> int:
+    resume = args.resume or bool(args.retake)
+    exists = (args.out / "manifest.json").is_file()
+    if resume and not exists:
+        raise InputError("no session to resume here", path=args.out)
+    # held from before the session is created until the capture ends
+    with SessionLock(args.out):
+        return _capture_cmd(args, resume)
+
+
+def _capture_cmd(args: argparse.Namespace, resume: bool) -> int:
     from tunespec.devices.capture import capture, new_session
     from tunespec.devices.registry import open_bench
 
-    resume = args.resume or bool(args.retake)
     exists = (args.out / "manifest.json").is_file()
     if exists and not resume:
         raise InputError(
@@ -261,9 +271,8 @@ def cmd_capture(args: argparse.Namespace) -> int:
             retake=args.retake,
             max_exposure_s=args.max_exposure,
             progress=progress_bar("capturing"),
+            on_warning=lambda w: print(f"warning: {w}", file=sys.stderr),
         )
-    for w in result.warnings:
-        print(f"warning: {w}", file=sys.stderr)
     print(
         f"{len(result.captured)} frame(s) captured, {result.skipped} already there; "
         f"session {args.out} is complete"
@@ -288,6 +297,10 @@ def _corners_arg(text: str | None) -> object:
 def cmd_process(args: argparse.Namespace) -> int:
     from tunespec.core.processing import process_session, write_processed
 
+    illum = args.illuminants_out or args.output.with_name(
+        args.output.stem + "_illuminants.csv"
+    )
+    check_output_file(illum, "--illuminants-out")
     session = Session.open(args.session)
     layout = TargetLayout.load(args.layout) if args.layout else None
     processed = process_session(
@@ -298,9 +311,6 @@ def cmd_process(args: argparse.Namespace) -> int:
         allow_incomplete=args.allow_incomplete,
         verify=args.verify,
         progress=progress_bar("processing"),
-    )
-    illum = args.illuminants_out or args.output.with_name(
-        args.output.stem + "_illuminants.csv"
     )
     write_processed(processed, args.output, illum)
     for w in processed.warnings:

@@ -36,6 +36,7 @@ from tunespec.core.datasets import resource_path
 from tunespec.core.errors import InputError, read_json
 from tunespec.core.export import read_sensitivity_meta, write_sensitivity_meta
 from tunespec.core.layout import TargetLayout
+from tunespec.core.limits import dumps_json
 from tunespec.core.progress import Cancelled, ProgressFn, StopFn, check_stop
 from tunespec.core.spectra import (
     DEFAULT_GRID,
@@ -368,9 +369,7 @@ class Measurement(QObject):
             "threshold_rgb_mean": self.threshold,
             "reference_path": str(self.reference_path) if self.reference_path else None,
         }
-        atomic_write_text(
-            self.folder / MEASUREMENT_FILE, json.dumps(doc, indent=1) + "\n"
-        )
+        atomic_write_text(self.folder / MEASUREMENT_FILE, dumps_json(doc, indent=1))
 
     def save_settings(self) -> None:
         """Remember the options for the next measurement."""
@@ -823,7 +822,7 @@ def export_job(
         warnings=(*calibration.warnings, *estimated.warnings),
     )
     (Path(out_dir) / "exports.json").write_text(
-        json.dumps({k: Path(p).name for k, p in files.items()}, indent=1) + "\n"
+        dumps_json({k: Path(p).name for k, p in files.items()}, indent=1)
     )
     if progress is not None:
         progress(1.0)
@@ -873,7 +872,7 @@ def _write_calibration(
         "session_fingerprint": fingerprint,
     }
     # written last: its presence marks the step done
-    atomic_write_text(out_dir / "calibration.json", json.dumps(doc, indent=1) + "\n")
+    atomic_write_text(out_dir / "calibration.json", dumps_json(doc, indent=1))
 
 
 def _read_calibration(folder: Path, chart_root: Path) -> CalibrationResult | None:
@@ -930,7 +929,7 @@ def _write_estimate(
         "warnings": list(result.warnings),
         "session_fingerprint": fingerprint,
     }
-    atomic_write_text(out_dir / "estimate.json", json.dumps(doc, indent=1) + "\n")
+    atomic_write_text(out_dir / "estimate.json", dumps_json(doc, indent=1))
 
 
 def _read_estimate(folder: Path, sample_root: Path) -> EstimateResult | None:

@@ -139,6 +139,11 @@ class Cal1LightSource:
     recovery_timeout_s
         Time allowed for switching the lights off after a failure; default
         ``2 * timeout_s``.
+    recheck_timeout_s
+        When switching off did not answer in time, how long to wait for the
+        levels (``CHAN:LEVEL:ALL?``) before telling the operator the lights may be
+        on: a reply delayed by the CAL1 may still switch them off. Default
+        ``measure_timeout_s`` (the longest any command may take).
     """
 
     def __init__(
@@ -149,6 +154,7 @@ class Cal1LightSource:
         timeout_s: float = DEFAULT_TIMEOUT_S,
         measure_timeout_s: float = MEASURE_TIMEOUT_S,
         recovery_timeout_s: float | None = None,
+        recheck_timeout_s: float | None = None,
     ) -> None:
         if timeout_s <= 0 or measure_timeout_s <= 0:
             raise ValueError("timeouts must be positive")
@@ -158,6 +164,9 @@ class Cal1LightSource:
         self._measure_timeout_s = float(measure_timeout_s)
         self._recovery_timeout_s = float(
             2.0 * timeout_s if recovery_timeout_s is None else recovery_timeout_s
+        )
+        self._recheck_timeout_s = float(
+            measure_timeout_s if recheck_timeout_s is None else recheck_timeout_s
         )
         self._identity: DeviceIdentity | None = None
         self._channels: list[Channel] | None = None
@@ -414,10 +423,44 @@ class Cal1LightSource:
                 return " The lights were switched off."
             raise DeviceProtocolError("no OK among the replies")
         except DeviceError as off_exc:
+            # only a late answer can hide a switch-off that happened; a refusal cannot
+            if (
+                isinstance(off_exc, DeviceTimeoutError)
+                and self._lights_off_on_recheck()
+            ):
+                return " The lights were switched off (confirmed by a second check)."
             return (
                 f" The lights could NOT be switched off ({off_exc}): switch the CAL1 "
                 "off at its power switch before handling the sample."
             )
+
+    def _lights_off_on_recheck(self) -> bool:
+        """Ask for the levels once more, waiting out late replies; True if all off.
+
+        A CAL1 that answered late still executes the ``OUTP:OFF`` queued behind the
+        late command, so the lights may be off although switching off timed out.
+        """
+        try:
+            if not self._transport.is_open:
+                return False
+            self._transport.write(encode_request("get_levels"))
+            deadline = time.monotonic() + self._recheck_timeout_s
+            for _ in range(2 * _MAX_STALE_LINES):
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return False
+                line = self._transport.read_line(left)
+                try:
+                    levels = list(decode_reply("get_levels", line))
+                except DeviceProtocolError:
+                    continue  # a late reply to an earlier command
+                n = None if self._channels is None else len(self._channels)
+                if n is not None and len(levels) != n:
+                    continue  # e.g. a late spectrum: numbers, but not the levels
+                return not any(float(v) > 0 for v in levels)
+        except DeviceError:
+            return False
+        return False
 
 
 def open_cal1(
@@ -426,6 +469,7 @@ def open_cal1(
     timeout_s: float = DEFAULT_TIMEOUT_S,
     measure_timeout_s: float = MEASURE_TIMEOUT_S,
     recovery_timeout_s: float | None = None,
+    recheck_timeout_s: float | None = None,
     baudrate: int = BAUDRATE,
 ) -> Cal1LightSource:
     """Open a CAL1 from a spec string and check that it is one.
@@ -437,7 +481,7 @@ def open_cal1(
     spec
         ``cal1:///dev/ttyUSB0``, ``cal1://COM3``, ``cal1+socket://HOST:PORT`` (the
         emulator), ``cal1+loop://`` (pyserial loopback, for transport tests only).
-    timeout_s, measure_timeout_s, recovery_timeout_s
+    timeout_s, measure_timeout_s, recovery_timeout_s, recheck_timeout_s
         See :class:`Cal1LightSource`.
     baudrate
         Serial speed (ignored by ``socket://`` and ``loop://``).
@@ -481,6 +525,7 @@ def open_cal1(
         timeout_s=timeout_s,
         measure_timeout_s=measure_timeout_s,
         recovery_timeout_s=recovery_timeout_s,
+        recheck_timeout_s=recheck_timeout_s,
     )
     try:
         device.identity  # noqa: B018 (identification on open)

@@ -54,7 +54,6 @@ integrate narrowband LEDs more finely than the estimators do.
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from dataclasses import dataclass
@@ -67,6 +66,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from tunespec.core.datasets import DEFAULT_CAMERA, load_camera
 from tunespec.core.forward_model import render_rgb
+from tunespec.core.limits import dumps_json
 from tunespec.core.raw import full_to_plane_px
 from tunespec.core.spectra import Grid, Spectra, write_spectra_csv
 from tunespec.devices.clock import Clock, RealClock, VirtualClock
@@ -671,7 +671,7 @@ class SimCamera:
             "camera": t["camera"],
             "absolute_sensitivity_unit": t["absolute_sensitivity"].meta["unit"],
         }
-        paths[4].write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+        paths[4].write_text(dumps_json(doc), encoding="utf-8")
         return paths
 
 

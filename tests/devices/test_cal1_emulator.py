@@ -266,3 +266,140 @@ def test_cli_emulator_port_in_use_is_one_line(
     assert "Traceback" not in err
     with pytest.raises(SystemExit):
         main(["emulate", "cal1", "--port", "99999"])
+
+
+# --- issue 12: re-check before claiming, fault options on the command line --------------
+
+
+def test_a_late_switch_off_is_confirmed_before_the_operator_is_alarmed(
+    cal1_emulator: Cal1Emulator,
+) -> None:
+    # the reply to MEAS:SPD? comes after the recovery timeout: OUTP:OFF queued behind
+    # it is executed late, and a second look at the levels finds the lights off
+    with open_cal1(
+        cal1_emulator.spec,
+        timeout_s=SHORT_TIMEOUT_S,
+        measure_timeout_s=SHORT_TIMEOUT_S,
+        recovery_timeout_s=SHORT_TIMEOUT_S,
+        recheck_timeout_s=RECOVERY_TIMEOUT_S,
+    ) as light:
+        light.set_levels(ILLUMINANTS[4])
+        cal1_emulator.inject_fault(
+            "delay", command="MEAS:SPD?", delay_s=4 * SHORT_TIMEOUT_S
+        )
+        with pytest.raises(DeviceTimeoutError) as info:
+            light.measure_spd()
+        message = str(info.value)
+        assert "could NOT" not in message
+        assert "switched off (confirmed" in message
+        assert not cal1_emulator.lights_on
+
+
+def test_cli_fault_options_parse_and_are_injected() -> None:
+    parser = argparse.ArgumentParser(prog="tunespec")
+    device_cmds.register(parser.add_subparsers(dest="command", required=True))
+    args = parser.parse_args(
+        [
+            "emulate",
+            "cal1",
+            "--fault",
+            "delay,command=MEAS:SPD?,delay=12",
+            "--fault",
+            "error,code=500,skip=2",
+            "--fault",
+            "no-reply",
+            "--fault",
+            "garbage",
+            "--disconnect-after",
+            "40",
+        ]
+    )
+    assert args.fault[0] == {"kind": "delay", "command": "MEAS:SPD?", "delay_s": 12.0}
+    assert args.fault[1] == {"kind": "error", "code": 500, "skip": 2}
+    assert [f["kind"] for f in args.fault[2:]] == ["no_reply", "garbage"]
+    for bad in ("explode", "delay,delay=-1", "error,code=x", "drop,when=now"):
+        with pytest.raises(SystemExit):
+            parser.parse_args(["emulate", "cal1", "--fault", bad])
+
+
+def test_cli_emulator_with_an_error_fault_gives_a_one_line_device_error(
+    tmp_path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from tunespec.app.cli import EXIT_DEVICE, main
+
+    out, stop = _Announce(), threading.Event()
+    server = threading.Thread(
+        target=device_cmds.run_cal1_emulator,
+        kwargs={
+            "seed": 2,
+            "stop": stop,
+            "out": out,
+            "faults": [
+                {"kind": "error", "command": "MEAS:SPD?", "code": 500, "skip": 3}
+            ],
+        },
+    )
+    server.start()
+    try:
+        assert out.ready.wait(10.0)
+        spec = out.getvalue().split("light source spec: ")[1].split()[0]
+        rc = main(
+            [
+                "capture",
+                "--light",
+                spec,
+                "--camera",
+                "sim",
+                "--layout",
+                str(resource_path("layouts", "colorchecker_sg.json")),
+                "--out",
+                str(tmp_path / "s"),
+                "--resolution",
+                "256x192",
+                "--channels",
+                "LED450,LED540",
+                "--exposure",
+                "2",
+            ]
+        )
+        err = capsys.readouterr().err.strip().splitlines()
+        assert rc == EXIT_DEVICE, err
+        assert len(err) == 1 and "switched off" in err[0]
+    finally:
+        stop.set()
+        server.join(10.0)
+
+
+def test_capture_with_the_cal1_emulator_and_the_simulated_camera(
+    tmp_path, cal1_emulator: Cal1Emulator, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from tunespec.app.cli import main
+    from tunespec.core.session import Session
+
+    out = tmp_path / "s"
+    rc = main(
+        [
+            "capture",
+            "--light",
+            cal1_emulator.spec,
+            "--camera",
+            "sim",
+            "--layout",
+            str(resource_path("layouts", "colorchecker_sg.json")),
+            "--out",
+            str(out),
+            "--resolution",
+            "256x192",
+            "--channels",
+            "LED450,WHITE_WARM",
+            "--exposure",
+            "2",
+        ]
+    )
+    assert rc == 0, capsys.readouterr().err
+    session = Session.open(out)
+    assert session.missing() == []
+    assert session.devices["light"]["model"] == "CAL1"
+    white = session.frame("white_LED450")
+    assert session.read_spd(white).values.max() > 0
+    assert not cal1_emulator.lights_on
