@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -36,12 +36,12 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from tunespec.app.plots.frame_plot import FramePlot, FramePreview
+from tunespec.app.plots.frame_plot import FramePlot, FramePreview, build_preview
 from tunespec.app.workers import Worker
 from tunespec.core.errors import TuneSpecError
 from tunespec.core.layout import TargetLayout
 
-__all__ = ["CORNER_NAMES", "TargetLayoutEditor", "find_target_corners"]
+__all__ = ["CORNER_NAMES", "FoundCorners", "TargetLayoutEditor", "find_target_corners"]
 
 log = logging.getLogger(__name__)
 
@@ -51,27 +51,86 @@ _ROI_PEN = pg.mkPen((255, 220, 0), width=2)
 _OUTLINE_PEN = pg.mkPen((0, 255, 0), width=2)
 _SELECTED_PEN = pg.mkPen((255, 60, 60), width=3)
 
-#: ``finder(frame, layout) -> (4, 2) corners`` (TL, TR, BR, BL in mosaic pixels).
+#: ``finder(frame, layout, *, session_root, progress, should_stop)`` returning (4, 2)
+#: corners (TL, TR, BR, BL in mosaic pixels) or a :class:`FoundCorners`.
 CornerFinder = Callable[..., Any]
+
+
+@dataclass(frozen=True)
+class FoundCorners:
+    """What the automatic corner finder found.
+
+    Parameters
+    ----------
+    corners_px : (4, 2)
+        TL, TR, BR, BL in mosaic pixels.
+    preview
+        The frame the corners were found in, for the editor to show (None: the
+        frame shown already).
+    message
+        What the operator reads in the editor's status line.
+    """
+
+    corners_px: NDArray[np.float64]
+    preview: FramePreview | None = None
+    message: str = ""
 
 
 def find_target_corners(
     frame: Any,
     target_layout: TargetLayout,
     *,
+    session_root: str | Path | None = None,
     progress: Any = None,
     should_stop: Any = None,
-) -> NDArray[np.float64]:
-    """The core's corner finder on a frame's green plane, in mosaic pixels.
+) -> FoundCorners:
+    """The corners processing would find, in mosaic pixels (pool thread).
 
-    ``core.homography.locate_target`` works in the coordinates of the image it is
-    given (planes); the layout keeps mosaic pixels.
+    With a session that holds a white-background and a target frame under one LED,
+    this is processing's own detection
+    (:func:`tunespec.core.processing.find_session_corners`: the same frames, the same
+    detector), and the target frame it used is returned for display. Without one
+    (a frame taken outside a measurement), the shown frame's green plane alone is
+    searched, which finds a target only against an evenly lit background.
     """
+    from tunespec.core.errors import InputError
+    from tunespec.core.session import MANIFEST_NAME, Session
+
+    root = Path(session_root) if session_root else None
+    if root is not None and (root / MANIFEST_NAME).is_file():
+        from tunespec.core.processing import find_session_corners
+
+        session = Session.open(root)
+        try:
+            found, target = find_session_corners(session, target_layout)
+        except InputError as exc:
+            if frame is None or "white-background and a target" not in str(exc):
+                raise
+        else:
+            return FoundCorners(
+                found.corners_px,
+                build_preview(target),
+                f"Corners found as processing finds them ({found.target_id} "
+                f"against {found.white_id}, fit residual {found.residual_px:.2f} "
+                "px); drag a handle to correct.",
+            )
+    if frame is None:
+        raise InputError("take the white-background and target frames first")
     from tunespec.core.homography import locate_target
     from tunespec.core.raw import plane_to_full_px
 
-    corners_plane, _fit = locate_target(frame.planes[1], target_layout)
-    return plane_to_full_px(corners_plane)
+    try:
+        corners_plane, _fit = locate_target(frame.planes[1], target_layout)
+    except InputError as exc:
+        raise InputError(
+            f"{exc} (in the shown frame alone; with the white-background frame "
+            "taken, the finder compares the two as processing does)"
+        ) from None
+    return FoundCorners(
+        plane_to_full_px(corners_plane),
+        None,
+        "Corners found in the shown frame; drag a handle to correct.",
+    )
 
 
 def _polylines(quads: NDArray[np.float64]) -> tuple[NDArray, NDArray]:
@@ -115,6 +174,7 @@ class TargetLayoutEditor(QWidget):
         self._corner_finder = corner_finder
         self._finder_worker: Worker | None = None
         self._finder_target = ""
+        self._session_root: Path | None = None
         self._updating = False
         self.selected_patch: str | None = None
         self.last_dir = ""
@@ -262,6 +322,23 @@ class TargetLayoutEditor(QWidget):
         self._redraw()
         if emit:
             self.layout_changed.emit(self._layout)
+
+    def set_session_root(self, root: str | Path | None) -> None:
+        """The capture session of the target being edited (None: none yet).
+
+        "Find corners" then compares its white-background and target frames, as
+        processing does.
+        """
+        self._session_root = Path(root) if root else None
+
+    @property
+    def session_root(self) -> Path | None:
+        """The session "Find corners" reads, or None."""
+        return self._session_root
+
+    def show_status(self, text: str) -> None:
+        """Show ``text`` in the editor's status line."""
+        self.status_label.setText(text)
 
     def set_corner_finder(self, finder: CornerFinder | None) -> None:
         """Use ``finder`` for "Find corners" (None disables it)."""
@@ -496,10 +573,17 @@ class TargetLayoutEditor(QWidget):
     def _on_find_button_clicked(self) -> None:
         self.find_corners()
 
+    def _has_session(self) -> bool:
+        from tunespec.core.session import MANIFEST_NAME
+
+        root = self._session_root
+        return root is not None and (root / MANIFEST_NAME).is_file()
+
     def find_corners(self) -> Worker | None:
         """Run the automatic corner finder on the shown frame (in a worker)."""
         preview = self.frame_plot.preview
-        if self._corner_finder is None or preview is None or preview.frame is None:
+        frame = None if preview is None else preview.frame
+        if self._corner_finder is None or (frame is None and not self._has_session()):
             self.status_label.setText("Take a frame of the target first.")
             return None
         if self._finder_worker is not None:
@@ -507,7 +591,12 @@ class TargetLayoutEditor(QWidget):
         self.status_label.setText("Finding corners…")
         self.find_button.setEnabled(False)
         self._finder_target = self._layout.name
-        worker = Worker(self._corner_finder, preview.frame, self._layout)
+        worker = Worker(
+            self._corner_finder,
+            frame,
+            self._layout,
+            session_root=self._session_root,
+        )
         worker.signals.returned.connect(self._on_finder_returned)
         worker.signals.errored.connect(self._on_finder_errored)
         worker.signals.finished.connect(self._on_finder_finished)
@@ -523,8 +612,19 @@ class TargetLayoutEditor(QWidget):
                 f"shows {self._layout.name}."
             )
             return
-        self.set_corners(np.asarray(corners, dtype=float).reshape(4, 2))
-        self.status_label.setText("Corners found; drag a handle to correct.")
+        found = (
+            corners
+            if isinstance(corners, FoundCorners)
+            else FoundCorners(
+                np.asarray(corners, dtype=float),
+                None,
+                "Corners found; drag a handle to correct.",
+            )
+        )
+        if found.preview is not None:
+            self.frame_plot.show_preview(found.preview)
+        self.set_corners(np.asarray(found.corners_px, dtype=float).reshape(4, 2))
+        self.status_label.setText(found.message)
         log.info("target corners found automatically")
 
     @Slot(object)

@@ -116,7 +116,7 @@ def test_core_corner_finder_finds_the_dark_rectangle(editor, qtbot):
 def test_automatic_corner_finder_runs_in_a_worker(editor, qtbot):
     found = np.array([[40.0, 60.0], [280.0, 60.0], [280.0, 180.0], [40.0, 180.0]])
 
-    def finder(frame, layout, *, progress, should_stop):
+    def finder(frame, layout, *, session_root, progress, should_stop):
         return found
 
     editor.set_corner_finder(finder)
