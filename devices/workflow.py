@@ -25,7 +25,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from os import PathLike
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -36,15 +36,8 @@ from tunespec.core.export import export_measurement
 from tunespec.core.layout import TargetLayout
 from tunespec.core.processing import ProcessedSession, process_session, write_processed
 from tunespec.core.progress import ProgressFn, StopFn, report
-from tunespec.core.sensitivity import (
-    SensitivityEstimate,
-    correct_spd_shift,
-    estimate_camera_sensitivity,
-)
 from tunespec.core.session import Session, atomic_write_text
 from tunespec.core.spectra import DEFAULT_GRID, Grid, Spectra, read_spectra_csv
-from tunespec.core.stats import CalibrationReport, PredictionStats, calibration_report
-from tunespec.core.wiener import WienerEstimate, wiener_reflectance
 from tunespec.devices.capture import FrameCallback, capture, new_session
 from tunespec.devices.registry import (
     DEFAULT_SIM_RESOLUTION,
@@ -54,6 +47,13 @@ from tunespec.devices.registry import (
     parse_resolution,
     sim_scene,
 )
+
+if TYPE_CHECKING:
+    # the estimators import scipy (a third of a second): imported where they run,
+    # so that loading a configuration (and failing on it) answers at once
+    from tunespec.core.sensitivity import SensitivityEstimate
+    from tunespec.core.stats import CalibrationReport, PredictionStats
+    from tunespec.core.wiener import WienerEstimate
 
 __all__ = [
     "DEMO_RESOLUTION",
@@ -371,6 +371,9 @@ def calibrate(
     options
         More arguments for ``estimate_camera_sensitivity``.
     """
+    from tunespec.core.sensitivity import estimate_camera_sensitivity
+    from tunespec.core.stats import calibration_report
+
     refl = reflectances if reflectances is not None else load_colorchecker_sg(grid)
     refl = refl.resample(grid)
     illum = chart.illuminants.resample(grid)
@@ -404,6 +407,9 @@ def estimate(
     instrument, so it is undone on them too. ``None`` takes it from
     ``sensitivity.meta["spd_shift_nm"]`` (0 when absent).
     """
+    from tunespec.core.sensitivity import correct_spd_shift
+    from tunespec.core.wiener import wiener_reflectance
+
     prior = prior if prior is not None else load_colorchecker_sg(grid)
     if spd_shift_nm is None:
         spd_shift_nm = float(sensitivity.meta.get("spd_shift_nm", 0.0))

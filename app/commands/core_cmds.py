@@ -16,11 +16,13 @@ from tunespec.core.export import read_spd_shift, write_sensitivity_meta
 from tunespec.core.responses import Responses, read_responses_csv, write_responses_csv
 from tunespec.core.spectra import Spectra, read_spectra_csv, write_spectra_csv
 
+#: ``core.sensitivity.SENSITIVITY_METHODS``'s keys (a test checks), named here because
+#: importing the estimators (scipy) would cost ``tunespec --help`` a third of a second.
+METHOD_CHOICES = ("pca", "smooth")
+
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the core subcommands."""
-    from tunespec.core.sensitivity import SENSITIVITY_METHODS
-
     p = sub.add_parser(
         "calibrate",
         help="estimate camera sensitivities from a chart under all LEDs (Table 1)",
@@ -32,7 +34,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument(
         "--reflectances", required=True, type=Path, help="chart reflectances"
     )
-    p.add_argument("--method", choices=sorted(SENSITIVITY_METHODS), default="smooth")
+    p.add_argument("--method", choices=METHOD_CHOICES, default="smooth")
     p.add_argument("--components", type=int, default=4, help="pca: components (4)")
     p.add_argument(
         "--explained-variance",
@@ -165,9 +167,6 @@ def _check_names(
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
-    from tunespec.core.sensitivity import estimate_camera_sensitivity
-    from tunespec.core.stats import calibration_report, split_patches
-
     if args.hold_out_every and args.hold_out_every < 2:
         raise InputError(
             f"--hold-out-every {args.hold_out_every}: N must be at least 2 (0: off)"
@@ -181,6 +180,11 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         responses, illuminants, "illuminant", args.illuminants, responses.illuminants
     )
     _check_names(responses, reflectances, "patch", args.reflectances, responses.patches)
+    # the estimators (scipy) are imported once the inputs are known to be good: an
+    # error in them is reported at once
+    from tunespec.core.sensitivity import estimate_camera_sensitivity
+    from tunespec.core.stats import calibration_report, split_patches
+
     held: tuple[str, ...] = ()
     fit = responses
     if args.hold_out_every:
@@ -225,12 +229,14 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
 def cmd_estimate(args: argparse.Namespace) -> int:
     from tunespec.core.datasets import load_colorchecker_sg
-    from tunespec.core.sensitivity import correct_spd_shift
-    from tunespec.core.wiener import wiener_reflectance
 
     responses = read_responses_csv(args.responses)
     illuminants = read_spectra_csv(args.illuminants, args.grid)
     sensitivity = read_sensitivities(args.sensitivities, args.grid)
+    # imported after the inputs are read (scipy): an error in them is reported at once
+    from tunespec.core.sensitivity import correct_spd_shift
+    from tunespec.core.wiener import wiener_reflectance
+
     shift_nm = args.spd_shift_nm
     if shift_nm is None:
         shift_nm = read_spd_shift(args.sensitivities)
