@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import tempfile
 from collections.abc import Sequence
 from datetime import datetime
 from fractions import Fraction
@@ -28,6 +27,8 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
+
+from tunespec.core.session import create_temp_file
 
 __all__ = ["CANON_5D_MARK_III_COLOR_MATRIX", "CFA_PATTERNS", "write_dng"]
 
@@ -222,13 +223,13 @@ def _sub_ifd_tag(tag: tuple[int, tuple[int, int]], ifd: object) -> object:
 def _write_atomic(path: Path, data: bytes | bytearray) -> None:
     """Write ``data`` to ``path`` via a temporary file and a rename."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".part")
+    # the umask's permissions, as every other output (mkstemp's would be 0600)
+    tmp = create_temp_file(path.parent, f".{path.name}.", ".part")
     try:
-        with os.fdopen(fd, "wb") as fh:
+        with open(tmp, "wb") as fh:
             fh.write(data)
             fh.flush()
             os.fsync(fh.fileno())
-        os.chmod(tmp, 0o644)  # mkstemp makes it owner-only
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(OSError):
