@@ -134,6 +134,8 @@ class MainWindow(QMainWindow):
         self.addDockWidget(Qt.DockWidgetArea.BottomDockWidgetArea, self.log_dock)
         self.resizeDocks([self.log_dock], [150], Qt.Orientation.Vertical)
         self._build_menus()
+        # Esc aborts the running step whichever tab is shown
+        self.addAction(self.wizard_panel.abort_action)
 
         # redraw at most ~20 Hz however fast the devices report
         self._spd_throttle = Throttle(self.spd_plot.show_spd)
@@ -180,6 +182,9 @@ class MainWindow(QMainWindow):
         file_menu.addAction(self.open_action)
         file_menu.addSeparator()
         file_menu.addAction(self.quit_action)
+        edit_menu = self.menuBar().addMenu("&Edit")
+        edit_menu.addAction(self.layout_editor.undo_action)
+        edit_menu.addAction(self.layout_editor.redo_action)
         dev_menu = self.menuBar().addMenu("&Devices")
         self.connect_sim_action = QAction("Connect the &simulated bench", self)
         self.all_off_action = QAction(
