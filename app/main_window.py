@@ -278,6 +278,7 @@ class MainWindow(QMainWindow):
 
     @Slot()
     def _on_controller_devices_closed(self) -> None:
+        self.spd_plot.set_connected(False)
         self.statusBar().showMessage("Devices closed", 5000)
 
     @Slot(object, object)

@@ -391,6 +391,8 @@ class TargetLayoutEditor(QWidget):
             target_layout = target_layout.with_corners(self._layout.corners_px)
         if undo_text is None:
             self.undo_stack.clear()
+        if target_layout.name != before.name:
+            self.status_label.setText("")  # it spoke of the other target
         self._layout = target_layout
         self._sync_spins()
         self.names_check.setChecked(target_layout.n_patches <= 48)
