@@ -10,6 +10,33 @@ from collections.abc import Sequence
 
 __all__ = ["main"]
 
+#: What ``tunespec-gui`` says when the GUI's packages are not installed.
+INSTALL_HINT = (
+    "tunespec-gui: the GUI needs {missing}, which is not installed; "
+    "install the GUI with: pip install 'tunespec[gui]'"
+)
+#: The distributions the ``gui`` extra installs, by the module they provide.
+GUI_MODULES = {"PySide6": "PySide6", "shiboken6": "PySide6", "pyqtgraph": "pyqtgraph"}
+
+
+def _gui_import_error() -> str | None:
+    """One line saying why the GUI cannot start, or None if its packages load."""
+    import importlib
+
+    try:
+        # Qt first: pyqtgraph without a Qt binding raises its own ImportError
+        for name in ("PySide6.QtWidgets", "pyqtgraph"):
+            importlib.import_module(name)
+    except ModuleNotFoundError as exc:
+        top = (exc.name or "").split(".")[0]
+        if top in GUI_MODULES:
+            return INSTALL_HINT.format(missing=GUI_MODULES[top])
+        raise
+    except ImportError as exc:
+        # installed but not loadable, e.g. a system library Qt needs is missing
+        return f"tunespec-gui: Qt cannot be loaded: {exc}"
+    return None
+
 
 def _parse(argv: Sequence[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(
@@ -37,6 +64,10 @@ def _parse(argv: Sequence[str] | None) -> argparse.Namespace:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the GUI until its window closes; returns the exit code."""
     args = _parse(sys.argv[1:] if argv is None else argv)
+    problem = _gui_import_error()
+    if problem is not None:
+        sys.stderr.write(problem + "\n")
+        return 1
     from PySide6.QtCore import QTimer
     from PySide6.QtWidgets import QApplication
 

@@ -112,11 +112,37 @@ def progress_bar(label: str) -> ProgressFn:
     return TerminalProgress(label)
 
 
+class _VersionAction(argparse.Action):
+    """``--version``: the installed version, looked up only when asked for."""
+
+    def __init__(self, option_strings: Sequence[str], dest: str, **kwargs: object):
+        super().__init__(
+            option_strings,
+            dest,
+            nargs=0,
+            default=argparse.SUPPRESS,
+            help="print the TuneSpec version and exit",
+        )
+
+    def __call__(self, parser: argparse.ArgumentParser, *_args: object) -> None:
+        from tunespec.core.export import tunespec_version
+
+        print(f"{parser.prog} {tunespec_version()}")
+        parser.exit()
+
+
 def build_parser() -> argparse.ArgumentParser:
+    """The ``tunespec`` parser with every subcommand.
+
+    Builds fast: command modules import what a command needs when it runs, so that
+    ``--help``, ``--version`` and argument errors answer at once (no scipy,
+    colour-science or matplotlib).
+    """
     parser = argparse.ArgumentParser(
         prog="tunespec",
         description="Spectral reflectance from an RGB camera and a tunable LED source.",
     )
+    parser.add_argument("--version", action=_VersionAction)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in COMMAND_MODULES:
         importlib.import_module(name).register(sub)

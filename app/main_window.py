@@ -8,6 +8,7 @@ window holds no measurement logic of its own.
 from __future__ import annotations
 
 import logging
+import math
 from typing import Any
 
 from PySide6.QtCore import QSettings, Qt, Slot
@@ -36,7 +37,7 @@ from tunespec.app.plots.reflectance_plot import ReflectancePlot
 from tunespec.app.plots.sensitivity_plot import SensitivityPlot
 from tunespec.app.plots.spd_plot import SpdPlot
 from tunespec.app.settings import AppSettings
-from tunespec.app.wizard.measurement import Measurement
+from tunespec.app.wizard.measurement import CHART_DIR, SAMPLE_DIR, Measurement
 from tunespec.app.wizard.wizard_panel import WizardPanel
 from tunespec.app.workers import BenchInfo, DeviceController, Throttle, Worker
 
@@ -133,6 +134,8 @@ class MainWindow(QMainWindow):
         self.addDockWidget(Qt.DockWidgetArea.BottomDockWidgetArea, self.log_dock)
         self.resizeDocks([self.log_dock], [150], Qt.Orientation.Vertical)
         self._build_menus()
+        # Esc aborts the running step whichever tab is shown
+        self.addAction(self.wizard_panel.abort_action)
 
         # redraw at most ~20 Hz however fast the devices report
         self._spd_throttle = Throttle(self.spd_plot.show_spd)
@@ -145,6 +148,7 @@ class MainWindow(QMainWindow):
         c.errored.connect(self._on_controller_errored)
         m = self.measurement
         m.layout_needed.connect(self._on_measurement_layout_needed)
+        m.folder_changed.connect(self._on_measurement_folder_changed)
         m.calibrated.connect(self._on_measurement_calibrated)
         m.estimated.connect(self._on_measurement_estimated)
         m.result_cleared.connect(self._on_measurement_result_cleared)
@@ -178,6 +182,9 @@ class MainWindow(QMainWindow):
         file_menu.addAction(self.open_action)
         file_menu.addSeparator()
         file_menu.addAction(self.quit_action)
+        edit_menu = self.menuBar().addMenu("&Edit")
+        edit_menu.addAction(self.layout_editor.undo_action)
+        edit_menu.addAction(self.layout_editor.redo_action)
         dev_menu = self.menuBar().addMenu("&Devices")
         self.connect_sim_action = QAction("Connect the &simulated bench", self)
         self.all_off_action = QAction(
@@ -271,6 +278,7 @@ class MainWindow(QMainWindow):
 
     @Slot()
     def _on_controller_devices_closed(self) -> None:
+        self.spd_plot.set_connected(False)
         self.statusBar().showMessage("Devices closed", 5000)
 
     @Slot(object, object)
@@ -292,7 +300,19 @@ class MainWindow(QMainWindow):
         preview = self._last_preview.get(self.measurement.current_target)
         if preview is not None:
             self.layout_editor.show_preview(preview)
+        self.layout_editor.set_session_root(self._current_session_root())
         self.layout_editor.set_target_layout(target_layout)
+
+    @Slot(object)
+    def _on_measurement_folder_changed(self, _folder: Any) -> None:
+        self.layout_editor.set_session_root(self._current_session_root())
+
+    def _current_session_root(self) -> Any:
+        """The session folder of the target the editor edits (None: no folder)."""
+        m = self.measurement
+        if m.folder is None:
+            return None
+        return m.folder / (CHART_DIR if m.current_target == "chart" else SAMPLE_DIR)
 
     @Slot(object)
     def _on_layout_editor_layout_changed(self, target_layout: Any) -> None:
@@ -306,6 +326,7 @@ class MainWindow(QMainWindow):
     @Slot(object)
     def _on_measurement_calibrated(self, result: Any) -> None:
         show_table1(self.table1_panel, result)
+        self._show_corners_used("Calibrate", "chart", result.chart)
         reference = self._truth.get("sensitivity")
         label = "true (simulator)"
         if reference is None:
@@ -320,6 +341,7 @@ class MainWindow(QMainWindow):
     @Slot(object)
     def _on_measurement_estimated(self, result: Any) -> None:
         show_table2(self.table2_panel, result)
+        self._show_corners_used("Estimate", "sample", result.sample)
         per_patch = {}
         t = result.table2
         if t is not None:
@@ -328,6 +350,21 @@ class MainWindow(QMainWindow):
                 for n, d, r in zip(t.names, t.delta_e00, t.spectral_rms, strict=True)
             }
         self.reflectance_plot.set_data(result.reflectance, result.reference, per_patch)
+
+    def _show_corners_used(self, step: str, target: str, processed: Any) -> None:
+        """Tell the editor's operator that its corners are the ones ``step`` used."""
+        if processed is None or self.measurement.current_target != target:
+            return
+        how = {
+            "auto": "found in the images",
+            "layout": "set in this editor",
+            "given": "given",
+        }.get(processed.corners_source, processed.corners_source)
+        residual = processed.corner_residual_px
+        fit = f", fit residual {residual:.2f} px" if math.isfinite(residual) else ""
+        self.layout_editor.show_status(
+            f"The corners shown are the ones {step} used ({how}{fit})."
+        )
 
     @Slot(str)
     def _on_measurement_result_cleared(self, which: str) -> None:

@@ -42,17 +42,6 @@ from numpy.typing import ArrayLike, NDArray
 from tunespec.core.errors import InputError
 from tunespec.core.spectra import Grid, Spectra
 
-# colour-science 0.4 sets numpy's legacy="1.13" print options when it is imported,
-# which would change how every array in the process prints (reports, doctests);
-# np.printoptions() restores the caller's options on leaving the block.
-with np.printoptions():
-    import colour
-    from colour.utilities import (
-        ColourRuntimeWarning,
-        ColourUsageWarning,
-        ColourWarning,
-    )
-
 __all__ = [
     "ARGYLL_TABLE_STEPS_NM",
     "CMFS_NAME",
@@ -85,6 +74,21 @@ ARGYLL_TABLE_STEPS_NM = (1.0, 10.0, 20.0)
 MIN_RANGE_NM = (400.0, 700.0)
 
 _WL_TOL_NM = 1e-6
+
+
+def _colour() -> Any:
+    """colour-science, imported on first use.
+
+    ``import colour`` also imports ``colour.plotting`` and with it matplotlib's
+    pyplot (about 0.7 s), which nothing that only parses arguments, reads files or
+    reports an error should pay (``tunespec --help``). colour-science 0.4 also sets
+    numpy's legacy="1.13" print options when it is imported, which would change how
+    every array in the process prints (reports, doctests); ``np.printoptions()``
+    restores the caller's options on leaving the block.
+    """
+    with np.printoptions():
+        import colour
+    return colour
 
 
 def astm_e308_weights_d50(wavelength_nm: ArrayLike) -> NDArray[np.float64]:
@@ -177,6 +181,7 @@ def _linear_interpolation_matrix(
 
 def _probe_colour(wl: NDArray[np.float64]) -> NDArray[np.float64]:
     """colour's ASTM E308 XYZ of each unit impulse on ``wl``: the weighting table."""
+    colour = _colour()
     cmfs = colour.MSDS_CMFS[CMFS_NAME]
     d50 = colour.SDS_ILLUMINANTS["D50"]
     W = np.empty((wl.size, 3))
@@ -195,7 +200,8 @@ class _quiet_colour(warnings.catch_warnings):
 
     def __enter__(self) -> Any:
         out = super().__enter__()
-        for category in (ColourWarning, ColourRuntimeWarning, ColourUsageWarning):
+        u = _colour().utilities
+        for category in (u.ColourWarning, u.ColourRuntimeWarning, u.ColourUsageWarning):
             warnings.simplefilter("ignore", category)
         return out
 
@@ -276,6 +282,7 @@ def xyz_to_lab_d50(XYZ: ArrayLike) -> NDArray[np.float64]:
     [100.0, 0.0, 0.0]
     """
     XYZ = np.asarray(XYZ, dtype=np.float64)
+    colour = _colour()
     with colour.utilities.domain_range_scale("reference"):
         return np.asarray(colour.XYZ_to_Lab(XYZ / 100.0, ICC_D50_XY), dtype=np.float64)
 
@@ -328,6 +335,7 @@ def delta_e_2000(lab1: ArrayLike, lab2: ArrayLike) -> NDArray[np.float64]:
     """
     a = np.asarray(lab1, dtype=np.float64)
     b = np.asarray(lab2, dtype=np.float64)
+    colour = _colour()
     with colour.utilities.domain_range_scale("reference"):
         return np.asarray(colour.difference.delta_E_CIE2000(a, b), dtype=np.float64)
 

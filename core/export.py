@@ -137,11 +137,25 @@ def write_sensitivity_meta(
 
 #: Columns of the colorimetry CSV written beside estimated reflectances.
 COLORIMETRY_COLUMNS = (
-    "patch", "X", "Y", "Z", "L", "a", "b", "u_X", "u_Y", "u_Z", "u_L", "u_a", "u_b",
+    "patch",
+    "X",
+    "Y",
+    "Z",
+    "L",
+    "a",
+    "b",
+    "u_X",
+    "u_Y",
+    "u_Z",
+    "u_L",
+    "u_a",
+    "u_b",
 )
 
 
-def write_colorimetry_csv(path: str | PathLike[str], names: tuple[str, ...], unc: Any) -> Path:
+def write_colorimetry_csv(
+    path: str | PathLike[str], names: tuple[str, ...], unc: Any
+) -> Path:
     """CIE XYZ and CIELAB (D50) with their standard uncertainties, one row per patch.
 
     Columns :data:`COLORIMETRY_COLUMNS`: ``X, Y, Z`` (0-100), ``L, a, b`` and ``u_*``
@@ -170,7 +184,10 @@ def read_sensitivity_meta(sensitivity_csv: str | PathLike[str]) -> dict[str, Any
     doc = read_json(path)
     if not isinstance(doc, dict):
         raise InputError("expected a JSON object", path=path)
-    out: dict[str, Any] = {"meta_path": str(path), "spd_shift_nm": read_spd_shift(sensitivity_csv)}
+    out: dict[str, Any] = {
+        "meta_path": str(path),
+        "spd_shift_nm": read_spd_shift(sensitivity_csv),
+    }
     if "led_correction" in doc:
         out["led_correction"] = doc["led_correction"]
     cov = doc.get("covariance")
@@ -183,8 +200,10 @@ def read_sensitivity_meta(sensitivity_csv: str | PathLike[str]) -> dict[str, Any
                 "covariance: expected {'wavelength_nm': [...], 'values': [[...]]}",
                 path=path,
             ) from None
-        if values.ndim != 2 or values.shape[0] != values.shape[1] or not np.all(
-            np.isfinite(values)
+        if (
+            values.ndim != 2
+            or values.shape[0] != values.shape[1]
+            or not np.all(np.isfinite(values))
         ):
             raise InputError("covariance: expected a finite square matrix", path=path)
         out["covariance"] = values

@@ -72,8 +72,10 @@ from tunespec.core.spectra import Spectra, write_spectra_csv
 __all__ = [
     "FLAT_WINDOW_PX",
     "SATURATION_TOLERANCE",
+    "CornerDetection",
     "ProcessedSession",
     "RoiSet",
+    "find_session_corners",
     "flat_window",
     "process_session",
     "write_processed",
@@ -511,6 +513,109 @@ def _find_corners(
     return plane_to_full_px(plane_xy), 2.0 * step * fit.residual_px
 
 
+@dataclass(frozen=True)
+class CornerDetection:
+    """Where the automatic corner finder found a session's target.
+
+    Parameters
+    ----------
+    corners_px : (4, 2)
+        Outer corners TL, TR, BR, BL of the layout, mosaic pixels.
+    residual_px
+        RMS distance of the detected edge points from the fitted sides, mosaic px.
+    channel
+        The channel whose frames were used.
+    white_id, target_id
+        The white-background and target frames compared.
+    """
+
+    corners_px: NDArray[np.float64]
+    residual_px: float
+    channel: str
+    white_id: str
+    target_id: str
+
+
+def _detect_in_session(
+    whites: dict[str, list[FrameRecord]],
+    targets: dict[str, list[FrameRecord]],
+    channels: Sequence[str],
+    layout: TargetLayout,
+    read: Callable[[FrameRecord], RawFrame],
+) -> tuple[CornerDetection, RawFrame, RawFrame]:
+    """The one corner detection of a session: processing and the GUI's editor.
+
+    The detection channel among ``channels`` (white LEDs first), its first white-
+    background and first target frame, and :func:`_find_corners` on the two.
+    """
+    c = _detection_channel(channels)
+    w_rec, t_rec = whites[c][0], targets[c][0]
+    w_frame, t_frame = read(w_rec), read(t_rec)
+    corners, residual = _find_corners(w_frame, t_frame, layout)
+    found = CornerDetection(corners, residual, c, w_rec.id, t_rec.id)
+    return found, w_frame, t_frame
+
+
+def find_session_corners(
+    session: Session,
+    layout: TargetLayout | None = None,
+    *,
+    loader: Loader | None = None,
+) -> tuple[CornerDetection, RawFrame]:
+    """Find the target's corners in a session's frames, as processing does.
+
+    Uses the frames :func:`process_session` uses with ``corners="auto"``: the white-
+    background and target frames of the same broadband channel, compared (the ratio
+    flattens the light field, which a target frame alone does not show against the
+    board). Channels still being captured count as soon as they have both frames, so
+    the finder works while the capture runs; on a complete session the result is
+    the one processing gets.
+
+    Parameters
+    ----------
+    session
+        A captured (or partly captured) session.
+    layout
+        The target's geometry (corners not needed); default the session's.
+    loader
+        Reads a raw file; default :func:`tunespec.core.raw.load_raw`.
+
+    Returns
+    -------
+    detection : CornerDetection
+        The corners (mosaic pixels) and the frames they came from.
+    target_frame : RawFrame
+        The target frame used (for showing the corners on it).
+
+    Raises
+    ------
+    InputError
+        No channel with both a white-background and a target frame yet, no layout,
+        or no target found.
+    """
+    load = loader or load_raw
+    layout = layout or session.layout
+    if layout is None:
+        raise InputError("the session has no target layout", path=session.root)
+    frames = session.frames
+    whites = frames_by_channel(frames, "white")
+    targets = frames_by_channel(frames, "target")
+    order = list(session.settings.channels) or list(whites)
+    channels = [c for c in order if c in whites and c in targets]
+    if not channels:
+        raise InputError(
+            "corner detection needs a white-background and a target frame under the "
+            "same LED; take them first",
+            path=session.root,
+        )
+
+    def read(rec: FrameRecord) -> RawFrame:
+        return load(session.path_of(rec))
+
+    found, _white, target = _detect_in_session(whites, targets, channels, layout, read)
+    return found, target
+
+
 def process_session(
     session: Session,
     *,
@@ -668,11 +773,11 @@ def process_session(
     order = [first, *[c for c in use if c != first]]
     preloaded: dict[str, RawFrame] = {}
     if isinstance(mode, str) and mode == "auto":
-        w_frame, t_frame = read(whites[first][0]), read(targets[first][0])
-        corners_px, residual = _find_corners(w_frame, t_frame, layout)
-        layout = layout.with_corners(corners_px)
+        found, w_frame, t_frame = _detect_in_session(whites, targets, use, layout, read)
+        layout = layout.with_corners(found.corners_px)
+        residual = found.residual_px
         source = "auto"
-        preloaded = {whites[first][0].id: w_frame, targets[first][0].id: t_frame}
+        preloaded = {found.white_id: w_frame, found.target_id: t_frame}
     elif isinstance(mode, str):
         if layout.corners_px is None:
             raise InputError(

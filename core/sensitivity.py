@@ -614,7 +614,9 @@ def correct_illuminants_from_meta(
             try:
                 doc = json.loads(doc)
             except json.JSONDecodeError:
-                raise InputError("led_correction is not valid JSON", path=source) from None
+                raise InputError(
+                    "led_correction is not valid JSON", path=source
+                ) from None
         return LedCorrection.from_dict(doc, path=source).apply(illuminants)
     if spd_shift_nm is None:
         try:
@@ -646,14 +648,18 @@ def calibration_from_files(
     corr = None
     if "led_correction" in meta:
         doc = meta["led_correction"]
-        corr = LedCorrection.from_dict(json.loads(doc) if isinstance(doc, str) else doc, path=source)
+        corr = LedCorrection.from_dict(
+            json.loads(doc) if isinstance(doc, str) else doc, path=source
+        )
     cov = meta.get("covariance")
     if cov is not None:
         n_led = len(corr.names) if corr is not None else 0
         expected = 3 * sens.wavelength_nm.size + 2 * n_led
         wl = np.asarray(meta.get("covariance_wavelength_nm", sens.wavelength_nm))
-        if cov.shape != (expected, expected) or wl.shape != sens.wavelength_nm.shape or not np.allclose(
-            wl, sens.wavelength_nm
+        if (
+            cov.shape != (expected, expected)
+            or wl.shape != sens.wavelength_nm.shape
+            or not np.allclose(wl, sens.wavelength_nm)
         ):
             raise InputError(
                 f"covariance is {cov.shape[0]} x {cov.shape[1]}; the sensitivities and "
@@ -968,14 +974,18 @@ def _estimate_sensitivity_bayes(
         tuple(float(g) for g in fit.gain),
         tuple(float(d) for d in fit.shift_nm),
         fit.shift0_nm,
-        tuple(float(g * u) for g, u in zip(fit.gain, sd[3 * n : 3 * n + n_i], strict=True))
+        tuple(
+            float(g * u) for g, u in zip(fit.gain, sd[3 * n : 3 * n + n_i], strict=True)
+        )
         if self_calibrate
         else (),
         tuple(float(u) for u in sd[3 * n + n_i :]) if self_calibrate else (),
     )
     params = {
         **fit.params,
-        "prior_components": min(SMOOTH_PRIOR_COMPONENTS, len(database)) if database else 0,
+        "prior_components": min(SMOOTH_PRIOR_COMPONENTS, len(database))
+        if database
+        else 0,
         "relative_error": SMOOTH_RELATIVE_ERROR,
         "roi_noise_weights": problem.has_roi_noise,
         "database_size": len(database),
@@ -1110,7 +1120,9 @@ def estimate_camera_sensitivity(
     if self_calibrate is None:
         self_calibrate = method == "bayes" and fit_spd_shift
     elif self_calibrate and method != "bayes":
-        raise InputError(f"per-LED self-calibration needs method 'bayes', not {method!r}")
+        raise InputError(
+            f"per-LED self-calibration needs method 'bayes', not {method!r}"
+        )
     if fit_spd_shift and method != "bayes":
         shift_nm, shift_at_bound = _fit_spd_shift(problem, db, should_stop)
         report(progress, 0.2)

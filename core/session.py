@@ -41,8 +41,8 @@ import hashlib
 import json
 import math
 import os
+import secrets
 import socket
-import tempfile
 import threading
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
@@ -70,6 +70,7 @@ __all__ = [
     "SessionLock",
     "atomic_write_bytes",
     "atomic_write_text",
+    "create_temp_file",
     "dark_id",
     "find_darks",
     "frames_by_channel",
@@ -108,17 +109,37 @@ def _fsync_dir(folder: Path) -> None:
         os.close(fd)
 
 
+def create_temp_file(folder: Path, prefix: str, suffix: str = ".tmp") -> Path:
+    """Create a new, empty, uniquely named file in ``folder``; returns its path.
+
+    Unlike ``tempfile.mkstemp`` (always 0600) the file gets the permissions any
+    newly created file gets, ``0666`` less the process's umask, so an output written
+    through a temporary file and a rename looks like every other output (0644
+    under the usual umask 022).
+    """
+    for _ in range(100):
+        path = folder / f"{prefix}{secrets.token_hex(4)}{suffix}"
+        try:
+            fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+        except FileExistsError:
+            continue
+        os.close(fd)
+        return path
+    raise FileExistsError(f"no free temporary name in {folder}")  # pragma: no cover
+
+
 def atomic_write_bytes(path: str | PathLike[str], data: bytes) -> None:
     """Write ``data`` to ``path`` atomically: temporary file, fsync, ``os.replace``.
 
     A reader (or a process started after a crash) sees either the old content or the
-    new one, never a partial file.
+    new one, never a partial file. The file's permissions are those of a plain
+    ``open(path, "w")`` (the umask's), see :func:`create_temp_file`.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    tmp = create_temp_file(path.parent, f".{path.name}.")
     try:
-        with os.fdopen(fd, "wb") as fh:
+        with open(tmp, "wb") as fh:
             fh.write(data)
             fh.flush()
             os.fsync(fh.fileno())
@@ -1000,7 +1021,8 @@ class Session:
         return self._tmp_dir() / f"{frame_id}.{os.getpid()}"
 
     def clean_temp(self) -> None:
-        """Remove leftovers of interrupted writes (never referenced by the manifest).
+        """Remove leftovers of interrupted writes (never referenced by the manifest)
+        and the then empty ``tmp/`` folder (:meth:`temp_stem` makes it again).
 
         Only entries directly in the session's own ``tmp/`` are removed; links are
         removed as links (never followed), folders are left alone.
@@ -1014,6 +1036,8 @@ class Session:
                 if entry.is_symlink() or entry.is_file(follow_symlinks=False):
                     with contextlib.suppress(OSError):
                         os.unlink(entry.path)
+        with contextlib.suppress(OSError):  # not empty: something else is there
+            tmp.rmdir()
 
     def commit_frame(
         self,

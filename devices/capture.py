@@ -647,6 +647,9 @@ def _capture_locked(
         with contextlib.suppress(DeviceError, OSError):
             light.all_off()
         raise
+    finally:
+        # nothing is being written now: no empty tmp/ folder in the session
+        session.clean_temp()
     report(progress, 1.0)
     return CaptureResult(session, tuple(captured), skipped, metered, tuple(warnings))
 

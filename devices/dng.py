@@ -1,25 +1,42 @@
-"""Write a Bayer CFA DNG (the simulated camera's raw file) with pidng.
+"""Write a Bayer CFA DNG (the simulated camera's raw file), with numpy and struct only.
 
 The file is what LibRaw/rawpy reads back bit for bit: ``raw_image_visible`` equals the
 mosaic written, and the black level, white level, CFA pattern, exposure time, ISO,
-make and model come back from the tags (checked in ``tests/core/test_raw.py``).
+make and model come back from the tags (checked in ``tests/devices/test_sim_camera.py``
+and ``tests/core/test_raw.py``).
+
+A DNG here is a little-endian baseline TIFF: one IFD with the uncompressed mosaic as
+one strip (``PhotometricInterpretation`` 32803 = CFA) and the DNG tags, plus an EXIF
+sub-IFD, where LibRaw looks for the ISO speed. Written by :func:`_tiff_bytes`, a few
+dozen lines, because
+
+- pidng, used before, is built from source on install (no wheels): installing
+  TuneSpec needed a C compiler;
+- tifffile (wheels) writes the main IFD's tags through ``extratags`` but cannot
+  write an EXIF sub-IFD (a tag whose value is the offset of another IFD), so the
+  ISO would be lost or need a hand-made IFD patched into its output anyway.
 
 Storage is 16 bits per sample while ``WhiteLevel`` says where the 14-bit sensor
-clips (the 5D Mark III's data are 14-bit). pidng 4.0.9's 14-bit packer is not usable:
-``pidng.packing.pack14`` strides the samples by 6 but the bytes by 7, so it raises on
-any width, and it keeps only 2 of the low 6 bits of each first sample. 16-bit samples
-cost 1/7 more disk (44 MB for 5760 x 3840) and carry no decoding risk.
+clips (the 5D Mark III's data are 14-bit): 1/7 more disk (44 MB for 5760 x 3840)
+than 14-bit packing and no decoding risk.
 
-pidng's IFD-typed tag cannot be encoded (a ``str``/``bytes`` mix-up in
-``dngTag.setValue``), so the EXIF sub-IFD (where LibRaw looks for the ISO speed) is
-written through :class:`_SubIfdTag`.
+Tags (TIFF 6.0, TIFF/EP, DNG 1.4.0.0): IFD0 NewSubFileType 254, ImageWidth 256,
+ImageLength 257, BitsPerSample 258, Compression 259, PhotometricInterpretation 262,
+ImageDescription 270, Make 271, Model 272, StripOffsets 273, Orientation 274,
+SamplesPerPixel 277, RowsPerStrip 278, StripByteCounts 279, PlanarConfiguration 284,
+Software 305, DateTime 306, CFARepeatPatternDim 33421, CFAPattern 33422,
+ExposureTime 33434, ExifIFD 34665, DNGVersion 50706, DNGBackwardVersion 50707,
+UniqueCameraModel 50708, CFAPlaneColor 50710, CFALayout 50711, BlackLevelRepeatDim
+50713, BlackLevel 50714, WhiteLevel 50717, ColorMatrix1 50721, AsShotNeutral 50728,
+CalibrationIlluminant1 50778; EXIF: ExposureTime 33434, PhotographicSensitivity
+34855, SensitivityType 34864, ExifVersion 36864, DateTimeOriginal 36867.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
-import tempfile
+import struct
 from collections.abc import Sequence
 from datetime import datetime
 from fractions import Fraction
@@ -28,6 +45,8 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
+
+from tunespec.core.session import create_temp_file
 
 __all__ = ["CANON_5D_MARK_III_COLOR_MATRIX", "CFA_PATTERNS", "write_dng"]
 
@@ -109,10 +128,6 @@ def write_dng(
     OSError
         When the file cannot be written (the temporary file is removed).
     """
-    from pidng.core import RAW2DNG
-    from pidng.defs import CalibrationIlluminant, PhotometricInterpretation
-    from pidng.dng import DNGTags, Tag, dngIFD, dngTag
-
     path = Path(path)
     mosaic = np.asarray(mosaic)
     if mosaic.ndim != 2 or mosaic.dtype != np.uint16:
@@ -141,94 +156,157 @@ def write_dng(
             f"and {white_level}"
         )
 
-    tags = DNGTags()
-    tags.set(Tag.ImageWidth, width)
-    tags.set(Tag.ImageLength, height)
-    tags.set(Tag.TileWidth, width)
-    tags.set(Tag.TileLength, height)
-    tags.set(Tag.Orientation, 1)
-    tags.set(
-        Tag.PhotometricInterpretation, PhotometricInterpretation.Color_Filter_Array
-    )
-    tags.set(Tag.SamplesPerPixel, 1)
-    tags.set(Tag.BitsPerSample, 16)
-    tags.set(Tag.PlanarConfiguration, 1)
-    tags.set(Tag.CFARepeatPatternDim, [2, 2])
-    tags.set(Tag.CFAPattern, CFA_PATTERNS[cfa_pattern])
-    tags.set(Tag.CFAPlaneColor, [0, 1, 2])
-    tags.set(Tag.CFALayout, 1)
+    ifd0: dict[int, tuple[int, bytes]] = {
+        254: _long(0),  # NewSubFileType: the main image
+        256: _long(width),
+        257: _long(height),
+        258: _short(16),  # BitsPerSample
+        259: _short(1),  # Compression: none
+        262: _short(_CFA),  # PhotometricInterpretation
+        271: _ascii(make),
+        272: _ascii(model),
+        273: _long(0),  # StripOffsets: set below
+        274: _short(1),  # Orientation: top left
+        277: _short(1),  # SamplesPerPixel
+        278: _long(height),  # RowsPerStrip: one strip
+        279: _long(2 * width * height),  # StripByteCounts
+        284: _short(1),  # PlanarConfiguration: chunky
+        305: _ascii("TuneSpec"),
+        33421: _short(2, 2),  # CFARepeatPatternDim
+        33422: _byte(*CFA_PATTERNS[cfa_pattern]),
+        50706: _byte(1, 4, 0, 0),  # DNGVersion
+        50707: _byte(1, 2, 0, 0),  # DNGBackwardVersion (BlackLevelRepeatDim, ...)
+        50708: _ascii(unique_camera_model or f"{make} {model}".strip()),
+        50710: _byte(0, 1, 2),  # CFAPlaneColor: R, G, B
+        50711: _short(1),  # CFALayout: rectangular
+        50717: _long(int(white_level)),
+    }
     if blacks.size == 4:
-        tags.set(Tag.BlackLevelRepeatDim, [2, 2])
-        tags.set(Tag.BlackLevel, [round(b) for b in blacks])
-    else:
-        tags.set(Tag.BlackLevel, round(float(blacks[0])))
-    tags.set(Tag.WhiteLevel, int(white_level))
-    tags.set(Tag.DNGBackwardVersion, [1, 2, 0, 0])
-    tags.set(Tag.Make, make)
-    tags.set(Tag.Model, model)
-    tags.set(Tag.UniqueCameraModel, unique_camera_model or f"{make} {model}".strip())
+        ifd0[50713] = _short(2, 2)  # BlackLevelRepeatDim
+    ifd0[50714] = _long(*(round(float(b)) for b in blacks))
     if color_matrix is not None:
         cm = [int(v) for v in color_matrix]
         if len(cm) != 9:
             raise ValueError("color_matrix needs 9 values")
-        tags.set(Tag.ColorMatrix1, [[v, 10000] for v in cm])
-        tags.set(Tag.CalibrationIlluminant1, CalibrationIlluminant.D65)
-        tags.set(Tag.AsShotNeutral, [[1, 1], [1, 1], [1, 1]])
+        ifd0[50721] = _srational(*((v, 10000) for v in cm))  # ColorMatrix1
+        ifd0[50728] = _rational((1, 1), (1, 1), (1, 1))  # AsShotNeutral
+        ifd0[50778] = _short(_D65)  # CalibrationIlluminant1
     if description:
-        tags.set(Tag.ImageDescription, description)
-    exif = dngIFD()
+        ifd0[270] = _ascii(description)
+    exif: dict[int, tuple[int, bytes]] = {}
     if exposure_s is not None:
         if not exposure_s > 0:
             raise ValueError(f"exposure_s must be > 0, got {exposure_s}")
         frac = Fraction(exposure_s).limit_denominator(1_000_000)
-        tags.set(Tag.ExposureTime, [[frac.numerator, frac.denominator]])
-        exif.tags.append(dngTag(Tag.ExposureTime, [[frac.numerator, frac.denominator]]))
+        ifd0[33434] = exif[33434] = _rational((frac.numerator, frac.denominator))
     if iso is not None:
         if not 0 < iso <= 65535:
             raise ValueError(f"iso must be in 1..65535, got {iso}")
-        exif.tags.append(dngTag(Tag.PhotographicSensitivity, [int(iso)]))
-        exif.tags.append(dngTag(Tag.SensitivityType, [3]))  # ISO speed
+        exif[34855] = _short(int(iso))  # PhotographicSensitivity
+        exif[34864] = _short(3)  # SensitivityType: ISO speed
     if timestamp is not None:
         text = timestamp.strftime("%Y:%m:%d %H:%M:%S")
-        tags.set(Tag.DateTime, text)
-        exif.tags.append(dngTag(Tag.DateTimeOriginal, text))
-    if exif.tags:
-        exif.tags.append(dngTag(Tag.ExifVersion, list(b"0230")))
-        # DNGTags has no public way to add a custom tag object
-        tags.__tags__[Tag.EXIF_IFD] = _sub_ifd_tag(Tag.EXIF_IFD, exif)
+        ifd0[306] = exif[36867] = _ascii(text)  # DateTime, DateTimeOriginal
+    if exif:
+        exif[36864] = (_UNDEFINED, b"0230")  # ExifVersion
+        ifd0[34665] = _long(0)  # ExifIFD: set below
 
-    writer = RAW2DNG()
-    writer.options(tags, path="", compress=False)
-    buf = writer.convert(np.ascontiguousarray(mosaic), filename="")
-    _write_atomic(path, buf)
+    head = _tiff_bytes(ifd0, exif)
+    pixels = np.ascontiguousarray(mosaic, dtype="<u2")
+    _write_atomic(path, (head, memoryview(pixels).cast("B")))
     return path
 
 
-def _sub_ifd_tag(tag: tuple[int, tuple[int, int]], ifd: object) -> object:
-    """A pidng tag pointing at a sub-IFD (works around ``dngTag.setValue``)."""
-    from pidng.dng import Type, dngTag
-
-    class _SubIfdTag(dngTag):  # type: ignore[misc]
-        def setValue(self, value: list[object]) -> None:  # pidng's method name
-            if self.DataType == Type.IFD:
-                self.Value = b"\0\0\0\0"
-                self.subIFD = value[0]
-            else:
-                super().setValue(value)
-
-    return _SubIfdTag(tag, [ifd])
+# -- a minimal TIFF encoder (little endian) ---------------------------------------
+_BYTE, _ASCII, _SHORT, _LONG, _RATIONAL, _UNDEFINED, _SRATIONAL = 1, 2, 3, 4, 5, 7, 10
+#: PhotometricInterpretation CFA (TIFF/EP) and CalibrationIlluminant D65 (EXIF).
+_CFA, _D65 = 32803, 21
 
 
-def _write_atomic(path: Path, data: bytes | bytearray) -> None:
-    """Write ``data`` to ``path`` via a temporary file and a rename."""
+def _byte(*values: int) -> tuple[int, bytes]:
+    return _BYTE, bytes(values)
+
+
+def _ascii(text: str) -> tuple[int, bytes]:
+    return _ASCII, text.encode("ascii", "replace") + b"\0"
+
+
+def _short(*values: int) -> tuple[int, bytes]:
+    return _SHORT, struct.pack(f"<{len(values)}H", *values)
+
+
+def _long(*values: int) -> tuple[int, bytes]:
+    return _LONG, struct.pack(f"<{len(values)}I", *values)
+
+
+def _rational(*pairs: tuple[int, int]) -> tuple[int, bytes]:
+    return _RATIONAL, struct.pack(f"<{2 * len(pairs)}I", *(v for p in pairs for v in p))
+
+
+def _srational(*pairs: tuple[int, int]) -> tuple[int, bytes]:
+    return _SRATIONAL, struct.pack(
+        f"<{2 * len(pairs)}i", *(v for p in pairs for v in p)
+    )
+
+
+#: Bytes per value of each field type (the entry's count is in values).
+_TYPE_SIZE = {_BYTE: 1, _ASCII: 1, _SHORT: 2, _LONG: 4, _RATIONAL: 8, _UNDEFINED: 1}
+_TYPE_SIZE[_SRATIONAL] = 8
+
+
+def _ifd(entries: dict[int, tuple[int, bytes]], offset: int) -> bytes:
+    """One IFD at file ``offset``, followed by the values that do not fit its entries.
+
+    Entries are sorted by tag (TIFF 6.0 requires it); values longer than 4 bytes
+    go after the IFD, each on a word boundary; the next-IFD offset is 0.
+    """
+    n = len(entries)
+    extra_at = offset + 2 + 12 * n + 4
+    table, extra = [struct.pack("<H", n)], bytearray()
+    for tag in sorted(entries):
+        kind, data = entries[tag]
+        count = len(data) // _TYPE_SIZE[kind]
+        if len(data) <= 4:
+            table.append(struct.pack("<HHI", tag, kind, count) + data.ljust(4, b"\0"))
+        else:
+            table.append(struct.pack("<HHII", tag, kind, count, extra_at + len(extra)))
+            extra += data + b"\0" * (len(data) % 2)
+    table.append(struct.pack("<I", 0))
+    return b"".join(table) + bytes(extra)
+
+
+def _tiff_bytes(
+    ifd0: dict[int, tuple[int, bytes]], exif: dict[int, tuple[int, bytes]]
+) -> bytes:
+    """Header, IFD0 and the EXIF IFD; the pixel strip follows them at the end.
+
+    IFD0's size does not depend on the offsets it holds (LONG values inline), so it
+    is laid out once to place the EXIF IFD and the strip, then written for real.
+    """
+    ifd0_at = 8
+    size0 = len(_ifd(ifd0, ifd0_at))
+    exif_at = ifd0_at + size0
+    exif_bytes = _ifd(exif, exif_at) if exif else b""
+    strip_at = exif_at + len(exif_bytes)
+    strip_at += strip_at % 2
+    ifd0 = {**ifd0, 273: _long(strip_at)}
+    if exif:
+        ifd0[34665] = _long(exif_at)
+    head = b"II*\0" + struct.pack("<I", ifd0_at) + _ifd(ifd0, ifd0_at) + exif_bytes
+    return head.ljust(strip_at, b"\0")
+
+
+def _write_atomic(path: Path, chunks: Sequence[bytes | memoryview]) -> None:
+    """Write ``chunks`` to ``path`` via a temporary file and a rename."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".part")
+    # the umask's permissions, as every other output (mkstemp's would be 0600)
+    tmp = create_temp_file(path.parent, f".{path.name}.", ".part")
     try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
+        with open(tmp, "wb") as fh:
+            for chunk in chunks:
+                fh.write(chunk)
             fh.flush()
             os.fsync(fh.fileno())
-        os.chmod(tmp, 0o644)  # mkstemp makes it owner-only
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(OSError):

@@ -24,7 +24,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from os import PathLike
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -49,12 +49,6 @@ from tunespec.core.limits import (
 )
 from tunespec.core.processing import ProcessedSession, process_session, write_processed
 from tunespec.core.progress import ProgressFn, StopFn, report
-from tunespec.core.sensitivity import (
-    SENSITIVITY_METHODS,
-    SensitivityEstimate,
-    correct_illuminants_from_meta,
-    estimate_camera_sensitivity,
-)
 from tunespec.core.session import Session, atomic_write_text
 from tunespec.core.spectra import (
     DEFAULT_GRID,
@@ -63,9 +57,6 @@ from tunespec.core.spectra import (
     read_spectra_csv,
     write_spectra_csv,
 )
-from tunespec.core.stats import CalibrationReport, PredictionStats, calibration_report
-from tunespec.core.uncertainty import ReflectanceUncertainty, reflectance_uncertainty
-from tunespec.core.wiener import WienerEstimate, wiener_reflectance
 from tunespec.devices.capture import FrameCallback, capture, new_session
 from tunespec.devices.registry import (
     DEFAULT_SIM_RESOLUTION,
@@ -75,6 +66,18 @@ from tunespec.devices.registry import (
     parse_resolution,
     sim_scene,
 )
+
+#: Sensitivity methods a configuration may name (``core.sensitivity.SENSITIVITY_METHODS``
+#: without importing scipy; tests/test_cli_startup.py keeps them equal).
+METHOD_CHOICES = ("bayes", "pca", "smooth")
+
+if TYPE_CHECKING:
+    # the estimators import scipy (a third of a second): imported where they run,
+    # so that loading a configuration (and failing on it) answers at once
+    from tunespec.core.sensitivity import SensitivityEstimate
+    from tunespec.core.stats import CalibrationReport, PredictionStats
+    from tunespec.core.uncertainty import ReflectanceUncertainty
+    from tunespec.core.wiener import WienerEstimate
 
 __all__ = [
     "DEMO_RESOLUTION",
@@ -394,6 +397,9 @@ def calibrate(
     options
         More arguments for ``estimate_camera_sensitivity``.
     """
+    from tunespec.core.sensitivity import estimate_camera_sensitivity
+    from tunespec.core.stats import calibration_report
+
     refl = reflectances if reflectances is not None else load_colorchecker_sg(grid)
     refl = refl.resample(grid)
     illum = chart.illuminants.resample(grid)
@@ -431,6 +437,10 @@ def estimate(
     With ``calibration`` carrying a covariance, the standard uncertainties of the
     reflectances and their CIELAB are computed too (:mod:`tunespec.core.uncertainty`).
     """
+    from tunespec.core.sensitivity import correct_illuminants_from_meta
+    from tunespec.core.uncertainty import reflectance_uncertainty
+    from tunespec.core.wiener import wiener_reflectance
+
     prior = prior if prior is not None else load_colorchecker_sg(grid)
     illuminants = correct_illuminants_from_meta(
         sample.illuminants, sensitivity.meta, spd_shift_nm
@@ -1090,10 +1100,10 @@ def check_config(cfg: Mapping[str, Any]) -> None:
         cap.get("iso", 100), "capture.iso", path=src, lo=1, hi=1e7, integer=True
     )
     method = cfg.get("calibrate", {}).get("method")
-    if method is not None and method not in SENSITIVITY_METHODS:
+    if method is not None and method not in METHOD_CHOICES:
         raise InputError(
             f"calibrate.method: {shown(method)} is not one of "
-            f"{', '.join(SENSITIVITY_METHODS)}",
+            f"{', '.join(METHOD_CHOICES)}",
             path=src,
         )
     for section in ("calibrate", "estimate"):

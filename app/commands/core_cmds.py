@@ -16,11 +16,13 @@ from tunespec.core.limits import MAX_REFLECTANCE, dumps_json
 from tunespec.core.responses import Responses, read_responses_csv, write_responses_csv
 from tunespec.core.spectra import Grid, Spectra, read_spectra_csv, write_spectra_csv
 
+#: ``core.sensitivity.SENSITIVITY_METHODS``'s keys (a test checks), named here because
+#: importing the estimators (scipy) would cost ``tunespec --help`` a third of a second.
+METHOD_CHOICES = ("bayes", "pca", "smooth")
+
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the core subcommands."""
-    from tunespec.core.sensitivity import SENSITIVITY_METHODS
-
     p = sub.add_parser(
         "calibrate",
         help="estimate camera sensitivities from a chart under all LEDs (Table 1)",
@@ -34,7 +36,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     p.add_argument(
         "--method",
-        choices=sorted(SENSITIVITY_METHODS),
+        choices=METHOD_CHOICES,
         default="bayes",
         help="bayes (default): evidence-chosen priors and per-LED self-calibration "
         "with uncertainties; smooth: the previous default; pca: the paper's Eq. 4",
@@ -178,9 +180,6 @@ def _check_names(
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
-    from tunespec.core.sensitivity import estimate_camera_sensitivity
-    from tunespec.core.stats import calibration_report, split_patches
-
     if args.hold_out_every and args.hold_out_every < 2:
         raise InputError(
             f"--hold-out-every {args.hold_out_every}: N must be at least 2 (0: off)"
@@ -196,6 +195,11 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         responses, illuminants, "illuminant", args.illuminants, responses.illuminants
     )
     _check_names(responses, reflectances, "patch", args.reflectances, responses.patches)
+    # the estimators (scipy) are imported once the inputs are known to be good: an
+    # error in them is reported at once
+    from tunespec.core.sensitivity import estimate_camera_sensitivity
+    from tunespec.core.stats import calibration_report, split_patches
+
     held: tuple[str, ...] = ()
     fit = responses
     if args.hold_out_every:
@@ -250,12 +254,14 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
 def cmd_estimate(args: argparse.Namespace) -> int:
     from tunespec.core.datasets import load_colorchecker_sg
-    from tunespec.core.sensitivity import correct_illuminants_from_meta
-    from tunespec.core.wiener import wiener_reflectance
 
     responses = read_responses_csv(args.responses)
     reported = read_spectra_csv(args.illuminants, args.grid)
     sensitivity = read_sensitivities(args.sensitivities, args.grid)
+    # imported after the inputs are read (scipy): an error in them is reported at once
+    from tunespec.core.sensitivity import correct_illuminants_from_meta
+    from tunespec.core.wiener import wiener_reflectance
+
     meta = read_sensitivity_meta(args.sensitivities)
     illuminants = correct_illuminants_from_meta(reported, meta, args.spd_shift_nm)
     prior = (
@@ -296,7 +302,8 @@ def _write_uncertainty(
     calibration = calibration_from_files(args.sensitivities, meta)
     wl = calibration.sensitivity.wavelength_nm
     reported = read_spectra_csv(
-        args.illuminants, Grid(float(wl[0]), float(wl[-1]), calibration.sensitivity.step_nm)
+        args.illuminants,
+        Grid(float(wl[0]), float(wl[-1]), calibration.sensitivity.step_nm),
     )
     unc = reflectance_uncertainty(est, responses, reported, calibration, prior)
     u_path = args.output.with_name(args.output.stem + "_uncertainty.csv")

@@ -16,10 +16,6 @@ from typing import Any, TextIO
 
 from tunespec.app.cli import seed_arg
 from tunespec.core.errors import InputError
-from tunespec.core.spectra import read_spectra_csv
-from tunespec.devices.cal1.emulator import Cal1Emulator
-from tunespec.devices.clock import RealClock
-from tunespec.devices.sim.led_physics import LedPhysics
 
 __all__ = ["register", "run_cal1_emulator"]
 
@@ -159,6 +155,12 @@ def run_cal1_emulator(
         For a bad LED file, or a port that cannot be bound (e.g. in use).
     """
     out = out if out is not None else sys.stdout
+    # imported here, not at the top: ``tunespec --help`` imports every command module
+    from tunespec.core.spectra import read_spectra_csv
+    from tunespec.devices.cal1.emulator import Cal1Emulator
+    from tunespec.devices.clock import RealClock
+    from tunespec.devices.sim.led_physics import LedPhysics
+
     spectra = read_spectra_csv(leds) if leds else None
     clock = RealClock()
     power_on_s = clock.now_s() - WARM_POWER_ON_AGO_S if warm else None

@@ -50,7 +50,9 @@ def _floats(text: str) -> tuple[float, ...]:
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the session subcommands."""
-    from tunespec.devices.workflow import DEMO_RESOLUTION
+    # the registry's constant (workflow.DEMO_RESOLUTION is the same object): the
+    # workflow imports the whole pipeline, which ``tunespec --help`` must not pay
+    from tunespec.devices.registry import DEFAULT_SIM_RESOLUTION as DEMO_RESOLUTION
 
     p = sub.add_parser(
         "demo",

@@ -14,14 +14,15 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pyqtgraph as pg
 from numpy.typing import NDArray
-from PySide6.QtCore import QPointF, Signal, Slot
+from PySide6.QtCore import QPointF, Qt, Signal, Slot
+from PySide6.QtGui import QKeySequence, QUndoCommand, QUndoStack
 from PySide6.QtWidgets import (
     QCheckBox,
     QDoubleSpinBox,
@@ -32,16 +33,17 @@ from PySide6.QtWidgets import (
     QLabel,
     QPushButton,
     QSpinBox,
+    QToolButton,
     QVBoxLayout,
     QWidget,
 )
 
-from tunespec.app.plots.frame_plot import FramePlot, FramePreview
+from tunespec.app.plots.frame_plot import FramePlot, FramePreview, build_preview
 from tunespec.app.workers import Worker
 from tunespec.core.errors import TuneSpecError
 from tunespec.core.layout import TargetLayout
 
-__all__ = ["CORNER_NAMES", "TargetLayoutEditor", "find_target_corners"]
+__all__ = ["CORNER_NAMES", "FoundCorners", "TargetLayoutEditor", "find_target_corners"]
 
 log = logging.getLogger(__name__)
 
@@ -51,27 +53,86 @@ _ROI_PEN = pg.mkPen((255, 220, 0), width=2)
 _OUTLINE_PEN = pg.mkPen((0, 255, 0), width=2)
 _SELECTED_PEN = pg.mkPen((255, 60, 60), width=3)
 
-#: ``finder(frame, layout) -> (4, 2) corners`` (TL, TR, BR, BL in mosaic pixels).
+#: ``finder(frame, layout, *, session_root, progress, should_stop)`` returning (4, 2)
+#: corners (TL, TR, BR, BL in mosaic pixels) or a :class:`FoundCorners`.
 CornerFinder = Callable[..., Any]
+
+
+@dataclass(frozen=True)
+class FoundCorners:
+    """What the automatic corner finder found.
+
+    Parameters
+    ----------
+    corners_px : (4, 2)
+        TL, TR, BR, BL in mosaic pixels.
+    preview
+        The frame the corners were found in, for the editor to show (None: the
+        frame shown already).
+    message
+        What the operator reads in the editor's status line.
+    """
+
+    corners_px: NDArray[np.float64]
+    preview: FramePreview | None = None
+    message: str = ""
 
 
 def find_target_corners(
     frame: Any,
     target_layout: TargetLayout,
     *,
+    session_root: str | Path | None = None,
     progress: Any = None,
     should_stop: Any = None,
-) -> NDArray[np.float64]:
-    """The core's corner finder on a frame's green plane, in mosaic pixels.
+) -> FoundCorners:
+    """The corners processing would find, in mosaic pixels (pool thread).
 
-    ``core.homography.locate_target`` works in the coordinates of the image it is
-    given (planes); the layout keeps mosaic pixels.
+    With a session that holds a white-background and a target frame under one LED,
+    this is processing's own detection
+    (:func:`tunespec.core.processing.find_session_corners`: the same frames, the same
+    detector), and the target frame it used is returned for display. Without one
+    (a frame taken outside a measurement), the shown frame's green plane alone is
+    searched, which finds a target only against an evenly lit background.
     """
+    from tunespec.core.errors import InputError
+    from tunespec.core.session import MANIFEST_NAME, Session
+
+    root = Path(session_root) if session_root else None
+    if root is not None and (root / MANIFEST_NAME).is_file():
+        from tunespec.core.processing import find_session_corners
+
+        session = Session.open(root)
+        try:
+            found, target = find_session_corners(session, target_layout)
+        except InputError as exc:
+            if frame is None or "white-background and a target" not in str(exc):
+                raise
+        else:
+            return FoundCorners(
+                found.corners_px,
+                build_preview(target),
+                f"Corners found as processing finds them ({found.target_id} "
+                f"against {found.white_id}, fit residual {found.residual_px:.2f} "
+                "px); drag a handle to correct.",
+            )
+    if frame is None:
+        raise InputError("take the white-background and target frames first")
     from tunespec.core.homography import locate_target
     from tunespec.core.raw import plane_to_full_px
 
-    corners_plane, _fit = locate_target(frame.planes[1], target_layout)
-    return plane_to_full_px(corners_plane)
+    try:
+        corners_plane, _fit = locate_target(frame.planes[1], target_layout)
+    except InputError as exc:
+        raise InputError(
+            f"{exc} (in the shown frame alone; with the white-background frame "
+            "taken, the finder compares the two as processing does)"
+        ) from None
+    return FoundCorners(
+        plane_to_full_px(corners_plane),
+        None,
+        "Corners found in the shown frame; drag a handle to correct.",
+    )
 
 
 def _polylines(quads: NDArray[np.float64]) -> tuple[NDArray, NDArray]:
@@ -81,6 +142,46 @@ def _polylines(quads: NDArray[np.float64]) -> tuple[NDArray, NDArray]:
     )
     flat = closed.reshape(-1, 2)
     return flat[:, 0], flat[:, 1]
+
+
+class _LayoutEdit(QUndoCommand):
+    """One edit of the layout (a corner drag, a spin box, found corners...).
+
+    Pushed after the edit is shown, so the first ``redo`` (Qt calls it on push)
+    re-applies the same layout. Successive changes of one spin box merge into one
+    step (``merge_key``), so an arrow key held down is undone at once.
+    """
+
+    def __init__(
+        self,
+        editor: TargetLayoutEditor,
+        before: TargetLayout,
+        after: TargetLayout,
+        text: str,
+        merge_key: int = -1,
+    ) -> None:
+        super().__init__(text)
+        self._editor, self.before, self.after = editor, before, after
+        self._merge_key = merge_key
+
+    def id(self) -> int:
+        return self._merge_key
+
+    def mergeWith(self, other: QUndoCommand) -> bool:
+        if not isinstance(other, _LayoutEdit) or other.id() != self.id():
+            return False
+        self.after = other.after
+        return True
+
+    def redo(self) -> None:
+        self._editor._apply_layout(self.after)
+
+    def undo(self) -> None:
+        self._editor._apply_layout(self.before)
+
+
+#: ``merge_key`` of the spin boxes' edits (a drag or a button never merges: -1).
+_MERGE_KEYS = {"rows": 1, "cols": 2, "patch": 3, "roi": 4, "margin": 10}
 
 
 class TargetLayoutEditor(QWidget):
@@ -115,7 +216,13 @@ class TargetLayoutEditor(QWidget):
         self._corner_finder = corner_finder
         self._finder_worker: Worker | None = None
         self._finder_target = ""
+        self._session_root: Path | None = None
         self._updating = False
+        self._drag_before: TargetLayout | None = None
+        #: Undo/redo of the edits made here (corners, grid, margins, fractions).
+        #: A layout set from outside (another target, the corners a step used)
+        #: starts a new history.
+        self.undo_stack = QUndoStack(self)
         self.selected_patch: str | None = None
         self.last_dir = ""
 
@@ -174,6 +281,23 @@ class TargetLayoutEditor(QWidget):
             "Find the target's corners automatically, then drag to correct"
         )
         self.reset_button = QPushButton("Reset corners")
+        self.undo_action = self.undo_stack.createUndoAction(self, "Undo")
+        self.undo_action.setShortcut(QKeySequence.StandardKey.Undo)
+        self.redo_action = self.undo_stack.createRedoAction(self, "Redo")
+        # the platform's Redo, and both common ones whatever the platform says
+        redo_keys = QKeySequence.keyBindings(QKeySequence.StandardKey.Redo)
+        for text in ("Ctrl+Shift+Z", "Ctrl+Y"):
+            if all(k.toString() != text for k in redo_keys):
+                redo_keys.append(QKeySequence(text))
+        self.redo_action.setShortcuts(redo_keys)
+        for action in (self.undo_action, self.redo_action):
+            # only while the editor has the focus: a spin box elsewhere keeps its own
+            action.setShortcutContext(Qt.ShortcutContext.WidgetWithChildrenShortcut)
+            self.addAction(action)
+        self.undo_button = QToolButton()
+        self.undo_button.setDefaultAction(self.undo_action)
+        self.redo_button = QToolButton()
+        self.redo_button.setDefaultAction(self.redo_action)
         self.status_label = QLabel()
         self.status_label.setWordWrap(True)
         self.corners_label = QLabel()
@@ -198,10 +322,15 @@ class TargetLayoutEditor(QWidget):
         corners = QHBoxLayout()
         corners.addWidget(self.find_button)
         corners.addWidget(self.reset_button)
+        history = QHBoxLayout()
+        history.addWidget(self.undo_button)
+        history.addWidget(self.redo_button)
+        history.addStretch(1)
         side = QVBoxLayout()
         side.addWidget(box)
         side.addLayout(buttons)
         side.addLayout(corners)
+        side.addLayout(history)
         side.addWidget(self.corners_label)
         side.addWidget(self.status_label)
         side.addStretch(1)
@@ -213,12 +342,20 @@ class TargetLayoutEditor(QWidget):
         main.addWidget(self.frame_plot, 1)
         main.addWidget(side_widget)
 
-        self.rows_spin.valueChanged.connect(self._on_geometry_edited)
-        self.cols_spin.valueChanged.connect(self._on_geometry_edited)
-        for spin in self.margin_spins:
-            spin.valueChanged.connect(self._on_geometry_edited)
-        self.patch_fraction_spin.valueChanged.connect(self._on_geometry_edited)
-        self.roi_fraction_spin.valueChanged.connect(self._on_geometry_edited)
+        edits = [
+            (self.rows_spin, _MERGE_KEYS["rows"], "Change rows"),
+            (self.cols_spin, _MERGE_KEYS["cols"], "Change columns"),
+            (self.patch_fraction_spin, _MERGE_KEYS["patch"], "Change patch size"),
+            (self.roi_fraction_spin, _MERGE_KEYS["roi"], "Change ROI size"),
+        ]
+        for i, (spin, side) in enumerate(
+            zip(self.margin_spins, ("left", "top", "right", "bottom"), strict=True)
+        ):
+            edits.append((spin, _MERGE_KEYS["margin"] + i, f"Change {side} margin"))
+        for spin, merge, text in edits:
+            spin.valueChanged.connect(
+                lambda _v, m=merge, t=text: self._on_geometry_edited(t, m)
+            )
         self.names_check.toggled.connect(self._on_names_check_toggled)
         self.load_button.clicked.connect(self._on_load_button_clicked)
         self.save_button.clicked.connect(self._on_save_button_clicked)
@@ -234,47 +371,106 @@ class TargetLayoutEditor(QWidget):
         return self._layout
 
     def set_target_layout(
-        self, target_layout: TargetLayout, *, emit: bool = False
+        self,
+        target_layout: TargetLayout,
+        *,
+        emit: bool = False,
+        undo_text: str | None = None,
     ) -> None:
-        """Show and edit ``target_layout`` (corners are kept if it has none)."""
+        """Show and edit ``target_layout`` (corners are kept if it has none).
+
+        A layout from outside (another target, the corners a step used) starts a new
+        undo history; with ``undo_text`` (a file loaded here) it is a step of it.
+        """
+        before = self._layout
         if (
             target_layout.corners_px is None
             and self._layout.corners_px is not None
             and self.frame_plot.image_size is not None
         ):
             target_layout = target_layout.with_corners(self._layout.corners_px)
+        if undo_text is None:
+            self.undo_stack.clear()
+        if target_layout.name != before.name:
+            self.status_label.setText("")  # it spoke of the other target
         self._layout = target_layout
-        self._updating = True
-        try:
-            self.name_label.setText(target_layout.name)
-            self.rows_spin.setValue(target_layout.rows)
-            self.cols_spin.setValue(target_layout.cols)
-            for spin, m in zip(self.margin_spins, target_layout.margin_mm, strict=True):
-                spin.setValue(m)
-            self.patch_fraction_spin.setValue(target_layout.patch_fraction)
-            self.roi_fraction_spin.setValue(100.0 * target_layout.roi_fraction)
-            self.names_check.setChecked(target_layout.n_patches <= 48)
-        finally:
-            self._updating = False
+        self._sync_spins()
+        self.names_check.setChecked(target_layout.n_patches <= 48)
         if target_layout.corners_px is None and self.frame_plot.image_size is not None:
             self._layout = target_layout.with_corners(self.default_corners())
         self._sync_handles()
         self._redraw()
         if emit:
             self.layout_changed.emit(self._layout)
+        if undo_text is not None:
+            self._edited(before, undo_text)
+
+    def _sync_spins(self) -> None:
+        lay = self._layout
+        self._updating = True
+        try:
+            self.name_label.setText(lay.name)
+            self.rows_spin.setValue(lay.rows)
+            self.cols_spin.setValue(lay.cols)
+            for spin, m in zip(self.margin_spins, lay.margin_mm, strict=True):
+                spin.setValue(m)
+            self.patch_fraction_spin.setValue(lay.patch_fraction)
+            self.roi_fraction_spin.setValue(100.0 * lay.roi_fraction)
+        finally:
+            self._updating = False
+
+    def _apply_layout(self, target_layout: TargetLayout) -> None:
+        """Show ``target_layout`` as the edited one (undo/redo) and announce it."""
+        self._layout = target_layout
+        self._sync_spins()
+        self._sync_handles()
+        self._redraw()
+        self.layout_changed.emit(self._layout)
+
+    def _edited(self, before: TargetLayout, text: str, merge_key: int = -1) -> None:
+        """Record the edit from ``before`` to the layout now shown (undoable)."""
+        if before != self._layout:
+            self.undo_stack.push(
+                _LayoutEdit(self, before, self._layout, text, merge_key)
+            )
+
+    def set_session_root(self, root: str | Path | None) -> None:
+        """The capture session of the target being edited (None: none yet).
+
+        "Find corners" then compares its white-background and target frames, as
+        processing does.
+        """
+        self._session_root = Path(root) if root else None
+
+    @property
+    def session_root(self) -> Path | None:
+        """The session "Find corners" reads, or None."""
+        return self._session_root
+
+    def show_status(self, text: str) -> None:
+        """Show ``text`` in the editor's status line."""
+        self.status_label.setText(text)
 
     def set_corner_finder(self, finder: CornerFinder | None) -> None:
         """Use ``finder`` for "Find corners" (None disables it)."""
         self._corner_finder = finder
         self.find_button.setEnabled(finder is not None)
 
-    def set_corners(self, corners_px: Any, *, emit: bool = True) -> None:
-        """Move the corners to ``corners_px`` (4, 2) TL, TR, BR, BL mosaic pixels."""
+    def set_corners(
+        self, corners_px: Any, *, emit: bool = True, undo_text: str | None = None
+    ) -> None:
+        """Move the corners to ``corners_px`` (4, 2) TL, TR, BR, BL mosaic pixels.
+
+        With ``undo_text`` the move is a step of the undo history.
+        """
+        before = self._layout
         self._layout = self._layout.with_corners(np.asarray(corners_px, dtype=float))
         self._sync_handles()
         self._redraw()
         if emit:
             self.layout_changed.emit(self._layout)
+        if undo_text is not None:
+            self._edited(before, undo_text)
 
     def show_preview(self, preview: FramePreview) -> None:
         """Show a frame; a layout without corners gets default ones inside it."""
@@ -394,17 +590,24 @@ class TargetLayoutEditor(QWidget):
     def _on_handle_position_changed(self, _handle: Any) -> None:
         if self._updating:
             return
+        if self._drag_before is None:
+            self._drag_before = self._layout  # the drag's first move
         self._layout = self._layout.with_corners(self.handle_positions())
         self._show_corners_text()
         self._redraw()
         self.layout_changed.emit(self._layout)
 
     @Slot(object)
-    def _on_handle_drag_finished(self, _handle: Any) -> None:
+    def _on_handle_drag_finished(self, handle: Any) -> None:
+        before, self._drag_before = self._drag_before, None
+        if before is not None:
+            name = CORNER_NAMES[self.handles.index(handle)]
+            self._edited(before, f"Move corner {name}")
         log.info("target corners set by hand: %s", self._layout.corners_px)
 
-    @Slot()
-    def _on_geometry_edited(self) -> None:
+    def _on_geometry_edited(
+        self, text: str = "Edit layout", merge_key: int = -1
+    ) -> None:
         if self._updating:
             return
         lay = self._layout
@@ -428,9 +631,10 @@ class TargetLayoutEditor(QWidget):
             self.status_label.setText(f"Not applied: {exc}")
             return
         self.status_label.setText("")
-        self._layout = new
+        before, self._layout = self._layout, new
         self._redraw()
         self.layout_changed.emit(new)
+        self._edited(before, text, merge_key)
 
     @Slot(bool)
     def _on_names_check_toggled(self, _on: bool) -> None:
@@ -472,7 +676,7 @@ class TargetLayoutEditor(QWidget):
             log.error("cannot load layout: %s", exc)
             return
         self.last_dir = str(Path(path).parent)
-        self.set_target_layout(lay, emit=True)
+        self.set_target_layout(lay, emit=True, undo_text=f"Load {Path(path).name}")
         self.status_label.setText(f"Loaded {Path(path).name}")
         self.layout_loaded.emit(str(path))
 
@@ -490,16 +694,23 @@ class TargetLayoutEditor(QWidget):
 
     @Slot()
     def _on_reset_button_clicked(self) -> None:
-        self.set_corners(self.default_corners())
+        self.set_corners(self.default_corners(), undo_text="Reset corners")
 
     @Slot()
     def _on_find_button_clicked(self) -> None:
         self.find_corners()
 
+    def _has_session(self) -> bool:
+        from tunespec.core.session import MANIFEST_NAME
+
+        root = self._session_root
+        return root is not None and (root / MANIFEST_NAME).is_file()
+
     def find_corners(self) -> Worker | None:
         """Run the automatic corner finder on the shown frame (in a worker)."""
         preview = self.frame_plot.preview
-        if self._corner_finder is None or preview is None or preview.frame is None:
+        frame = None if preview is None else preview.frame
+        if self._corner_finder is None or (frame is None and not self._has_session()):
             self.status_label.setText("Take a frame of the target first.")
             return None
         if self._finder_worker is not None:
@@ -507,7 +718,12 @@ class TargetLayoutEditor(QWidget):
         self.status_label.setText("Finding corners…")
         self.find_button.setEnabled(False)
         self._finder_target = self._layout.name
-        worker = Worker(self._corner_finder, preview.frame, self._layout)
+        worker = Worker(
+            self._corner_finder,
+            frame,
+            self._layout,
+            session_root=self._session_root,
+        )
         worker.signals.returned.connect(self._on_finder_returned)
         worker.signals.errored.connect(self._on_finder_errored)
         worker.signals.finished.connect(self._on_finder_finished)
@@ -523,8 +739,22 @@ class TargetLayoutEditor(QWidget):
                 f"shows {self._layout.name}."
             )
             return
-        self.set_corners(np.asarray(corners, dtype=float).reshape(4, 2))
-        self.status_label.setText("Corners found; drag a handle to correct.")
+        found = (
+            corners
+            if isinstance(corners, FoundCorners)
+            else FoundCorners(
+                np.asarray(corners, dtype=float),
+                None,
+                "Corners found; drag a handle to correct.",
+            )
+        )
+        if found.preview is not None:
+            self.frame_plot.show_preview(found.preview)
+        self.set_corners(
+            np.asarray(found.corners_px, dtype=float).reshape(4, 2),
+            undo_text="Find corners",
+        )
+        self.status_label.setText(found.message)
         log.info("target corners found automatically")
 
     @Slot(object)

@@ -27,13 +27,26 @@ class SpdPlot(SpectraPlot):
             parent,
         )
         self.plot_item.getAxis("left").enableAutoSIPrefix(True)
-        self.set_message("Connect the light source and select a channel.")
         self.channel_names: list[str] = []
         self.last_spd: Any = None
+        self.set_connected(False)
+
+    def set_connected(self, connected: bool) -> None:
+        """Say what to do next: connect, or switch a channel on (connected)."""
+        if not connected:
+            self.last_spd = None
+            self.clear()
+            self.set_title("Light source SPD (internal spectroradiometer)")
+            self.set_message("Connect the light source to see its SPD.")
+        elif self.last_spd is None:
+            self.set_message(
+                "Connected: switch a channel on in the Devices panel to see its SPD."
+            )
 
     def set_channel_names(self, names: list[str]) -> None:
-        """Names of the light source's channels, in device order."""
+        """Names of the light source's channels, in device order (it is connected)."""
         self.channel_names = list(names)
+        self.set_connected(True)
 
     def show_spd(self, spd: Any, levels: Any = None) -> None:
         """Plot ``spd`` (a ``Spectra`` with one ``"measured"`` spectrum).

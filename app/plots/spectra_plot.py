@@ -9,6 +9,7 @@ curves to show; drawing and clearing are shared here.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from html import escape
 
 import numpy as np
 import pyqtgraph as pg
@@ -48,7 +49,12 @@ class SpectraPlot(QWidget):
         self.plot_item.showGrid(x=True, y=True, alpha=0.25)
         # SI prefixes on "nm" would print "knm"-style nonsense when zoomed out
         self.plot_item.getAxis("bottom").enableAutoSIPrefix(False)
-        self.legend = self.plot_item.addLegend(offset=(-10, 10))
+        # the legend is a line of text under the plot: never over the curves, and
+        # it wraps instead of being cut off when the plot is narrow
+        self.legend = QLabel()
+        self.legend.setWordWrap(True)
+        self.legend.setTextFormat(Qt.TextFormat.RichText)
+        self._legend_entries: dict[str, tuple[str, bool]] = {}
         self.title_label = QLabel(title)
         self.title_label.setAlignment(Qt.AlignmentFlag.AlignCenter)
         self.title_label.setStyleSheet("font-weight: bold")
@@ -58,14 +64,42 @@ class SpectraPlot(QWidget):
         layout.setContentsMargins(2, 2, 2, 2)
         layout.addWidget(self.title_label)
         layout.addWidget(self.plot_widget, 1)
+        layout.addWidget(self.legend)
         layout.addWidget(self.message_label)
         self.curves: dict[str, pg.PlotDataItem] = {}
+        self._update_empty()
+
+    @property
+    def empty(self) -> bool:
+        """Whether no curve is shown."""
+        return not self.curves
+
+    def _update_empty(self) -> None:
+        """An empty plot shows no axes: pyqtgraph's default 0-1 range would read as
+        data (ticks 0.1 ... 0.9 of nothing); the message under it says why."""
+        shown = bool(self.curves)
+        for side in ("left", "bottom"):
+            self.plot_item.showAxis(side, shown)
+        self.plot_item.showGrid(x=shown, y=shown, alpha=0.25)
+        self.legend.setVisible(shown)
+        self._update_legend()
+
+    def _update_legend(self) -> None:
+        entries = []
+        for name, (colour, dashed) in self._legend_entries.items():
+            sample = "╍╍╍" if dashed else "━━━"
+            entries.append(
+                f"<span style='color:{colour}'>{sample}</span>&nbsp;"
+                + escape(name).replace(" ", "&nbsp;")  # wrap between entries only
+            )
+        self.legend.setText(" &nbsp;&nbsp; ".join(entries))
 
     def clear(self) -> None:
         """Remove every curve."""
         self.plot_item.clear()
-        self.legend.clear()
+        self._legend_entries.clear()
         self.curves.clear()
+        self._update_empty()
 
     def add_curve(
         self,
@@ -84,11 +118,15 @@ class SpectraPlot(QWidget):
         y = np.asarray(values, dtype=float)
         item = self.curves.get(name)
         if item is None:
-            item = self.plot_item.plot(x, y, pen=pen, name=name)
+            item = self.plot_item.plot(x, y, pen=pen)
             self.curves[name] = item
         else:
             item.setData(x, y)
             item.setPen(pen)
+        entry = (pen.color().name(), dashed)
+        if self._legend_entries.get(name) != entry:
+            self._legend_entries[name] = entry
+            self._update_empty()
         return item
 
     def remove_curve(self, name: str) -> None:
@@ -96,7 +134,8 @@ class SpectraPlot(QWidget):
         item = self.curves.pop(name, None)
         if item is not None:
             self.plot_item.removeItem(item)
-            self.legend.removeItem(item)
+            self._legend_entries.pop(name, None)
+            self._update_empty()
 
     def set_title(self, text: str) -> None:
         """Change the title above the plot."""

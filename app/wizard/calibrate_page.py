@@ -55,6 +55,7 @@ class CalibratePage(StepPage):
             "located, and the camera sensitivities estimated. Table 1 compares the "
             "captured responses with those the sensitivities predict (Eq. 1).",
             start_text="Calibrate",
+            retake_text="Recalibrate",
         )
         m = measurement
         self.corners_combo = QComboBox()

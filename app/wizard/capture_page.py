@@ -24,6 +24,12 @@ from tunespec.app.workers import DeviceJob
 
 __all__ = ["CapturePage"]
 
+#: What "Retake" takes again, by frame kind.
+_RETAKE = {
+    "dark": "dark frames",
+    "white": "white frames",
+    "target": "chart frames",
+}
 _NOUN = {
     "dark": "dark frame(s)",
     "white": "white-background frames",
@@ -52,7 +58,13 @@ class CapturePage(StepPage):
         description: str,
         parent: QWidget | None = None,
     ) -> None:
-        super().__init__(measurement, title, description, start_text="Take frames")
+        super().__init__(
+            measurement,
+            title,
+            description,
+            start_text="Take frames",
+            retake_text=f"Retake {_RETAKE[kind]}",
+        )
         self.kind = kind
         self.key = kind
         self.options_widget: QWidget | None = None

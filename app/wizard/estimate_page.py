@@ -46,6 +46,7 @@ class EstimatePage(StepPage):
             "reflectance is estimated from its responses under all LEDs (Wiener, "
             "Eq. 5-6). Give reference reflectances to see Table 2.",
             start_text="Estimate",
+            retake_text="Estimate again",
         )
         m = measurement
         self.reference_edit = QLineEdit(str(m.reference_path or ""))

@@ -34,6 +34,7 @@ class ExportPage(StepPage):
             "CGATS .ti3), the responses, Tables 1 and 2 and an HTML/PDF report into "
             "the measurement's <i>export</i> folder.",
             start_text="Export",
+            retake_text="Export again",
         )
         self.files_list = QListWidget()
         self.open_button = QPushButton("Open the folder")

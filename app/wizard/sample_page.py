@@ -30,6 +30,7 @@ class SamplePage(StepPage):
             "dark frame, white background and the <b>sample</b> under every LED; "
             "you are asked when to put the white board and the sample in place.",
             start_text="Capture sample",
+            retake_text="Retake sample frames",
         )
         self.body.addStretch(1)
 

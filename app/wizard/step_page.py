@@ -55,6 +55,9 @@ class StepPage(QWidget):
         What the operator should do before starting, in plain words.
     start_text
         Label of the start button.
+    retake_text
+        Its label once the step has run, saying what is taken again ("Retake dark
+        frames"); default "Retake".
     """
 
     #: The step changed state: one of :class:`StepState`.
@@ -80,6 +83,7 @@ class StepPage(QWidget):
         description: str,
         *,
         start_text: str = "Start",
+        retake_text: str = "Retake",
         parent: QWidget | None = None,
     ) -> None:
         super().__init__(parent)
@@ -118,14 +122,22 @@ class StepPage(QWidget):
         progress = QHBoxLayout()
         progress.addWidget(self.progress_bar, 1)
         progress.addWidget(self.remaining_label)
+        # the buttons are the last row, so they sit at the same place on every page
+        # whatever the length of the description or the result message above them;
+        # the start button is wide enough for both its labels, so "Abort" does not
+        # move when "Take frames" turns into "Retake dark frames"
         layout = QVBoxLayout(self)
         layout.addWidget(self.title_label)
         layout.addWidget(self.description_label)
         layout.addLayout(self.body, 1)
+        layout.addWidget(self.result_label)
         layout.addLayout(progress)
         layout.addLayout(buttons)
-        layout.addWidget(self.result_label)
         self._start_text = start_text
+        self._retake_text = retake_text
+        metrics = self.start_button.fontMetrics()
+        widest = max(metrics.horizontalAdvance(t) for t in (start_text, retake_text))
+        self.start_button.setMinimumWidth(widest + 32)
         self.eta_timer = QTimer(self)
         self.eta_timer.setInterval(self.ETA_PERIOD_MS)
         self.eta_timer.timeout.connect(self._on_eta_timer_timeout)
@@ -238,7 +250,7 @@ class StepPage(QWidget):
         self.start_button.setEnabled(not running)
         self.abort_button.setEnabled(running)
         done = self.state in (StepState.DONE, StepState.FAILED, StepState.ABORTED)
-        self.start_button.setText("Retake" if done else self._start_text)
+        self.start_button.setText(self._retake_text if done else self._start_text)
 
     # -- slots ---------------------------------------------------------------------------
     @Slot()

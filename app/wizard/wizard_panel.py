@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from PySide6.QtCore import Qt, Signal, Slot
-from PySide6.QtGui import QBrush, QColor
+from PySide6.QtGui import QAction, QBrush, QColor, QKeySequence
 from PySide6.QtWidgets import (
     QFileDialog,
     QFrame,
@@ -132,6 +132,16 @@ class WizardPanel(QWidget):
         self.prompt_frame.hide()
         self.back_button = QPushButton("◀ Back")
         self.next_button = QPushButton("Next ▶")
+        # keyboard: Back/Next as a browser's, start (Take frames, Calibrate...) and
+        # Abort; the main window also adds Abort to itself, so it works on every tab
+        self.back_action = self._action("Back", ("Alt+Left", "Ctrl+PgUp"))
+        self.next_action = self._action("Next", ("Alt+Right", "Ctrl+PgDown"))
+        self.start_action = self._action(
+            "Start / take frames", ("Ctrl+Return", "Ctrl+Enter")
+        )
+        self.abort_action = self._action("Abort", ("Escape",))
+        self.back_button.setToolTip("Previous step (Alt+←)")
+        self.next_button.setToolTip("Next step (Alt+→)")
         top = QHBoxLayout()
         top.addWidget(QLabel("Measurement:"))
         top.addWidget(self.folder_label, 1)
@@ -160,6 +170,15 @@ class WizardPanel(QWidget):
         self.step_list.currentRowChanged.connect(self._on_step_list_row_changed)
         self.back_button.clicked.connect(self._on_back_button_clicked)
         self.next_button.clicked.connect(self._on_next_button_clicked)
+        self.back_action.triggered.connect(self._on_back_action_triggered)
+        self.next_action.triggered.connect(self._on_next_action_triggered)
+        self.start_action.triggered.connect(self._on_start_action_triggered)
+        self.abort_action.triggered.connect(self.abort)
+        for page in self.pages:
+            page.start_button.setToolTip(
+                f"{page.start_button.toolTip() or 'Start this step'} (Ctrl+Enter)"
+            )
+            page.abort_button.setToolTip(f"{page.abort_button.toolTip()} (Esc)")
         self.new_button.clicked.connect(self._on_new_button_clicked)
         self.open_button.clicked.connect(self._on_open_button_clicked)
         m.folder_changed.connect(self._on_measurement_folder_changed)
@@ -168,6 +187,13 @@ class WizardPanel(QWidget):
         for i in range(len(self.pages)):
             self._show_state(i)
         self.go_to(0)
+
+    def _action(self, text: str, keys: tuple[str, ...]) -> QAction:
+        action = QAction(text, self)
+        action.setShortcuts([QKeySequence(k) for k in keys])
+        action.setShortcutContext(Qt.ShortcutContext.WindowShortcut)
+        self.addAction(action)
+        return action
 
     # -- navigation -----------------------------------------------------------------
     @property
@@ -331,6 +357,22 @@ class WizardPanel(QWidget):
     @Slot()
     def _on_next_button_clicked(self) -> None:
         self.go_to(self.current_index + 1)
+
+    @Slot()
+    def _on_back_action_triggered(self) -> None:
+        if self.back_button.isEnabled():
+            self.back_button.click()
+
+    @Slot()
+    def _on_next_action_triggered(self) -> None:
+        if self.next_button.isEnabled():
+            self.next_button.click()
+
+    @Slot()
+    def _on_start_action_triggered(self) -> None:
+        button = self.current_page.start_button
+        if button.isEnabled() and button.isVisible():
+            button.click()
 
     @Slot()
     def _on_new_button_clicked(self) -> None:

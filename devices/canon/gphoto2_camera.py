@@ -28,11 +28,11 @@ from __future__ import annotations
 import contextlib
 import math
 import os
-import tempfile
 from pathlib import Path
 from types import ModuleType
 from typing import Any
 
+from tunespec.core.session import create_temp_file
 from tunespec.devices.protocols import (
     DeviceBusyError,
     DeviceCommandError,
@@ -421,14 +421,11 @@ class Gphoto2Camera:
             )
         target = Path(f"{stem}{suffix}")
         target.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(
-            dir=target.parent, prefix=f".{target.name}.", suffix=".part"
-        )
-        os.close(fd)
+        # the umask's permissions, as the session's other files (not mkstemp's 0600)
+        tmp = create_temp_file(target.parent, f".{target.name}.", ".part")
         try:
             camera_file = self._camera.file_get(folder, name, gp.GP_FILE_TYPE_NORMAL)
-            camera_file.save(tmp)
-            os.chmod(tmp, 0o644)
+            camera_file.save(str(tmp))
             os.replace(tmp, target)
         except gp.GPhoto2Error as exc:
             raise map_gphoto2_error(exc, f"downloading {folder}/{name}") from exc

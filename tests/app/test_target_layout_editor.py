@@ -116,10 +116,84 @@ def test_core_corner_finder_finds_the_dark_rectangle(editor, qtbot):
 def test_automatic_corner_finder_runs_in_a_worker(editor, qtbot):
     found = np.array([[40.0, 60.0], [280.0, 60.0], [280.0, 180.0], [40.0, 180.0]])
 
-    def finder(frame, layout, *, progress, should_stop):
+    def finder(frame, layout, *, session_root, progress, should_stop):
         return found
 
     editor.set_corner_finder(finder)
     assert editor.find_corners() is not None
     qtbot.waitUntil(lambda: editor.find_button.isEnabled(), timeout=5000)
     np.testing.assert_allclose(editor.target_layout.corners_px, found)
+
+
+def _drag_corner(editor, index, delta):
+    vb = editor.frame_plot.view_box
+    view = editor.frame_plot.graphics
+    corners = np.asarray(editor.target_layout.corners_px)
+    start = view.mapFromScene(vb.mapViewToScene(pg.Point(*corners[index])))
+    end = view.mapFromScene(vb.mapViewToScene(pg.Point(*(corners[index] + delta))))
+    mouse_drag(view.viewport(), start, end)
+
+
+def test_undo_restores_a_dragged_corner(editor, qtbot, monkeypatch):
+    monkeypatch.setitem(pg.CONFIG_OPTIONS, "mouseRateLimit", -1)
+    before = np.asarray(editor.target_layout.corners_px)
+    with qtbot.waitSignal(editor.layout_changed, timeout=2000):
+        _drag_corner(editor, 2, np.array([-30.0, 20.0]))
+    moved = np.asarray(editor.target_layout.corners_px)
+    assert np.abs(moved[2] - before[2]).max() > 10
+    # one drag (many mouse moves) is one step of the history
+    assert editor.undo_stack.count() == 1
+    assert editor.undo_action.text() == "Undo Move corner BR"
+    with qtbot.waitSignal(editor.layout_changed):
+        editor.undo_action.trigger()
+    np.testing.assert_array_equal(editor.target_layout.corners_px, before)
+    np.testing.assert_allclose(editor.handle_positions(), before)
+    editor.redo_action.trigger()
+    np.testing.assert_array_equal(editor.target_layout.corners_px, moved)
+    np.testing.assert_allclose(editor.handle_positions(), moved)
+
+
+def test_undo_redo_of_margins_grid_and_found_corners(editor, qtbot):
+    original = editor.target_layout
+    editor.margin_spins[0].setValue(5.0)
+    editor.margin_spins[0].setValue(6.0)  # the same spin box: one step
+    editor.rows_spin.setValue(3)
+    assert editor.undo_stack.count() == 2
+    editor.set_corners([[10, 20], [300, 25], [290, 220], [15, 210]], undo_text="x")
+    editor.undo_stack.undo()
+    np.testing.assert_array_equal(editor.target_layout.corners_px, original.corners_px)
+    editor.undo_stack.undo()
+    assert editor.target_layout.rows == original.rows == editor.rows_spin.value()
+    editor.undo_stack.undo()
+    assert editor.target_layout == original
+    assert editor.margin_spins[0].value() == original.margin_mm[0]
+    editor.undo_stack.redo()
+    assert editor.target_layout.margin_mm[0] == 6.0
+
+
+def test_undo_and_redo_keys(editor, qtbot):
+    from PySide6.QtCore import Qt
+
+    editor.activateWindow()
+    editor.rows_spin.setFocus()
+    original = editor.target_layout
+    editor.cols_spin.setValue(5)
+    editor.frame_plot.graphics.setFocus()
+    qtbot.keyClick(
+        editor.frame_plot.graphics, Qt.Key.Key_Z, Qt.KeyboardModifier.ControlModifier
+    )
+    assert editor.target_layout == original
+    qtbot.keyClick(
+        editor.frame_plot.graphics,
+        Qt.Key.Key_Z,
+        Qt.KeyboardModifier.ControlModifier | Qt.KeyboardModifier.ShiftModifier,
+    )
+    assert editor.target_layout.cols == 5
+
+
+def test_a_layout_from_outside_starts_a_new_history(editor):
+    editor.rows_spin.setValue(3)
+    assert editor.undo_stack.canUndo()
+    other = TargetLayout.load(resource_path("layouts", "colorchecker_sg.json"))
+    editor.set_target_layout(other)
+    assert not editor.undo_stack.canUndo()

@@ -6,7 +6,6 @@ import subprocess
 import sys
 import warnings
 
-import colour
 import numpy as np
 import pytest
 
@@ -30,6 +29,10 @@ from tunespec.core.colorimetry import (
     xyz_d50,
     xyz_to_lab_d50,
 )
+
+# imported as the core imports it: colour-science changes numpy's print options
+with np.printoptions():
+    import colour
 from tunespec.core.datasets import load_colorchecker_sg, load_training_reflectances_190
 from tunespec.core.errors import InputError
 from tunespec.core.spectra import Grid, Spectra

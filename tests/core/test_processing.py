@@ -19,6 +19,7 @@ from tunespec.core.layout import TargetLayout, apply_homography, homography_from
 from tunespec.core.processing import (
     ProcessedSession,
     RoiSet,
+    find_session_corners,
     flat_window,
     process_session,
     write_processed,
@@ -201,6 +202,30 @@ def test_auto_corners_match_truth_and_give_the_same_responses(tmp_path) -> None:
     np.testing.assert_allclose(
         out.responses.rgb, _expected(patch_rgb, GAINS), atol=ATOL_QUANTISED
     )
+
+
+def test_session_corner_finder_is_the_one_processing_uses(tmp_path) -> None:
+    """The layout editor's finder: the same frames, the same detector, the same
+    corners as processing with ``corners="auto"``."""
+    session, _ = _make_session(tmp_path / "s")
+    found, target = find_session_corners(session, loader=_npy_loader)
+    out = process_session(session, loader=_npy_loader)
+    np.testing.assert_array_equal(found.corners_px, out.layout.corners_px)
+    assert found.residual_px == out.corner_residual_px
+    assert (found.channel, found.white_id, found.target_id) == (
+        "WHITE",
+        "white_WHITE",
+        "target_WHITE",
+    )
+    assert target.shape == (SHAPE[0] // 2, SHAPE[1] // 2)
+
+
+def test_session_corner_finder_needs_a_white_and_a_target_frame(tmp_path) -> None:
+    session, _ = _make_session(tmp_path / "s", skip=("target_L1", "target_WHITE"))
+    ids = [f.id for f in session.frames]
+    assert not any(i.startswith("target") for i in ids), ids
+    with pytest.raises(InputError, match="white-background and a target frame"):
+        find_session_corners(session, loader=_npy_loader)
 
 
 def test_roi_pixel_count_follows_roi_fraction(tmp_path) -> None:

@@ -448,9 +448,7 @@ def test_all_patches_saturated_is_singular(data) -> None:
 def test_smooth_without_database_still_fits_the_data(data) -> None:
     # An empty database switches the subspace penalty off: smoothness + NNLS only.
     responses, leds, sg = _small_problem(data)
-    est = estimate_camera_sensitivity(
-        responses, leds, sg, method="smooth", database={}
-    )
+    est = estimate_camera_sensitivity(responses, leds, sg, method="smooth", database={})
     assert est.params["prior_weight"] == 0.0
     assert np.all(est.sensitivity.values >= 0.0)
     predicted = predict_responses(est.sensitivity, leds, sg)

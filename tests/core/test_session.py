@@ -17,6 +17,7 @@ from tunespec.core.session import (
     FrameSpec,
     Session,
     atomic_write_text,
+    create_temp_file,
     find_darks,
     frames_by_channel,
     plan_frames,
@@ -219,11 +220,36 @@ def test_atomic_write_text_replaces_whole_file(tmp_path) -> None:
     assert p.read_text() == "two" and [x.name for x in tmp_path.iterdir()] == ["f.txt"]
 
 
-def test_clean_temp_removes_leftovers(tmp_path) -> None:
+def test_clean_temp_removes_leftovers_and_the_empty_folder(tmp_path) -> None:
     s = Session.create(tmp_path / "s", settings=_settings())
     s.temp_stem("x").with_suffix(".dng").write_bytes(b"half")
     s.clean_temp()
-    assert not list((tmp_path / "s" / "tmp").iterdir())
+    assert not (tmp_path / "s" / "tmp").exists()
+    s.clean_temp()  # nothing to clean: fine
+    assert s.temp_stem("y").parent.is_dir()  # made again when needed
+
+
+@pytest.fixture
+def umask_027():
+    """A stricter umask than the usual 022, restored afterwards."""
+    old = os.umask(0o027)
+    yield 0o027
+    os.umask(old)
+
+
+def test_atomic_writes_get_the_permissions_of_a_plain_write(tmp_path, umask_027):
+    """mkstemp's 0600 made manifests and summary.json owner-only while every other
+    output followed the umask (issue 13)."""
+    plain = tmp_path / "plain.txt"
+    plain.write_text("x")
+    atomic = tmp_path / "atomic.txt"
+    atomic_write_text(atomic, "one")
+    atomic_write_text(atomic, "two")  # replacing keeps the rule
+    temp = create_temp_file(tmp_path, ".t.")
+    s = Session.create(tmp_path / "s", settings=_settings())
+    want = 0o666 & ~umask_027
+    for p in (plain, atomic, temp, s.manifest_path):
+        assert os.stat(p).st_mode & 0o777 == want, p
 
 
 def _damaged(tmp_path, edit) -> Session:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -106,6 +107,24 @@ def test_fixed_capture_order_spd_and_lights_off(tmp_path, bench) -> None:
     assert frame.exposure_s == pytest.approx(6.0) and frame.iso == 100
 
 
+def test_a_finished_capture_leaves_no_tmp_folder_and_one_file_mode(
+    tmp_path, bench
+) -> None:
+    session = _session(tmp_path, bench, exposure="auto")
+    capture(session, bench.light, bench.camera, bench.stage)
+    root = tmp_path / "s"
+    # session.lock stays: removing a flock()ed file would let two writers race
+    assert sorted(p.name for p in root.iterdir()) == [
+        "frames",
+        "manifest.json",
+        "session.lock",
+    ]
+    umask = os.umask(0)
+    os.umask(umask)
+    modes = {p.name: p.stat().st_mode & 0o777 for p in root.rglob("*") if p.is_file()}
+    assert set(modes.values()) == {0o666 & ~umask}, modes
+
+
 def test_auto_exposure_puts_the_white_board_near_three_quarters(
     tmp_path, bench
 ) -> None:
@@ -122,7 +141,7 @@ def test_auto_exposure_puts_the_white_board_near_three_quarters(
     assert len(session.ok_frames("dark")) == len(
         {t for v in exposures.values() for t in v}
     )
-    assert not list((session.root / "tmp").iterdir())
+    assert not (session.root / "tmp").exists()  # metering shots removed with it
 
 
 def test_auto_exposure_is_metered_at_the_sessions_iso(tmp_path, bench) -> None:

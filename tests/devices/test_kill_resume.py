@@ -44,12 +44,13 @@ def _arm(point: str, nth: int, delay_s: float) -> None:
     if point == "raw_write":
         real_raw = dng._write_atomic
 
-        def raw(path, data):
+        def raw(path, chunks):
             if due():
+                data = b"".join(bytes(c) for c in chunks)
                 part = path.with_name(f".{path.name}.killed.part")
-                part.write_bytes(bytes(data[: len(data) // 2]))
+                part.write_bytes(data[: len(data) // 2])
                 _die()
-            return real_raw(path, data)
+            return real_raw(path, chunks)
 
         dng._write_atomic = raw
     elif point == "spd_write":
@@ -131,7 +132,7 @@ def _kill_and_resume(tmp_path, point: str, nth: int, delay_s: float) -> None:
         assert session.problem(rec) == "", f"{point} #{nth}: {rec.id}"
         if rec.spd_file is not None:
             assert session.read_spd(rec).values.max() > 0
-    assert sorted(p.name for p in (root / "tmp").iterdir()) == []
+    assert not (root / "tmp").exists() or not any((root / "tmp").iterdir())
 
 
 def _moments(n: int, seed: int) -> list[tuple[str, int, float]]:

@@ -16,7 +16,7 @@ from tunespec.core.layout import TargetLayout, apply_homography
 from tunespec.core.raw import full_to_plane_px, load_raw, plane_to_full_px, quad_mask
 from tunespec.core.spectra import Spectra, read_spectra_csv
 from tunespec.devices.clock import VirtualClock
-from tunespec.devices.dng import write_dng
+from tunespec.devices.dng import CANON_5D_MARK_III_COLOR_MATRIX, write_dng
 from tunespec.devices.protocols import DeviceCommandError, TargetStage
 from tunespec.devices.sim.camera import (
     DEFAULT_ELECTRONS_PER_UNIT,
@@ -386,6 +386,43 @@ def test_dng_round_trip_is_exact(tmp_path: Path, pattern: str) -> None:
     )
     assert frame.iso == 800 and frame.exposure_s == pytest.approx(0.008)
     assert [p.name for p in tmp_path.iterdir()] == ["x.dng"]  # no temporary left
+
+
+def test_dng_tags_read_back_with_tifffile(tmp_path: Path) -> None:
+    """The tags rawpy does not show, read by an independent TIFF reader."""
+    from datetime import datetime
+
+    tifffile = pytest.importorskip("tifffile")
+    mosaic = np.arange(24 * 30, dtype=np.uint16).reshape(24, 30)
+    path = write_dng(
+        tmp_path / "x.dng",
+        mosaic,
+        cfa_pattern="GBRG",
+        exposure_s=0.3,
+        iso=1600,
+        make="Canon",
+        model="EOS 5D Mark III",
+        timestamp=datetime(2024, 5, 6, 7, 8, 9),
+        description="simulated",
+    )
+    with tifffile.TiffFile(path) as tif:
+        page = tif.pages[0]
+        np.testing.assert_array_equal(page.asarray(), mosaic)
+        tags = {t.code: t.value for t in page.tags.values()}
+    assert tags[262] == 32803  # PhotometricInterpretation: CFA
+    assert bytes(tags[50706]) == bytes([1, 4, 0, 0])  # DNGVersion
+    assert tags[50708] == "Canon EOS 5D Mark III"  # UniqueCameraModel
+    assert tuple(tags[33421]) == (2, 2) and bytes(tags[33422]) == bytes([1, 2, 0, 1])
+    assert tags[50717] == 15000 and tags[50714] == 2048
+    cm = np.asarray(tags[50721]).reshape(9, 2)
+    np.testing.assert_array_equal(cm[:, 0], CANON_5D_MARK_III_COLOR_MATRIX)
+    assert set(cm[:, 1]) == {10000}
+    assert tuple(tags[50728]) == (1, 1, 1, 1, 1, 1) and tags[50778] == 21
+    assert (tags[270], tags[306]) == ("simulated", "2024:05:06 07:08:09")
+    exif = tags[34665]
+    assert exif["ISOSpeedRatings"] == 1600 and exif["SensitivityType"] == 3
+    assert tuple(exif["ExposureTime"]) == (3, 10)
+    assert exif["DateTimeOriginal"] == "2024:05:06 07:08:09"
 
 
 def test_dng_writer_rejects_bad_input(tmp_path: Path) -> None:

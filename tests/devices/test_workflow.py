@@ -56,6 +56,26 @@ def test_demo_reaches_the_papers_numbers(demo) -> None:
     assert result.chart.corners_source == "auto"
 
 
+def test_demo_outputs_share_one_file_mode_and_leave_no_tmp_folder(demo) -> None:
+    """Manifests and summary.json were 0600 (mkstemp) beside 0644 outputs, and each
+    finished session kept an empty tmp/ folder (issue 13)."""
+    import os
+
+    result, _ = demo
+    umask = os.umask(0)
+    os.umask(umask)
+    everything = list(result.out_dir.rglob("*"))
+    modes = {
+        str(p.relative_to(result.out_dir)): p.stat().st_mode & 0o777
+        for p in everything
+        if p.is_file()
+    }
+    assert "summary.json" in modes and "chart/manifest.json" in modes
+    odd = {k: oct(v) for k, v in modes.items() if v != 0o666 & ~umask}
+    assert not odd
+    assert not [p for p in everything if p.is_dir() and p.name == "tmp"]
+
+
 def test_demo_progress_and_outputs(demo) -> None:
     result, fractions = demo
     assert fractions == sorted(fractions) and fractions[-1] == 1.0
