@@ -336,6 +336,7 @@ class MainWindow(QMainWindow):
             reference,
             label=f"estimated ({result.method})",
             reference_label=label,
+            std=getattr(getattr(result.calibration, "estimate", None), "std", None),
         )
 
     @Slot(object)
@@ -349,7 +350,13 @@ class MainWindow(QMainWindow):
                 n: f"CIEDE2000 {d:.2f}, spectral RMS {r:.4f}"
                 for n, d, r in zip(t.names, t.delta_e00, t.spectral_rms, strict=True)
             }
-        self.reflectance_plot.set_data(result.reflectance, result.reference, per_patch)
+        unc = getattr(result.estimation, "uncertainty", None)
+        self.reflectance_plot.set_data(
+            result.reflectance,
+            result.reference,
+            per_patch,
+            std=None if unc is None else unc.reflectance_std,
+        )
 
     def _show_corners_used(self, step: str, target: str, processed: Any) -> None:
         """Tell the editor's operator that its corners are the ones ``step`` used."""

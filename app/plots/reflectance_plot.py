@@ -42,13 +42,16 @@ class ReflectancePlot(SpectraPlot):
         estimated: Any,
         reference: Any = None,
         per_patch_text: dict[str, str] | None = None,
+        std: Any = None,
     ) -> None:
         """New estimate (``Spectra`` named by patch) and optional reference ``Spectra``.
 
         ``per_patch_text`` maps a patch to a line shown under the plot (e.g. its
-        CIEDE2000 and spectral RMS from Table 2).
+        CIEDE2000 and spectral RMS from Table 2); ``std`` (n_patches, n_wl), the
+        standard uncertainty of the estimate, is drawn as a 95 % band.
         """
         self.estimated, self.reference = estimated, reference
+        self.std = None if std is None else np.asarray(std, dtype=float)
         self.per_patch_text = dict(per_patch_text or {})
         current = self.patch_combo.currentText()
         self.patch_combo.blockSignals(True)
@@ -60,6 +63,7 @@ class ReflectancePlot(SpectraPlot):
     def clear_data(self) -> None:
         """Forget the estimate (another measurement, or a retaken step)."""
         self.estimated = self.reference = None
+        self.std = None
         self.per_patch_text = {}
         self.patch_combo.blockSignals(True)
         self.patch_combo.clear()
@@ -80,6 +84,17 @@ class ReflectancePlot(SpectraPlot):
     def _draw(self, name: str) -> None:
         est = self.estimated
         self.add_curve("estimated", est.wavelength_nm, est[name], colour=(31, 119, 180))
+        if self.std is not None:
+            u = 1.96 * self.std[est.names.index(name)]
+            self.set_band(
+                "95 %",
+                est.wavelength_nm,
+                est[name] - u,
+                est[name] + u,
+                colour=(31, 119, 180),
+            )
+        else:
+            self.remove_band("95 %")
         has_ref = self.reference is not None and name in self.reference.names
         if has_ref:
             ref = self.reference
@@ -90,7 +105,8 @@ class ReflectancePlot(SpectraPlot):
             self.remove_curve("reference")
         top = max(1.0, float(np.max(est[name])) * 1.05)
         self.plot_item.setYRange(0.0, top, padding=0.02)
-        self.set_title(f"Reflectance of {name}")
+        band = " (95 % band)" if self.std is not None else ""
+        self.set_title(f"Reflectance of {name}{band}")
         text = self.per_patch_text.get(name, "")
         if not has_ref:
             text = (text + "; " if text else "") + "no reference for this patch"

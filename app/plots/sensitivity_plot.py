@@ -37,10 +37,28 @@ class SensitivityPlot(SpectraPlot):
         *,
         label: str = "estimated",
         reference_label: str = "reference",
+        std: Any = None,
     ) -> None:
-        """Plot ``sensitivity`` (``Spectra`` R, G, B) and a dashed ``reference``."""
+        """Plot ``sensitivity`` (``Spectra`` R, G, B) and a dashed ``reference``.
+
+        ``std`` (3, n_wl), the standard uncertainty of ``sensitivity``, is drawn as
+        a 95 % band around each channel.
+        """
         self.sensitivity = sensitivity
         self.clear()
+        if std is not None:
+            values = np.asarray(sensitivity.values, dtype=float)
+            peak = float(np.max(values)) or 1.0
+            u = 1.96 * np.asarray(std, dtype=float) / peak
+            for name, row, uk in zip(sensitivity.names, values / peak, u, strict=True):
+                self.set_band(
+                    f"{name} 95 %",
+                    sensitivity.wavelength_nm,
+                    row - uk,
+                    row + uk,
+                    colour=CHANNEL_COLOURS.get(name, (0, 0, 0)),
+                )
+            self.set_title("Camera sensitivities (95 % bands)")
         for spectra, dashed, tag in (
             (sensitivity, False, "estimated"),
             (reference, True, reference_label),

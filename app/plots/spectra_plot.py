@@ -67,6 +67,7 @@ class SpectraPlot(QWidget):
         layout.addWidget(self.legend)
         layout.addWidget(self.message_label)
         self.curves: dict[str, pg.PlotDataItem] = {}
+        self.bands: dict[str, pg.FillBetweenItem] = {}
         self._update_empty()
 
     @property
@@ -95,11 +96,46 @@ class SpectraPlot(QWidget):
         self.legend.setText(" &nbsp;&nbsp; ".join(entries))
 
     def clear(self) -> None:
-        """Remove every curve."""
+        """Remove every curve and band."""
         self.plot_item.clear()
         self._legend_entries.clear()
         self.curves.clear()
+        self.bands.clear()
         self._update_empty()
+
+    def set_band(
+        self,
+        name: str,
+        wavelength_nm: ArrayLike,
+        lower: ArrayLike,
+        upper: ArrayLike,
+        *,
+        colour: Sequence[int] | str = "k",
+        alpha: int = 60,
+    ) -> pg.FillBetweenItem:
+        """Shade between ``lower`` and ``upper`` (an uncertainty interval).
+
+        A band of the same name is updated in place; bands are not in the legend
+        (the title says what they are).
+        """
+        x = np.asarray(wavelength_nm, dtype=float)
+        lo = pg.PlotDataItem(x, np.asarray(lower, dtype=float))
+        hi = pg.PlotDataItem(x, np.asarray(upper, dtype=float))
+        self.remove_band(name)
+        brush = pg.mkColor(colour)
+        brush.setAlpha(alpha)
+        band = pg.FillBetweenItem(lo, hi, brush=brush)
+        band.setZValue(-10)
+        band.curves_ = (lo, hi)  # keep the edges alive with the band
+        self.plot_item.addItem(band)
+        self.bands[name] = band
+        return band
+
+    def remove_band(self, name: str) -> None:
+        """Remove the band called ``name`` (if shown)."""
+        band = self.bands.pop(name, None)
+        if band is not None:
+            self.plot_item.removeItem(band)
 
     def add_curve(
         self,

@@ -98,6 +98,7 @@ class EstimatePage(StepPage):
             m.calibration.sensitivity,
             m.reference(),
             corners=self.corners_combo.currentData(),
+            calibration=getattr(m.calibration.calibration, "estimate", None),
         )
 
     def accept_result(self, result: EstimateResult) -> str:

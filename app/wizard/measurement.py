@@ -716,8 +716,13 @@ def estimate_job(
     corners: str = "auto",
     progress: ProgressFn | None = None,
     should_stop: StopFn | None = None,
+    calibration: Any = None,
 ) -> EstimateResult:
-    """Process the sample session, estimate reflectances (Wiener) and Table 2. Pool."""
+    """Process the sample session, estimate reflectances (Wiener) and Table 2. Pool.
+
+    ``calibration`` (a ``SensitivityEstimate`` with a covariance) adds the
+    reflectances' standard uncertainties (``result.estimation.uncertainty``).
+    """
     from tunespec.devices.workflow import estimate
 
     t0 = time.monotonic()
@@ -734,7 +739,7 @@ def estimate_job(
     if reference is not None:
         names = [n for n in sample.responses.patches if n in reference.names]
         ref = reference.select(names) if names else None
-    est = estimate(sample, sensitivity, reference=None)
+    est = estimate(sample, sensitivity, reference=None, calibration=calibration)
     table2 = None
     if ref is not None:
         from tunespec.devices.workflow import evaluate
@@ -750,7 +755,7 @@ def estimate_job(
         clipped=tuple(est.wiener.clipped),
         warnings=tuple(sample.warnings),
         elapsed_s=time.monotonic() - t0,
-        estimation=type(est)(est.wiener, table2),
+        estimation=type(est)(est.wiener, table2, est.uncertainty),
         sample=sample,
     )
     _write_estimate(out_dir, result, _fingerprint(sample_root))
