@@ -512,6 +512,7 @@ def reflectance_ti3(
     created: datetime | str | None = None,
     keywords: Mapping[str, str] | None = None,
     spectra: bool = True,
+    uncertainty: Any = None,
 ) -> CgatsTable:
     """An Argyll ``.ti3`` of reflectances with XYZ and L*a*b* (D50, CIE 1931 2°).
 
@@ -534,6 +535,11 @@ def reflectance_ti3(
         More header keywords.
     spectra
         Write the ``SPEC_nnn`` fields (percent).
+    uncertainty
+        A :class:`tunespec.core.uncertainty.ReflectanceUncertainty` of
+        ``reflectance``: adds the fields :data:`TI3_UNCERTAINTY_FIELDS`, the standard
+        uncertainties (k = 1) of ``XYZ_X ... LAB_B`` (declared with ``KEYWORD``;
+        ArgyllCMS's tools read past them).
 
     Returns
     -------
@@ -564,6 +570,14 @@ def reflectance_ti3(
                 n for n, o in zip(names, out, strict=True) if o
             )
     kw.update(keywords or {})
+    extra = None
+    if uncertainty is not None:
+        u = np.hstack([uncertainty.xyz_std, uncertainty.lab_std])
+        extra = {f: u[:, j] for j, f in enumerate(TI3_UNCERTAINTY_FIELDS)}
+        kw["TUNESPEC_UNCERTAINTY"] = (
+            "fields *_U: standard uncertainty (k = 1) of XYZ and L*a*b*; "
+            "95 % interval = value +- 1.96 u"
+        )
     return ti3_table(
         names,
         reflectance=reflectance if spectra else None,
@@ -574,7 +588,19 @@ def reflectance_ti3(
         originator=f"TuneSpec {tunespec_version()}",
         created=created,
         keywords=kw,
+        extra_fields=extra,
     )
+
+
+#: Uncertainty fields of :func:`reflectance_ti3` (standard uncertainties, k = 1).
+TI3_UNCERTAINTY_FIELDS = (
+    "XYZ_X_U",
+    "XYZ_Y_U",
+    "XYZ_Z_U",
+    "LAB_L_U",
+    "LAB_A_U",
+    "LAB_B_U",
+)
 
 
 def _reference_ti3(
@@ -622,6 +648,7 @@ def export_measurement(
     manufacturer: str = "",
     model: str = "",
     created: datetime | str | None = None,
+    uncertainty: Any = None,
 ) -> dict[str, Path]:
     """Write every export of a measurement into ``out_dir`` (see the module table).
 
@@ -655,6 +682,9 @@ def export_measurement(
         The camera, for the rawtoaces JSON header.
     created
         Timestamp written into the headers; ``None`` is now (UTC).
+    uncertainty
+        The reflectances' :class:`~tunespec.core.uncertainty.ReflectanceUncertainty`:
+        its fields go into ``reflectances.ti3`` (:data:`TI3_UNCERTAINTY_FIELDS`).
 
     Returns
     -------
@@ -694,6 +724,7 @@ def export_measurement(
                 responses=ti3_rgb,
                 illuminant=ti3_illuminant,
                 created=created,
+                uncertainty=uncertainty,
             ),
             target("reflectances_ti3"),
         )

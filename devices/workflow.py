@@ -506,6 +506,7 @@ def export(
             illuminants=sample.illuminants,
             manufacturer=cam.get("vendor", ""),
             model=cam.get("model", ""),
+            uncertainty=estimation.uncertainty,
         )
     )
     if calibration.estimate.covariance is not None:

@@ -12,6 +12,7 @@ import shutil
 import numpy as np
 import pytest
 
+from tunespec.core.colorimetry import lab_d50
 from tunespec.core.errors import InputError
 from tunespec.core.progress import Cancelled
 from tunespec.core.responses import read_responses_csv
@@ -104,6 +105,19 @@ def test_demo_progress_and_outputs(demo) -> None:
     assert refl.wavelength_nm[0] == ESTIMATION_GRID.start_nm
     summary = json.loads((out / "summary.json").read_text())
     assert summary["table1_rgb_rms_mean"] == pytest.approx(result.table1.mean[3])
+    # the uncertainties beside the values (issue 10)
+    u = read_spectra_csv(out / "reflectances_uncertainty.csv")
+    assert u.names == refl.names and np.all(u.values > 0) and np.all(u.values < 0.5)
+    rows = (out / "colorimetry.csv").read_text().splitlines()
+    assert rows[0] == "patch,X,Y,Z,L,a,b,u_X,u_Y,u_Z,u_L,u_a,u_b"
+    lab = np.array([[float(x) for x in r.split(",")[4:7]] for r in rows[1:]])
+    assert np.allclose(lab, lab_d50(refl), atol=1e-4)
+    ti3 = (out / "reflectances.ti3").read_text()
+    assert "LAB_L_U" in ti3 and "TUNESPEC_UNCERTAINTY" in ti3
+    meta = json.loads((out / "sensitivities.csv.meta.json").read_text())
+    assert len(meta["led_correction"]["leds"]) == 22
+    n_par = 3 * read_spectra_csv(out / "sensitivities.csv").wavelength_nm.size + 44
+    assert np.array(meta["covariance"]["values"]).shape == (n_par, n_par)
     # both sessions complete and checksummed
     for name in ("chart", "sample"):
         assert Session.open(out / name).missing() == []
