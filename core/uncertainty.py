@@ -397,7 +397,10 @@ def reflectance_uncertainty(
     xyz_cov = T.T[None] @ cov @ T[None]
     lab = xyz_to_lab_d50(xyz)
     lab_cov = lab_covariance(xyz, xyz_cov)
-    std = np.sqrt(np.maximum(np.diagonal(cov, axis1=1, axis2=2), 0.0))
+    # A reflectance factor lies in [0, 1] (as the clipped estimate does), so its
+    # standard deviation cannot exceed 0.5 (Popoviciu's inequality); the linear
+    # model can claim more where the LEDs see nothing.
+    std = np.minimum(np.sqrt(np.maximum(np.diagonal(cov, axis1=1, axis2=2), 0.0)), 0.5)
     return ReflectanceUncertainty(
         covariance=cov,
         reflectance_std=std,
