@@ -25,7 +25,8 @@ Estimators: ``bayes`` (default: empirical Bayes, per-LED self-calibration),
 ``bayes-noselfcal`` (same, one common wavelength offset only), ``smooth`` (the previous
 default, fixed database weight), ``pca`` (the paper's Eq. 4) and ``nnls`` (plain
 non-negative least squares with a fixed second-difference penalty, no database, no
-shift: the reference every family must beat or match).
+shift: the reference every family must beat or match); ``truth`` is Wiener with the
+true sensitivities and the true spectra, the floor that no calibration can beat.
 
 Usage::
 
@@ -71,7 +72,7 @@ from tunespec.core.wiener import wiener_reflectance
 
 WORK = DEFAULT_GRID
 EST = Grid(400.0, 700.0, 5.0)
-VARIANTS = ("bayes", "bayes-noselfcal", "smooth", "pca", "nnls")
+VARIANTS = ("bayes", "bayes-noselfcal", "smooth", "pca", "nnls", "truth")
 #: Smoothness weight of the ``nnls`` reference (relative to the data's mean diagonal).
 NNLS_LAMBDA = 1e-3
 Z95 = 1.959964
@@ -121,8 +122,10 @@ def nnls_reference(responses, reported: Spectra, chart: Spectra) -> SensitivityE
 
 
 def calibrate(
-    variant, responses, reported, chart, database, exclude
+    variant, responses, reported, chart, database, exclude, truth=None
 ) -> SensitivityEstimate:
+    if variant == "truth":  # the floor: true sensitivities (and true spectra)
+        return SensitivityEstimate(truth, "truth")
     if variant == "nnls":
         return nnls_reference(responses, reported, chart)
     method = variant.split("-")[0]
@@ -156,16 +159,19 @@ def run_camera(
         reported_fine, shifts, gains = gd.metering_error(scaled, rng)
     else:
         reported_fine, shifts, gains = scaled, np.zeros(len(leds)), np.ones(len(leds))
-    reported = reported_fine.resample(WORK)
+    reported = reported_fine.resample(WORK, average=True)
     truth_work = cam.truth.resample(WORK)
     lab_true = lab_d50(test_est)
     out = []
     for variant in variants:
         t0 = time.perf_counter()
-        est = calibrate(variant, resp, reported, chart_work, db, cam.exclude)
+        est = calibrate(
+            variant, resp, reported, chart_work, db, cam.exclude, truth_work
+        )
         secs = time.perf_counter() - t0
-        t1 = calibration_report(est, resp, reported, chart_work).training
-        illum = est.correct_illuminants(reported).resample(EST)
+        used = scaled.resample(WORK, average=True) if variant == "truth" else reported
+        t1 = calibration_report(est, resp, used, chart_work).training
+        illum = est.correct_illuminants(used).resample(EST, average=True)
         sens = est.sensitivity.resample(EST)
         w = wiener_reflectance(resp_t, illum, sens, prior_est)
         st = reflectance_stats(w.reflectance, test_est)

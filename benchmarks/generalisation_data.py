@@ -15,15 +15,17 @@ Camera families (each camera carries the database cameras the estimator must not
     SD Merrill), measured elsewhere; the whole shipped database may be used.
 ``synthetic:*``
     Cameras outside the database's span, seeded: ``shifted`` (a shipped camera with
-    each channel moved by 10-20 nm either way), ``narrow`` and ``broad`` bands,
+    each channel moved by 10-20 nm either way), ``narrow`` (Gaussian sigma 20-28 nm,
+    about 2/3 of a typical camera's band width; narrower bands leave spectral gaps
+    that no estimate, not even the true sensitivities, bridges) and ``broad`` bands,
     ``overlap`` (strongly overlapping channels), ``ircut`` (a phone-like steep IR-cut
     filter at 620-650 nm and a UV cut), ``lobes`` (secondary lobes: red in the blue,
     blue in the red). Derived cameras exclude their parent from the database.
 
 Light sources: ``cal1-model`` (the shipped 22-LED model, Ohno 2005 shapes) and
-``heldout-leds``, 20 narrowband LEDs of another shape (skewed Gaussians, other peaks
-and widths) and two whites with other phosphors, not shipped and not used anywhere
-else in the project.
+``heldout-leds``, 20 narrowband LEDs of another shape (skewed Gaussians, other peaks,
+17-39 nm FWHM as commercial narrowband LEDs) and two whites with other phosphors,
+not shipped and not used anywhere else in the project.
 
 Test reflectances (not the calibration chart, not the Wiener prior): the 190
 rawtoaces training reflectances, the 99 CIE 2017 colour-fidelity samples (TM-30), the
@@ -153,7 +155,7 @@ def synthetic_cameras(n_per_family: int = 6, seed: int = 2026) -> list[Camera]:
         )
         # narrow and broad bands
         peaks = np.array([600.0, 535.0, 455.0]) + rng.uniform(-12, 12, 3)
-        w = rng.uniform(12, 20, (3, 2))
+        w = rng.uniform(20, 28, (3, 2))
         vals = np.stack(
             [_skewed(peaks[k], *w[k]) * rng.uniform(0.6, 1.0) for k in range(3)]
         )
@@ -217,7 +219,7 @@ def light_sources() -> dict[str, Spectra]:
     peaks = np.linspace(415.0, 695.0, 20) + rng.uniform(-4, 4, 20)
     rows, names = [], []
     for p in peaks:
-        fwhm = 16.0 + 18.0 * (1.0 - abs(p - 560.0) / 140.0) ** 2 + rng.uniform(-3, 3)
+        fwhm = 20.0 + 16.0 * (1.0 - abs(p - 560.0) / 140.0) ** 2 + rng.uniform(-3, 3)
         sig = fwhm / 2.355
         skew = rng.uniform(0.7, 1.4)
         rows.append(_skewed(p, sig * skew, sig / skew))

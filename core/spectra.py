@@ -39,6 +39,7 @@ __all__ = [
     "Grid",
     "Spectra",
     "read_spectra_csv",
+    "resampling_matrix",
     "write_spectra_csv",
 ]
 
@@ -200,11 +201,20 @@ class Spectra:
         idx = [self.names.index(n) for n in names]
         return Spectra(self.wavelength_nm, self.values[idx], tuple(names), self.meta)
 
-    def resample(self, grid: Grid, *, source: str | None = None) -> Spectra:
-        """Linear interpolation onto ``grid``.
+    def resample(
+        self, grid: Grid, *, source: str | None = None, average: bool = False
+    ) -> Spectra:
+        """Onto ``grid`` by linear interpolation (or, ``average``, band averaging).
 
-        Linear interpolation never creates negative values or overshoot, which matters
-        for narrowband LED peaks; the grid must lie inside the data's range.
+        Linear interpolation never creates negative values or overshoot (it matters
+        for narrowband LED peaks); from finer data it picks samples, the usual
+        abridgement of reflectance data (ASTM E308). ``average=True`` is for light
+        source spectra: from data finer than half the grid's step it averages with
+        the grid's hat (linear-interpolation) kernels instead, so that Eq. 1's sum
+        on the coarse grid keeps each spectrum's area and centroid -- a 15 nm wide
+        LED point-sampled every 5 nm gains or loses several per cent of its power
+        depending on where its peak falls, and its apparent position moves.
+        The grid must lie inside the data's range.
 
         Raises
         ------
@@ -223,7 +233,7 @@ class Spectra:
             wl, target, rtol=0.0, atol=_WL_TOL_NM
         ):
             return Spectra(target, self.values, self.names, self.meta)
-        out = np.stack([np.interp(target, wl, v) for v in self.values])
+        out = self.values @ resampling_matrix(wl, target, average=average).T
         return Spectra(target, out, self.names, self.meta)
 
     def with_values(
@@ -238,14 +248,74 @@ class Spectra:
         )
 
 
+def resampling_matrix(
+    wl: NDArray[np.float64], target: NDArray[np.float64], *, average: bool = False
+) -> NDArray[np.float64]:
+    """``W`` (n_target, n_data) with ``values @ W.T`` the resampled spectra.
+
+    Linear interpolation (end values held outside the data); with ``average``, where
+    the data are finer than half the target's local step, the hat function of each
+    target sample (1 at it, 0 at its neighbours) weighted by the data's trapezoid
+    rule and normalised: a local average that preserves area and centroid (see
+    :meth:`Spectra.resample`).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> wl = np.arange(400.0, 421.0)
+    >>> W = resampling_matrix(wl, np.arange(400.0, 421.0, 5.0), average=True)
+    >>> led = np.exp(-0.5 * ((wl - 410.4) / 2.0) ** 2)
+    >>> round(float((W @ led).sum() * 5.0 / led.sum()), 2)  # the area is kept
+    1.0
+    """
+    n_t = target.size
+    W = np.zeros((n_t, wl.size))
+    d_data = float(np.median(np.diff(wl))) if wl.size > 1 else 0.0
+    trap = np.zeros(wl.size)
+    if wl.size > 1:
+        dw = np.diff(wl)
+        trap[:-1] += dw / 2.0
+        trap[1:] += dw / 2.0
+    for j, t in enumerate(target):
+        left = target[j - 1] if j > 0 else None
+        right = target[j + 1] if j < n_t - 1 else None
+        steps = [t - left] if left is not None else []
+        steps += [right - t] if right is not None else []
+        step = min(steps) if steps else 0.0
+        if average and wl.size > 1 and step > 2.0 * d_data:
+            lo = left if left is not None else t - (right - t)
+            hi = right if right is not None else t + (t - left)
+            hat = np.where(wl <= t, (wl - lo) / (t - lo), (hi - wl) / (hi - t)).clip(
+                0.0, 1.0
+            )
+            inside = (wl >= lo) & (wl <= hi) & (wl >= wl[0]) & (wl <= wl[-1])
+            w = np.where(inside, hat * trap, 0.0)
+            if w.sum() > 0:
+                W[j] = w / w.sum()
+                continue
+        k = int(np.clip(np.searchsorted(wl, t), 1, wl.size - 1)) if wl.size > 1 else 0
+        if wl.size == 1:
+            W[j, 0] = 1.0
+            continue
+        x0, x1 = wl[k - 1], wl[k]
+        f = float(np.clip((t - x0) / (x1 - x0), 0.0, 1.0))
+        W[j, k - 1] += 1.0 - f
+        W[j, k] += f
+    return W
+
+
 def read_spectra_csv(
     path: str | PathLike[str],
     grid: Grid | None = None,
     *,
     allow_negative: bool = False,
     max_value: float = MAX_VALUE,
+    average: bool = False,
 ) -> Spectra:
     """Read a spectral CSV and optionally resample it onto ``grid``.
+
+    ``average``: resample light-source spectra by band averaging
+    (:meth:`Spectra.resample`).
 
     Parameters
     ----------
@@ -337,7 +407,9 @@ def read_spectra_csv(
     spectra = Spectra(
         np.array(wl), np.array(data).T, tuple(names), {"source": str(path)}
     )
-    return spectra if grid is None else spectra.resample(grid, source=str(path))
+    if grid is None:
+        return spectra
+    return spectra.resample(grid, source=str(path), average=average)
 
 
 def write_spectra_csv(

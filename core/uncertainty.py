@@ -43,7 +43,7 @@ from tunespec.core.forward_model import lighting_matrix
 from tunespec.core.responses import Responses
 from tunespec.core.sensitivity import SensitivityEstimate
 from tunespec.core.sensitivity_bayes import _corrected
-from tunespec.core.spectra import Spectra
+from tunespec.core.spectra import Spectra, resampling_matrix
 from tunespec.core.wiener import WienerEstimate, _prior_moments
 
 __all__ = [
@@ -172,8 +172,11 @@ def _hold_resample(
     wl_from: NDArray[np.float64],
     values: NDArray[np.float64],
     wl_to: NDArray[np.float64],
+    *,
+    average: bool = False,
 ) -> NDArray[np.float64]:
-    return np.stack([np.interp(wl_to, wl_from, v) for v in values])
+    """Onto ``wl_to`` (end values held), as :meth:`Spectra.resample` does."""
+    return values @ resampling_matrix(wl_from, wl_to, average=average).T
 
 
 def calibration_response_covariance(
@@ -217,7 +220,9 @@ def calibration_response_covariance(
     wl = sens.wavelength_nm
     step = sens.step_nm
     n = wl.size
-    rep = _hold_resample(illuminants.wavelength_nm, illuminants.values, wl)
+    rep = _hold_resample(
+        illuminants.wavelength_nm, illuminants.values, wl, average=True
+    )
     corr = calibration.led_correction
     names = list(illuminants.names)
     n_i = len(names)
@@ -329,7 +334,10 @@ def reflectance_uncertainty(
     p = wiener.params
     corrected = calibration.correct_illuminants(illuminants)
     L = _hold_resample(
-        corrected.wavelength_nm, corrected.select(responses.illuminants).values, wl
+        corrected.wavelength_nm,
+        corrected.select(responses.illuminants).values,
+        wl,
+        average=True,
     )
     S = _hold_resample(
         calibration.sensitivity.wavelength_nm, calibration.sensitivity.values, wl

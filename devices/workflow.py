@@ -402,7 +402,7 @@ def calibrate(
 
     refl = reflectances if reflectances is not None else load_colorchecker_sg(grid)
     refl = refl.resample(grid)
-    illum = chart.illuminants.resample(grid)
+    illum = chart.illuminants.resample(grid, average=True)
     if method is not None:
         options["method"] = method
     est = estimate_camera_sensitivity(
@@ -447,7 +447,7 @@ def estimate(
     )
     est = wiener_reflectance(
         sample.responses,
-        illuminants.resample(grid),
+        illuminants.resample(grid, average=True),
         sensitivity.resample(grid),
         prior.resample(grid),
     )

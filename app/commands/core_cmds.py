@@ -185,7 +185,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             f"--hold-out-every {args.hold_out_every}: N must be at least 2 (0: off)"
         )
     responses = read_responses_csv(args.responses)
-    illuminants = read_spectra_csv(args.illuminants, args.grid)
+    illuminants = read_spectra_csv(args.illuminants, args.grid, average=True)
     reflectances = read_spectra_csv(
         args.reflectances, args.grid, max_value=MAX_REFLECTANCE
     )
@@ -256,7 +256,7 @@ def cmd_estimate(args: argparse.Namespace) -> int:
     from tunespec.core.datasets import load_colorchecker_sg
 
     responses = read_responses_csv(args.responses)
-    reported = read_spectra_csv(args.illuminants, args.grid)
+    reported = read_spectra_csv(args.illuminants, args.grid, average=True)
     sensitivity = read_sensitivities(args.sensitivities, args.grid)
     # imported after the inputs are read (scipy): an error in them is reported at once
     from tunespec.core.sensitivity import correct_illuminants_from_meta
@@ -304,6 +304,7 @@ def _write_uncertainty(
     reported = read_spectra_csv(
         args.illuminants,
         Grid(float(wl[0]), float(wl[-1]), calibration.sensitivity.step_nm),
+        average=True,
     )
     unc = reflectance_uncertainty(est, responses, reported, calibration, prior)
     u_path = args.output.with_name(args.output.stem + "_uncertainty.csv")
@@ -328,7 +329,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from tunespec.core.simulate import NoiseModel, scale_to_exposure, simulate_responses
 
     sensitivity = read_sensitivities(args.sensitivities, args.grid)
-    illuminants = read_spectra_csv(args.illuminants, args.grid)
+    illuminants = read_spectra_csv(args.illuminants, args.grid, average=True)
     reflectances = read_spectra_csv(
         args.reflectances, args.grid, max_value=MAX_REFLECTANCE
     )

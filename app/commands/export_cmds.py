@@ -198,7 +198,7 @@ def cmd_report(args: argparse.Namespace) -> int:
             args.reference_sensitivities, grid
         )
     if args.illuminants:
-        data["illuminants"] = read_spectra_csv(args.illuminants, grid)
+        data["illuminants"] = read_spectra_csv(args.illuminants, grid, average=True)
     if args.responses:
         data["responses"] = read_responses_csv(args.responses)
     if "reflectance" in data and "reflectance_reference" in data:
