@@ -1,0 +1,55 @@
+"""The generalisation benchmark in a reduced form (issue 10): one camera per family,
+the shipped light-source model, per-LED metering error; nothing the estimator was
+tuned on is scored (leave-one-source-out, synthetic families, other reflectances)."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "generalisation.py"
+
+
+@pytest.fixture(scope="module")
+def summary(tmp_path_factory):
+    sys.path.insert(0, str(BENCH.parent))
+    try:
+        spec = importlib.util.spec_from_file_location("generalisation", BENCH)
+        mod = importlib.util.module_from_spec(spec)
+        sys.modules["generalisation"] = mod  # dataclasses look their module up
+        spec.loader.exec_module(mod)
+        out = tmp_path_factory.mktemp("gen") / "gen.json"
+        argv = ["--per-family", "1", "--lights", "cal1-model"]
+        assert (
+            mod.main([*argv, "--variants", "bayes,nnls,truth", "--json", str(out)]) == 0
+        )
+    finally:
+        sys.path.remove(str(BENCH.parent))
+        sys.modules.pop("generalisation", None)
+    return json.loads(out.read_text())
+
+
+@pytest.mark.slow
+def test_every_family_is_accurate_and_never_worse_than_plain_nnls(summary) -> None:
+    fams = summary["summary"]
+    assert len(fams) == 10
+    for fam, per in fams.items():
+        bayes, nnls = per["bayes"], per["nnls"]
+        assert bayes["de00_mean"] <= 0.3, (fam, bayes["de00_mean"])
+        assert bayes["de00_mean"] <= nnls["de00_mean"] + 0.02, fam
+        assert bayes["sens_rms_median"] <= 0.06, fam
+        assert 0.85 <= bayes["coverage_reflectance"] <= 1.0, fam
+
+
+@pytest.mark.slow
+def test_fitted_led_offsets_follow_the_injected_ones(summary) -> None:
+    fit = [x for s in summary["scores"] for x in s["fitted_shift_nm"]]
+    true = [x for s in summary["scores"] for x in s["true_shift_nm"]]
+    import numpy as np
+
+    assert len(fit) == 10 * 22
+    assert np.corrcoef(fit, true)[0, 1] > 0.8
