@@ -56,14 +56,14 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.interpolate import CubicSpline
 from scipy.linalg import eigh, solve_triangular
-from scipy.optimize import minimize_scalar, nnls
+from scipy.optimize import minimize_scalar
 
 from tunespec.core.datasets import load_camera_database
 from tunespec.core.errors import InputError, SingularSystemError
 from tunespec.core.forward_model import render_rgb
 from tunespec.core.progress import ProgressFn, StopFn, check_stop, report
 from tunespec.core.responses import CHANNELS, Responses
-from tunespec.core.sensitivity_bayes import LedCorrection, fit_bayes
+from tunespec.core.sensitivity_bayes import LedCorrection, _nnls_quadratic, fit_bayes
 from tunespec.core.simulate import check_rgb_sensitivity, check_same_grid
 from tunespec.core.spectra import Grid, Spectra
 
@@ -807,27 +807,6 @@ def _subspace_penalty(
     Q = np.eye(n) - P.T @ P
     Q *= n / max(np.trace(Q), 1.0)
     return Q
-
-
-def _nnls_quadratic(
-    H: NDArray[np.float64], b: NDArray[np.float64]
-) -> NDArray[np.float64]:
-    """``argmin_{s >= 0} s' H s - 2 b' s`` for positive definite ``H``.
-
-    This is the augmented non-negative least-squares problem
-    ``min ||[W A; Q^1/2] s - [W c; 0]||`` compressed to its normal matrix
-    ``H = A' W' W A + Q``: with ``H = L L'`` it equals ``min ||L' s - L^-1 b||``, an
-    n_wl x n_wl NNLS problem instead of an (m + n_wl) x n_wl one.
-    """
-    try:
-        L = np.linalg.cholesky(H)
-    except np.linalg.LinAlgError:
-        raise SingularSystemError(
-            "the regularised normal matrix is not positive definite"
-        ) from None
-    rhs = solve_triangular(L, b, lower=True)
-    s, _ = nnls(L.T, rhs, maxiter=50 * H.shape[0])
-    return s
 
 
 def _estimate_sensitivity_smooth(

@@ -58,7 +58,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 from scipy.interpolate import CubicSpline
-from scipy.linalg import cho_factor, cho_solve
+from scipy.linalg import cho_factor, cho_solve, solve_triangular
 from scipy.optimize import nnls
 
 from tunespec.core.errors import InputError, SingularSystemError
@@ -419,14 +419,20 @@ def _negative_fraction(G: NDArray, b: NDArray, t: float, Lam: NDArray) -> float:
 
 
 def _nnls_quadratic(H: NDArray, b: NDArray) -> NDArray:
-    """``argmin_{s >= 0} s'Hs - 2 b's`` through the Cholesky factor of ``H``."""
+    """``argmin_{s >= 0} s'Hs - 2 b's`` for positive definite ``H``.
+
+    The augmented non-negative least-squares problem ``min ||[W A; Q^1/2] s -
+    [W c; 0]||`` compressed to its normal matrix ``H = A' W' W A + Q``: with
+    ``H = L L'`` it equals ``min ||L' s - L^-1 b||``, an n_wl x n_wl NNLS problem
+    instead of an (m + n_wl) x n_wl one.
+    """
     try:
         L = np.linalg.cholesky(H)
     except np.linalg.LinAlgError:
         raise SingularSystemError(
             "the regularised normal matrix is not positive definite"
         ) from None
-    rhs = np.linalg.solve(L, b)
+    rhs = solve_triangular(L, b, lower=True)
     s, _ = nnls(L.T, rhs, maxiter=50 * H.shape[0])
     return s
 
