@@ -60,9 +60,11 @@ __all__ = [
 #: irradiance ratio between white reference and target is known to about 0.3 %.
 FLAT_FIELD_RESIDUAL = 0.003
 #: Correlation lengths (nm) tried for the generic prior component (Matern 3/2).
-GENERIC_LENGTHS_NM = (10.0, 20.0, 40.0, 80.0)
+GENERIC_LENGTHS_NM = (20.0, 40.0, 80.0)
 #: Standard deviations tried for it (reflectance units).
-GENERIC_SIGMAS = np.concatenate([[0.0], np.logspace(-3.0, np.log10(0.3), 15)])
+GENERIC_SIGMAS = np.concatenate([[0.0], np.logspace(-3.0, np.log10(0.3), 11)])
+#: Scales of the prior's own covariance tried per target.
+GENERIC_ALPHAS = (1.0, 1.5, 2.0, 3.0, 5.0)
 _CHUNK = 256
 
 
@@ -96,17 +98,19 @@ def fit_generic_prior(
     rgb: NDArray[np.float64],
     noise: NDArray[np.float64],
     wavelength_nm: NDArray[np.float64],
-) -> tuple[NDArray[np.float64], float]:
-    """How far each measured target reaches beyond the prior: ``(sigma_p, length_nm)``.
+) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+    """How far each measured target reaches beyond the prior.
 
     The prior reflectances (e.g. the SG's 140) span fewer spectra than the world;
     the error of a Wiener estimate outside that span is what the prior cannot
-    predict. For each target the prior covariance is widened to ``K + sigma_p^2 M_l``
-    with ``M_l`` a Matern-3/2 correlation (:func:`matern32`): ``l`` maximises the
-    marginal likelihood of the measured responses of the whole batch,
-    ``c_p - F m ~ N(0, F (K + sigma_p^2 M_l) F' + N_p)``, and ``sigma_p`` that of
-    each target's own responses -- a target unlike the prior widens its own
-    interval, one like it keeps ``sigma_p = 0``. No reference values are used.
+    predict. For each target ``p`` the prior covariance is taken as
+    ``alpha_p^2 K + sigma_p^2 M_l``: the prior's own covariance, scaled for a
+    target more extreme than the prior set (a saturated print against a chart),
+    plus a Matern-3/2 correlation ``M_l`` (:func:`matern32`) for shapes the prior
+    set lacks. ``l`` maximises the marginal likelihood of the measured responses of
+    the whole batch, ``c_p - F m ~ N(0, F (alpha_p^2 K + sigma_p^2 M_l) F' + N_p)``,
+    and ``(alpha_p, sigma_p)`` that of each target's own responses; a target like
+    the prior set keeps ``(1, 0)``. No reference values are used.
 
     Parameters
     ----------
@@ -119,19 +123,22 @@ def fit_generic_prior(
 
     Returns
     -------
-    sigma : (n_p,)
+    alpha, sigma : (n_p,)
     length_nm : float
     """
     y = rgb - F @ mean
     base = F @ K @ F.T
-    best_total, best = np.inf, (np.zeros(rgb.shape[0]), GENERIC_LENGTHS_NM[0])
+    n_p = rgb.shape[0]
+    grid = [(a, sg) for a in GENERIC_ALPHAS for sg in GENERIC_SIGMAS]
+    best_total = np.inf
+    best = (np.ones(n_p), np.zeros(n_p), GENERIC_LENGTHS_NM[0])
     for length in GENERIC_LENGTHS_NM:
         FMF = F @ matern32(wavelength_nm, length) @ F.T
-        nll = np.full((GENERIC_SIGMAS.size, rgb.shape[0]), np.inf)
-        for j, sigma in enumerate(GENERIC_SIGMAS):
-            for lo in range(0, rgb.shape[0], _CHUNK):
-                hi = min(lo + _CHUNK, rgb.shape[0])
-                C = base[None] + sigma**2 * FMF[None] + noise[lo:hi]
+        nll = np.full((len(grid), n_p), np.inf)
+        for j, (alpha, sigma) in enumerate(grid):
+            for lo in range(0, n_p, _CHUNK):
+                hi = min(lo + _CHUNK, n_p)
+                C = alpha**2 * base[None] + sigma**2 * FMF[None] + noise[lo:hi]
                 try:
                     Lc = np.linalg.cholesky(C)
                 except np.linalg.LinAlgError:
@@ -141,9 +148,10 @@ def fit_generic_prior(
                     np.log(np.diagonal(Lc, axis1=1, axis2=2)), axis=1
                 )
         pick = np.argmin(nll, axis=0)
-        total = float(np.sum(nll[pick, np.arange(rgb.shape[0])]))
+        total = float(np.sum(nll[pick, np.arange(n_p)]))
         if total < best_total:
-            best_total, best = total, (GENERIC_SIGMAS[pick], float(length))
+            chosen = np.array(grid)[pick]
+            best_total, best = total, (chosen[:, 0], chosen[:, 1], float(length))
     return best
 
 
@@ -378,7 +386,7 @@ def reflectance_uncertainty(
     if cal is not None:
         noise_all += cal
     mean, _ = _prior_moments(pv, bool(p.get("center_prior", True)))
-    sigma, length = fit_generic_prior(F, K, mean, rgb, noise_all, wl)
+    alpha, sigma, length = fit_generic_prior(F, K, mean, rgb, noise_all, wl)
     IM = matern32(wl, length)
     FK = F @ K
     G = FK @ F.T
@@ -395,7 +403,10 @@ def reflectance_uncertainty(
         IWF = eye - W @ F
         E = (
             IWF
-            @ (K[None] + sigma[lo:hi, None, None] ** 2 * IM[None])
+            @ (
+                alpha[lo:hi, None, None] ** 2 * K[None]
+                + sigma[lo:hi, None, None] ** 2 * IM[None]
+            )
             @ IWF.transpose(0, 2, 1)
         )
         E += W @ noise_all[lo:hi] @ Wt
