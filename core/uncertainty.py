@@ -60,6 +60,10 @@ __all__ = [
 #: irradiance ratio between white reference and target is known to about 0.3 %.
 FLAT_FIELD_RESIDUAL = 0.003
 #: Correlation lengths (nm) tried for the generic prior component (Matern 3/2).
+#: Surface reflectances are smooth: a handful of basis functions describe them
+#: (L. T. Maloney, "Evaluation of linear models of surface spectral reflectance with
+#: small numbers of parameters", JOSA A 3 (1986) 1673-1683), so no shorter scale
+#: is offered: structure finer than the LEDs resolve would only be invented.
 GENERIC_LENGTHS_NM = (20.0, 40.0, 80.0)
 #: Standard deviations tried for it (reflectance units).
 GENERIC_SIGMAS = np.concatenate([[0.0], np.logspace(-3.0, np.log10(0.3), 11)])
