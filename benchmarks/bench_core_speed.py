@@ -6,9 +6,11 @@ Usage::
 
 Times, on one simulated ColorChecker SG capture of the 5D Mark III (380-730 nm, 5 nm):
 
-- ``estimate_camera_sensitivity`` with ``method="pca"`` (Eq. 4), ``"smooth"`` (the
-  default, including its GCV choice of the smoothness weight per channel and the fit
-  of the spectroradiometer's wavelength shift), and ``"smooth"`` without that fit;
+- ``estimate_camera_sensitivity`` with ``method="bayes"`` (the default: priors by the
+  marginal likelihood and the per-LED self-calibration, with its covariance), ``"bayes"``
+  with one common wavelength offset only, ``method="pca"`` (Eq. 4), ``"smooth"`` (the
+  previous default, with the fit of the spectroradiometer's wavelength shift), and
+  ``"smooth"`` without that fit;
 - ``wiener_reflectance`` of the 140 patches (Eq. 5-6).
 
 It prints the median and the best of ``--repeat`` runs in milliseconds. Goal: a
@@ -81,8 +83,13 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{'step':<52}{'median ms':>11}{'best ms':>10}")
     ok = True
     for label, kw in (
+        ("calibration, 'bayes' (default: per-LED self-calibration)", {}),
+        (
+            "calibration, 'bayes' with one common offset",
+            {"method": "bayes", "self_calibrate": False},
+        ),
         ("calibration, method='pca' (Eq. 4)", {"method": "pca"}),
-        ("calibration, 'smooth' (default: fits the SPD shift)", {"method": "smooth"}),
+        ("calibration, 'smooth' (fits the SPD shift)", {"method": "smooth"}),
         (
             "calibration, 'smooth' without the SPD shift fit",
             {"method": "smooth", "fit_spd_shift": False},
