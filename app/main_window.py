@@ -398,7 +398,7 @@ class MainWindow(QMainWindow):
 
 #: Modules the measurement steps need, imported in the background at start-up.
 PIPELINE_MODULES = (
-    "tunespec.devices.workflow",
+    "tunespec.app.pipeline.run",
     "tunespec.devices.sim.camera",
     "tunespec.devices.sim.light",
     "tunespec.devices.dng",

@@ -10,6 +10,8 @@ from pathlib import Path
 import pytest
 
 from tunespec.app.cli import EXIT_DISK_FULL, EXIT_INPUT, main
+from tunespec.app.pipeline.plan import load_config
+from tunespec.app.pipeline.run import run_config
 from tunespec.core.datasets import load_colorchecker_sg, resource_path
 from tunespec.core.errors import DiskFullError, InputError
 from tunespec.core.layout import TargetLayout
@@ -23,7 +25,6 @@ from tunespec.core.responses import read_responses_csv
 from tunespec.core.session import Session
 from tunespec.core.spectra import read_spectra_csv, write_spectra_csv
 from tunespec.devices.registry import layout_reflectances
-from tunespec.devices.workflow import load_config, run_config
 
 SG_LAYOUT = resource_path("layouts", "colorchecker_sg.json")
 SMALL = "384x256"

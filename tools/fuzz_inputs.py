@@ -41,6 +41,7 @@ from typing import Any
 
 import numpy as np
 
+from tunespec.app.pipeline.plan import check_config, load_config
 from tunespec.core.cgats import read_cgats, ti3_table, write_cgats
 from tunespec.core.errors import TuneSpecError
 from tunespec.core.layout import TargetLayout
@@ -54,7 +55,6 @@ from tunespec.core.spectra import (
     write_spectra_csv,
 )
 from tunespec.devices.registry import layout_reflectances
-from tunespec.devices.workflow import check_config, load_config
 
 KINDS = ("spectra", "responses", "cgats", "manifest", "layout", "config", "session")
 OUTCOMES = ("refused", "accepted", "traceback", "hang", "accepted_bad")

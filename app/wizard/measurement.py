@@ -153,7 +153,7 @@ class CalibrationResult:
     elapsed_s
         Wall time of processing and estimation.
     calibration, chart
-        ``workflow.Calibration`` and the processed chart session; ``None`` when the
+        ``pipeline.Calibration`` and the processed chart session; ``None`` when the
         result was restored from disk (the export step recomputes them).
     """
 
@@ -200,7 +200,7 @@ class EstimateResult:
     elapsed_s
         Wall time.
     estimation, sample
-        ``workflow.Estimation`` and the processed sample session; ``None`` when
+        ``pipeline.Estimation`` and the processed sample session; ``None`` when
         restored from disk.
     """
 
@@ -513,10 +513,10 @@ def _bench_showing(context: DeviceContext, target_layout: TargetLayout) -> Any:
     """The bench with ``target_layout`` in front of the camera.
 
     On hardware the operator places the target (the page told them, the stage asks);
-    on the simulated bench ``workflow.bench_for_target`` gives a camera looking at a
+    on the simulated bench ``pipeline.bench_for_target`` gives a camera looking at a
     scene of that target, which then becomes the controller's bench.
     """
-    from tunespec.devices.workflow import bench_for_target
+    from tunespec.app.pipeline.steps import bench_for_target
 
     bench = context.bench
     shown = getattr(bench.stage, "layout", None)
@@ -540,7 +540,7 @@ def capture_job(
 ) -> PhaseResult:
     """Capture one phase (``kind``) of a session, or the whole session (None).
 
-    ``workflow.capture_target`` runs the capture sequence (resuming the session) and
+    ``pipeline.capture_target`` runs the capture sequence (resuming the session) and
     is stopped as soon as every frame of ``kind`` is in: a cancelled capture keeps
     its frames and the next phase resumes from there. A phase that is already
     complete is taken again (its frames are marked bad first). Device thread.
@@ -551,8 +551,8 @@ def capture_job(
         Overrides ``options.exposure`` (e.g. the chart's metered exposures for the
         sample: same board, same LEDs).
     """
+    from tunespec.app.pipeline.steps import capture_target
     from tunespec.core.session import MANIFEST_NAME, Session
-    from tunespec.devices.workflow import capture_target
 
     t0 = time.monotonic()
     bench = _bench_showing(context, target_layout)
@@ -637,9 +637,9 @@ def _process(
     progress: ProgressFn | None,
     should_stop: StopFn | None,
 ) -> Any:
-    """``workflow.process`` with corners ``"auto"`` (found) or ``"editor"`` (given)."""
+    """``pipeline.process`` with corners ``"auto"`` (found) or ``"editor"`` (given)."""
+    from tunespec.app.pipeline.steps import process
     from tunespec.core.session import Session
-    from tunespec.devices.workflow import process
 
     given = corners == "editor"
     return process(
@@ -670,8 +670,8 @@ def calibrate_job(
     corners
         ``"auto"`` (found in the images) or ``"editor"`` (the layout's corners).
     """
+    from tunespec.app.pipeline.steps import calibrate
     from tunespec.devices.registry import layout_reflectances
-    from tunespec.devices.workflow import calibrate
 
     t0 = time.monotonic()
     chart = _process(
@@ -718,7 +718,7 @@ def estimate_job(
     should_stop: StopFn | None = None,
 ) -> EstimateResult:
     """Process the sample session, estimate reflectances (Wiener) and Table 2. Pool."""
-    from tunespec.devices.workflow import estimate
+    from tunespec.app.pipeline.steps import estimate
 
     t0 = time.monotonic()
     sample = _process(
@@ -737,7 +737,7 @@ def estimate_job(
     est = estimate(sample, sensitivity, reference=None)
     table2 = None
     if ref is not None:
-        from tunespec.devices.workflow import evaluate
+        from tunespec.app.pipeline.steps import evaluate
 
         table2 = evaluate(est.reflectance.select(ref.names), ref)
     if progress is not None:
@@ -767,13 +767,13 @@ def export_job(
     progress: ProgressFn | None = None,
     should_stop: StopFn | None = None,
 ) -> ExportResult:
-    """Write every export and the report (``workflow.export``). Pool.
+    """Write every export and the report (``pipeline.export``). Pool.
 
     Results restored from disk lack the processed sessions; they are recomputed
     from the sessions with the corners used then.
     """
+    from tunespec.app.pipeline.steps import calibrate, estimate, export
     from tunespec.devices.registry import layout_reflectances
-    from tunespec.devices.workflow import calibrate, estimate, export
 
     chart, cal = calibration.chart, calibration.calibration
     if chart is None or cal is None:
@@ -859,7 +859,7 @@ def _write_calibration(
 
     out_dir.mkdir(parents=True, exist_ok=True)
     write_spectra_csv(result.sensitivity, out_dir / "sensitivity.csv")
-    # the fitted SPD shift, which the CSV cannot hold (workflow.estimate needs it)
+    # the fitted SPD shift, which the CSV cannot hold (pipeline.estimate needs it)
     write_sensitivity_meta(out_dir / "sensitivity.csv", result.sensitivity)
     doc = {
         "table1": result.table1.as_dict(),
@@ -933,7 +933,7 @@ def _write_estimate(
 
 
 def _read_estimate(folder: Path, sample_root: Path) -> EstimateResult | None:
-    from tunespec.devices.workflow import evaluate
+    from tunespec.app.pipeline.steps import evaluate
 
     try:
         doc = read_json(folder / "estimate.json")

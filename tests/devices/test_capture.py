@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tunespec.app.pipeline.plan import sample_layout
 from tunespec.core.errors import InputError
 from tunespec.core.progress import Cancelled
 from tunespec.core.raw import load_raw
@@ -21,7 +22,6 @@ from tunespec.devices.registry import (
     open_light_source,
     parse_resolution,
 )
-from tunespec.devices.workflow import sample_layout
 
 #: Small frames: these tests check bookkeeping, not accuracy.
 RESOLUTION = (384, 256)

@@ -11,10 +11,10 @@ import threading
 import numpy as np
 import pytest
 
+from tunespec.app.pipeline.plan import sample_layout
 from tunespec.core.session import Session
 from tunespec.devices.capture import capture, new_session
 from tunespec.devices.registry import open_bench
-from tunespec.devices.workflow import sample_layout
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "fork"), reason="needs os.fork")
 
