@@ -115,6 +115,7 @@ def test_illuminants_are_measured_spd_times_exposure(demo) -> None:
     )
 
 
+@pytest.mark.slow
 def test_rerun_resumes_without_capturing(demo, tmp_path) -> None:
     result, _ = demo
     out = tmp_path / "again"
@@ -128,6 +129,7 @@ def test_rerun_resumes_without_capturing(demo, tmp_path) -> None:
     assert again.table1.mean[3] == pytest.approx(result.table1.mean[3])
 
 
+@pytest.mark.slow
 def test_config_run_on_existing_sessions(demo, tmp_path) -> None:
     result, _ = demo
     shutil.copytree(result.out_dir / "chart", tmp_path / "run" / "chart")

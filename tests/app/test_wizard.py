@@ -55,6 +55,7 @@ def test_chart_capture_steps_fill_the_session(window, qtbot, tmp_path):
     assert kinds.count("white") == kinds.count("target") == 22
 
 
+@pytest.mark.slow
 def test_wizard_runs_to_the_end_on_the_simulated_bench(window, qtbot, tmp_path):
     """connect -> dark -> white -> chart -> calibrate -> sample -> estimate -> export.
 
