@@ -205,7 +205,7 @@ def _cli(*argv: str | Path) -> int:
     """Run an export subcommand through its own parser (as ``tunespec`` does)."""
     import argparse
 
-    from tunespec.app.commands import export_cmds
+    from tunespec.app.cli import export_cmds
 
     parser = argparse.ArgumentParser(prog="tunespec")
     export_cmds.register(parser.add_subparsers(dest="command", required=True))

@@ -74,7 +74,7 @@ def test_disk_full_during_capture_is_one_line_with_its_own_exit_code(
 def test_disk_full_writing_an_output_file_is_one_line(
     tmp_path, monkeypatch, capsys
 ) -> None:
-    import tunespec.app.commands.core_cmds as cmds
+    import tunespec.app.cli.core_cmds as cmds
 
     stats = tmp_path / "out" / "stats.json"
 

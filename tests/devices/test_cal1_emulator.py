@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from tests.devices.conftest import CAL1_TIMEOUT_S
-from tunespec.app.commands import device_cmds
+from tunespec.app.cli import device_cmds
 from tunespec.core.datasets import resource_path
 from tunespec.devices.cal1.driver import Cal1LightSource, open_cal1
 from tunespec.devices.cal1.emulator import Cal1Emulator

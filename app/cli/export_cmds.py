@@ -13,7 +13,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from tunespec.app.cli import grid_arg
+from tunespec.app.cli.common import grid_arg
 from tunespec.core.datasets import read_sensitivities
 from tunespec.core.errors import InputError, read_json
 from tunespec.core.limits import MAX_REFLECTANCE

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from tunespec.app.cli import add_grid_option, progress_bar, seed_arg
+from tunespec.app.cli.common import add_grid_option, progress_bar, seed_arg
 from tunespec.core.datasets import read_sensitivities
 from tunespec.core.errors import InputError
 from tunespec.core.export import read_sensitivity_meta, write_sensitivity_meta

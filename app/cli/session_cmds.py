@@ -7,7 +7,7 @@ import sys
 import time
 from pathlib import Path
 
-from tunespec.app.cli import progress_bar, seed_arg
+from tunespec.app.cli.common import progress_bar, seed_arg
 from tunespec.core.errors import InputError
 from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import check_output_file
