@@ -402,13 +402,13 @@ PIPELINE_MODULES = (
     "tunespec.devices.sim.camera",
     "tunespec.devices.sim.light",
     "tunespec.devices.dng",
-    "tunespec.core.raw",
+    "tunespec.core.io.raw",
     "tunespec.core.homography",
     "tunespec.core.sensitivity",
     "tunespec.core.stats",
     "tunespec.core.wiener",
     "tunespec.core.colorimetry",
-    "tunespec.core.export",
+    "tunespec.core.io.export",
 )
 
 

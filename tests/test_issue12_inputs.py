@@ -14,6 +14,7 @@ from tunespec.app.pipeline.plan import load_config
 from tunespec.app.pipeline.run import run_config
 from tunespec.core.datasets import load_colorchecker_sg, resource_path
 from tunespec.core.errors import DiskFullError, InputError
+from tunespec.core.io.session import Session
 from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import (
     MAX_DEPTH,
@@ -22,7 +23,6 @@ from tunespec.core.limits import (
     valid_number,
 )
 from tunespec.core.responses import read_responses_csv
-from tunespec.core.session import Session
 from tunespec.core.spectra import read_spectra_csv, write_spectra_csv
 from tunespec.devices.registry import layout_reflectances
 
@@ -237,7 +237,7 @@ def test_manifest_settings_are_bounded(tmp_path, change, fragment) -> None:
 
 
 def _settings():
-    from tunespec.core.session import CaptureSettings
+    from tunespec.core.io.session import CaptureSettings
 
     return CaptureSettings(
         ("LED450",), exposure_mode="fixed", exposures_s={"LED450": (1.0,)}

@@ -42,12 +42,12 @@ from typing import Any
 import numpy as np
 
 from tunespec.app.pipeline.plan import check_config, load_config
-from tunespec.core.cgats import read_cgats, ti3_table, write_cgats
 from tunespec.core.errors import TuneSpecError
+from tunespec.core.io.cgats import read_cgats, ti3_table, write_cgats
+from tunespec.core.io.session import CaptureSettings, Session, plan_frames
 from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import MAX_VALUE
 from tunespec.core.responses import Responses, read_responses_csv, write_responses_csv
-from tunespec.core.session import CaptureSettings, Session, plan_frames
 from tunespec.core.spectra import (
     DEFAULT_GRID,
     Spectra,

@@ -64,7 +64,7 @@ class _VersionAction(argparse.Action):
         )
 
     def __call__(self, parser: argparse.ArgumentParser, *_args: object) -> None:
-        from tunespec.core.export import tunespec_version
+        from tunespec.core.io.export import tunespec_version
 
         print(f"{parser.prog} {tunespec_version()}")
         parser.exit()

@@ -9,9 +9,9 @@ from pathlib import Path
 
 from tunespec.app.cli.common import progress_bar, seed_arg
 from tunespec.core.errors import InputError
+from tunespec.core.io.session import Session, SessionLock
 from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import check_output_file
-from tunespec.core.session import Session, SessionLock
 
 __all__ = ["register"]
 

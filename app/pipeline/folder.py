@@ -3,11 +3,11 @@
 ::
 
     OUT/
-      chart/          the chart's capture session (``core.session``: manifest + frames)
+      chart/          the chart's capture session (``core.io.session``: manifest + frames)
       sample/         the sample target's session
       truth/          a simulated bench's truth (sensitivities, corners, scene)
       summary.json    the headline numbers and Tables 1-2 (:meth:`write_summary`)
-      *.csv *.json *.ti3 report.html report.pdf   the exports (``core.export``)
+      *.csv *.json *.ti3 report.html report.pdf   the exports (``core.io.export``)
 
 Every path of a measurement is named here once; readers and writers take a
 :class:`MeasurementFolder`, not a path they compose themselves.
@@ -20,8 +20,8 @@ from os import PathLike
 from pathlib import Path
 from typing import Any
 
+from tunespec.core.io.session import MANIFEST_NAME, atomic_write_text
 from tunespec.core.limits import dumps_json, read_json
-from tunespec.core.session import MANIFEST_NAME, atomic_write_text
 
 __all__ = ["MeasurementFolder"]
 

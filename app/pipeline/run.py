@@ -36,6 +36,7 @@ from tunespec.app.pipeline.steps import (
     export,
     process,
 )
+from tunespec.core.io.session import Session
 from tunespec.core.processing import ProcessedSession
 from tunespec.core.progress import (
     ProgressFn,
@@ -44,7 +45,6 @@ from tunespec.core.progress import (
     report,
     sub_progress,
 )
-from tunespec.core.session import Session
 from tunespec.core.spectra import Grid, Spectra
 from tunespec.devices.capture import FrameCallback
 from tunespec.devices.registry import Bench, open_bench

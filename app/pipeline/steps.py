@@ -28,15 +28,15 @@ from tunespec.app.pipeline.plan import ESTIMATION_GRID, chart_layout, sample_lay
 from tunespec.core.colorimetry import ReflectanceStats, reflectance_stats
 from tunespec.core.datasets import load_colorchecker_sg
 from tunespec.core.errors import InputError
-from tunespec.core.export import (
+from tunespec.core.io.export import (
     export_measurement,
     write_colorimetry_csv,
     write_sensitivity_meta,
 )
+from tunespec.core.io.session import Session
 from tunespec.core.layout import TargetLayout
 from tunespec.core.processing import ProcessedSession, process_session, write_processed
 from tunespec.core.progress import ProgressFn, StopFn
-from tunespec.core.session import Session
 from tunespec.core.spectra import DEFAULT_GRID, Grid, Spectra, write_spectra_csv
 from tunespec.devices.capture import FrameCallback, capture, new_session
 from tunespec.devices.registry import Bench, sim_scene
@@ -325,10 +325,10 @@ def export(
     warnings: Sequence[str] = (),
     report: bool = True,
 ) -> dict[str, Path]:
-    """Write every export (``core.export``) and, if asked, the HTML/PDF report.
+    """Write every export (``core.io.export``) and, if asked, the HTML/PDF report.
 
     Files: the chart's ``chart_responses.csv`` / ``chart_illuminants.csv``, the
-    ``core.export`` set (sensitivities, reflectances, the sample's responses and
+    ``core.io.export`` set (sensitivities, reflectances, the sample's responses and
     illuminants, Tables 1-2, ``.ti3``) and ``report.html`` / ``report.pdf``.
     """
     out = Path(out_dir)
@@ -372,7 +372,7 @@ def export(
             out / "colorimetry.csv", names, unc
         )
     if report:
-        from tunespec.core.report import ReportData, write_report
+        from tunespec.app.report.report import ReportData, write_report
 
         data = ReportData(
             title="TuneSpec measurement report",

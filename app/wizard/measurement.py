@@ -4,7 +4,7 @@ A measurement folder holds everything of one operator run::
 
     MEASUREMENT/
       measurement.json   what the wizard needs to resume (layouts, capture options)
-      chart/             capture session of the chart (tunespec.core.session)
+      chart/             capture session of the chart (tunespec.core.io.session)
       sample/            capture session of the sample target
       calibration/       estimated sensitivities and Table 1 (calibrate step)
       estimate/          estimated reflectances and Table 2 (estimate step)
@@ -34,7 +34,7 @@ from tunespec.app.settings import AppSettings
 from tunespec.app.workers import DeviceContext, DeviceController
 from tunespec.core.datasets import resource_path
 from tunespec.core.errors import InputError, read_json
-from tunespec.core.export import read_sensitivity_meta, write_sensitivity_meta
+from tunespec.core.io.export import read_sensitivity_meta, write_sensitivity_meta
 from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import dumps_json
 from tunespec.core.progress import Cancelled, ProgressFn, StopFn, check_stop
@@ -357,7 +357,7 @@ class Measurement(QObject):
         """Write ``measurement.json`` (atomically)."""
         if self.folder is None:
             return
-        from tunespec.core.session import atomic_write_text
+        from tunespec.core.io.session import atomic_write_text
 
         doc = {
             "format": MEASUREMENT_FORMAT,
@@ -413,7 +413,7 @@ class Measurement(QObject):
     # -- state on disk (for resume) -----------------------------------------------
     def session(self, which: str) -> Any:
         """The chart or sample session, or None if not started."""
-        from tunespec.core.session import MANIFEST_NAME, Session
+        from tunespec.core.io.session import MANIFEST_NAME, Session
 
         if self.folder is None:
             return None
@@ -552,7 +552,7 @@ def capture_job(
         sample: same board, same LEDs).
     """
     from tunespec.app.pipeline.steps import capture_target
-    from tunespec.core.session import MANIFEST_NAME, Session
+    from tunespec.core.io.session import MANIFEST_NAME, Session
 
     t0 = time.monotonic()
     bench = _bench_showing(context, target_layout)
@@ -639,7 +639,7 @@ def _process(
 ) -> Any:
     """``pipeline.process`` with corners ``"auto"`` (found) or ``"editor"`` (given)."""
     from tunespec.app.pipeline.steps import process
-    from tunespec.core.session import Session
+    from tunespec.core.io.session import Session
 
     given = corners == "editor"
     return process(
@@ -831,8 +831,8 @@ def export_job(
 
 # -- what the steps leave on disk ----------------------------------------------------------
 def _fingerprint(session_root: Path) -> str | None:
-    """The session's :meth:`~tunespec.core.session.Session.fingerprint` (None: none)."""
-    from tunespec.core.session import Session
+    """The session's :meth:`~tunespec.core.io.session.Session.fingerprint` (None: none)."""
+    from tunespec.core.io.session import Session
 
     try:
         return Session.open(session_root).fingerprint()
@@ -855,7 +855,7 @@ def _is_current(doc: dict[str, object], session_root: Path, what: str) -> bool:
 def _write_calibration(
     out_dir: Path, result: CalibrationResult, fingerprint: str | None = None
 ) -> None:
-    from tunespec.core.session import atomic_write_text
+    from tunespec.core.io.session import atomic_write_text
 
     out_dir.mkdir(parents=True, exist_ok=True)
     write_spectra_csv(result.sensitivity, out_dir / "sensitivity.csv")
@@ -917,7 +917,7 @@ def _read_calibration(folder: Path, chart_root: Path) -> CalibrationResult | Non
 def _write_estimate(
     out_dir: Path, result: EstimateResult, fingerprint: str | None = None
 ) -> None:
-    from tunespec.core.session import atomic_write_text
+    from tunespec.core.io.session import atomic_write_text
 
     out_dir.mkdir(parents=True, exist_ok=True)
     write_spectra_csv(result.reflectance, out_dir / "reflectance.csv")

@@ -15,9 +15,9 @@ import pytest
 from tunespec.app.pipeline.plan import ESTIMATION_GRID, load_config
 from tunespec.app.pipeline.run import run_config, run_demo
 from tunespec.core.errors import InputError
+from tunespec.core.io.session import Session
 from tunespec.core.progress import Cancelled
 from tunespec.core.responses import read_responses_csv
-from tunespec.core.session import Session
 from tunespec.core.spectra import read_spectra_csv
 
 #: Paper, Table 1: mean RGB RMS prediction error of the SG under all LEDs.

@@ -374,7 +374,7 @@ def test_capture_with_the_cal1_emulator_and_the_simulated_camera(
     tmp_path, cal1_emulator: Cal1Emulator, capsys: pytest.CaptureFixture[str]
 ) -> None:
     from tunespec.app.cli import main
-    from tunespec.core.session import Session
+    from tunespec.core.io.session import Session
 
     out = tmp_path / "s"
     rc = main(

@@ -21,7 +21,7 @@ from tests.devices.camera_fixtures import (
     dng_raw_maker,
     make_fake_gphoto2,
 )
-from tunespec.core.raw import load_raw
+from tunespec.core.io.raw import load_raw
 from tunespec.devices.canon.gphoto2_camera import Gphoto2Camera
 from tunespec.devices.protocols import Camera, DeviceError, DeviceIdentity
 from tunespec.devices.sim.camera import SimCamera

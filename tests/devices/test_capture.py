@@ -10,9 +10,9 @@ import pytest
 
 from tunespec.app.pipeline.plan import sample_layout
 from tunespec.core.errors import InputError
+from tunespec.core.io.raw import load_raw
+from tunespec.core.io.session import Session
 from tunespec.core.progress import Cancelled
-from tunespec.core.raw import load_raw
-from tunespec.core.session import Session
 from tunespec.devices.capture import capture, meter_exposure, new_session
 from tunespec.devices.protocols import DeviceTimeoutError
 from tunespec.devices.registry import (
