@@ -405,17 +405,17 @@ class MainWindow(QMainWindow):
 
 #: Modules the measurement steps need, imported in the background at start-up.
 PIPELINE_MODULES = (
-    "tunespec.devices.workflow",
+    "tunespec.app.pipeline.run",
     "tunespec.devices.sim.camera",
     "tunespec.devices.sim.light",
     "tunespec.devices.dng",
-    "tunespec.core.raw",
+    "tunespec.core.io.raw",
     "tunespec.core.homography",
     "tunespec.core.sensitivity",
     "tunespec.core.stats",
     "tunespec.core.wiener",
     "tunespec.core.colorimetry",
-    "tunespec.core.export",
+    "tunespec.core.io.export",
 )
 
 

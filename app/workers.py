@@ -341,7 +341,7 @@ class DeviceContext:
             return
         self._last_frame_s = now
         from tunespec.app.plots.frame_plot import build_preview
-        from tunespec.core.raw import load_raw
+        from tunespec.core.io.raw import load_raw
 
         try:
             preview = build_preview(load_raw(path))
@@ -613,7 +613,7 @@ class DeviceController(QObject):
 
         def snap() -> Any:
             from tunespec.app.plots.frame_plot import build_preview
-            from tunespec.core.raw import load_raw
+            from tunespec.core.io.raw import load_raw
 
             stem = Path(self._preview_dir.name) / "preview"
             path = self._bench.camera.capture(stem)

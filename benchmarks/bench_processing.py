@@ -69,8 +69,8 @@ def _decode_all(paths: list[Path]) -> float:
 
 
 def _process(session_dir: Path) -> float:
+    from tunespec.core.io.session import Session
     from tunespec.core.processing import process_session
-    from tunespec.core.session import Session
 
     t0 = time.perf_counter()
     process_session(Session.open(session_dir))
@@ -87,7 +87,7 @@ def main(argv: list[str] | None = None) -> int:
     work = (
         args.work or Path(tempfile.gettempdir()) / f"tunespec-bench-{args.resolution}"
     )
-    from tunespec.core.session import Session
+    from tunespec.core.io.session import Session
 
     if (
         args.fresh

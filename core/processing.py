@@ -1,6 +1,6 @@
 """From a captured session to patch responses and illuminants (the paper's processing).
 
-For every LED channel ``j`` of a session (:mod:`tunespec.core.session`) and every patch:
+For every LED channel ``j`` of a session (:mod:`tunespec.core.io.session`) and every patch:
 
 1. **Dark subtraction.** The dark frame(s) taken at the same exposure and ISO (light
    off) are averaged and subtracted from the white and the target frame.
@@ -23,7 +23,7 @@ For every LED channel ``j`` of a session (:mod:`tunespec.core.session`) and ever
    out.
 
 All of it runs on the half-resolution R, G, B planes of the raw mosaic
-(:func:`tunespec.core.raw.load_raw`, no demosaicing), and only on the ROI pixels and
+(:func:`tunespec.core.io.raw.load_raw`, no demosaicing), and only on the ROI pixels and
 the flat-field window: a frame is read, its ROI photosites are gathered as float32,
 and the frame is dropped before the next is read, so memory does not grow with the
 number of frames and processing costs little more than decoding the raw files.
@@ -51,22 +51,22 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tunespec.core.errors import InputError
-from tunespec.core.layout import TargetLayout
-from tunespec.core.progress import ProgressFn, StopFn, check_stop, report
-from tunespec.core.raw import (
+from tunespec.core.io.raw import (
     RawFrame,
     full_to_plane_px,
     load_raw,
     plane_to_full_px,
     quad_mask,
 )
-from tunespec.core.responses import Responses, write_responses_csv
-from tunespec.core.session import (
+from tunespec.core.io.session import (
     FrameRecord,
     Session,
     find_darks,
     frames_by_channel,
 )
+from tunespec.core.layout import TargetLayout
+from tunespec.core.progress import ProgressFn, StopFn, check_stop, report
+from tunespec.core.responses import Responses, write_responses_csv
 from tunespec.core.spectra import Spectra, write_spectra_csv
 
 __all__ = [
@@ -154,7 +154,7 @@ class RoiSet:
         """Rasterise quads given in plane pixels (x, y) on planes of ``shape``.
 
         A pixel belongs to an ROI when its centre lies inside the quad
-        (:func:`tunespec.core.raw.quad_mask`).
+        (:func:`tunespec.core.io.raw.quad_mask`).
 
         Raises
         ------
@@ -222,7 +222,7 @@ class RoiSet:
         """The R, G, B plane values of every ROI pixel of a frame.
 
         Reads only the ROI photosites of the mosaic, with the same arithmetic as
-        :meth:`tunespec.core.raw.RawFrame.planes_in` (so the values are identical),
+        :meth:`tunespec.core.io.raw.RawFrame.planes_in` (so the values are identical),
         instead of converting windows or whole planes: on a full-size frame that
         is what keeps processing close to the raw decoder's own speed.
 
@@ -578,7 +578,7 @@ def find_session_corners(
     layout
         The target's geometry (corners not needed); default the session's.
     loader
-        Reads a raw file; default :func:`tunespec.core.raw.load_raw`.
+        Reads a raw file; default :func:`tunespec.core.io.raw.load_raw`.
 
     Returns
     -------
@@ -635,7 +635,7 @@ def process_session(
     Parameters
     ----------
     session
-        A captured session (see :mod:`tunespec.core.session`).
+        A captured session (see :mod:`tunespec.core.io.session`).
     layout
         The target's layout; default the one stored in the session.
     corners
@@ -654,7 +654,7 @@ def process_session(
     verify
         Check every raw file's SHA-256 against the manifest first.
     loader
-        Reads a raw file; default :func:`tunespec.core.raw.load_raw`.
+        Reads a raw file; default :func:`tunespec.core.io.raw.load_raw`.
     progress, should_stop
         Progress (fraction of frames read) and cancellation hooks.
 

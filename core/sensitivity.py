@@ -633,7 +633,7 @@ def calibration_from_files(
 ) -> SensitivityEstimate:
     """A calibration back from ``calibrate``'s CSV and the side file's ``meta``.
 
-    ``meta`` as :func:`tunespec.core.export.read_sensitivity_meta` returns it; the
+    ``meta`` as :func:`tunespec.core.io.export.read_sensitivity_meta` returns it; the
     sensitivities stay on their own grid (the covariance's).
 
     Raises

@@ -13,7 +13,7 @@ Order (each step only for what is still missing in the session):
 Around every LED exposure the light source's spectroradiometer is read just before
 and just after; their mean is stored with the frame (Eq. 1's illuminant is that SPD
 times the exposure time). Every frame goes into the session at once
-(:meth:`tunespec.core.session.Session.commit_frame`), so a crash, a kill or a device
+(:meth:`tunespec.core.io.session.Session.commit_frame`), so a crash, a kill or a device
 error loses nothing already captured; :func:`capture` with ``resume=True`` takes only
 what is missing, bad or damaged, and ``retake=[ids]`` takes chosen frames again. All
 LEDs are switched off when the sequence ends, fails or is cancelled.
@@ -33,9 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from tunespec.core.errors import DiskFullError, InputError
-from tunespec.core.layout import TargetLayout
-from tunespec.core.progress import ProgressFn, StopFn, check_stop, report
-from tunespec.core.session import (
+from tunespec.core.io.session import (
     CaptureSettings,
     FrameRecord,
     FrameSpec,
@@ -43,6 +41,8 @@ from tunespec.core.session import (
     SessionLock,
     with_exposures,
 )
+from tunespec.core.layout import TargetLayout
+from tunespec.core.progress import ProgressFn, StopFn, check_stop, report
 from tunespec.core.spectra import Spectra
 from tunespec.devices.protocols import (
     Camera,
@@ -241,7 +241,7 @@ def _bright_level(path: Path) -> tuple[float, float]:
     :data:`METER_STEP`-th cell in each direction is enough for that and keeps
     metering cheap on a full-size frame.
     """
-    from tunespec.core.raw import load_raw
+    from tunespec.core.io.raw import load_raw
 
     frame = load_raw(path)
     step = 2 * METER_STEP

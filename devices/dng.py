@@ -46,7 +46,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from tunespec.core.session import create_temp_file
+from tunespec.core.io.session import create_temp_file
 
 __all__ = ["CANON_5D_MARK_III_COLOR_MATRIX", "CFA_PATTERNS", "write_dng"]
 

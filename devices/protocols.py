@@ -8,8 +8,9 @@ the operator: what failed, on which device, and what to check.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from os import PathLike
 from pathlib import Path
-from typing import Literal, Protocol, runtime_checkable
+from typing import Any, Literal, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -28,6 +29,8 @@ __all__ = [
     "DeviceTimeoutError",
     "LightSource",
     "LightStatus",
+    "SimulatedCamera",
+    "SimulatedStage",
     "TargetStage",
 ]
 
@@ -166,3 +169,47 @@ class TargetStage(Protocol):
     """
 
     def present(self, what: Literal["white", "target"]) -> None: ...
+
+
+@runtime_checkable
+class SimulatedStage(TargetStage, Protocol):
+    """A simulated scene as the stage: it knows the bench it stands on.
+
+    The simulator's side of a bench (``devices.sim.scene.SimScene``), reached through
+    this protocol instead of casts (ophyd's ``SynGauss`` exposes its truth the same way).
+    """
+
+    def bench_options(self) -> dict[str, object]:
+        """Arguments describing the bench (pose, field of view, light field, board)."""
+        ...
+
+
+@runtime_checkable
+class SimulatedCamera(Camera, Protocol):
+    """A simulated camera: a :class:`Camera` that also knows its truth.
+
+    ``devices.sim.camera.SimCamera`` implements it; the pipeline scores a run
+    against ``truth()`` and moves the same camera to another target with
+    ``looking_at``.
+    """
+
+    @property
+    def resolution(self) -> tuple[int, int]:
+        """``(width, height)`` of the mosaic in pixels."""
+        ...
+
+    def looking_at(self, scene: Any, *, seed: int | None = None) -> SimulatedCamera:
+        """The same camera facing another simulated scene."""
+        ...
+
+    def shading(self, xy_px: Any) -> NDArray[np.float64]:
+        """Relative irradiance (fall-off x vignetting) at mosaic pixels ``(..., 2)``."""
+        ...
+
+    def truth(self) -> dict[str, Any]:
+        """Everything the simulation was built with (sensitivities, corners, ...)."""
+        ...
+
+    def write_truth(self, folder: str | PathLike[str]) -> list[Path]:
+        """Write the truth beside a run (CSV/JSON) and return the files."""
+        ...

@@ -36,7 +36,13 @@ from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import contained_path, shown
 from tunespec.core.spectra import DEFAULT_GRID, Grid, Spectra, read_spectra_csv
 from tunespec.devices.clock import Clock, RealClock, VirtualClock
-from tunespec.devices.protocols import Camera, LightSource, TargetStage
+from tunespec.devices.protocols import (
+    Camera,
+    LightSource,
+    SimulatedCamera,
+    SimulatedStage,
+    TargetStage,
+)
 
 __all__ = [
     "DEFAULT_SIM_RESOLUTION",
@@ -319,6 +325,20 @@ class Bench:
     def simulated(self) -> bool:
         return bool(self.truth)
 
+    @property
+    def sim_camera(self) -> SimulatedCamera:
+        """The camera as a :class:`SimulatedCamera` (``TypeError`` on hardware)."""
+        if not isinstance(self.camera, SimulatedCamera):
+            raise TypeError("not a simulated bench: the camera has no truth")
+        return self.camera
+
+    @property
+    def sim_stage(self) -> SimulatedStage:
+        """The stage as a :class:`SimulatedStage` (``TypeError`` on hardware)."""
+        if not isinstance(self.stage, SimulatedStage):
+            raise TypeError("not a simulated bench: the stage is the operator")
+        return self.stage
+
     def close(self) -> None:
         """Close the camera, then the light (which switches its LEDs off)."""
         try:
@@ -411,8 +431,9 @@ def open_bench(
         except BaseException:
             src.close()
             raise
-        truth = cam.truth()  # type: ignore[attr-defined]
-        return Bench(src, cam, scene, truth)
+        if not isinstance(cam, SimulatedCamera):  # pragma: no cover - sim specs only
+            raise TypeError(f"{cam_spec}: not a simulated camera")
+        return Bench(src, cam, scene, cam.truth())
     src = open_light_source(light, seed=seed)
     try:
         cam = open_camera(cam_spec)

@@ -35,10 +35,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tunespec.core.cgats import read_cgats, ti3_table, write_cgats
 from tunespec.core.colorimetry import delta_e_2000, lab_d50, xyz_d50
 from tunespec.core.datasets import load_colorchecker_sg
-from tunespec.core.export import reflectance_ti3
+from tunespec.core.io.cgats import read_cgats, ti3_table, write_cgats
+from tunespec.core.io.export import reflectance_ti3
 from tunespec.core.spectra import Grid, Spectra
 
 requires_argyll = pytest.mark.skipif(
@@ -177,7 +177,7 @@ def test_colverify_reproduces_our_delta_e(tmp_path: Path) -> None:
 @requires_argyll
 def test_colverify_of_the_exports_reproduces_table2(tmp_path: Path) -> None:
     from tunespec.core.colorimetry import reflectance_stats
-    from tunespec.core.export import export_measurement
+    from tunespec.core.io.export import export_measurement
 
     # Estimate on a shorter grid than the reference, as in the demo (400-700 nm).
     ref = load_colorchecker_sg(Grid(380.0, 730.0, 10.0))
@@ -205,7 +205,7 @@ def _cli(*argv: str | Path) -> int:
     """Run an export subcommand through its own parser (as ``tunespec`` does)."""
     import argparse
 
-    from tunespec.app.commands import export_cmds
+    from tunespec.app.cli import export_cmds
 
     parser = argparse.ArgumentParser(prog="tunespec")
     export_cmds.register(parser.add_subparsers(dest="command", required=True))
@@ -397,9 +397,9 @@ def test_cli_report_table1_undoes_the_fitted_spd_shift(
     # 'report --chart' must predict with the corrected spectra, as 'calibrate' did.
     import json
 
-    from tunespec.core import report as report_module
-    from tunespec.core.export import sensitivity_meta_path
+    from tunespec.app.report import report as report_module
     from tunespec.core.forward_model import render_rgb
+    from tunespec.core.io.export import sensitivity_meta_path
     from tunespec.core.responses import Responses, write_responses_csv
     from tunespec.core.sensitivity import correct_spd_shift
     from tunespec.core.spectra import read_spectra_csv, write_spectra_csv

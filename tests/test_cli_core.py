@@ -14,7 +14,7 @@ from tunespec.core.datasets import (
     load_led_set,
     resource_path,
 )
-from tunespec.core.export import COLORIMETRY_COLUMNS
+from tunespec.core.io.export import COLORIMETRY_COLUMNS
 from tunespec.core.spectra import read_spectra_csv, write_spectra_csv
 
 

@@ -103,10 +103,10 @@ def test_version_prints_the_package_version(capsys) -> None:
 
 
 def test_the_cli_offers_every_sensitivity_method() -> None:
-    from tunespec.app.commands.core_cmds import METHOD_CHOICES
+    from tunespec.app.cli.core_cmds import METHOD_CHOICES
     from tunespec.core.sensitivity import SENSITIVITY_METHODS
 
     assert sorted(METHOD_CHOICES) == sorted(SENSITIVITY_METHODS)
-    from tunespec.devices.workflow import METHOD_CHOICES as WORKFLOW_METHODS
+    from tunespec.app.pipeline.plan import METHOD_CHOICES as WORKFLOW_METHODS
 
     assert sorted(WORKFLOW_METHODS) == sorted(SENSITIVITY_METHODS)

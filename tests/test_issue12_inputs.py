@@ -10,8 +10,11 @@ from pathlib import Path
 import pytest
 
 from tunespec.app.cli import EXIT_DISK_FULL, EXIT_INPUT, main
+from tunespec.app.pipeline.plan import load_config
+from tunespec.app.pipeline.run import run_config
 from tunespec.core.datasets import load_colorchecker_sg, resource_path
 from tunespec.core.errors import DiskFullError, InputError
+from tunespec.core.io.session import Session
 from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import (
     MAX_DEPTH,
@@ -20,10 +23,8 @@ from tunespec.core.limits import (
     valid_number,
 )
 from tunespec.core.responses import read_responses_csv
-from tunespec.core.session import Session
 from tunespec.core.spectra import read_spectra_csv, write_spectra_csv
 from tunespec.devices.registry import layout_reflectances
-from tunespec.devices.workflow import load_config, run_config
 
 SG_LAYOUT = resource_path("layouts", "colorchecker_sg.json")
 SMALL = "384x256"
@@ -73,7 +74,7 @@ def test_disk_full_during_capture_is_one_line_with_its_own_exit_code(
 def test_disk_full_writing_an_output_file_is_one_line(
     tmp_path, monkeypatch, capsys
 ) -> None:
-    import tunespec.app.commands.core_cmds as cmds
+    import tunespec.app.cli.core_cmds as cmds
 
     stats = tmp_path / "out" / "stats.json"
 
@@ -236,7 +237,7 @@ def test_manifest_settings_are_bounded(tmp_path, change, fragment) -> None:
 
 
 def _settings():
-    from tunespec.core.session import CaptureSettings
+    from tunespec.core.io.session import CaptureSettings
 
     return CaptureSettings(
         ("LED450",), exposure_mode="fixed", exposures_s={"LED450": (1.0,)}

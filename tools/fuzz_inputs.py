@@ -41,12 +41,13 @@ from typing import Any
 
 import numpy as np
 
-from tunespec.core.cgats import read_cgats, ti3_table, write_cgats
+from tunespec.app.pipeline.plan import check_config, load_config
 from tunespec.core.errors import TuneSpecError
+from tunespec.core.io.cgats import read_cgats, ti3_table, write_cgats
+from tunespec.core.io.session import CaptureSettings, Session, plan_frames
 from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import MAX_VALUE
 from tunespec.core.responses import Responses, read_responses_csv, write_responses_csv
-from tunespec.core.session import CaptureSettings, Session, plan_frames
 from tunespec.core.spectra import (
     DEFAULT_GRID,
     Spectra,
@@ -54,7 +55,6 @@ from tunespec.core.spectra import (
     write_spectra_csv,
 )
 from tunespec.devices.registry import layout_reflectances
-from tunespec.devices.workflow import check_config, load_config
 
 KINDS = ("spectra", "responses", "cgats", "manifest", "layout", "config", "session")
 OUTCOMES = ("refused", "accepted", "traceback", "hang", "accepted_bad")

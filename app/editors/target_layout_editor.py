@@ -96,7 +96,7 @@ def find_target_corners(
     searched, which finds a target only against an evenly lit background.
     """
     from tunespec.core.errors import InputError
-    from tunespec.core.session import MANIFEST_NAME, Session
+    from tunespec.core.io.session import MANIFEST_NAME, Session
 
     root = Path(session_root) if session_root else None
     if root is not None and (root / MANIFEST_NAME).is_file():
@@ -119,7 +119,7 @@ def find_target_corners(
     if frame is None:
         raise InputError("take the white-background and target frames first")
     from tunespec.core.homography import locate_target
-    from tunespec.core.raw import plane_to_full_px
+    from tunespec.core.io.raw import plane_to_full_px
 
     try:
         corners_plane, _fit = locate_target(frame.planes[1], target_layout)
@@ -701,7 +701,7 @@ class TargetLayoutEditor(QWidget):
         self.find_corners()
 
     def _has_session(self) -> bool:
-        from tunespec.core.session import MANIFEST_NAME
+        from tunespec.core.io.session import MANIFEST_NAME
 
         root = self._session_root
         return root is not None and (root / MANIFEST_NAME).is_file()

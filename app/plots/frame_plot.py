@@ -3,7 +3,7 @@
 :func:`build_preview` is plain numpy and may run on any thread (the device controller
 calls it next to the camera, so the GUI thread only uploads a small image).
 Coordinates in the view are *mosaic* pixels (full sensor resolution, pixel centres at
-integers, ``tunespec.core.raw`` convention), the coordinates a
+integers, ``tunespec.core.io.raw`` convention), the coordinates a
 :class:`~tunespec.core.layout.TargetLayout` keeps its corners in; a plane pixel ``u``
 covers mosaic pixels ``2u`` and ``2u + 1``.
 """

@@ -45,7 +45,7 @@ class CapturePage(StepPage):
     measurement
         The shared measurement.
     kind
-        ``"dark"``, ``"white"`` or ``"target"`` (a frame kind of ``core.session``).
+        ``"dark"``, ``"white"`` or ``"target"`` (a frame kind of ``core.io.session``).
     title, description
         Shown to the operator.
     """

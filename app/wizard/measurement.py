@@ -4,7 +4,7 @@ A measurement folder holds everything of one operator run::
 
     MEASUREMENT/
       measurement.json   what the wizard needs to resume (layouts, capture options)
-      chart/             capture session of the chart (tunespec.core.session)
+      chart/             capture session of the chart (tunespec.core.io.session)
       sample/            capture session of the sample target
       calibration/       estimated sensitivities and Table 1 (calibrate step)
       estimate/          estimated reflectances and Table 2 (estimate step)
@@ -34,7 +34,7 @@ from tunespec.app.settings import AppSettings
 from tunespec.app.workers import DeviceContext, DeviceController
 from tunespec.core.datasets import resource_path
 from tunespec.core.errors import InputError, read_json
-from tunespec.core.export import read_sensitivity_meta, write_sensitivity_meta
+from tunespec.core.io.export import read_sensitivity_meta, write_sensitivity_meta
 from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import dumps_json
 from tunespec.core.progress import Cancelled, ProgressFn, StopFn, check_stop
@@ -153,7 +153,7 @@ class CalibrationResult:
     elapsed_s
         Wall time of processing and estimation.
     calibration, chart
-        ``workflow.Calibration`` and the processed chart session; ``None`` when the
+        ``pipeline.Calibration`` and the processed chart session; ``None`` when the
         result was restored from disk (the export step recomputes them).
     """
 
@@ -200,7 +200,7 @@ class EstimateResult:
     elapsed_s
         Wall time.
     estimation, sample
-        ``workflow.Estimation`` and the processed sample session; ``None`` when
+        ``pipeline.Estimation`` and the processed sample session; ``None`` when
         restored from disk.
     """
 
@@ -357,7 +357,7 @@ class Measurement(QObject):
         """Write ``measurement.json`` (atomically)."""
         if self.folder is None:
             return
-        from tunespec.core.session import atomic_write_text
+        from tunespec.core.io.session import atomic_write_text
 
         doc = {
             "format": MEASUREMENT_FORMAT,
@@ -413,7 +413,7 @@ class Measurement(QObject):
     # -- state on disk (for resume) -----------------------------------------------
     def session(self, which: str) -> Any:
         """The chart or sample session, or None if not started."""
-        from tunespec.core.session import MANIFEST_NAME, Session
+        from tunespec.core.io.session import MANIFEST_NAME, Session
 
         if self.folder is None:
             return None
@@ -513,10 +513,10 @@ def _bench_showing(context: DeviceContext, target_layout: TargetLayout) -> Any:
     """The bench with ``target_layout`` in front of the camera.
 
     On hardware the operator places the target (the page told them, the stage asks);
-    on the simulated bench ``workflow.bench_for_target`` gives a camera looking at a
+    on the simulated bench ``pipeline.bench_for_target`` gives a camera looking at a
     scene of that target, which then becomes the controller's bench.
     """
-    from tunespec.devices.workflow import bench_for_target
+    from tunespec.app.pipeline.steps import bench_for_target
 
     bench = context.bench
     shown = getattr(bench.stage, "layout", None)
@@ -540,7 +540,7 @@ def capture_job(
 ) -> PhaseResult:
     """Capture one phase (``kind``) of a session, or the whole session (None).
 
-    ``workflow.capture_target`` runs the capture sequence (resuming the session) and
+    ``pipeline.capture_target`` runs the capture sequence (resuming the session) and
     is stopped as soon as every frame of ``kind`` is in: a cancelled capture keeps
     its frames and the next phase resumes from there. A phase that is already
     complete is taken again (its frames are marked bad first). Device thread.
@@ -551,8 +551,8 @@ def capture_job(
         Overrides ``options.exposure`` (e.g. the chart's metered exposures for the
         sample: same board, same LEDs).
     """
-    from tunespec.core.session import MANIFEST_NAME, Session
-    from tunespec.devices.workflow import capture_target
+    from tunespec.app.pipeline.steps import capture_target
+    from tunespec.core.io.session import MANIFEST_NAME, Session
 
     t0 = time.monotonic()
     bench = _bench_showing(context, target_layout)
@@ -637,9 +637,9 @@ def _process(
     progress: ProgressFn | None,
     should_stop: StopFn | None,
 ) -> Any:
-    """``workflow.process`` with corners ``"auto"`` (found) or ``"editor"`` (given)."""
-    from tunespec.core.session import Session
-    from tunespec.devices.workflow import process
+    """``pipeline.process`` with corners ``"auto"`` (found) or ``"editor"`` (given)."""
+    from tunespec.app.pipeline.steps import process
+    from tunespec.core.io.session import Session
 
     given = corners == "editor"
     return process(
@@ -670,8 +670,8 @@ def calibrate_job(
     corners
         ``"auto"`` (found in the images) or ``"editor"`` (the layout's corners).
     """
+    from tunespec.app.pipeline.steps import calibrate
     from tunespec.devices.registry import layout_reflectances
-    from tunespec.devices.workflow import calibrate
 
     t0 = time.monotonic()
     chart = _process(
@@ -723,7 +723,7 @@ def estimate_job(
     ``calibration`` (a ``SensitivityEstimate`` with a covariance) adds the
     reflectances' standard uncertainties (``result.estimation.uncertainty``).
     """
-    from tunespec.devices.workflow import estimate
+    from tunespec.app.pipeline.steps import estimate
 
     t0 = time.monotonic()
     sample = _process(
@@ -742,7 +742,7 @@ def estimate_job(
     est = estimate(sample, sensitivity, reference=None, calibration=calibration)
     table2 = None
     if ref is not None:
-        from tunespec.devices.workflow import evaluate
+        from tunespec.app.pipeline.steps import evaluate
 
         table2 = evaluate(est.reflectance.select(ref.names), ref)
     if progress is not None:
@@ -772,13 +772,13 @@ def export_job(
     progress: ProgressFn | None = None,
     should_stop: StopFn | None = None,
 ) -> ExportResult:
-    """Write every export and the report (``workflow.export``). Pool.
+    """Write every export and the report (``pipeline.export``). Pool.
 
     Results restored from disk lack the processed sessions; they are recomputed
     from the sessions with the corners used then.
     """
+    from tunespec.app.pipeline.steps import calibrate, estimate, export
     from tunespec.devices.registry import layout_reflectances
-    from tunespec.devices.workflow import calibrate, estimate, export
 
     chart, cal = calibration.chart, calibration.calibration
     if chart is None or cal is None:
@@ -836,8 +836,8 @@ def export_job(
 
 # -- what the steps leave on disk ----------------------------------------------------------
 def _fingerprint(session_root: Path) -> str | None:
-    """The session's :meth:`~tunespec.core.session.Session.fingerprint` (None: none)."""
-    from tunespec.core.session import Session
+    """The session's :meth:`~tunespec.core.io.session.Session.fingerprint` (None: none)."""
+    from tunespec.core.io.session import Session
 
     try:
         return Session.open(session_root).fingerprint()
@@ -860,11 +860,11 @@ def _is_current(doc: dict[str, object], session_root: Path, what: str) -> bool:
 def _write_calibration(
     out_dir: Path, result: CalibrationResult, fingerprint: str | None = None
 ) -> None:
-    from tunespec.core.session import atomic_write_text
+    from tunespec.core.io.session import atomic_write_text
 
     out_dir.mkdir(parents=True, exist_ok=True)
     write_spectra_csv(result.sensitivity, out_dir / "sensitivity.csv")
-    # the fitted SPD shift, which the CSV cannot hold (workflow.estimate needs it)
+    # the fitted SPD shift, which the CSV cannot hold (pipeline.estimate needs it)
     write_sensitivity_meta(out_dir / "sensitivity.csv", result.sensitivity)
     doc = {
         "table1": result.table1.as_dict(),
@@ -922,7 +922,7 @@ def _read_calibration(folder: Path, chart_root: Path) -> CalibrationResult | Non
 def _write_estimate(
     out_dir: Path, result: EstimateResult, fingerprint: str | None = None
 ) -> None:
-    from tunespec.core.session import atomic_write_text
+    from tunespec.core.io.session import atomic_write_text
 
     out_dir.mkdir(parents=True, exist_ok=True)
     write_spectra_csv(result.reflectance, out_dir / "reflectance.csv")
@@ -938,7 +938,7 @@ def _write_estimate(
 
 
 def _read_estimate(folder: Path, sample_root: Path) -> EstimateResult | None:
-    from tunespec.devices.workflow import evaluate
+    from tunespec.app.pipeline.steps import evaluate
 
     try:
         doc = read_json(folder / "estimate.json")

@@ -2,7 +2,8 @@
 
 - :func:`open_cal1` / :class:`Cal1LightSource` - the driver (a ``LightSource``);
 - :mod:`~tunespec.devices.cal1.commands` - the (assumed) command table, one module;
-- :mod:`~tunespec.devices.cal1.transport` - pyserial and scripted transports;
+- :mod:`~tunespec.devices.cal1.transport` - the pyserial/socket transport (scripted
+  fakes for tests: :mod:`tunespec.devices.testing`);
 - :class:`Cal1Emulator` - the protocol served on a local TCP port.
 
 See ``PROTOCOL.md`` in this folder for what is assumed about the protocol.
@@ -10,12 +11,11 @@ See ``PROTOCOL.md`` in this folder for what is assumed about the protocol.
 
 from tunespec.devices.cal1.driver import Cal1LightSource, open_cal1, parse_cal1_spec
 from tunespec.devices.cal1.emulator import Cal1Emulator
-from tunespec.devices.cal1.transport import FakeTransport, SerialTransport, Transport
+from tunespec.devices.cal1.transport import SerialTransport, Transport
 
 __all__ = [
     "Cal1Emulator",
     "Cal1LightSource",
-    "FakeTransport",
     "SerialTransport",
     "Transport",
     "open_cal1",

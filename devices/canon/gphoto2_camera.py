@@ -32,7 +32,7 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
-from tunespec.core.session import create_temp_file
+from tunespec.core.io.session import create_temp_file
 from tunespec.devices.protocols import (
     DeviceBusyError,
     DeviceCommandError,

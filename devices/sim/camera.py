@@ -66,8 +66,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from tunespec.core.datasets import DEFAULT_CAMERA, load_camera
 from tunespec.core.forward_model import render_rgb
+from tunespec.core.io.raw import full_to_plane_px
 from tunespec.core.limits import dumps_json
-from tunespec.core.raw import full_to_plane_px
 from tunespec.core.spectra import Grid, Spectra, write_spectra_csv
 from tunespec.devices.clock import Clock, RealClock, VirtualClock
 from tunespec.devices.dng import write_dng
@@ -165,7 +165,7 @@ class SimCamera:
     """A simulated Canon EOS 5D Mark III imaging a :class:`SimScene`.
 
     Implements :class:`~tunespec.devices.protocols.Camera`; ``capture`` writes a CFA
-    DNG (RGGB, 16-bit storage, 14-bit levels) that :func:`tunespec.core.raw.load_raw`
+    DNG (RGGB, 16-bit storage, 14-bit levels) that :func:`tunespec.core.io.raw.load_raw`
     reads.
 
     Parameters
@@ -570,7 +570,7 @@ class SimCamera:
         """Sensitivities in full-scale units per (W sr^-1 m^-2 nm^-1 x nm x s).
 
         What a calibration should recover (times the exposure time) when the
-        responses are the full-scale planes of :func:`tunespec.core.raw.load_raw` at
+        responses are the full-scale planes of :func:`tunespec.core.io.raw.load_raw` at
         the image centre (irradiance and vignetting there are 1 up to the fall-off
         centre's offset) and at the current ISO.
         """

@@ -32,6 +32,7 @@ def window(qtbot, tmp_path):
     w.close()
 
 
+@pytest.mark.slow
 def test_find_corners_works_on_the_bench_frames(window, qtbot, tmp_path):
     wizard, editor = window.wizard_panel, window.layout_editor
     assert wizard.new_measurement(tmp_path / "m")

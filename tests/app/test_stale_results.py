@@ -6,7 +6,7 @@ import json
 
 from tests.core.test_session import LAYOUT, _commit, _settings
 from tunespec.app.wizard import measurement as m
-from tunespec.core.session import Session
+from tunespec.core.io.session import Session
 
 
 def test_saved_results_are_dropped_when_their_session_changed(tmp_path, caplog) -> None:

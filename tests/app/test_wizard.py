@@ -55,6 +55,7 @@ def test_chart_capture_steps_fill_the_session(window, qtbot, tmp_path):
     assert kinds.count("white") == kinds.count("target") == 22
 
 
+@pytest.mark.slow
 def test_wizard_runs_to_the_end_on_the_simulated_bench(window, qtbot, tmp_path):
     """connect -> dark -> white -> chart -> calibrate -> sample -> estimate -> export.
 
@@ -62,11 +63,11 @@ def test_wizard_runs_to_the_end_on_the_simulated_bench(window, qtbot, tmp_path):
     computes it from the chart session, Table 2 as ``reflectance_stats`` of the
     exported reflectances and references.
     """
+    from tunespec.app.pipeline.steps import calibrate, process
     from tunespec.core.colorimetry import reflectance_stats
-    from tunespec.core.export import EXPORT_NAMES
+    from tunespec.core.io.export import EXPORT_NAMES
     from tunespec.core.spectra import read_spectra_csv
     from tunespec.devices.registry import layout_reflectances
-    from tunespec.devices.workflow import calibrate, process
 
     folder = tmp_path / "m"
     wizard, m = window.wizard_panel, window.measurement
@@ -98,7 +99,7 @@ def test_wizard_runs_to_the_end_on_the_simulated_bench(window, qtbot, tmp_path):
     assert json.loads((export / "exports.json").read_text())
 
     # Table 1 as shown == Table 1 of the core's pipeline, run again here on the chart
-    # session (the CLI's path: workflow.process + workflow.calibrate)
+    # session (the CLI's path: pipeline.steps.process + calibrate)
     cal = m.calibration
     chart = process(m.session("chart"), layout=cal.layout, corners="layout")
     core1 = calibrate(

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from PySide6.QtCore import QSettings
 
 from tests.app.test_wizard import STEP_TIMEOUT_MS, run_step
@@ -70,6 +71,7 @@ def test_abort_then_reopen_and_resume(qtbot, tmp_path):
     w2.close()
 
 
+@pytest.mark.slow
 def test_a_finished_measurement_reopens_with_its_results(qtbot, tmp_path):
     from tests.app.test_wizard import SIM
 

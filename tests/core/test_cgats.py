@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 
 from tests.tolerances import ATOL_ROUNDTRIP
-from tunespec.core.cgats import (
+from tunespec.core.datasets import load_colorchecker_sg
+from tunespec.core.errors import InputError
+from tunespec.core.io.cgats import (
     CgatsTable,
     _from_percent,
     _percent_text,
@@ -21,8 +23,6 @@ from tunespec.core.cgats import (
     ti3_table,
     write_cgats,
 )
-from tunespec.core.datasets import load_colorchecker_sg
-from tunespec.core.errors import InputError
 from tunespec.core.spectra import Grid, Spectra
 
 CREATED = "2026-01-02T03:04:05+00:00"

@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 from tests.tolerances import ATOL_ROUNDTRIP
-from tunespec.core.cgats import read_cgats
 from tunespec.core.colorimetry import lab_d50, reflectance_stats, xyz_d50
 from tunespec.core.datasets import (
     load_camera,
@@ -20,7 +19,9 @@ from tunespec.core.datasets import (
     resource_path,
 )
 from tunespec.core.errors import InputError
-from tunespec.core.export import (
+from tunespec.core.forward_model import render_rgb
+from tunespec.core.io.cgats import read_cgats
+from tunespec.core.io.export import (
     EXPORT_NAMES,
     RAWTOACES_GRID,
     export_measurement,
@@ -30,7 +31,6 @@ from tunespec.core.export import (
     write_reflectance_stats_csv,
     write_sensitivity_json,
 )
-from tunespec.core.forward_model import render_rgb
 from tunespec.core.responses import Responses, read_responses_csv
 from tunespec.core.spectra import Grid, Spectra, read_spectra_csv
 

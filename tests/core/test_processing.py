@@ -2,7 +2,7 @@
 
 The frames are rendered here from a known scene (patch responses, an uneven light
 field, a fixed-pattern dark signal) as uint16 mosaics, stored as ``.npy`` "raw" files
-and read back through :class:`tunespec.core.raw.RawFrame`, so the expected responses
+and read back through :class:`tunespec.core.io.raw.RawFrame`, so the expected responses
 are known exactly: ``A' = mean(A_B[centre]) A / A_B`` of a patch is its response times
 the light field's mean over the centre window.
 """
@@ -15,6 +15,8 @@ import numpy as np
 import pytest
 
 from tunespec.core.errors import InputError
+from tunespec.core.io.raw import RawFrame
+from tunespec.core.io.session import CaptureSettings, Session
 from tunespec.core.layout import TargetLayout, apply_homography, homography_from_corners
 from tunespec.core.processing import (
     ProcessedSession,
@@ -25,9 +27,7 @@ from tunespec.core.processing import (
     write_processed,
 )
 from tunespec.core.progress import Cancelled
-from tunespec.core.raw import RawFrame
 from tunespec.core.responses import read_responses_csv
-from tunespec.core.session import CaptureSettings, Session
 from tunespec.core.spectra import Spectra, read_spectra_csv
 
 #: Responses of noise-free frames go through uint16 quantisation (1 DN of ~13000).

@@ -1,4 +1,4 @@
-"""core.raw: decoding real raw files and the plane arithmetic."""
+"""core.io.raw: decoding real raw files and the plane arithmetic."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from tunespec.core.errors import InputError
-from tunespec.core.raw import (
+from tunespec.core.io.raw import (
     RawFrame,
     full_to_plane_px,
     load_raw,

@@ -9,8 +9,7 @@ import numpy as np
 import pytest
 
 from tunespec.core.errors import InputError
-from tunespec.core.layout import TargetLayout
-from tunespec.core.session import (
+from tunespec.core.io.session import (
     MANIFEST_NAME,
     SESSION_VERSION,
     CaptureSettings,
@@ -24,6 +23,7 @@ from tunespec.core.session import (
     sha256_file,
     with_exposures,
 )
+from tunespec.core.layout import TargetLayout
 from tunespec.core.spectra import Spectra
 
 LAYOUT = TargetLayout("t", 2, 2, 40.0, 40.0, patch_names=("a", "b", "c", "d"))

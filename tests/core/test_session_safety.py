@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from tunespec.core.errors import InputError
-from tunespec.core.session import (
+from tunespec.core.io.session import (
     LOCK_NAME,
     CaptureSettings,
     FrameSpec,
@@ -94,7 +94,7 @@ def test_commit_refuses_a_frames_folder_that_links_elsewhere(tmp_path) -> None:
 def test_spd_temp_name_keeps_the_process_id(tmp_path, monkeypatch) -> None:
     s = Session.create(tmp_path / "s", settings=SETTINGS)
     seen = []
-    import tunespec.core.session as mod
+    import tunespec.core.io.session as mod
 
     real = mod.write_spectra_csv
 
@@ -115,7 +115,7 @@ def test_a_second_writer_is_refused_naming_the_holder(tmp_path) -> None:
     root.mkdir()
     code = (
         "import sys, time\n"
-        "from tunespec.core.session import SessionLock\n"
+        "from tunespec.core.io.session import SessionLock\n"
         f"lock = SessionLock({str(root)!r}); lock.acquire()\n"
         "print('locked', flush=True); sys.stdin.readline(); lock.release()\n"
     )
@@ -148,7 +148,7 @@ def test_a_stale_lock_of_a_killed_process_is_taken_over(tmp_path) -> None:
     root.mkdir()
     code = (
         "import os, signal\n"
-        "from tunespec.core.session import SessionLock\n"
+        "from tunespec.core.io.session import SessionLock\n"
         f"SessionLock({str(root)!r}).acquire()\n"
         "os.kill(os.getpid(), signal.SIGKILL)\n"
     )
@@ -176,7 +176,7 @@ def test_the_lock_is_reentrant_within_one_process(tmp_path) -> None:
         [
             sys.executable,
             "-c",
-            "from tunespec.core.session import SessionLock\n"
+            "from tunespec.core.io.session import SessionLock\n"
             f"SessionLock({str(root)!r}).acquire()",
         ],
         capture_output=True,

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from tests.devices.conftest import CAL1_TIMEOUT_S
-from tunespec.app.commands import device_cmds
+from tunespec.app.cli import device_cmds
 from tunespec.core.datasets import resource_path
 from tunespec.devices.cal1.driver import Cal1LightSource, open_cal1
 from tunespec.devices.cal1.emulator import Cal1Emulator
@@ -374,7 +374,7 @@ def test_capture_with_the_cal1_emulator_and_the_simulated_camera(
     tmp_path, cal1_emulator: Cal1Emulator, capsys: pytest.CaptureFixture[str]
 ) -> None:
     from tunespec.app.cli import main
-    from tunespec.core.session import Session
+    from tunespec.core.io.session import Session
 
     out = tmp_path / "s"
     rc = main(

@@ -17,14 +17,7 @@ import pytest
 from tunespec.core.errors import InputError
 from tunespec.devices.cal1 import commands as cmds
 from tunespec.devices.cal1.driver import Cal1LightSource, open_cal1, parse_cal1_spec
-from tunespec.devices.cal1.transport import (
-    DROP,
-    REOPEN,
-    REOPEN_FAILS,
-    FakeTransport,
-    SerialTransport,
-    Transport,
-)
+from tunespec.devices.cal1.transport import SerialTransport, Transport
 from tunespec.devices.protocols import (
     DeviceBusyError,
     DeviceCommandError,
@@ -33,6 +26,13 @@ from tunespec.devices.protocols import (
     DeviceProtocolError,
     DeviceTimeoutError,
     LightSource,
+)
+from tunespec.devices.testing import (
+    DROP,
+    REOPEN,
+    REOPEN_FAILS,
+    FakeTransport,
+    expected_protocol,
 )
 
 IDN = (b"*IDN?\n", b"Image Engineering,CAL1,SN042,1.2.3\n")
@@ -181,8 +181,8 @@ def test_a_device_that_is_not_a_cal1_is_refused_and_left_alone() -> None:
 
 
 def test_channels() -> None:
-    with FakeTransport(OPENED) as fake:
-        channels = make_driver(fake).channels()
+    with expected_protocol(make_driver, OPENED) as dev:
+        channels = dev.channels()
     assert [(c.index, c.name, c.peak_nm, c.kind) for c in channels] == [
         (0, "LED450", 450.0, "narrowband"),
         (1, "LED630", 630.0, "narrowband"),
@@ -191,10 +191,9 @@ def test_channels() -> None:
 
 
 def test_set_levels_sends_all_channels_in_one_line() -> None:
-    with FakeTransport(
-        [*OPENED, (b"CHAN:LEVEL:ALL 0.2500,0.0000,1.0000\n", b"OK\n")]
-    ) as fake:
-        make_driver(fake).set_levels(np.array([0.25, 0.0, 1.0]))
+    script = [*OPENED, (b"CHAN:LEVEL:ALL 0.2500,0.0000,1.0000\n", b"OK\n")]
+    with expected_protocol(make_driver, script) as dev:
+        dev.set_levels(np.array([0.25, 0.0, 1.0]))
 
 
 @pytest.mark.parametrize(
@@ -221,8 +220,8 @@ def test_levels_are_read_back() -> None:
 
 
 def test_all_off() -> None:
-    with FakeTransport([IDN, OFF]) as fake:
-        make_driver(fake).all_off()
+    with expected_protocol(make_driver, [IDN, OFF]) as dev:
+        dev.all_off()
 
 
 def test_measure_spd_builds_a_spectrum_with_the_long_timeout() -> None:
@@ -506,3 +505,11 @@ def test_open_cal1_where_nothing_listens() -> None:
 def test_open_cal1_on_a_missing_serial_port() -> None:
     with pytest.raises(DeviceConnectionError, match="connected by USB"):
         open_cal1("cal1:///dev/does-not-exist-tunespec", timeout_s=0.2)
+
+
+def test_expected_protocol_fails_on_an_unused_exchange() -> None:
+    with (
+        pytest.raises(AssertionError, match="script not consumed"),
+        expected_protocol(make_driver, [IDN, OFF]) as dev,
+    ):
+        _ = dev.identity

@@ -15,17 +15,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.devices.camera_fixtures import (
-    FakeCameraState,
-    StubLight,
-    dng_raw_maker,
-    make_fake_gphoto2,
-)
-from tunespec.core.raw import load_raw
+from tests.devices.camera_fixtures import StubLight, dng_raw_maker
+from tunespec.core.io.raw import load_raw
 from tunespec.devices.canon.gphoto2_camera import Gphoto2Camera
 from tunespec.devices.protocols import Camera, DeviceError, DeviceIdentity
 from tunespec.devices.sim.camera import SimCamera
 from tunespec.devices.sim.scene import SimScene
+from tunespec.devices.testing import FakeCameraState, make_fake_gphoto2
 
 HARDWARE_SPEC = os.environ.get("TUNESPEC_CAMERA", "")
 

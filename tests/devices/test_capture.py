@@ -8,10 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tunespec.app.pipeline.plan import sample_layout
 from tunespec.core.errors import InputError
+from tunespec.core.io.raw import load_raw
+from tunespec.core.io.session import Session
 from tunespec.core.progress import Cancelled
-from tunespec.core.raw import load_raw
-from tunespec.core.session import Session
 from tunespec.devices.capture import capture, meter_exposure, new_session
 from tunespec.devices.protocols import DeviceTimeoutError
 from tunespec.devices.registry import (
@@ -21,7 +22,6 @@ from tunespec.devices.registry import (
     open_light_source,
     parse_resolution,
 )
-from tunespec.devices.workflow import sample_layout
 
 #: Small frames: these tests check bookkeeping, not accuracy.
 RESOLUTION = (384, 256)

@@ -8,14 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from tests.devices.camera_fixtures import (
-    FakeCameraState,
-    FakeGPhoto2Error,
-    canon_5d3_config,
-    dng_raw_maker,
-    make_fake_gphoto2,
-)
-from tunespec.core.raw import load_raw
+from tests.devices.camera_fixtures import dng_raw_maker
+from tunespec.core.io.raw import load_raw
 from tunespec.devices.canon.gphoto2_camera import (
     Gphoto2Camera,
     import_gphoto2,
@@ -28,6 +22,12 @@ from tunespec.devices.protocols import (
     DeviceCommandError,
     DeviceConnectionError,
     DeviceTimeoutError,
+)
+from tunespec.devices.testing import (
+    FakeCameraState,
+    FakeGPhoto2Error,
+    canon_5d3_config,
+    make_fake_gphoto2,
 )
 
 

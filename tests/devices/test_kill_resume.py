@@ -11,10 +11,10 @@ import threading
 import numpy as np
 import pytest
 
-from tunespec.core.session import Session
+from tunespec.app.pipeline.plan import sample_layout
+from tunespec.core.io.session import Session
 from tunespec.devices.capture import capture, new_session
 from tunespec.devices.registry import open_bench
-from tunespec.devices.workflow import sample_layout
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "fork"), reason="needs os.fork")
 
@@ -32,7 +32,7 @@ def _die() -> None:
 def _arm(point: str, nth: int, delay_s: float) -> None:
     """In the child: make the ``nth`` call of ``point`` (or a timer) kill the process
     half-way through what it writes."""
-    import tunespec.core.session as session_mod
+    import tunespec.core.io.session as session_mod
     import tunespec.devices.dng as dng
 
     calls = {"n": 0}

@@ -14,7 +14,7 @@ import threading
 from collections.abc import Mapping, Sequence
 from typing import Any, TextIO
 
-from tunespec.app.cli import seed_arg
+from tunespec.app.cli.common import seed_arg
 from tunespec.core.errors import InputError
 
 __all__ = ["register", "run_cal1_emulator"]

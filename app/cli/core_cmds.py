@@ -8,10 +8,10 @@ from typing import Any
 
 import numpy as np
 
-from tunespec.app.cli import add_grid_option, progress_bar, seed_arg
+from tunespec.app.cli.common import add_grid_option, progress_bar, seed_arg
 from tunespec.core.datasets import read_sensitivities
 from tunespec.core.errors import InputError
-from tunespec.core.export import read_sensitivity_meta, write_sensitivity_meta
+from tunespec.core.io.export import read_sensitivity_meta, write_sensitivity_meta
 from tunespec.core.limits import MAX_REFLECTANCE, dumps_json
 from tunespec.core.responses import Responses, read_responses_csv, write_responses_csv
 from tunespec.core.spectra import Grid, Spectra, read_spectra_csv, write_spectra_csv
@@ -295,7 +295,7 @@ def _write_uncertainty(
     args: argparse.Namespace, est: Any, responses: Responses, prior: Spectra, meta: dict
 ) -> None:
     """Standard uncertainties beside the reflectances (see the README's formats)."""
-    from tunespec.core.export import write_colorimetry_csv
+    from tunespec.core.io.export import write_colorimetry_csv
     from tunespec.core.sensitivity import calibration_from_files
     from tunespec.core.uncertainty import reflectance_uncertainty
 

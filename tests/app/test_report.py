@@ -11,16 +11,7 @@ from typing import ClassVar
 import numpy as np
 import pytest
 
-from tunespec.core.colorimetry import reflectance_stats
-from tunespec.core.datasets import (
-    load_camera,
-    load_colorchecker_sg,
-    load_led_set,
-    resource_path,
-)
-from tunespec.core.export import tunespec_version
-from tunespec.core.forward_model import render_rgb
-from tunespec.core.report import (
+from tunespec.app.report.report import (
     COLORIMETRY_DATA,
     PATCHES_PER_FIGURE,
     Flag,
@@ -31,6 +22,15 @@ from tunespec.core.report import (
     shipped_datasets,
     write_report,
 )
+from tunespec.core.colorimetry import reflectance_stats
+from tunespec.core.datasets import (
+    load_camera,
+    load_colorchecker_sg,
+    load_led_set,
+    resource_path,
+)
+from tunespec.core.forward_model import render_rgb
+from tunespec.core.io.export import tunespec_version
 from tunespec.core.responses import Responses
 from tunespec.core.spectra import Grid
 
@@ -249,7 +249,7 @@ def test_shipped_datasets_and_licences() -> None:
 
 
 def test_pdf_tables_wrap_long_cells_instead_of_cutting_them() -> None:
-    from tunespec.core.report import _Table, _text_table
+    from tunespec.app.report.report import _Table, _text_table
 
     long = "a description " * 10
     lines = _text_table(_Table("T", ("Name", "What"), (("x", long),)))

@@ -56,7 +56,7 @@ from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
 from tunespec.core.errors import InputError
-from tunespec.core.export import tunespec_version
+from tunespec.core.io.export import tunespec_version
 from tunespec.core.responses import Responses
 from tunespec.core.spectra import Spectra
 
@@ -146,7 +146,7 @@ class ReportData:
     created
         When the measurement was made; ``None`` is the time of writing (UTC).
     session_id
-        The session's identifier (``core.session``).
+        The session's identifier (``core.io.session``).
     devices
         Device role to identity, e.g. ``{"camera": {"model": "Canon EOS 5D Mark III",
         "serial": "0123"}, "light source": {...}}``.

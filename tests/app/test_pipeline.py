@@ -12,18 +12,14 @@ import shutil
 import numpy as np
 import pytest
 
+from tunespec.app.pipeline.plan import ESTIMATION_GRID, load_config
+from tunespec.app.pipeline.run import run_config, run_demo
 from tunespec.core.colorimetry import lab_d50
 from tunespec.core.errors import InputError
+from tunespec.core.io.session import Session
 from tunespec.core.progress import Cancelled
 from tunespec.core.responses import read_responses_csv
-from tunespec.core.session import Session
 from tunespec.core.spectra import read_spectra_csv
-from tunespec.devices.workflow import (
-    ESTIMATION_GRID,
-    load_config,
-    run_config,
-    run_demo,
-)
 
 #: Paper, Table 1: mean RGB RMS prediction error of the SG under all LEDs.
 PAPER_TABLE1_RGB_RMS = 0.0024
@@ -133,6 +129,7 @@ def test_illuminants_are_measured_spd_times_exposure(demo) -> None:
     )
 
 
+@pytest.mark.slow
 def test_rerun_resumes_without_capturing(demo, tmp_path) -> None:
     result, _ = demo
     out = tmp_path / "again"
@@ -146,6 +143,7 @@ def test_rerun_resumes_without_capturing(demo, tmp_path) -> None:
     assert again.table1.mean[3] == pytest.approx(result.table1.mean[3])
 
 
+@pytest.mark.slow
 def test_config_run_on_existing_sessions(demo, tmp_path) -> None:
     result, _ = demo
     shutil.copytree(result.out_dir / "chart", tmp_path / "run" / "chart")
@@ -210,9 +208,10 @@ def test_config_values_of_the_wrong_type_are_one_line_errors(
 
 
 def test_sample_bench_keeps_the_bench_and_camera_constants() -> None:
+    from tunespec.app.pipeline.plan import sample_layout
+    from tunespec.app.pipeline.steps import bench_for_target
     from tunespec.core.spectra import Spectra
     from tunespec.devices.registry import open_bench
-    from tunespec.devices.workflow import bench_for_target, sample_layout
 
     grey = Spectra(np.linspace(380.0, 780.0, 81), np.full((1, 81), 0.6), ("board",))
     with open_bench(

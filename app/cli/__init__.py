@@ -1,6 +1,6 @@
 """The ``tunespec`` command line.
 
-Subcommands live in ``tunespec.app.commands.*`` modules, each with a
+Subcommands live in the ``tunespec.app.cli.*_cmds`` modules, each with a
 ``register(subparsers)`` function that adds its parsers and sets ``func`` (called with
 the parsed namespace, returns an exit code). This module owns error handling: any
 :class:`~tunespec.core.errors.TuneSpecError` or
@@ -13,103 +13,42 @@ from __future__ import annotations
 
 import argparse
 import errno
-import importlib
 import sys
-import time
 from collections.abc import Sequence
 
-from tunespec.core.errors import DiskFullError, TuneSpecError
-from tunespec.core.progress import Cancelled, ProgressFn
-from tunespec.core.spectra import DEFAULT_GRID, Grid
-
-COMMAND_MODULES = (
-    "tunespec.app.commands.core_cmds",
-    "tunespec.app.commands.device_cmds",
-    "tunespec.app.commands.session_cmds",
-    "tunespec.app.commands.export_cmds",
+from tunespec.app.cli import core_cmds, device_cmds, export_cmds, session_cmds
+from tunespec.app.cli.common import (
+    EXIT_CANCELLED,
+    EXIT_DEVICE,
+    EXIT_DISK_FULL,
+    EXIT_INPUT,
+    TerminalProgress,
+    add_grid_option,
+    grid_arg,
+    progress_bar,
+    seed_arg,
 )
+from tunespec.core.errors import DiskFullError, TuneSpecError
+from tunespec.core.progress import Cancelled
 
-EXIT_INPUT = 2
-EXIT_DEVICE = 3
-EXIT_DISK_FULL = 4
-EXIT_CANCELLED = 130
+__all__ = [
+    "EXIT_CANCELLED",
+    "EXIT_DEVICE",
+    "EXIT_DISK_FULL",
+    "EXIT_INPUT",
+    "TerminalProgress",
+    "add_grid_option",
+    "build_parser",
+    "check_outputs",
+    "grid_arg",
+    "main",
+    "progress_bar",
+    "seed_arg",
+]
 
-
-def grid_arg(text: str) -> Grid:
-    """argparse type for ``--grid START:END:STEP``."""
-    try:
-        return Grid.parse(text)
-    except TuneSpecError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-
-
-def seed_arg(text: str) -> int:
-    """argparse type for ``--seed``: an integer in ``[0, 2**32 - 1]``."""
-    from tunespec.core.limits import valid_seed
-
-    try:
-        return valid_seed(int(text), "--seed")
-    except (ValueError, TuneSpecError) as exc:
-        raise argparse.ArgumentTypeError(
-            f"expected an integer from 0 to 4294967295, got {text!r}"
-        ) from exc
-
-
-def add_grid_option(parser: argparse.ArgumentParser) -> None:
-    """The shared ``--grid`` option."""
-    parser.add_argument(
-        "--grid",
-        type=grid_arg,
-        default=DEFAULT_GRID,
-        metavar="START:END:STEP",
-        help=f"working wavelength grid in nm (default {DEFAULT_GRID})",
-    )
-
-
-class TerminalProgress:
-    """A one-line progress bar on stderr, usable as a :data:`ProgressFn`.
-
-    Redraws at most 10 times a second, shows elapsed and remaining time, and stays
-    silent when stderr is not a terminal unless ``force`` (then it prints a line per
-    10 % so logs still show progress).
-    """
-
-    def __init__(self, label: str, *, width: int = 30, force: bool = False) -> None:
-        self.label = label
-        self.width = width
-        self._tty = sys.stderr.isatty()
-        self._force = force
-        self._t0 = time.monotonic()
-        self._last_draw = 0.0
-        self._last_decile = -1
-
-    def __call__(self, fraction: float) -> None:
-        now = time.monotonic()
-        elapsed = now - self._t0
-        if self._tty:
-            if fraction < 1.0 and now - self._last_draw < 0.1:
-                return
-            self._last_draw = now
-            filled = round(self.width * fraction)
-            eta = elapsed / fraction * (1 - fraction) if fraction > 0 else float("nan")
-            eta_s = f"{eta:5.0f}s left" if eta == eta else "   ?s left"
-            bar = "#" * filled + "-" * (self.width - filled)
-            sys.stderr.write(f"\r{self.label:<28} [{bar}] {fraction:6.1%} {eta_s}")
-            if fraction >= 1.0:
-                sys.stderr.write(
-                    f"\r{self.label:<28} [{bar}] done in {elapsed:.1f}s   \n"
-                )
-            sys.stderr.flush()
-        elif self._force:
-            decile = int(fraction * 10)
-            if decile > self._last_decile:
-                self._last_decile = decile
-                sys.stderr.write(f"{self.label}: {fraction:.0%} ({elapsed:.1f}s)\n")
-
-
-def progress_bar(label: str) -> ProgressFn:
-    """A terminal progress callback for ``label``."""
-    return TerminalProgress(label)
+#: The command modules, in the order ``--help`` lists them. Imported statically: each
+#: imports only what its commands need when they run (``tunespec --help`` stays light).
+COMMAND_MODULES = (core_cmds, device_cmds, session_cmds, export_cmds)
 
 
 class _VersionAction(argparse.Action):
@@ -125,7 +64,7 @@ class _VersionAction(argparse.Action):
         )
 
     def __call__(self, parser: argparse.ArgumentParser, *_args: object) -> None:
-        from tunespec.core.export import tunespec_version
+        from tunespec.core.io.export import tunespec_version
 
         print(f"{parser.prog} {tunespec_version()}")
         parser.exit()
@@ -144,8 +83,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action=_VersionAction)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for name in COMMAND_MODULES:
-        importlib.import_module(name).register(sub)
+    for module in COMMAND_MODULES:
+        module.register(sub)
     return parser
 
 
@@ -201,7 +140,3 @@ def check_outputs(args: argparse.Namespace) -> None:
         value = getattr(args, attr, None)
         if value is not None:
             check_output_dir(value, "--" + attr.replace("_", "-"))
-
-
-if __name__ == "__main__":
-    sys.exit(main())

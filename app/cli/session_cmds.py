@@ -7,11 +7,11 @@ import sys
 import time
 from pathlib import Path
 
-from tunespec.app.cli import progress_bar, seed_arg
+from tunespec.app.cli.common import progress_bar, seed_arg
 from tunespec.core.errors import InputError
+from tunespec.core.io.session import Session, SessionLock
 from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import check_output_file
-from tunespec.core.session import Session, SessionLock
 
 __all__ = ["register"]
 
@@ -50,8 +50,8 @@ def _floats(text: str) -> tuple[float, ...]:
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the session subcommands."""
-    # the registry's constant (workflow.DEMO_RESOLUTION is the same object): the
-    # workflow imports the whole pipeline, which ``tunespec --help`` must not pay
+    # the registry's constant (pipeline.plan.DEMO_RESOLUTION is the same object): the
+    # the pipeline imports every step,, which ``tunespec --help`` must not pay
     from tunespec.devices.registry import DEFAULT_SIM_RESOLUTION as DEMO_RESOLUTION
 
     p = sub.add_parser(
@@ -180,7 +180,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "run",
         help="capture -> process -> calibrate -> estimate -> export from a config",
         description="Run the whole measurement from a JSON or TOML configuration "
-        "(see tunespec.devices.workflow.load_config); existing sessions are resumed.",
+        "(see tunespec.app.pipeline.plan.load_config); existing sessions are resumed.",
     )
     p.add_argument("config", type=Path, help="configuration (.json or .toml)")
     p.set_defaults(func=cmd_run)
@@ -201,7 +201,7 @@ def _print_result(result: object, wall_s: float) -> None:
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    from tunespec.devices.workflow import run_demo
+    from tunespec.app.pipeline.run import run_demo
 
     t0 = time.perf_counter()
     result = run_demo(
@@ -329,7 +329,7 @@ def cmd_process(args: argparse.Namespace) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from tunespec.devices.workflow import run_config
+    from tunespec.app.pipeline.run import run_config
 
     t0 = time.perf_counter()
     result = run_config(args.config, progress=progress_bar("run"))

@@ -50,9 +50,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from tunespec.core.cgats import CgatsTable, ti3_table, write_cgats
 from tunespec.core.colorimetry import lab_d50, xyz_d50
 from tunespec.core.errors import InputError, read_json
+from tunespec.core.io.cgats import CgatsTable, ti3_table, write_cgats
 from tunespec.core.limits import dumps_json
 from tunespec.core.responses import Responses, write_responses_csv
 from tunespec.core.spectra import Grid, Spectra, write_spectra_csv

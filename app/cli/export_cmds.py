@@ -13,7 +13,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from tunespec.app.cli import grid_arg
+from tunespec.app.cli.common import grid_arg
 from tunespec.core.datasets import read_sensitivities
 from tunespec.core.errors import InputError, read_json
 from tunespec.core.limits import MAX_REFLECTANCE
@@ -116,8 +116,8 @@ def _add_optional_grid(parser: argparse.ArgumentParser) -> None:
 
 
 def cmd_export_cgats(args: argparse.Namespace) -> int:
-    from tunespec.core.cgats import write_cgats
-    from tunespec.core.export import reflectance_ti3
+    from tunespec.core.io.cgats import write_cgats
+    from tunespec.core.io.export import reflectance_ti3
     from tunespec.core.responses import read_responses_csv
 
     reflectance = read_spectra_csv(
@@ -141,7 +141,7 @@ def cmd_export_cgats(args: argparse.Namespace) -> int:
 
 
 def cmd_export_rawtoaces(args: argparse.Namespace) -> int:
-    from tunespec.core.export import (
+    from tunespec.core.io.export import (
         RAWTOACES_GRID,
         tunespec_version,
         write_sensitivity_json,
@@ -178,7 +178,7 @@ def _table1_from_json(path: Path) -> tuple[Any, Any, tuple[str, ...]]:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from tunespec.core.report import ReportData, write_report
+    from tunespec.app.report.report import ReportData, write_report
     from tunespec.core.responses import read_responses_csv
 
     grid = args.grid
@@ -220,8 +220,8 @@ def cmd_report(args: argparse.Namespace) -> int:
 def _table1_from_files(
     args: argparse.Namespace, data: dict[str, Any], grid: Grid | None
 ) -> Any:
-    from tunespec.core.export import read_sensitivity_meta
     from tunespec.core.forward_model import render_rgb
+    from tunespec.core.io.export import read_sensitivity_meta
     from tunespec.core.sensitivity import correct_illuminants_from_meta
     from tunespec.core.stats import prediction_stats
 

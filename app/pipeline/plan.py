@@ -1,0 +1,390 @@
+"""The plan of a measurement: every choice of a run in one frozen object.
+
+A :class:`Plan` replaces the keyword arguments the orchestrator used to take: the
+bench (``light``/``camera`` specs, simulated resolution and seed), the two targets,
+the capture settings, the estimators and their grids, and whether to write the
+report. :func:`demo_plan` is ``tunespec demo``; :func:`plan_from_config` reads a
+``tunespec run`` configuration (:func:`load_config`, checked by :func:`check_config`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from os import PathLike
+from pathlib import Path
+from typing import Any
+
+from tunespec.core.datasets import resource_path
+from tunespec.core.errors import InputError
+from tunespec.core.layout import TargetLayout
+from tunespec.core.limits import (
+    check_output_dir,
+    loads_json,
+    loads_toml,
+    read_text,
+    shown,
+    valid_number,
+    valid_seed,
+)
+from tunespec.core.spectra import DEFAULT_GRID, Grid, Spectra, read_spectra_csv
+from tunespec.devices.registry import (
+    DEFAULT_SIM_RESOLUTION,
+    layout_reflectances,
+    parse_resolution,
+)
+
+__all__ = [
+    "DEMO_RESOLUTION",
+    "ESTIMATION_GRID",
+    "METHOD_CHOICES",
+    "Plan",
+    "chart_layout",
+    "check_config",
+    "demo_plan",
+    "load_config",
+    "plan_from_config",
+    "sample_layout",
+    "sample_reference",
+]
+
+
+#: Sensitivity methods a configuration may name (``core.sensitivity.SENSITIVITY_METHODS``
+#: without importing scipy; tests/test_cli_startup.py keeps them equal).
+METHOD_CHOICES = ("bayes", "pca", "smooth")
+
+#: Default resolution of ``tunespec demo``: a quarter of the 5D Mark III's sides.
+DEMO_RESOLUTION = DEFAULT_SIM_RESOLUTION
+#: Grid of reflectance estimation and Table 2: the band the 22 LEDs cover (410-700 nm
+#: peaks) and CIE colorimetry needs. Outside it no LED carries information and a
+#: reflectance is only the prior's extrapolation, so the spectral RMS there measures
+#: the prior, not the instrument. Sensitivities are still estimated on the working
+#: grid (``DEFAULT_GRID``) for the exports.
+ESTIMATION_GRID = Grid(400.0, 700.0, 5.0)
+
+
+def chart_layout() -> TargetLayout:
+    """The shipped ColorChecker SG layout (corners unknown: found in the images)."""
+    return TargetLayout.load(resource_path("layouts", "colorchecker_sg.json"))
+
+
+def sample_layout() -> TargetLayout:
+    """The shipped sample target: the eight CMY Neugebauer primaries."""
+    return TargetLayout.load(resource_path("layouts", "neugebauer_cmy.json"))
+
+
+def sample_reference(grid: Grid = DEFAULT_GRID) -> Spectra:
+    """Reference reflectances of the shipped sample target (the simulation's truth)."""
+    return read_spectra_csv(resource_path("charts", "neugebauer_cmy_model.csv"), grid)
+
+
+@dataclass(frozen=True, eq=False)
+class Plan:
+    """Everything a run needs to know before it starts (no devices, no callbacks).
+
+    Parameters
+    ----------
+    out_dir
+        The measurement folder (:class:`~tunespec.app.pipeline.folder.MeasurementFolder`).
+    light, camera
+        Device specs (``devices.registry.open_bench``); ``camera`` ``None`` picks the
+        default for the light.
+    resolution, seed
+        Simulated camera ``(width, height)`` (``None``: the default) and the seed of
+        the simulated bench (the sample's camera gets ``seed + 1``).
+    chart_layout, chart_reflectances
+        The calibration chart (default the ColorChecker SG and its reflectances).
+    sample_layout, sample_reflectances
+        The sample target; its reflectances are what a simulated bench renders.
+    reference
+        Reference reflectances of the sample for Table 2 (``None``: no Table 2).
+    exposure, brackets, iso
+        Capture settings (``"auto"`` meters every LED on the chart; the sample reuses
+        the chart's exposures).
+    method
+        Sensitivity method (``None``: the library's default).
+    prior
+        Prior of the Wiener estimation (``None``: the ColorChecker SG).
+    grid, estimation_grid
+        Calibration grid and estimation/Table-2 grid.
+    report
+        Also write the HTML/PDF report.
+    """
+
+    out_dir: Path
+    light: str = "sim"
+    camera: str | None = None
+    resolution: tuple[int, int] | None = None
+    seed: int = 0
+    chart_layout: TargetLayout = field(default_factory=chart_layout)
+    chart_reflectances: Spectra | None = None
+    sample_layout: TargetLayout = field(default_factory=sample_layout)
+    sample_reflectances: Spectra | None = None
+    reference: Spectra | None = None
+    exposure: str | float | Mapping[str, float] = "auto"
+    brackets: tuple[float, ...] = (1.0,)
+    iso: int = 100
+    method: str | None = None
+    prior: Spectra | None = None
+    grid: Grid = DEFAULT_GRID
+    estimation_grid: Grid = ESTIMATION_GRID
+    report: bool = True
+
+
+def demo_plan(
+    out_dir: str | PathLike[str],
+    *,
+    seed: int = 0,
+    resolution: tuple[int, int] = DEMO_RESOLUTION,
+    report: bool = True,
+) -> Plan:
+    """The plan of ``tunespec demo``: the simulated bench, SG then the CMY target."""
+    return Plan(
+        Path(out_dir),
+        resolution=resolution,
+        seed=seed,
+        sample_reflectances=sample_reference(),
+        reference=sample_reference(),
+        report=report,
+    )
+
+
+# -- configuration files ---------------------------------------------------------------
+def load_config(path: str | PathLike[str]) -> dict[str, Any]:
+    """Read a run configuration (``.json`` or ``.toml``).
+
+    Keys (all optional)::
+
+        out = "run"                          # output folder, relative to the file
+        [bench]    light = "sim", camera = "sim", resolution = "1536x1024", seed = 0
+        [capture]  exposure = "auto" | seconds, brackets = [1.0], iso = 100
+        [chart]    layout = FILE (default the SG), reflectances = FILE
+        [sample]   layout = FILE (default the CMY target), reflectances = FILE,
+                   reference = FILE (for Table 2)
+        [calibrate] method = "smooth", grid = "380:730:5"
+        [estimate] prior = FILE (default the SG), grid = "400:700:5"
+        [export]   report = true
+
+    Raises
+    ------
+    InputError
+        Unreadable file, bad syntax, unknown sections or keys.
+    """
+    path = Path(path)
+    text = read_text(path)
+    if path.suffix.lower() == ".toml":
+        cfg = loads_toml(text, path=path)
+    else:
+        cfg = loads_json(text, path=path)
+    if not isinstance(cfg, dict):
+        raise InputError("expected a table/object at the top", path=path)
+    known = {
+        "out": None,
+        "bench": {"light", "camera", "resolution", "seed"},
+        "capture": {"exposure", "brackets", "iso"},
+        "chart": {"layout", "reflectances"},
+        "sample": {"layout", "reflectances", "reference"},
+        "calibrate": {"method", "grid"},
+        "estimate": {"prior", "grid"},
+        "export": {"report"},
+    }
+    for key, value in cfg.items():
+        if key not in known:
+            raise InputError(
+                f"unknown section {shown(key)} (known: {', '.join(known)})", path=path
+            )
+        allowed = known[key]
+        if allowed is not None:
+            if not isinstance(value, dict):
+                raise InputError(f"{key}: expected a table/object", path=path)
+            bad = set(value) - allowed
+            if bad:
+                raise InputError(
+                    f"{key}: unknown key(s) {', '.join(sorted(bad))} (known: "
+                    f"{', '.join(sorted(allowed))})",
+                    path=path,
+                )
+    cfg["_path"] = str(path)
+    return cfg
+
+
+def plan_from_config(config: Mapping[str, Any] | str | PathLike[str]) -> Plan:
+    """The :class:`Plan` of a configuration (a file or what :func:`load_config` read).
+
+    Paths in the configuration are relative to its file. Every value is checked
+    (:func:`check_config`) before anything is read.
+    """
+    cfg = dict(config) if isinstance(config, Mapping) else load_config(config)
+    base = Path(cfg.get("_path", ".")).parent if "_path" in cfg else Path(".")
+    check_config(cfg)
+
+    def rel(p: str | None) -> Path | None:
+        return None if p is None else (base / p)
+
+    bench_cfg = cfg.get("bench", {})
+    cap = cfg.get("capture", {})
+    cal_cfg = cfg.get("calibrate", {})
+    grid = Grid.parse(cal_cfg["grid"]) if "grid" in cal_cfg else DEFAULT_GRID
+    est_cfg = cfg.get("estimate", {})
+    est_grid = Grid.parse(est_cfg["grid"]) if "grid" in est_cfg else ESTIMATION_GRID
+    chart_cfg, sample_cfg = cfg.get("chart", {}), cfg.get("sample", {})
+    chart_path = rel(chart_cfg.get("layout"))
+    sample_path = rel(sample_cfg.get("layout"))
+    c_layout = TargetLayout.load(chart_path) if chart_path else chart_layout()
+    s_layout = TargetLayout.load(sample_path) if sample_path else sample_layout()
+
+    def spectra(p: str | None) -> Spectra | None:
+        q = rel(p)
+        return None if q is None else read_spectra_csv(q, grid)
+
+    c_refl = spectra(chart_cfg.get("reflectances"))
+    if c_refl is None and chart_path is not None:
+        c_refl = layout_reflectances(c_layout, chart_path, grid)
+    s_refl = spectra(sample_cfg.get("reflectances"))
+    reference = spectra(sample_cfg.get("reference"))
+    light = str(bench_cfg.get("light", "sim"))
+    if reference is None and sample_path is None and light.startswith("sim"):
+        reference = sample_reference(grid)
+    if s_refl is None and light.startswith("sim"):
+        s_refl = (
+            layout_reflectances(s_layout, sample_path, grid)
+            if sample_path
+            else sample_reference(grid)
+        )
+    src = cfg.get("_path")
+    exposure = cap.get("exposure", "auto")
+    if not isinstance(exposure, str):
+        exposure = _cfg_number(exposure, "capture.exposure", src)
+    res = bench_cfg.get("resolution")
+    brackets = cap.get("brackets", [1.0])
+    if not isinstance(brackets, list | tuple):
+        raise InputError(
+            f"capture.brackets: expected a list of numbers, got {shown(brackets)}",
+            path=src,
+        )
+    return Plan(
+        base / str(cfg.get("out", "run")),
+        light=light,
+        camera=bench_cfg.get("camera"),
+        resolution=None if res is None else parse_resolution(res),
+        seed=_cfg_int(bench_cfg.get("seed", 0), "bench.seed", src),
+        chart_layout=c_layout,
+        chart_reflectances=c_refl,
+        sample_layout=s_layout,
+        sample_reflectances=s_refl,
+        reference=reference,
+        exposure=exposure,
+        brackets=tuple(_cfg_number(b, "capture.brackets", src) for b in brackets),
+        iso=_cfg_int(cap.get("iso", 100), "capture.iso", src),
+        method=cal_cfg.get("method"),
+        prior=spectra(est_cfg.get("prior")),
+        grid=grid,
+        estimation_grid=est_grid,
+        report=cfg.get("export", {}).get("report", True),
+    )
+
+
+def _cfg_number(value: Any, key: str, source: str | None) -> float:
+    """A configuration value that must be a number (one-line error otherwise)."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise InputError(f"{key}: expected a number, got {shown(value)}", path=source)
+    return float(value)
+
+
+def _cfg_int(value: Any, key: str, source: str | None) -> int:
+    """A configuration value that must be an integer (one-line error otherwise)."""
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise InputError(f"{key}: expected an integer, got {shown(value)}", path=source)
+    return value
+
+
+#: Configuration keys whose values are text (paths, specs, grids, names).
+_CONFIG_STRINGS = {
+    "bench": ("light", "camera", "resolution"),
+    "chart": ("layout", "reflectances"),
+    "sample": ("layout", "reflectances", "reference"),
+    "calibrate": ("method", "grid"),
+    "estimate": ("prior", "grid"),
+}
+
+
+def check_config(cfg: Mapping[str, Any]) -> None:
+    """Check every value of a configuration before anything runs.
+
+    Raises
+    ------
+    InputError
+        Naming the file and the key: a section that is not a table, a text key that
+        is not text, a bad seed, resolution, exposure, bracket, ISO, method or grid,
+        or an ``out`` that is an existing file.
+    """
+    src = cfg.get("_path")
+    for section, keys in _CONFIG_STRINGS.items():
+        table = cfg.get(section, {})
+        if not isinstance(table, Mapping):
+            raise InputError(f"{section}: expected a table/object", path=src)
+        for key in keys:
+            value = table.get(key)
+            if value is not None and not isinstance(value, str):
+                raise InputError(
+                    f"{section}.{key}: expected a string, got {shown(value)}", path=src
+                )
+    out = cfg.get("out", "run")
+    if not isinstance(out, str | PathLike):
+        raise InputError(f"out: expected a folder name, got {shown(out)}", path=src)
+    base = Path(src).parent if src else Path(".")
+    try:
+        check_output_dir(base / out, "out")
+    except InputError as exc:
+        raise InputError(exc.message, path=src) from None
+    # every value checked before anything is captured (a typo must not cost a chart)
+    bench = cfg.get("bench", {})
+    valid_seed(bench.get("seed", 0), "bench.seed", path=src)
+    if bench.get("resolution") is not None:
+        try:
+            parse_resolution(bench["resolution"])
+        except InputError as exc:
+            raise InputError(f"bench.resolution: {exc.message}", path=src) from None
+    cap = cfg.get("capture", {})
+    if not isinstance(cap, Mapping):
+        raise InputError("capture: expected a table/object", path=src)
+    exposure = cap.get("exposure", "auto")
+    if isinstance(exposure, str):
+        if exposure != "auto":
+            raise InputError(
+                f'capture.exposure: expected "auto" or seconds, got {shown(exposure)}',
+                path=src,
+            )
+    else:
+        valid_number(exposure, "capture.exposure", path=src, lo=0, hi=1e4, lo_open=True)
+    brackets = cap.get("brackets", [1.0])
+    if not isinstance(brackets, list | tuple) or not 1 <= len(brackets) <= 16:
+        raise InputError(
+            f"capture.brackets: expected a list of 1 to 16 numbers, got {shown(brackets)}",
+            path=src,
+        )
+    for b in brackets:
+        valid_number(b, "capture.brackets", path=src, lo=0, hi=1, lo_open=True)
+    valid_number(
+        cap.get("iso", 100), "capture.iso", path=src, lo=1, hi=1e7, integer=True
+    )
+    method = cfg.get("calibrate", {}).get("method")
+    if method is not None and method not in METHOD_CHOICES:
+        raise InputError(
+            f"calibrate.method: {shown(method)} is not one of "
+            f"{', '.join(METHOD_CHOICES)}",
+            path=src,
+        )
+    for section in ("calibrate", "estimate"):
+        grid = cfg.get(section, {}).get("grid")
+        if grid is not None:
+            try:
+                Grid.parse(grid)
+            except InputError as exc:
+                raise InputError(f"{section}.grid: {exc.message}", path=src) from None
+    report_files = cfg.get("export", {}).get("report", True)
+    if not isinstance(report_files, bool):
+        raise InputError(
+            f"export.report: expected true or false, got {shown(report_files)}",
+            path=src,
+        )

@@ -1,0 +1,462 @@
+"""``run(plan)``: the steps of a measurement in order, on one bench.
+
+Like a bluesky plan run by its RunEngine: the :class:`~tunespec.app.pipeline.plan.Plan`
+says what to do, :func:`run` opens the bench it names, runs the steps
+(:mod:`tunespec.app.pipeline.steps`) with one progress bar split over them, scores a
+simulated bench against its truth, and writes the measurement folder
+(:class:`~tunespec.app.pipeline.folder.MeasurementFolder`). Sessions that already exist
+in the folder are resumed, so a run interrupted by a crash continues where it stopped.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from os import PathLike
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from tunespec.app.pipeline.folder import MeasurementFolder
+from tunespec.app.pipeline.plan import (
+    DEMO_RESOLUTION,
+    Plan,
+    demo_plan,
+    plan_from_config,
+)
+from tunespec.app.pipeline.steps import (
+    Calibration,
+    Estimation,
+    bench_for_target,
+    calibrate,
+    capture_target,
+    estimate,
+    export,
+    process,
+)
+from tunespec.core.io.session import Session
+from tunespec.core.processing import ProcessedSession
+from tunespec.core.progress import (
+    ProgressFn,
+    StopFn,
+    progress_ranges,
+    report,
+    sub_progress,
+)
+from tunespec.core.spectra import Grid, Spectra
+from tunespec.devices.capture import FrameCallback
+from tunespec.devices.registry import Bench, open_bench
+
+if TYPE_CHECKING:
+    from tunespec.core.colorimetry import ReflectanceStats
+    from tunespec.core.stats import PredictionStats
+
+__all__ = ["DemoResult", "RunResult", "run", "run_config", "run_demo"]
+
+
+# -- results ---------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class RunResult:
+    """What a full run produced.
+
+    Parameters
+    ----------
+    out_dir
+        Where everything was written.
+    calibration, estimation
+        The step results.
+    chart, sample
+        Processed sessions (responses, illuminants, corners used).
+    files
+        Export kind -> path.
+    timings_s
+        Wall time per step.
+    warnings
+        Everything the steps warned about.
+    truth
+        For a simulated bench: ``corner_error_px`` per session and
+        ``sensitivity_rel_rms`` (estimated vs. true, per channel).
+    """
+
+    out_dir: Path
+    calibration: Calibration
+    estimation: Estimation
+    chart: ProcessedSession
+    sample: ProcessedSession
+    files: dict[str, Path] = field(default_factory=dict)
+    timings_s: dict[str, float] = field(default_factory=dict)
+    warnings: tuple[str, ...] = ()
+    truth: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def table1(self) -> PredictionStats:
+        return self.calibration.table1
+
+    @property
+    def table2(self) -> ReflectanceStats | None:
+        return self.estimation.table2
+
+    def summary(self) -> dict[str, Any]:
+        """The headline numbers and both tables, JSON-ready."""
+        t1 = self.table1
+        out: dict[str, Any] = {
+            "table1_rgb_rms_mean": float(t1.mean[3]),
+            "table1_rgb_rms_max": float(t1.max[3]),
+            "table1_rgb_rms_p95": float(t1.p95[3]),
+            "table1": t1.as_dict(),
+            "sensitivity_method": str(self.calibration.estimate.method),
+            "excluded_patches": list(self.calibration.estimate.excluded_patches),
+            "timings_s": {k: round(v, 3) for k, v in self.timings_s.items()},
+            "warnings": list(self.warnings),
+        }
+        if self.table2 is not None:
+            out["table2_delta_e00_mean"] = self.table2.mean_delta_e00
+            out["table2_delta_e00_max"] = self.table2.max_delta_e00
+            out["table2_spectral_rms_mean"] = self.table2.mean_spectral_rms
+            out["table2"] = self.table2.as_dict()
+        out.update(self.truth)  # plain floats, per session or channel
+        return out
+
+    def format_text(self) -> str:
+        """Table 1 and Table 2 as the terminal shows them."""
+        parts = [self.table1.format_table("Table 1 - ColorChecker SG, RGB prediction")]
+        if self.table2 is not None:
+            parts.append(
+                "Table 2 - sample target vs. reference (CIEDE2000 D50, spectral RMS)\n"
+                + self.table2.format_table()
+            )
+        if "sensitivity_rel_rms" in self.truth:
+            rr = self.truth["sensitivity_rel_rms"]
+            parts.append(
+                "Sensitivities vs. the bench's truth (relative RMS): "
+                + ", ".join(f"{k} {v:.2%}" for k, v in rr.items())
+            )
+        if "corner_error_px" in self.truth:
+            ce = self.truth["corner_error_px"]
+            parts.append(
+                "Automatic corners vs. truth (max, mosaic px): "
+                + ", ".join(f"{k} {v:.2f}" for k, v in ce.items())
+            )
+        return "\n\n".join(parts)
+
+
+#: The result of :func:`run_demo`.
+DemoResult = RunResult
+
+
+# -- orchestration ---------------------------------------------------------------------
+class _Stages:
+    """One progress callback split over weighted stages, and each stage's wall time."""
+
+    def __init__(
+        self, progress: ProgressFn | None, weights: Mapping[str, float]
+    ) -> None:
+        self._progress = progress
+        self._ranges = progress_ranges(weights)
+        self.timings_s: dict[str, float] = {}
+
+    def timed(self, name: str, func: Callable[[ProgressFn | None], Any]) -> Any:
+        start, stop = self._ranges[name]
+        t0 = time.perf_counter()
+        try:
+            return func(sub_progress(self._progress, start, stop))
+        finally:
+            self.timings_s[name] = time.perf_counter() - t0
+            report(self._progress, stop)
+
+
+_STAGE_WEIGHTS = {
+    "capture_chart": 30.0,
+    "process_chart": 6.0,
+    "calibrate": 6.0,
+    "capture_sample": 25.0,
+    "process_sample": 4.0,
+    "estimate": 1.0,
+    "export": 8.0,
+}
+
+
+def _corner_error_px(bench: Bench, processed: ProcessedSession) -> float:
+    """Largest distance of the corners used from the simulated bench's true ones."""
+    used = np.asarray(processed.layout.corners_px, dtype=np.float64)
+    return float(np.max(np.abs(used - bench.truth["corners_px"])))
+
+
+def _true_sensitivity(bench: Bench, grid: Grid) -> Spectra:
+    """The sensitivity calibration should recover on this simulated bench.
+
+    The flat field normalises every frame to the mean of the white frame's centre
+    window (Eq. 2), so the responses carry the bench's shading (fall-off times
+    vignetting) averaged over that window.
+    """
+    from tunespec.core.processing import flat_window
+
+    cam = bench.sim_camera
+    width, height = cam.resolution
+    r0, r1, c0, c1 = flat_window((height // 2, width // 2))
+    yy, xx = np.mgrid[r0:r1, c0:c1]
+    xy = np.stack([2.0 * xx + 0.5, 2.0 * yy + 0.5], axis=-1)
+    shading = float(np.mean(cam.shading(xy)))
+    absolute = bench.truth["absolute_sensitivity"].resample(grid)
+    return absolute.with_values(absolute.values * shading)
+
+
+def _relative_rms(estimated: Spectra, truth: Spectra) -> dict[str, float]:
+    out = {}
+    for name in ("R", "G", "B"):
+        t = truth[name]
+        e = np.interp(truth.wavelength_nm, estimated.wavelength_nm, estimated[name])
+        out[name] = float(np.sqrt(np.mean((e - t) ** 2)) / np.max(t))
+    return out
+
+
+def _score_truth(
+    folder: MeasurementFolder,
+    plan: Plan,
+    benches: tuple[Bench, Bench],
+    processed: tuple[ProcessedSession, ProcessedSession],
+    cal: Calibration,
+) -> tuple[dict[str, Any], Spectra | None]:
+    """A simulated bench's truth: sensitivity and corner errors, ``truth/`` written."""
+    chart_bench, sample_bench = benches
+    if not chart_bench.simulated:
+        return {}, None
+    truth_sens = _true_sensitivity(chart_bench, plan.grid)
+    truth: dict[str, Any] = {
+        "sensitivity_rel_rms": _relative_rms(cal.sensitivity, truth_sens),
+        "corner_error_px": {
+            "chart": _corner_error_px(chart_bench, processed[0]),
+            "sample": _corner_error_px(sample_bench, processed[1]),
+        },
+    }
+    chart_bench.sim_camera.write_truth(folder.truth_dir)
+    return truth, truth_sens
+
+
+@dataclass
+class _Hooks:
+    """The callbacks of one run (not part of the plan: they belong to the caller)."""
+
+    stages: _Stages
+    should_stop: StopFn | None
+    on_frame: FrameCallback | None
+    warnings: list[str] = field(default_factory=list)
+
+
+def _capture_and_process(
+    hooks: _Hooks,
+    folder: MeasurementFolder,
+    plan: Plan,
+    which: str,
+    bench: Bench,
+    layout: Any,
+    exposure: Any,
+) -> tuple[Session, ProcessedSession]:
+    """Capture (or resume) and process one session of the measurement."""
+
+    def capturing(p: ProgressFn | None) -> Session:
+        session, warned = capture_target(
+            bench,
+            folder.session_dir(which),
+            layout,
+            exposure=exposure,
+            brackets=plan.brackets,
+            iso=plan.iso,
+            progress=p,
+            should_stop=hooks.should_stop,
+            on_frame=hooks.on_frame,
+        )
+        hooks.warnings.extend(f"{which} capture: {x}" for x in warned)
+        return session
+
+    session: Session = hooks.stages.timed(f"capture_{which}", capturing)
+    processed: ProcessedSession = hooks.stages.timed(
+        f"process_{which}",
+        lambda p: process(session, progress=p, should_stop=hooks.should_stop),
+    )
+    hooks.warnings.extend(f"{which}: {w}" for w in processed.warnings)
+    return session, processed
+
+
+def _run_on(
+    bench: Bench,
+    plan: Plan,
+    *,
+    progress: ProgressFn | None,
+    should_stop: StopFn | None,
+    on_frame: FrameCallback | None,
+) -> RunResult:
+    """Every step of ``plan`` on an open ``bench``."""
+    hooks = _Hooks(_Stages(progress, _STAGE_WEIGHTS), should_stop, on_frame)
+    folder = MeasurementFolder.at(plan.out_dir)
+    # a simulated bench is opened showing the chart; hardware shows what the
+    # operator puts there (the stage asks)
+    chart_session, chart = _capture_and_process(
+        hooks, folder, plan, "chart", bench, plan.chart_layout, plan.exposure
+    )
+    cal: Calibration = hooks.stages.timed(
+        "calibrate",
+        lambda p: calibrate(
+            chart,
+            plan.chart_reflectances,
+            method=plan.method,
+            grid=plan.grid,
+            progress=p,
+            should_stop=should_stop,
+        ),
+    )
+    if cal.estimate.excluded_patches:
+        hooks.warnings.append(
+            f"calibration left out {len(cal.estimate.excluded_patches)} saturated "
+            "patch(es)"
+        )
+    sample_bench = bench_for_target(
+        bench, plan.sample_layout, plan.sample_reflectances, seed=plan.seed + 1
+    )
+    # the same board and LEDs: the chart's metered exposures suit the sample too
+    chart_exposures = {c: t[0] for c, t in chart_session.settings.exposures_s.items()}
+    sample_exposure = chart_exposures if plan.exposure == "auto" else plan.exposure
+    _, sample = _capture_and_process(
+        hooks, folder, plan, "sample", sample_bench, plan.sample_layout, sample_exposure
+    )
+    est: Estimation = hooks.stages.timed(
+        "estimate",
+        lambda p: estimate(
+            sample,
+            cal.sensitivity,
+            prior=plan.prior,
+            reference=plan.reference,
+            grid=plan.estimation_grid,
+            calibration=cal.estimate,
+        ),
+    )
+    truth, truth_sens = _score_truth(
+        folder, plan, (bench, sample_bench), (chart, sample), cal
+    )
+    settings = {
+        "calibration grid": str(plan.grid),
+        "estimation grid": str(plan.estimation_grid),
+        "sensitivity method": str(cal.estimate.method),
+        "exposure": str(plan.exposure),
+        "chart corners": chart.corners_source,
+        "sample corners": sample.corners_source,
+    }
+    files: dict[str, Path] = hooks.stages.timed(
+        "export",
+        lambda p: export(
+            folder.root,
+            calibration=cal,
+            estimation=est,
+            chart=chart,
+            sample=sample,
+            reference=plan.reference,
+            truth_sensitivity=truth_sens,
+            devices=chart_session.devices,
+            settings=settings,
+            warnings=hooks.warnings,
+            report=plan.report,
+        ),
+    )
+    if sample_bench is not bench:
+        sample_bench.camera.close()
+    result = RunResult(
+        out_dir=folder.root,
+        calibration=cal,
+        estimation=est,
+        chart=chart,
+        sample=sample,
+        files=files,
+        timings_s=dict(hooks.stages.timings_s),
+        warnings=tuple(hooks.warnings),
+        truth=truth,
+    )
+    files["summary_json"] = folder.write_summary(result.summary())
+    report(progress, 1.0)
+    return result
+
+
+def run(
+    plan: Plan,
+    *,
+    progress: ProgressFn | None = None,
+    should_stop: StopFn | None = None,
+    prompt: Callable[[str], None] | None = None,
+    on_frame: FrameCallback | None = None,
+) -> RunResult:
+    """Capture -> process -> calibrate -> capture sample -> estimate -> export.
+
+    Opens the bench ``plan`` names, runs every step on it and closes it. Re-running
+    the same plan resumes the sessions already in ``plan.out_dir``.
+
+    Parameters
+    ----------
+    plan
+        What to measure and how.
+    progress, should_stop
+        Hooks over the whole run.
+    prompt
+        For hardware: how to ask the operator to change the target.
+    on_frame
+        Called after every captured frame (live view).
+    """
+    t0 = time.perf_counter()
+    with open_bench(
+        plan.light,
+        plan.camera,
+        layout=plan.chart_layout,
+        reflectances=plan.chart_reflectances,
+        resolution=plan.resolution,
+        seed=plan.seed,
+        prompt=prompt,
+    ) as bench:
+        result = _run_on(
+            bench,
+            plan,
+            progress=progress,
+            should_stop=should_stop,
+            on_frame=on_frame,
+        )
+    result.timings_s["total"] = time.perf_counter() - t0
+    return result
+
+
+def run_demo(
+    out_dir: str | PathLike[str],
+    *,
+    progress: ProgressFn | None = None,
+    should_stop: StopFn | None = None,
+    seed: int = 0,
+    resolution: tuple[int, int] = DEMO_RESOLUTION,
+    report_files: bool = True,
+    on_frame: FrameCallback | None = None,
+) -> RunResult:
+    """The full measurement on the simulated bench, compared with its truth.
+
+    ``run(demo_plan(...))``: captures the ColorChecker SG under all 22 LEDs,
+    processes it, calibrates the camera (Table 1), captures the CMY Neugebauer sample
+    target, estimates its reflectances with the SG as prior and compares them with
+    the truth (Table 2), and writes the exports and the report into ``out_dir``.
+    Re-running on the same folder resumes the sessions there.
+    """
+    plan = demo_plan(out_dir, seed=seed, resolution=resolution, report=report_files)
+    return run(plan, progress=progress, should_stop=should_stop, on_frame=on_frame)
+
+
+def run_config(
+    config: Mapping[str, Any] | str | PathLike[str],
+    *,
+    progress: ProgressFn | None = None,
+    should_stop: StopFn | None = None,
+    prompt: Callable[[str], None] | None = None,
+    on_frame: FrameCallback | None = None,
+) -> RunResult:
+    """``run(plan_from_config(config))`` (``tunespec run CONFIG``)."""
+    return run(
+        plan_from_config(config),
+        progress=progress,
+        should_stop=should_stop,
+        prompt=prompt,
+        on_frame=on_frame,
+    )

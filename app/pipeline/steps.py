@@ -1,0 +1,404 @@
+"""The steps of a measurement, shared by ``tunespec run``/``demo`` and the GUI wizard.
+
+Each step is a function of frozen inputs returning a frozen result; the ones that take
+time accept ``progress`` and ``should_stop`` (``core.progress``):
+
+1. :func:`capture_target` (:func:`capture_chart`, :func:`capture_sample`) - a session
+   under every LED (dark, white, target), resumed where it exists;
+2. :func:`process` - dark, flat field (Eq. 2), corners, ROI statistics -> responses
+   and illuminants (measured SPD x exposure);
+3. :func:`calibrate` - camera sensitivities (``core.sensitivity``) and Table 1;
+4. :func:`estimate` - Wiener reflectances (Eq. 5-6, the SG as prior) and, with a
+   reference, Table 2 (:func:`evaluate`);
+5. :func:`export` - CSV, rawtoaces JSON, Argyll ``.ti3`` and the HTML/PDF report.
+
+:func:`tunespec.app.pipeline.run.run` loops over them for a
+:class:`~tunespec.app.pipeline.plan.Plan`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from os import PathLike
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from tunespec.app.pipeline.plan import ESTIMATION_GRID, chart_layout, sample_layout
+from tunespec.core.colorimetry import ReflectanceStats, reflectance_stats
+from tunespec.core.datasets import load_colorchecker_sg
+from tunespec.core.errors import InputError
+from tunespec.core.io.export import (
+    export_measurement,
+    write_colorimetry_csv,
+    write_sensitivity_meta,
+)
+from tunespec.core.io.session import Session
+from tunespec.core.layout import TargetLayout
+from tunespec.core.processing import ProcessedSession, process_session, write_processed
+from tunespec.core.progress import ProgressFn, StopFn
+from tunespec.core.spectra import DEFAULT_GRID, Grid, Spectra, write_spectra_csv
+from tunespec.devices.capture import FrameCallback, capture, new_session
+from tunespec.devices.registry import Bench, sim_scene
+
+if TYPE_CHECKING:
+    # the estimators import scipy (a third of a second): imported where they run,
+    # so that loading a configuration (and failing on it) answers at once
+    from tunespec.core.sensitivity import SensitivityEstimate
+    from tunespec.core.stats import CalibrationReport, PredictionStats
+    from tunespec.core.uncertainty import ReflectanceUncertainty
+    from tunespec.core.wiener import WienerEstimate
+
+__all__ = [
+    "Calibration",
+    "Estimation",
+    "bench_for_target",
+    "calibrate",
+    "capture_chart",
+    "capture_sample",
+    "capture_target",
+    "estimate",
+    "evaluate",
+    "export",
+    "process",
+]
+
+
+# -- results ---------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class Calibration:
+    """Estimated camera sensitivities and how well they predict the chart (Table 1).
+
+    Parameters
+    ----------
+    estimate
+        :class:`tunespec.core.sensitivity.SensitivityEstimate`.
+    report
+        :class:`tunespec.core.stats.CalibrationReport`; ``report.training`` is Table 1.
+    """
+
+    estimate: SensitivityEstimate
+    report: CalibrationReport
+
+    @property
+    def sensitivity(self) -> Spectra:
+        return self.estimate.sensitivity
+
+    @property
+    def table1(self) -> PredictionStats:
+        """Table 1 (:class:`~tunespec.core.stats.PredictionStats`)."""
+        return self.report.training
+
+
+@dataclass(frozen=True, eq=False)
+class Estimation:
+    """Wiener reflectances of a target and, with a reference, Table 2."""
+
+    wiener: WienerEstimate
+    table2: ReflectanceStats | None = None
+    uncertainty: ReflectanceUncertainty | None = None
+
+    @property
+    def reflectance(self) -> Spectra:
+        return self.wiener.reflectance
+
+
+# -- steps -----------------------------------------------------------------------------
+def bench_for_target(
+    bench: Bench,
+    layout: TargetLayout,
+    reflectances: Spectra | None = None,
+    *,
+    seed: int = 1,
+) -> Bench:
+    """The bench with ``layout`` in front of the camera.
+
+    On hardware the operator changes the target (the stage asks them), so the bench is
+    returned as it is. A simulated bench gets the same simulated camera (same
+    constants, light and clock; :meth:`SimCamera.looking_at`) looking at a scene with
+    ``layout`` on the same board under the same light field
+    (:meth:`SimScene.bench_options`).
+    """
+    if not bench.simulated:
+        return bench
+    # the same bench: camera pose, field of view, the light's fall-off, the white
+    # board and the camera's sensor constants stay; only the target changes (a
+    # scene or camera rebuilt from defaults would change the flat field and the
+    # sensitivities between the calibration and the sample)
+    same: dict[str, Any] = bench.sim_stage.bench_options()
+    scene = sim_scene(layout, reflectances, **same)
+    camera = bench.sim_camera.looking_at(scene, seed=seed)
+    return Bench(bench.light, camera, scene, camera.truth())
+
+
+def capture_target(
+    bench: Bench,
+    session_dir: str | PathLike[str],
+    layout: TargetLayout,
+    *,
+    exposure: str | float | Mapping[str, float] = "auto",
+    iso: int = 100,
+    brackets: Sequence[float] = (1.0,),
+    n_darks: int = 1,
+    resume: bool = True,
+    progress: ProgressFn | None = None,
+    should_stop: StopFn | None = None,
+    on_frame: FrameCallback | None = None,
+) -> tuple[Session, tuple[str, ...]]:
+    """Capture (or resume) one session of ``layout`` on ``bench``.
+
+    Returns
+    -------
+    (session, warnings)
+    """
+    root = Path(session_dir)
+    if (root / "manifest.json").is_file():
+        if not resume:
+            raise InputError("a session already exists here", path=root)
+        session = Session.open(root)
+        if session.layout is None:
+            session.set_layout(layout.with_corners(None))
+    else:
+        session = new_session(
+            root,
+            bench.light,
+            bench.camera,
+            layout=layout.with_corners(None),
+            exposure=exposure,
+            iso=iso,
+            brackets=brackets,
+            n_darks=n_darks,
+        )
+    result = capture(
+        session,
+        bench.light,
+        bench.camera,
+        bench.stage,
+        resume=True,
+        progress=progress,
+        should_stop=should_stop,
+        on_frame=on_frame,
+    )
+    return session, result.warnings
+
+
+def capture_chart(
+    bench: Bench, session_dir: str | PathLike[str], **kwargs: Any
+) -> tuple[Session, tuple[str, ...]]:
+    """:func:`capture_target` of the ColorChecker SG (:func:`chart_layout`)."""
+    return capture_target(bench, session_dir, chart_layout(), **kwargs)
+
+
+def capture_sample(
+    bench: Bench,
+    session_dir: str | PathLike[str],
+    layout: TargetLayout | None = None,
+    **kwargs: Any,
+) -> tuple[Session, tuple[str, ...]]:
+    """:func:`capture_target` of the sample target (default :func:`sample_layout`)."""
+    return capture_target(bench, session_dir, layout or sample_layout(), **kwargs)
+
+
+def process(
+    session: Session,
+    *,
+    out_dir: str | PathLike[str] | None = None,
+    progress: ProgressFn | None = None,
+    should_stop: StopFn | None = None,
+    **kwargs: Any,
+) -> ProcessedSession:
+    """:func:`tunespec.core.processing.process_session`; with ``out_dir``, also write
+    the ``responses.csv`` and ``illuminants.csv`` that calibrate/estimate read."""
+    processed = process_session(
+        session, progress=progress, should_stop=should_stop, **kwargs
+    )
+    if out_dir is not None:
+        out = Path(out_dir)
+        write_processed(processed, out / "responses.csv", out / "illuminants.csv")
+    return processed
+
+
+def calibrate(
+    chart: ProcessedSession,
+    reflectances: Spectra | None = None,
+    *,
+    method: str | None = None,
+    grid: Grid = DEFAULT_GRID,
+    progress: ProgressFn | None = None,
+    should_stop: StopFn | None = None,
+    **options: Any,
+) -> Calibration:
+    """Camera sensitivities from the chart's responses (``core.sensitivity``) + Table 1.
+
+    Parameters
+    ----------
+    chart
+        The processed chart session.
+    reflectances
+        The chart's reflectances (default the shipped ColorChecker SG).
+    method
+        A method of ``SENSITIVITY_METHODS`` (default: the library's default).
+    grid
+        Working wavelength grid.
+    options
+        More arguments for ``estimate_camera_sensitivity``.
+    """
+    from tunespec.core.sensitivity import estimate_camera_sensitivity
+    from tunespec.core.stats import calibration_report
+
+    refl = reflectances if reflectances is not None else load_colorchecker_sg(grid)
+    refl = refl.resample(grid)
+    illum = chart.illuminants.resample(grid, average=True)
+    if method is not None:
+        options["method"] = method
+    est = estimate_camera_sensitivity(
+        chart.responses,
+        illum,
+        refl,
+        progress=progress,
+        should_stop=should_stop,
+        **options,
+    )
+    rep = calibration_report(est, chart.responses, illum, refl)
+    return Calibration(est, rep)
+
+
+def estimate(
+    sample: ProcessedSession,
+    sensitivity: Spectra,
+    *,
+    prior: Spectra | None = None,
+    reference: Spectra | None = None,
+    grid: Grid = ESTIMATION_GRID,
+    spd_shift_nm: float | None = None,
+    calibration: SensitivityEstimate | None = None,
+) -> Estimation:
+    """Wiener reflectances of the sample (Eq. 5-6; prior default: the SG) and Table 2.
+
+    ``spd_shift_nm`` is the spectroradiometer's wavelength shift fitted at calibration
+    (``SensitivityEstimate.spd_shift_nm``); the sample's SPDs come from the same
+    instrument, so it is undone on them too. ``None`` takes it from
+    ``sensitivity.meta`` (the per-LED corrections of a ``"bayes"`` calibration, else
+    its common shift; :func:`~tunespec.core.sensitivity.correct_illuminants_from_meta`).
+    With ``calibration`` carrying a covariance, the standard uncertainties of the
+    reflectances and their CIELAB are computed too (:mod:`tunespec.core.uncertainty`).
+    """
+    from tunespec.core.sensitivity import correct_illuminants_from_meta
+    from tunespec.core.uncertainty import reflectance_uncertainty
+    from tunespec.core.wiener import wiener_reflectance
+
+    prior = prior if prior is not None else load_colorchecker_sg(grid)
+    illuminants = correct_illuminants_from_meta(
+        sample.illuminants, sensitivity.meta, spd_shift_nm
+    )
+    est = wiener_reflectance(
+        sample.responses,
+        illuminants.resample(grid, average=True),
+        sensitivity.resample(grid),
+        prior.resample(grid),
+    )
+    table2 = None if reference is None else evaluate(est.reflectance, reference)
+    unc = None
+    if calibration is not None and calibration.covariance is not None:
+        unc = reflectance_uncertainty(
+            est, sample.responses, sample.illuminants, calibration, prior.resample(grid)
+        )
+    return Estimation(est, table2, unc)
+
+
+def evaluate(estimated: Spectra, reference: Spectra) -> ReflectanceStats:
+    """Table 2 (:func:`tunespec.core.colorimetry.reflectance_stats`)."""
+    return reflectance_stats(estimated, reference)
+
+
+def export(
+    out_dir: str | PathLike[str],
+    *,
+    calibration: Calibration,
+    estimation: Estimation,
+    chart: ProcessedSession,
+    sample: ProcessedSession,
+    reference: Spectra | None = None,
+    truth_sensitivity: Spectra | None = None,
+    devices: Mapping[str, Mapping[str, str]] | None = None,
+    settings: Mapping[str, str] | None = None,
+    warnings: Sequence[str] = (),
+    report: bool = True,
+) -> dict[str, Path]:
+    """Write every export (``core.io.export``) and, if asked, the HTML/PDF report.
+
+    Files: the chart's ``chart_responses.csv`` / ``chart_illuminants.csv``, the
+    ``core.io.export`` set (sensitivities, reflectances, the sample's responses and
+    illuminants, Tables 1-2, ``.ti3``) and ``report.html`` / ``report.pdf``.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    files: dict[str, Path] = {}
+    write_processed(chart, out / "chart_responses.csv", out / "chart_illuminants.csv")
+    files["chart_responses_csv"] = out / "chart_responses.csv"
+    files["chart_illuminants_csv"] = out / "chart_illuminants.csv"
+    cam = (devices or {}).get("camera", {})
+    files.update(
+        export_measurement(
+            out,
+            sensitivity=calibration.sensitivity,
+            reflectance=estimation.reflectance,
+            responses=sample.responses,
+            table1=calibration.table1,
+            table2=estimation.table2,
+            reference=None
+            if reference is None
+            else reference.select(estimation.reflectance.names, source="reference"),
+            illuminants=sample.illuminants,
+            manufacturer=cam.get("vendor", ""),
+            model=cam.get("model", ""),
+            uncertainty=estimation.uncertainty,
+        )
+    )
+    if calibration.estimate.covariance is not None:
+        write_sensitivity_meta(
+            files["sensitivities_csv"],
+            calibration.sensitivity,
+            calibration.estimate.covariance,
+        )
+    unc = estimation.uncertainty
+    if unc is not None:
+        names = estimation.reflectance.names
+        files["reflectances_uncertainty_csv"] = out / "reflectances_uncertainty.csv"
+        write_spectra_csv(
+            estimation.reflectance.with_values(unc.reflectance_std),
+            files["reflectances_uncertainty_csv"],
+        )
+        files["colorimetry_csv"] = write_colorimetry_csv(
+            out / "colorimetry.csv", names, unc
+        )
+    if report:
+        from tunespec.app.report.report import ReportData, write_report
+
+        data = ReportData(
+            title="TuneSpec measurement report",
+            devices={k: dict(v) for k, v in (devices or {}).items()},
+            settings=dict(settings or {}),
+            illuminants=sample.illuminants,
+            sensitivity=calibration.sensitivity,
+            sensitivity_reference=truth_sensitivity,
+            sensitivity_reference_label="simulation truth",
+            sensitivity_method=str(calibration.estimate.method),
+            reflectance=estimation.reflectance,
+            reflectance_reference=reference,
+            table1=calibration.table1,
+            table2=estimation.table2,
+            responses=chart.responses,
+            excluded_patches=tuple(calibration.estimate.excluded_patches),
+            clipped_patches=tuple(estimation.wiener.clipped),
+            sensitivity_std=calibration.estimate.std,
+            reflectance_std=None if unc is None else unc.reflectance_std,
+            lab=None if unc is None else unc.lab,
+            lab_std=None if unc is None else unc.lab_std,
+            led_correction=calibration.estimate.led_correction,
+            flags=tuple(warnings),
+            exports={k: p.name for k, p in files.items()},
+        )
+        html, pdf = write_report(out, data)
+        files["report_html"], files["report_pdf"] = html, pdf
+    return files
