@@ -397,11 +397,19 @@ def _choose(
     # (Gaussian) posterior mean is substantially negative is too weak for these
     # data -- it happens when the data carry structure the model lacks (e.g. noise
     # in the reported spectra), which the evidence then buys with a rough curve.
-    # Stiffen until the negative part is small.
+    # Stiffen until the negative part is small, as long as the non-negative fit
+    # still explains the data (a narrow band legitimately rings below zero).
+    misfit0 = _nnls_misfit(G, b, cc, t, lam * Om_a + mu * Q)
     while _negative_fraction(G, b, t, lam * Om_a + mu * Q) > MAX_NEGATIVE_FRACTION:
         if lam >= BAYES_LAMBDAS[-1]:
             break
-        lam *= 2.0
+        stiffer = 2.0 * lam
+        if (
+            _nnls_misfit(G, b, cc, t, stiffer * Om_a + mu * Q)
+            > MAX_MISFIT_GROWTH * misfit0
+        ):
+            break
+        lam = stiffer
         e = _evidence(G, b, cc, m, t, lam * Om_a + mu * Q)
     return lam, mu, e
 
@@ -409,6 +417,16 @@ def _choose(
 #: Largest negative part of the unconstrained posterior mean (relative to its
 #: positive part) accepted with the evidence's choice of prior.
 MAX_NEGATIVE_FRACTION = 0.1
+
+
+#: How much the stiffening may raise the non-negative fit's weighted residual.
+MAX_MISFIT_GROWTH = 3.0
+
+
+def _nnls_misfit(G: NDArray, b: NDArray, cc: float, t: float, Lam: NDArray) -> float:
+    """Weighted residual sum of squares of the non-negative MAP at prior ``Lam``."""
+    s = _nnls_quadratic(G + t * Lam, b)
+    return max(float(cc - 2.0 * b @ s + s @ G @ s), 0.0)
 
 
 def _negative_fraction(G: NDArray, b: NDArray, t: float, Lam: NDArray) -> float:
