@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tunespec.core.errors import InputError
+from tunespec.core.errors import InputError, check_names
 from tunespec.core.spectra import Grid, Spectra
 
 __all__ = [
@@ -505,14 +505,13 @@ def reflectance_stats(estimated: Spectra, reference: Spectra) -> ReflectanceStat
     src_r = reference.meta.get("source")
     if len(estimated) == 0:
         raise InputError("estimated reflectances: no patches", path=src_e)
-    missing = [n for n in estimated.names if n not in reference.names]
-    if missing:
-        shown = ", ".join(missing[:20]) + (" ..." if len(missing) > 20 else "")
-        raise InputError(
-            f"reference reflectances: {len(missing)} estimated patch(es) missing: "
-            f"{shown}",
-            path=src_r,
-        )
+    check_names(
+        estimated.names,
+        reference.names,
+        "reference reflectances: {n} estimated patch(es) missing: {names}",
+        path=src_r,
+        limit=20,
+    )
     wl = estimated.wavelength_nm
     grid = Grid(float(wl[0]), float(wl[-1]), estimated.step_nm)
     ref = reference.select(estimated.names, source=src_r).resample(grid, source=src_r)

@@ -28,7 +28,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from tunespec.core.errors import InputError, SingularSystemError
+from tunespec.core.errors import InputError, SingularSystemError, check_names
 from tunespec.core.forward_model import lighting_matrix
 from tunespec.core.responses import CHANNELS, Responses
 from tunespec.core.spectra import Grid, Spectra
@@ -366,14 +366,13 @@ def _source(spectra: Spectra) -> str | None:
 
 
 def _select(spectra: Spectra, names: tuple[str, ...], role: str) -> Spectra:
-    missing = [n for n in names if n not in spectra.names]
-    if missing:
-        shown = ", ".join(missing[:8]) + (" ..." if len(missing) > 8 else "")
-        raise InputError(
-            f"{role}: {len(missing)} name(s) not found: {shown} "
-            f"(have {', '.join(spectra.names[:8])}{' ...' if len(spectra) > 8 else ''})",
-            path=_source(spectra),
-        )
+    have = ", ".join(spectra.names[:8]) + (" ..." if len(spectra) > 8 else "")
+    check_names(
+        names,
+        spectra.names,
+        f"{role}: {{n}} name(s) not found: {{names}} (have {have})",
+        path=_source(spectra),
+    )
     return spectra.select(names)
 
 

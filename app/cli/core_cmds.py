@@ -10,7 +10,7 @@ import numpy as np
 
 from tunespec.app.cli.common import add_grid_option, progress_bar, seed_arg
 from tunespec.core.datasets import read_sensitivities
-from tunespec.core.errors import InputError
+from tunespec.core.errors import InputError, check_names
 from tunespec.core.io.export import read_sensitivity_meta, write_sensitivity_meta
 from tunespec.core.limits import MAX_REFLECTANCE, dumps_json
 from tunespec.core.responses import Responses, read_responses_csv, write_responses_csv
@@ -169,14 +169,13 @@ def _check_names(
     path: Path,
     names: tuple[str, ...],
 ) -> None:
-    missing = [n for n in names if n not in spectra.names]
-    if missing:
-        shown = ", ".join(missing[:6]) + (" ..." if len(missing) > 6 else "")
-        raise InputError(
-            f"{len(missing)} {what} name(s) of the responses are not columns here: "
-            f"{shown}",
-            path=path,
-        )
+    check_names(
+        names,
+        spectra.names,
+        f"{{n}} {what} name(s) of the responses are not columns here: {{names}}",
+        path=path,
+        limit=6,
+    )
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:

@@ -51,7 +51,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tunespec.core.colorimetry import lab_d50, xyz_d50
-from tunespec.core.errors import InputError, read_json
+from tunespec.core.errors import InputError, check_names, read_json
 from tunespec.core.io.cgats import CgatsTable, ti3_table, write_cgats
 from tunespec.core.limits import dumps_json
 from tunespec.core.responses import Responses, write_responses_csv
@@ -494,11 +494,7 @@ def _responses_rgb(
             f"illuminant {illuminant!r} not in the responses "
             f"({', '.join(responses.illuminants)})"
         )
-    missing = [n for n in names if n not in responses.patches]
-    if missing:
-        raise InputError(
-            f"{len(missing)} patch(es) have no responses: {', '.join(missing[:8])}"
-        )
+    check_names(names, responses.patches, "{n} patch(es) have no responses: {names}")
     sub = responses.subset(list(names), [illuminant])
     return sub.rgb[:, 0, :], illuminant
 
