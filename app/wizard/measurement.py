@@ -54,7 +54,13 @@ from tunespec.core.datasets import resource_path
 from tunespec.core.errors import InputError, read_json
 from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import dumps_json
-from tunespec.core.progress import Cancelled, ProgressFn, StopFn, check_stop
+from tunespec.core.progress import (
+    Cancelled,
+    ProgressFn,
+    StopFn,
+    check_stop,
+    sub_progress,
+)
 from tunespec.core.spectra import (
     DEFAULT_GRID,
     Spectra,
@@ -535,13 +541,6 @@ def capture_job(
     )
 
 
-def _staged(progress: ProgressFn | None, lo: float, hi: float) -> ProgressFn | None:
-    """A progress callback mapping [0, 1] onto [lo, hi] of ``progress``."""
-    if progress is None:
-        return None
-    return lambda f: progress(lo + (hi - lo) * f)
-
-
 def _process(
     session_root: Path,
     target_layout: TargetLayout,
@@ -592,7 +591,7 @@ def calibrate_job(
         chart_layout,
         corners,
         out_dir,
-        _staged(progress, 0, 0.6),
+        sub_progress(progress, 0, 0.6),
         should_stop,
     )
     check_stop(should_stop)
@@ -600,7 +599,7 @@ def calibrate_job(
         chart,
         layout_reflectances(chart_layout, grid=DEFAULT_GRID),
         method=method,
-        progress=_staged(progress, 0.6, 1.0),
+        progress=sub_progress(progress, 0.6, 1.0),
         should_stop=should_stop,
     )
     result = CalibrationResult(
@@ -639,7 +638,7 @@ def estimate_job(
         sample_layout,
         corners,
         out_dir,
-        _staged(progress, 0, 0.8),
+        sub_progress(progress, 0, 0.8),
         should_stop,
     )
     check_stop(should_stop)
