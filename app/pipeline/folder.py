@@ -303,8 +303,14 @@ def write_calibration(
 
     out_dir.mkdir(parents=True, exist_ok=True)
     write_spectra_csv(result.sensitivity, out_dir / "sensitivity.csv")
-    # the fitted SPD shift, which the CSV cannot hold (pipeline.estimate needs it)
-    write_sensitivity_meta(out_dir / "sensitivity.csv", result.sensitivity)
+    # the fitted SPD shift (and the covariance), which the CSV cannot hold
+    # (pipeline.estimate and the export need them)
+    covariance = getattr(
+        getattr(result.calibration, "estimate", None), "covariance", None
+    )
+    write_sensitivity_meta(out_dir / "sensitivity.csv", result.sensitivity, covariance)
+    if result.chart is not None:
+        _write_processed(out_dir, result.chart)
     doc = {
         "table1": result.table1.as_dict(),
         "threshold_rgb_mean": result.threshold,
@@ -365,6 +371,8 @@ def write_estimate(
 
     out_dir.mkdir(parents=True, exist_ok=True)
     write_spectra_csv(result.reflectance, out_dir / "reflectance.csv")
+    if result.sample is not None:
+        _write_processed(out_dir, result.sample)
     if result.reference is not None:
         write_spectra_csv(result.reference, out_dir / "reference.csv")
     doc = {
@@ -404,3 +412,75 @@ def read_estimate(folder: Path, sample_root: Path) -> EstimateResult | None:
     except (OSError, ValueError, KeyError, InputError) as exc:
         log.warning("no usable estimate in %s: %s", folder, exc)
         return None
+
+
+# -- the processed sessions beside a result (the export needs no raw frame again) ------
+PROCESSED_FILES = ("responses.csv", "illuminants.csv")
+
+
+def _write_processed(out_dir: Path, processed: Any) -> None:
+    from tunespec.core.processing import write_processed
+
+    write_processed(processed, *(out_dir / name for name in PROCESSED_FILES))
+
+
+def read_processed(
+    result_dir: Path, layout: TargetLayout, warnings: tuple[str, ...] = ()
+) -> Any:
+    """The processed session a calibrate or estimate step left in ``result_dir``.
+
+    The corners are the layout's (``corners_source = "layout"``), as they were used.
+    Returns ``None`` when the files are not there (a folder of an older version).
+    """
+    from tunespec.core.processing import ProcessedSession
+    from tunespec.core.responses import read_responses_csv
+
+    responses_csv, illuminants_csv = (result_dir / n for n in PROCESSED_FILES)
+    if not (responses_csv.is_file() and illuminants_csv.is_file()):
+        return None
+    return ProcessedSession(
+        responses=read_responses_csv(responses_csv),
+        illuminants=read_spectra_csv(illuminants_csv),
+        layout=layout,
+        corners_source="layout",
+        warnings=warnings,
+    )
+
+
+def restore_calibration_steps(
+    result_dir: Path, result: CalibrationResult, grid: Any = None
+) -> tuple[Any, Any] | None:
+    """The processed chart and the ``pipeline.Calibration`` of a restored result.
+
+    Nothing is estimated again: the sensitivities, their covariance and LED
+    corrections come from the files (``core.sensitivity.calibration_from_files``),
+    Table 1 is recomputed from them (``core.stats.calibration_report``). ``None``
+    when the processed chart is not in ``result_dir``.
+    """
+    from dataclasses import replace
+
+    from tunespec.app.pipeline.steps import Calibration
+    from tunespec.core.sensitivity import calibration_from_files
+    from tunespec.core.spectra import DEFAULT_GRID
+    from tunespec.core.stats import calibration_report
+    from tunespec.devices.registry import layout_reflectances
+
+    chart = read_processed(result_dir, result.layout, result.warnings)
+    if chart is None:
+        return None
+    csv = result_dir / "sensitivity.csv"
+    est = calibration_from_files(csv, read_sensitivity_meta(csv))
+    # the sensitivities as restored (with the SPD shift in their meta) and what the
+    # CSV cannot say: the method and the patches the fit left out
+    est = replace(
+        est,
+        sensitivity=result.sensitivity,
+        method=result.method,
+        excluded_patches=result.excluded_patches,
+    )
+    work = grid or DEFAULT_GRID
+    refl = layout_reflectances(result.layout, grid=work).resample(work)
+    report = calibration_report(
+        est, chart.responses, chart.illuminants.resample(work), refl
+    )
+    return chart, Calibration(est, report)

@@ -275,6 +275,8 @@ def _write_results(
             layout=chart.layout,
             excluded_patches=tuple(cal.estimate.excluded_patches),
             warnings=tuple(chart.warnings),
+            calibration=cal,
+            chart=chart,
         ),
         session_fingerprint(folder.chart_dir),
     )
@@ -291,6 +293,8 @@ def _write_results(
             layout=sample.layout,
             clipped=tuple(est.wiener.clipped),
             warnings=tuple(sample.warnings),
+            estimation=est,
+            sample=sample,
         ),
         session_fingerprint(folder.sample_dir),
     )

@@ -43,6 +43,8 @@ from tunespec.app.pipeline.folder import (
     read_calibration,
     read_estimate,
     read_measurement_doc,
+    read_processed,
+    restore_calibration_steps,
     session_fingerprint,
     write_calibration,
     write_estimate,
@@ -590,7 +592,7 @@ def calibrate_job(
         chart_root,
         chart_layout,
         corners,
-        out_dir,
+        None,  # written with the result (pipeline.folder.write_calibration)
         sub_progress(progress, 0, 0.6),
         should_stop,
     )
@@ -637,7 +639,7 @@ def estimate_job(
         sample_root,
         sample_layout,
         corners,
-        out_dir,
+        None,  # written with the result (pipeline.folder.write_estimate)
         sub_progress(progress, 0, 0.8),
         should_stop,
     )
@@ -688,7 +690,11 @@ def export_job(
     from tunespec.devices.registry import layout_reflectances
 
     chart, cal = calibration.chart, calibration.calibration
-    if chart is None or cal is None:
+    if (chart is None or cal is None) and (
+        restored := restore_calibration_steps(folder / CALIBRATION_DIR, calibration)
+    ) is not None:
+        chart, cal = restored
+    if chart is None or cal is None:  # a folder of an older version: process again
         chart = _process(
             folder / CHART_DIR, calibration.layout, "editor", None, None, should_stop
         )
@@ -703,7 +709,11 @@ def export_job(
     sample, est = estimated.sample, estimated.estimation
     if sample is None or est is None:
         assert estimated.layout is not None
-        sample = _process(
+        # the processed sample beside the estimate; only the (closed-form) Wiener
+        # estimate is computed again, from the same numbers
+        sample = read_processed(
+            folder / ESTIMATE_DIR, estimated.layout, estimated.warnings
+        ) or _process(
             folder / SAMPLE_DIR, estimated.layout, "editor", None, None, should_stop
         )
         est = estimate(sample, cal.sensitivity, reference=None)

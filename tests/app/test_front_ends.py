@@ -28,7 +28,9 @@ def _settings(tmp_path, name: str) -> AppSettings:
     )
 
 
-def test_a_cli_measurement_opens_in_the_wizard_with_its_results(qtbot, tmp_path):
+def test_a_cli_measurement_opens_in_the_wizard_with_its_results(
+    qtbot, tmp_path, monkeypatch
+):
     folder = tmp_path / "m"
     result = run_demo(folder, resolution=SIM["resolution"], report_files=False)
     model = Measurement(controller=None, settings=_settings(tmp_path, "a"))  # type: ignore[arg-type]
@@ -54,6 +56,24 @@ def test_a_cli_measurement_opens_in_the_wizard_with_its_results(qtbot, tmp_path)
     np.testing.assert_allclose(
         est.table2.mean_delta_e00, result.table2.mean_delta_e00, rtol=1e-12
     )
+    # the wizard exports the restored results without processing a raw frame or
+    # estimating the sensitivities again
+    from tunespec.app.pipeline.folder import restore_calibration_steps
+    from tunespec.app.wizard import measurement
+
+    restored = restore_calibration_steps(folder / "calibration", cal)
+    assert restored is not None
+    np.testing.assert_allclose(
+        restored[1].table1.mean, result.table1.mean, rtol=1e-9, atol=1e-12
+    )
+
+    def no_processing(*_args, **_kwargs):
+        raise AssertionError("raw frames processed again")
+
+    monkeypatch.setattr(measurement, "_process", no_processing)
+    exported = measurement.export_job(folder / "export", folder, cal, est, {})
+    assert exported.paths["reflectances_csv"].is_file()
+    assert exported.paths["sensitivities_csv"].is_file()
 
 
 def test_a_wizard_measurement_is_resumed_by_the_cli(qtbot, tmp_path):
