@@ -115,6 +115,12 @@ def flat_window(
     (row0, row1, col0, col1)
         The window ``[row0:row1, col0:col1]`` in plane pixels.
 
+    References
+    ----------
+    Trichromatic Reflectance Capture Using a Tunable Light Source (the paper in
+    ``shared/reference``), Eq. 2 (the mean of the white
+    background over this centre window normalises the flat field).
+
     Examples
     --------
     >>> flat_window((512, 768))
