@@ -11,7 +11,7 @@ import numpy as np
 from tunespec.app.cli.common import add_grid_option, progress_bar, seed_arg
 from tunespec.core.datasets import read_sensitivities
 from tunespec.core.errors import InputError, check_names
-from tunespec.core.io.export import read_sensitivity_meta, write_sensitivity_meta
+from tunespec.core.io.export import read_sensitivity_meta, write_sensitivities_csv
 from tunespec.core.limits import MAX_REFLECTANCE, dumps_json
 from tunespec.core.responses import Responses, read_responses_csv, write_responses_csv
 from tunespec.core.spectra import Grid, Spectra, read_spectra_csv, write_spectra_csv
@@ -220,8 +220,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     est = estimate_camera_sensitivity(
         fit, illuminants, reflectances, progress=progress_bar("calibrating"), **kwargs
     )
-    write_spectra_csv(est.sensitivity, args.output)
-    write_sensitivity_meta(args.output, est.sensitivity, est.covariance)
+    write_sensitivities_csv(args.output, est.sensitivity, est.covariance)
     report = calibration_report(
         est, responses, illuminants, reflectances, held_out_patches=held
     )

@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from tunespec.core.errors import InputError, read_json
-from tunespec.core.io.export import read_sensitivity_meta, write_sensitivity_meta
+from tunespec.core.io.export import read_sensitivity_meta, write_sensitivities_csv
 from tunespec.core.io.session import MANIFEST_NAME, atomic_write_text
 from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import dumps_json
@@ -302,13 +302,12 @@ def write_calibration(
     from tunespec.core.io.session import atomic_write_text
 
     out_dir.mkdir(parents=True, exist_ok=True)
-    write_spectra_csv(result.sensitivity, out_dir / "sensitivity.csv")
-    # the fitted SPD shift (and the covariance), which the CSV cannot hold
-    # (pipeline.estimate and the export need them)
+    # with the fitted SPD shift (and the covariance) beside it, which the CSV cannot
+    # hold (pipeline.estimate and the export need them)
     covariance = getattr(
         getattr(result.calibration, "estimate", None), "covariance", None
     )
-    write_sensitivity_meta(out_dir / "sensitivity.csv", result.sensitivity, covariance)
+    write_sensitivities_csv(out_dir / "sensitivity.csv", result.sensitivity, covariance)
     if result.chart is not None:
         _write_processed(out_dir, result.chart)
     doc = {

@@ -74,6 +74,7 @@ __all__ = [
     "write_colorimetry_csv",
     "write_prediction_stats_csv",
     "write_reflectance_stats_csv",
+    "write_sensitivities_csv",
     "write_sensitivity_json",
     "write_sensitivity_meta",
 ]
@@ -104,6 +105,23 @@ def sensitivity_meta_path(sensitivity_csv: str | PathLike[str]) -> Path:
     """``SENSITIVITIES.csv.meta.json``: what a sensitivities CSV cannot hold."""
     p = Path(sensitivity_csv)
     return p.with_name(p.name + ".meta.json")
+
+
+def write_sensitivities_csv(
+    path: str | PathLike[str],
+    sensitivity: Spectra,
+    covariance: NDArray[np.float64] | None = None,
+) -> Path:
+    """Write calibrated sensitivities: the spectral CSV and its ``.meta.json``.
+
+    The one writer of a calibration's result (``tunespec calibrate``, the exports and
+    the wizard's ``calibration/`` folder): the CSV holds the curves, the side file the
+    estimator, the fitted SPD shift or LED corrections and, if given, the covariance
+    (:func:`write_sensitivity_meta`), which ``estimate`` and the report need.
+    """
+    write_spectra_csv(sensitivity, path)
+    write_sensitivity_meta(path, sensitivity, covariance)
+    return Path(path)
 
 
 def write_sensitivity_meta(
@@ -618,6 +636,7 @@ def export_measurement(
     manufacturer: str = "",
     model: str = "",
     created: datetime | str | None = None,
+    sensitivity_covariance: NDArray[np.float64] | None = None,
 ) -> dict[str, Path]:
     """Write every export of a measurement into ``out_dir`` (see the module table).
 
@@ -667,8 +686,9 @@ def export_measurement(
         return paths[kind]
 
     if sensitivity is not None:
-        write_spectra_csv(sensitivity, target("sensitivities_csv"))
-        write_sensitivity_meta(paths["sensitivities_csv"], sensitivity)
+        write_sensitivities_csv(
+            target("sensitivities_csv"), sensitivity, sensitivity_covariance
+        )
         paths["sensitivities_meta"] = sensitivity_meta_path(paths["sensitivities_csv"])
         write_sensitivity_json(
             sensitivity,
