@@ -102,3 +102,31 @@ def test_a_wizard_measurement_is_resumed_by_the_cli(qtbot, tmp_path):
     model.open(folder)
     assert model.restore_calibration() is not None
     assert model.restore_estimate() is not None
+
+
+def test_the_cli_and_the_wizard_jobs_write_identical_results(tmp_path):
+    """The same plan's steps through the CLI and through the wizard's jobs (headless,
+    on the CLI's sessions) give the same files, byte for byte."""
+    import filecmp
+
+    from tunespec.app.pipeline.plan import chart_layout, sample_layout
+    from tunespec.app.wizard import measurement
+    from tunespec.devices.registry import layout_reflectances
+
+    cli = tmp_path / "cli"
+    run_demo(cli, resolution=SIM["resolution"], report_files=False)
+    wiz = tmp_path / "wizard"
+    cal = measurement.calibrate_job(cli / "chart", wiz / "calibration", chart_layout())
+    measurement.estimate_job(
+        cli / "sample",
+        wiz / "estimate",
+        sample_layout(),
+        cal.sensitivity,
+        layout_reflectances(sample_layout()),
+    )
+    for sub in ("calibration", "estimate"):
+        names = sorted(p.name for p in (cli / sub).iterdir())
+        assert names == sorted(p.name for p in (wiz / sub).iterdir())
+        assert "responses.csv" in names
+        for name in names:
+            assert filecmp.cmp(cli / sub / name, wiz / sub / name, shallow=False), name
