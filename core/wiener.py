@@ -189,31 +189,10 @@ def wiener_reflectance(
     >>> bool(np.abs(est.reflectance.values - sg.values[:2]).max() < 0.02)
     True
     """
-    if noise_from not in NOISE_SOURCES:
-        raise InputError(
-            f"noise_from={noise_from!r}: expected one of {', '.join(NOISE_SOURCES)}"
-        )
-    wl = illuminants.wavelength_nm
-    L = _select(illuminants, responses.illuminants, "illuminant spectra").values
-    S = _select(sensitivity, CHANNELS, "camera sensitivity").values
-    _check_grid(sensitivity, wl, "camera sensitivity")
-    if prior is None:
-        from tunespec.core.datasets import load_colorchecker_sg
-
-        prior = load_colorchecker_sg(Grid(float(wl[0]), float(wl[-1]), _step(wl)))
-    _check_grid(prior, wl, "prior reflectances")
-    for spectra, values, names, role in (
-        (illuminants, L, responses.illuminants, "illuminant spectra"),
-        (sensitivity, S, CHANNELS, "camera sensitivity"),
-        (prior, prior.values, prior.names, "prior reflectances"),
-    ):
-        _check_finite(values, names, role, _source(spectra))
-    rgb = responses.rgb
-    _check_responses_finite(responses, rgb, "rgb")
-
-    F = lighting_matrix(L, S, _step(wl))
+    wl, F, mean, K, prior = _wiener_system(
+        responses, illuminants, sensitivity, prior, noise_from, center_prior
+    )
     m_rows = F.shape[0]
-    mean, K = _prior_moments(prior.values, center_prior)
     FK = F @ K  # (3 n_i, n_wl) = (K F^T)^T, K symmetric
     G = FK @ F.T
     G = 0.5 * (G + G.T)  # exact symmetry for the solver; rounding made it inexact
@@ -229,50 +208,17 @@ def wiener_reflectance(
     low = var < ridge_floor
     n_ridged = int(np.count_nonzero(low))
     var = np.where(low, ridge_floor, var)
-
     n_p = len(responses.patches)
-    resid = rgb.reshape(n_p, m_rows) - F @ mean
-    noise = var.reshape(n_p, m_rows)
-    est = np.empty((n_p, wl.size))
-    post_var = np.empty((n_p, wl.size))
-    diag_idx = np.arange(m_rows)
-    prior_var = np.diag(K)
-    for lo in range(0, n_p, _CHUNK):
-        hi = min(lo + _CHUNK, n_p)
-        A = np.repeat(G[None], hi - lo, axis=0)
-        A[:, diag_idx, diag_idx] += noise[lo:hi]
-        # One batched solve for the data and for F K (the posterior covariance);
-        # right-hand sides (chunk, 3 n_i, 1 + n_wl).
-        rhs = np.concatenate(
-            [resid[lo:hi, :, None], np.broadcast_to(FK, (hi - lo, *FK.shape))],
-            axis=2,
-        )
-        try:
-            sol = np.linalg.solve(A, rhs)
-        except np.linalg.LinAlgError as exc:
-            raise SingularSystemError(
-                f"F K F^T + K_e is singular for patches {lo}..{hi - 1}: {exc}"
-            ) from None
-        est[lo:hi] = mean + sol[:, :, 0] @ FK
-        post_var[lo:hi] = prior_var - np.einsum("jl,pjl->pl", FK, sol[:, :, 1:])
-    if not np.all(np.isfinite(est)):
-        bad = [responses.patches[i] for i in np.flatnonzero(~np.isfinite(est).all(1))]
-        raise SingularSystemError(
-            f"non-finite estimate for {len(bad)} patch(es), e.g. {bad[0]!r}: "
-            "F K F^T + K_e is numerically singular"
-        )
-    # The posterior variance is a difference of nearly equal numbers where the data
-    # pin the spectrum down; rounding can make it slightly negative.
-    np.maximum(post_var, 0.0, out=post_var)
-
-    clipped: tuple[str, ...] = ()
-    n_clipped = 0
-    if clip:
-        out = (est < 0.0) | (est > 1.0)
-        n_clipped = int(np.count_nonzero(out))
-        clipped = tuple(responses.patches[i] for i in np.flatnonzero(out.any(axis=1)))
-        est = np.clip(est, 0.0, 1.0)
-
+    est, post_var = _solve_patchwise(
+        G,
+        FK,
+        mean,
+        responses.rgb.reshape(n_p, m_rows) - F @ mean,
+        var.reshape(n_p, m_rows),
+        np.diag(K),
+        responses.patches,
+    )
+    est, clipped, n_clipped = _clip_estimate(est, responses.patches, clip)
     reflectance = Spectra(
         wl, est, responses.patches, {"source": "wiener_reflectance (Eq. 5)"}
     )
@@ -292,6 +238,116 @@ def wiener_reflectance(
             "n_ridged": n_ridged,
         },
     )
+
+
+def _default_prior(wl: NDArray[np.float64]) -> Spectra:
+    """The default prior of :func:`wiener_reflectance`: the ColorChecker SG on ``wl``."""
+    from tunespec.core.datasets import load_colorchecker_sg
+
+    return load_colorchecker_sg(Grid(float(wl[0]), float(wl[-1]), _step(wl)))
+
+
+def _wiener_system(
+    responses: Responses,
+    illuminants: Spectra,
+    sensitivity: Spectra,
+    prior: Spectra | None,
+    noise_from: str,
+    center_prior: bool,
+) -> tuple[
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    Spectra,
+]:
+    """Checked inputs of Eq. 5: the grid, ``F`` (Eq. 1/5), the prior's mean and
+    covariance ``K``, and the prior (default the ColorChecker SG)."""
+    if noise_from not in NOISE_SOURCES:
+        raise InputError(
+            f"noise_from={noise_from!r}: expected one of {', '.join(NOISE_SOURCES)}"
+        )
+    wl = illuminants.wavelength_nm
+    L = _select(illuminants, responses.illuminants, "illuminant spectra").values
+    S = _select(sensitivity, CHANNELS, "camera sensitivity").values
+    _check_grid(sensitivity, wl, "camera sensitivity")
+    if prior is None:
+        prior = _default_prior(wl)
+    _check_grid(prior, wl, "prior reflectances")
+    for spectra, values, names, role in (
+        (illuminants, L, responses.illuminants, "illuminant spectra"),
+        (sensitivity, S, CHANNELS, "camera sensitivity"),
+        (prior, prior.values, prior.names, "prior reflectances"),
+    ):
+        _check_finite(values, names, role, _source(spectra))
+    rgb = responses.rgb
+    _check_responses_finite(responses, rgb, "rgb")
+
+    F = lighting_matrix(L, S, _step(wl))
+    mean, K = _prior_moments(prior.values, center_prior)
+    return wl, F, mean, K, prior
+
+
+def _solve_patchwise(
+    G: NDArray[np.float64],
+    FK: NDArray[np.float64],
+    mean: NDArray[np.float64],
+    resid: NDArray[np.float64],
+    noise: NDArray[np.float64],
+    prior_var: NDArray[np.float64],
+    patches: tuple[str, ...],
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Eq. 5-6 per patch with its own noise ``K_e``: the estimates and the diagonal
+    of their posterior covariance, solved in batches."""
+    m_rows = G.shape[0]
+    n_p = resid.shape[0]
+    est = np.empty((n_p, mean.size))
+    post_var = np.empty((n_p, mean.size))
+    diag_idx = np.arange(m_rows)
+    for lo in range(0, n_p, _CHUNK):
+        hi = min(lo + _CHUNK, n_p)
+        A = np.repeat(G[None], hi - lo, axis=0)
+        A[:, diag_idx, diag_idx] += noise[lo:hi]
+        # One batched solve for the data and for F K (the posterior covariance);
+        # right-hand sides (chunk, 3 n_i, 1 + n_wl).
+        rhs = np.concatenate(
+            [resid[lo:hi, :, None], np.broadcast_to(FK, (hi - lo, *FK.shape))],
+            axis=2,
+        )
+        try:
+            sol = np.linalg.solve(A, rhs)
+        except np.linalg.LinAlgError as exc:
+            raise SingularSystemError(
+                f"F K F^T + K_e is singular for patches {lo}..{hi - 1}: {exc}"
+            ) from None
+        est[lo:hi] = mean + sol[:, :, 0] @ FK
+        post_var[lo:hi] = prior_var - np.einsum("jl,pjl->pl", FK, sol[:, :, 1:])
+    if not np.all(np.isfinite(est)):
+        bad = [patches[i] for i in np.flatnonzero(~np.isfinite(est).all(1))]
+        raise SingularSystemError(
+            f"non-finite estimate for {len(bad)} patch(es), e.g. {bad[0]!r}: "
+            "F K F^T + K_e is numerically singular"
+        )
+    # The posterior variance is a difference of nearly equal numbers where the data
+    # pin the spectrum down; rounding can make it slightly negative.
+    np.maximum(post_var, 0.0, out=post_var)
+
+    return est, post_var
+
+
+def _clip_estimate(
+    est: NDArray[np.float64], patches: tuple[str, ...], clip: bool
+) -> tuple[NDArray[np.float64], tuple[str, ...], int]:
+    """Reflectances clipped to [0, 1], the patches clipped and the samples clipped."""
+    clipped: tuple[str, ...] = ()
+    n_clipped = 0
+    if clip:
+        out = (est < 0.0) | (est > 1.0)
+        n_clipped = int(np.count_nonzero(out))
+        clipped = tuple(patches[i] for i in np.flatnonzero(out.any(axis=1)))
+        est = np.clip(est, 0.0, 1.0)
+
+    return est, clipped, n_clipped
 
 
 def _prior_moments(
