@@ -193,37 +193,18 @@ def wiener_reflectance(
         responses, illuminants, sensitivity, prior, noise_from, center_prior
     )
     m_rows = F.shape[0]
-    FK = F @ K  # (3 n_i, n_wl) = (K F^T)^T, K symmetric
-    G = FK @ F.T
-    G = 0.5 * (G + G.T)  # exact symmetry for the solver; rounding made it inexact
-    scale = float(np.trace(G)) / m_rows
-    if not (np.isfinite(scale) and scale > 0.0):
-        raise SingularSystemError(
-            "F K F^T is zero: the illuminants are dark, the sensitivity is zero or "
-            "the prior varies only where the camera sees nothing"
-        )
-
-    var = _noise_variance(responses, noise_std, noise_from)
-    ridge_floor = RIDGE_RELATIVE * scale
-    low = var < ridge_floor
-    n_ridged = int(np.count_nonzero(low))
-    var = np.where(low, ridge_floor, var)
-    n_p = len(responses.patches)
+    FK, G, scale = _gram(F, K)
+    var, ridge_floor, n_ridged = _ridged(
+        _noise_variance(responses, noise_std, noise_from), scale
+    )
+    patches, n_p = responses.patches, len(responses.patches)
+    resid = responses.rgb.reshape(n_p, m_rows) - F @ mean
     est, post_var = _solve_patchwise(
-        G,
-        FK,
-        mean,
-        responses.rgb.reshape(n_p, m_rows) - F @ mean,
-        var.reshape(n_p, m_rows),
-        np.diag(K),
-        responses.patches,
+        G, FK, mean, resid, var.reshape(n_p, m_rows), np.diag(K), patches
     )
-    est, clipped, n_clipped = _clip_estimate(est, responses.patches, clip)
-    reflectance = Spectra(
-        wl, est, responses.patches, {"source": "wiener_reflectance (Eq. 5)"}
-    )
+    est, clipped, n_clipped = _clip_estimate(est, patches, clip)
     return WienerEstimate(
-        reflectance=reflectance,
+        reflectance=Spectra(wl, est, patches, {"source": "wiener_reflectance (Eq. 5)"}),
         clipped=clipped,
         n_clipped_samples=n_clipped,
         variance=post_var,
@@ -245,6 +226,31 @@ def _default_prior(wl: NDArray[np.float64]) -> Spectra:
     from tunespec.core.datasets import load_colorchecker_sg
 
     return load_colorchecker_sg(Grid(float(wl[0]), float(wl[-1]), _step(wl)))
+
+
+def _gram(
+    F: NDArray[np.float64], K: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+    """``F K``, ``G = F K F^T`` of Eq. 5 (exactly symmetric) and its mean diagonal."""
+    FK = F @ K  # (3 n_i, n_wl) = (K F^T)^T, K symmetric
+    G = FK @ F.T
+    G = 0.5 * (G + G.T)  # exact symmetry for the solver; rounding made it inexact
+    scale = float(np.trace(G)) / F.shape[0]
+    if not (np.isfinite(scale) and scale > 0.0):
+        raise SingularSystemError(
+            "F K F^T is zero: the illuminants are dark, the sensitivity is zero or "
+            "the prior varies only where the camera sees nothing"
+        )
+    return FK, G, scale
+
+
+def _ridged(
+    var: NDArray[np.float64], scale: float
+) -> tuple[NDArray[np.float64], float, int]:
+    """Noise variances floored at ``RIDGE_RELATIVE * scale``, the floor, how many."""
+    ridge_floor = RIDGE_RELATIVE * scale
+    low = var < ridge_floor
+    return np.where(low, ridge_floor, var), ridge_floor, int(np.count_nonzero(low))
 
 
 def _wiener_system(
