@@ -23,6 +23,14 @@ METHOD_CHOICES = ("bayes", "pca", "smooth")
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the core subcommands."""
+    _add_calibrate(sub)
+    _add_estimate(sub)
+    _add_evaluate(sub)
+    _add_simulate_responses(sub)
+
+
+def _add_calibrate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The ``calibrate`` subcommand."""
     p = sub.add_parser(
         "calibrate",
         help="estimate camera sensitivities from a chart under all LEDs (Table 1)",
@@ -80,6 +88,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--stats", type=Path, help="write the statistics as JSON")
     p.set_defaults(func=cmd_calibrate, output_files=("output", "stats"))
 
+
+def _add_estimate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The ``estimate`` subcommand."""
     p = sub.add_parser(
         "estimate",
         help="Wiener reflectance estimation (Eq. 5-6)",
@@ -118,6 +129,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("-o", "--output", required=True, type=Path)
     p.set_defaults(func=cmd_estimate, output_files=("output",))
 
+
+def _add_evaluate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The ``evaluate`` subcommand."""
     p = sub.add_parser(
         "evaluate",
         help="spectral RMS and CIEDE2000 (D50) against references (Table 2)",
@@ -128,6 +142,11 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--stats", type=Path, help="write the statistics as JSON")
     p.set_defaults(func=cmd_evaluate, output_files=("stats",))
 
+
+def _add_simulate_responses(
+    sub: argparse._SubParsersAction[argparse.ArgumentParser],
+) -> None:
+    """The ``simulate-responses`` subcommand."""
     p = sub.add_parser(
         "simulate-responses",
         help="forward model (Eq. 1) with photon and read noise",
