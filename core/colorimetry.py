@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tunespec.core.errors import InputError
+from tunespec.core.errors import InputError, check_names
 from tunespec.core.spectra import Grid, Spectra
 
 __all__ = [
@@ -119,6 +119,12 @@ def astm_e308_weights_d50(wavelength_nm: ArrayLike) -> NDArray[np.float64]:
     ------
     InputError
         Too short a range or wavelengths not strictly increasing.
+
+    References
+    ----------
+    ASTM E308-15, Standard Practice for Computing the Colors of Objects by Using the
+    CIE System (weighting tables on the measurement grid); CIE 015:2018 Colorimetry (1931 2°
+    observer, illuminant D50).
 
     Examples
     --------
@@ -276,6 +282,11 @@ def xyz_to_lab_d50(XYZ: ArrayLike) -> NDArray[np.float64]:
     (..., 3)
         L*, a*, b*.
 
+    References
+    ----------
+    CIE 015:2018 Colorimetry (the CIE 1976 L*a*b* equations); ICC.1:2010 (the D50
+    PCS white 0.9642, 1, 0.8249).
+
     Examples
     --------
     >>> (xyz_to_lab_d50([96.42, 100.0, 82.49]).round(12) + 0.0).tolist()
@@ -301,6 +312,11 @@ def lab_d50(
     -------
     (..., 3)
         L*, a*, b*.
+
+    References
+    ----------
+    ASTM E308-15 (tristimulus integration); CIE 015:2018 (CIE 1976 L*a*b*);
+    ICC.1:2010 (D50 white).
 
     Examples
     --------
@@ -355,6 +371,12 @@ def spectral_rms(
     -------
     (...)
         ``sqrt(mean((estimated - reference)**2, axis=-1))``.
+
+    References
+    ----------
+    Trichromatic Reflectance Capture Using a Tunable Light Source (the paper in
+    ``shared/reference``), Table 2 (spectral RMS error
+    ``sqrt(mean_lambda (r_hat - r)^2)``).
 
     Examples
     --------
@@ -505,14 +527,13 @@ def reflectance_stats(estimated: Spectra, reference: Spectra) -> ReflectanceStat
     src_r = reference.meta.get("source")
     if len(estimated) == 0:
         raise InputError("estimated reflectances: no patches", path=src_e)
-    missing = [n for n in estimated.names if n not in reference.names]
-    if missing:
-        shown = ", ".join(missing[:20]) + (" ..." if len(missing) > 20 else "")
-        raise InputError(
-            f"reference reflectances: {len(missing)} estimated patch(es) missing: "
-            f"{shown}",
-            path=src_r,
-        )
+    check_names(
+        estimated.names,
+        reference.names,
+        "reference reflectances: {n} estimated patch(es) missing: {names}",
+        path=src_r,
+        limit=20,
+    )
     wl = estimated.wavelength_nm
     grid = Grid(float(wl[0]), float(wl[-1]), estimated.step_nm)
     ref = reference.select(estimated.names, source=src_r).resample(grid, source=src_r)

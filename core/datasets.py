@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from tunespec.core.errors import InputError
+from tunespec.core.errors import InputError, check_names
 from tunespec.core.spectra import DEFAULT_GRID, Grid, Spectra, read_spectra_csv
 
 __all__ = [
@@ -107,11 +107,12 @@ def read_sensitivities(path: str | PathLike[str], grid: Grid | None = None) -> S
         s = read_rawtoaces_json(path)
     else:
         s = read_spectra_csv(path)
-        missing = [c for c in ("R", "G", "B") if c not in s.names]
-        if missing:
-            raise InputError(
-                f"missing column(s) {', '.join(missing)}; expected R, G, B", path=path
-            )
+        check_names(
+            ("R", "G", "B"),
+            s.names,
+            "missing column(s) {names}; expected R, G, B",
+            path=path,
+        )
         s = s.select(["R", "G", "B"])
     s = Spectra(s.wavelength_nm, s.values, s.names, {**s.meta, "source": str(path)})
     return s if grid is None else s.resample(grid, source=str(path))

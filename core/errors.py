@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from os import PathLike
 from typing import Any
 
@@ -103,3 +104,33 @@ def read_json(path: str | PathLike[str]) -> Any:
     from tunespec.core.limits import read_json as _read_json
 
     return _read_json(path)
+
+
+def check_names(
+    wanted: Iterable[str],
+    available: Iterable[str],
+    message: str = "{n} name(s) not found: {names}",
+    *,
+    path: str | PathLike[str] | None = None,
+    limit: int = 8,
+) -> None:
+    """Raise :class:`InputError` naming the ``wanted`` names not in ``available``.
+
+    The one "names not found" check of the readers and selections. ``message`` has
+    ``{n}`` replaced by how many are missing and ``{names}`` by the first ``limit`` of
+    them (`` ...`` when there are more); names are never interpreted as a format.
+
+    Examples
+    --------
+    >>> try:
+    ...     check_names(["A1", "Z9"], ["A1", "A2"])
+    ... except InputError as exc:
+    ...     print(exc)
+    1 name(s) not found: Z9
+    """
+    have = set(available)
+    missing = [n for n in wanted if n not in have]
+    if missing:
+        shown = ", ".join(missing[:limit]) + (" ..." if len(missing) > limit else "")
+        text = message.replace("{n}", str(len(missing))).replace("{names}", shown)
+        raise InputError(text, path=path)

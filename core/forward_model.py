@@ -46,6 +46,12 @@ def render_rgb(
     (n_p, n_i, 3)
         Responses.
 
+    References
+    ----------
+    Trichromatic Reflectance Capture Using a Tunable Light Source (the paper in
+    ``shared/reference``), Eq. 1 (camera response as the sum over
+    wavelengths of sensitivity x illuminant x reflectance).
+
     Examples
     --------
     >>> import numpy as np
@@ -65,6 +71,12 @@ def lighting_matrix(
 
     Rows are ordered illuminant-major, ``(i1 R, i1 G, i1 B, i2 R, ...)``, matching
     ``render_rgb(r, i, S).reshape(n_p, -1)``, so that ``render == r @ F.T``.
+
+    References
+    ----------
+    Trichromatic Reflectance Capture Using a Tunable Light Source (the paper in
+    ``shared/reference``), Eq. 1 and 5 (the stacked matrix of
+    sensitivity x illuminant products that maps a reflectance to its responses).
 
     Examples
     --------

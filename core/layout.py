@@ -304,6 +304,12 @@ def _sg_names(rows: int, cols: int) -> tuple[str, ...]:
 def homography_from_corners(src: ArrayLike, dst: ArrayLike) -> NDArray[np.float64]:
     """The 3x3 homography taking 4 ``src`` points to 4 ``dst`` points (OpenCV).
 
+    References
+    ----------
+    R. Hartley and A. Zisserman, Multiple View Geometry in Computer Vision, 2nd ed.,
+    Cambridge University Press (2004), Sec. 4.1 (the direct linear transform), as
+    OpenCV's ``getPerspectiveTransform``.
+
     Examples
     --------
     >>> import numpy as np
@@ -323,7 +329,13 @@ def homography_from_corners(src: ArrayLike, dst: ArrayLike) -> NDArray[np.float6
 
 
 def apply_homography(H: ArrayLike, points: ArrayLike) -> NDArray[np.float64]:
-    """Map points (..., 2) through the homography ``H`` (3, 3)."""
+    """Map points (..., 2) through the homography ``H`` (3, 3).
+
+    References
+    ----------
+    R. Hartley and A. Zisserman, Multiple View Geometry in Computer Vision, 2nd ed.
+    (2004), Sec. 2.3 (projective transformation of homogeneous points, x' = H x).
+    """
     H = np.asarray(H, dtype=np.float64)
     p = np.asarray(points, dtype=np.float64)
     flat = p.reshape(-1, 2)

@@ -115,6 +115,12 @@ def flat_window(
     (row0, row1, col0, col1)
         The window ``[row0:row1, col0:col1]`` in plane pixels.
 
+    References
+    ----------
+    Trichromatic Reflectance Capture Using a Tunable Light Source (the paper in
+    ``shared/reference``), Eq. 2 (the mean of the white
+    background over this centre window normalises the flat field).
+
     Examples
     --------
     >>> flat_window((512, 768))
@@ -352,6 +358,11 @@ class _RoiGeometry:
             np.add.reduceat(u64 * v64, starts),
             np.add.reduceat(v64 * v64, starts),
         )
+
+    @property
+    def n_patch_px(self) -> int:
+        """ROI pixels of all patches together (they come first in the gathered rows)."""
+        return int(self.n.sum())
 
     def sums(self, x: NDArray[np.float32]) -> NDArray[np.float64]:
         """Per-ROI sums along the last axis, accumulated in float64."""
@@ -675,7 +686,6 @@ def process_session(
     ----------
     Trichromatic Reflectance Capture Using a Tunable Light Source, Eq. 2 and 6.
     """
-    load = loader or load_raw
     layout = layout or session.layout
     if layout is None:
         raise InputError(
@@ -688,6 +698,88 @@ def process_session(
     whites = frames_by_channel(frames, "white")
     targets = frames_by_channel(frames, "target")
     wanted = list(channels) if channels is not None else list(session.settings.channels)
+    use, warnings = _usable_channels(
+        session,
+        whites,
+        targets,
+        wanted,
+        allow_incomplete=allow_incomplete,
+        verify=verify,
+    )
+    dark_ids = {
+        d.id
+        for c in use
+        for f in (*whites[c], *targets[c])
+        for d in find_darks(frames, f.exposure_s, f.iso)
+    }
+    total = len(dark_ids) + sum(len(whites[c]) + len(targets[c]) for c in use)
+    reader = _FrameReader(session, loader or load_raw, total, progress, should_stop)
+
+    # -- geometry: corners, then ROIs rasterised once ---------------------------------
+    first = _detection_channel(use)
+    layout, source, residual, preloaded = _place_corners(
+        session, layout, corners, whites, targets, use, reader
+    )
+    rois, window = _session_rois(layout, whites[first][0], preloaded, reader, window_px)
+
+    # -- per channel: darks, brackets, Eq. 2, statistics ------------------------------
+    acc = _ChannelStats.empty(layout, use, _RoiGeometry.of(rois, layout.n_patches))
+    for c in [first, *[c for c in use if c != first]]:
+        acc.add(session, c, reader.pixels(whites[c]), reader.pixels(targets[c]))
+        ref = targets[c][0]
+        acc.add_spd(c, session.read_spd(ref), ref.exposure_s)
+    warnings.extend(acc.warnings())
+    n_px = rois.n_pixels
+    n_patch = layout.n_patches
+    return ProcessedSession(
+        responses=acc.responses(n_px[:n_patch]),
+        illuminants=acc.illuminants(session),
+        layout=layout,
+        corners_source=source,
+        flagged=tuple(acc.flagged),
+        warnings=tuple(warnings),
+        corner_residual_px=residual,
+        stats={
+            "frames_read": reader.done,
+            "roi_pixels_per_patch_min": int(n_px[:n_patch].min()),
+            "flat_window_px": window,
+            "flat_fields_borrowed": acc.n_borrowed,
+        },
+    )
+
+
+def _session_rois(
+    layout: TargetLayout,
+    first_white: FrameRecord,
+    preloaded: dict[str, RawFrame],
+    reader: _FrameReader,
+    window_px: int,
+) -> tuple[RoiSet, int]:
+    """The patch ROIs and the flat-field window, rasterised once for the session, and
+    the window's side; ``reader`` gathers them from now on."""
+    # the plane shape comes from a frame processing reads first anyway
+    if first_white.id not in preloaded:
+        preloaded[first_white.id] = reader.read(first_white)
+    shape = preloaded[first_white.id].shape
+    r0, r1, c0, c1 = flat_window(shape, window_px)
+    rois = RoiSet.from_quads(
+        layout.patch_names, full_to_plane_px(layout.roi_quads_px()), shape
+    ).with_window(_FLAT, r0, r1, c0, c1)
+    reader.use_rois(rois, preloaded)
+    return rois, r1 - r0
+
+
+def _usable_channels(
+    session: Session,
+    whites: dict[str, list[FrameRecord]],
+    targets: dict[str, list[FrameRecord]],
+    wanted: Sequence[str],
+    *,
+    allow_incomplete: bool,
+    verify: bool,
+) -> tuple[list[str], list[str]]:
+    """The channels with every frame (and its darks) in, and warnings for the rest."""
+    frames = session.frames
     warnings: list[str] = []
     missing_specs = session.missing(verify=verify)
     incomplete = {s.channel for s in missing_specs if s.channel is not None}
@@ -716,51 +808,20 @@ def process_session(
         )
     if not use:
         raise InputError("no complete channel to process", path=session.manifest_path)
+    return use, warnings
 
-    dark_ids = {
-        d.id
-        for c in use
-        for f in (*whites[c], *targets[c])
-        for d in find_darks(frames, f.exposure_s, f.iso)
-    }
-    total = len(dark_ids) + sum(len(whites[c]) + len(targets[c]) for c in use)
-    done = 0
 
-    def step() -> None:
-        nonlocal done
-        done += 1
-        report(progress, done / total)
-        check_stop(should_stop)
-
-    retake = f"retake it (tunespec capture --out {session.root} --retake {{}})"
-    first_read: list[tuple[str, tuple[int, ...], str]] = []
-
-    def read(rec: FrameRecord) -> RawFrame:
-        check_stop(should_stop)
-        try:
-            frame = load(session.path_of(rec))
-        except InputError as exc:
-            raise InputError(
-                f"frame {rec.id}: {exc}; {retake.format(rec.id)}"
-            ) from None
-        # ROIs are rasterised once for one mosaic geometry: a frame of another size
-        # (resumed at another resolution or with another camera) would be read at
-        # the wrong photosites, or out of bounds
-        geometry = (frame.mosaic.shape, frame.cfa_pattern)
-        if not first_read:
-            first_read.append((rec.id, *geometry))
-        elif geometry != first_read[0][1:]:
-            ref_id, (h, w), cfa = first_read[0]
-            raise InputError(
-                f"frame {rec.id} is a {geometry[0][1]}x{geometry[0][0]} "
-                f"{geometry[1]} mosaic but frame {ref_id} is {w}x{h} {cfa}: all "
-                f"frames of a session need the same camera and raw size; "
-                f"{retake.format(rec.id)}",
-                path=session.manifest_path,
-            )
-        return frame
-
-    # -- geometry: corners, then ROIs rasterised once ---------------------------------
+def _place_corners(
+    session: Session,
+    layout: TargetLayout,
+    corners: str | ArrayLike | None,
+    whites: dict[str, list[FrameRecord]],
+    targets: dict[str, list[FrameRecord]],
+    use: Sequence[str],
+    reader: _FrameReader,
+) -> tuple[TargetLayout, str, float, dict[str, RawFrame]]:
+    """The layout with the corners to use, their source, the detection residual and
+    the frames the detection read (processing reads them again otherwise)."""
     if isinstance(corners, str) and corners not in ("auto", "layout"):
         raise InputError(
             f"corners must be 'auto', 'layout' or 4 points, got {corners!r}"
@@ -768,51 +829,104 @@ def process_session(
     mode = (
         corners if corners is not None else ("layout" if layout.corners_px else "auto")
     )
-    residual = float("nan")
-    first = _detection_channel(use)
-    order = [first, *[c for c in use if c != first]]
-    preloaded: dict[str, RawFrame] = {}
     if isinstance(mode, str) and mode == "auto":
-        found, w_frame, t_frame = _detect_in_session(whites, targets, use, layout, read)
-        layout = layout.with_corners(found.corners_px)
-        residual = found.residual_px
-        source = "auto"
+        found, w_frame, t_frame = _detect_in_session(
+            whites, targets, use, layout, reader.read
+        )
         preloaded = {found.white_id: w_frame, found.target_id: t_frame}
-    elif isinstance(mode, str):
+        return (
+            layout.with_corners(found.corners_px),
+            "auto",
+            found.residual_px,
+            preloaded,
+        )
+    if isinstance(mode, str):
         if layout.corners_px is None:
             raise InputError(
                 "corners='layout' but the layout has no corners_px",
                 path=session.manifest_path,
             )
-        source = "layout"
-    else:
-        layout = layout.with_corners(mode)
-        source = "given"
+        return layout, "layout", float("nan"), {}
+    return layout.with_corners(mode), "given", float("nan"), {}
 
-    # the plane shape comes from a frame processing reads first anyway
-    first_white = whites[first][0]
-    if first_white.id not in preloaded:
-        preloaded[first_white.id] = read(first_white)
-    shape = preloaded[first_white.id].shape
-    r0, r1, c0, c1 = flat_window(shape, window_px)
-    rois = RoiSet.from_quads(
-        layout.patch_names, full_to_plane_px(layout.roi_quads_px()), shape
-    ).with_window(_FLAT, r0, r1, c0, c1)
-    n_px = rois.n_pixels
-    n_patch = layout.n_patches
-    n_patch_px = int(n_px[:n_patch].sum())
 
-    # -- per channel: darks, brackets, Eq. 2, statistics ------------------------------
-    dark_cache: dict[tuple[float, int], _Pixels] = {}
+class _FrameReader:
+    """Reads a session's frames once each: progress, cancellation, one mosaic geometry,
+    darks averaged per (exposure, ISO) and brackets merged (ROI pixels only)."""
 
-    def dark_for(rec: FrameRecord) -> _Pixels:
+    def __init__(
+        self,
+        session: Session,
+        load: Loader,
+        total: int,
+        progress: ProgressFn | None,
+        should_stop: StopFn | None,
+    ) -> None:
+        self._session = session
+        self._load = load
+        self._total = total
+        self._progress = progress
+        self._should_stop = should_stop
+        self._retake = (
+            f"retake it (tunespec capture --out {session.root} --retake {{}})"
+        )
+        self._first: tuple[str, tuple[int, ...], str] | None = None
+        self._rois: RoiSet | None = None
+        self._preloaded: dict[str, RawFrame] = {}
+        self._darks: dict[tuple[float, int], _Pixels] = {}
+        self.done = 0
+
+    def step(self) -> None:
+        self.done += 1
+        report(self._progress, self.done / self._total)
+        check_stop(self._should_stop)
+
+    def read(self, rec: FrameRecord) -> RawFrame:
+        check_stop(self._should_stop)
+        try:
+            frame = self._load(self._session.path_of(rec))
+        except InputError as exc:
+            raise InputError(
+                f"frame {rec.id}: {exc}; {self._retake.format(rec.id)}"
+            ) from None
+        # ROIs are rasterised once for one mosaic geometry: a frame of another size
+        # (resumed at another resolution or with another camera) would be read at
+        # the wrong photosites, or out of bounds
+        geometry = (frame.mosaic.shape, frame.cfa_pattern)
+        if self._first is None:
+            self._first = (rec.id, *geometry)
+        elif geometry != self._first[1:]:
+            ref_id, (h, w), cfa = self._first
+            raise InputError(
+                f"frame {rec.id} is a {geometry[0][1]}x{geometry[0][0]} "
+                f"{geometry[1]} mosaic but frame {ref_id} is {w}x{h} {cfa}: all "
+                f"frames of a session need the same camera and raw size; "
+                f"{self._retake.format(rec.id)}",
+                path=self._session.manifest_path,
+            )
+        return frame
+
+    def use_rois(self, rois: RoiSet, preloaded: dict[str, RawFrame]) -> None:
+        """Gather these ROIs from now on; ``preloaded`` frames are not read again."""
+        self._rois = rois
+        self._preloaded = preloaded
+
+    def _gather(self, rec: FrameRecord) -> _Pixels:
+        assert self._rois is not None
+        frame = self._preloaded.pop(rec.id, None)
+        return _Pixels(
+            *self._rois.gather(frame if frame is not None else self.read(rec))
+        )
+
+    def dark_for(self, rec: FrameRecord) -> _Pixels:
+        """The mean dark (ROI pixels) at the frame's exposure and ISO."""
         key = (rec.exposure_s, rec.iso)
-        if key not in dark_cache:
+        if key not in self._darks:
             acc: _Pixels | None = None
-            darks = find_darks(frames, rec.exposure_s, rec.iso)
+            darks = find_darks(self._session.frames, rec.exposure_s, rec.iso)
             for d in darks:
-                px = _Pixels(*rois.gather(read(d)))
-                step()
+                px = self._gather(d)
+                self.step()
                 if acc is None:
                     acc = px
                 else:
@@ -820,32 +934,46 @@ def process_session(
             assert acc is not None  # checked above: every frame has its darks
             if len(darks) > 1:
                 acc.values *= np.float32(1.0 / len(darks))
-            dark_cache[key] = acc
-        return dark_cache[key]
+            self._darks[key] = acc
+        return self._darks[key]
 
-    def pixels(records: Sequence[FrameRecord]) -> _Pixels:
+    def pixels(self, records: Sequence[FrameRecord]) -> _Pixels:
+        """Dark-subtracted ROI pixels of a bracket series, merged."""
         got = []
         for rec in records:
-            frame = preloaded.pop(rec.id, None)
-            got.append(_Pixels(*rois.gather(frame if frame is not None else read(rec))))
-            del frame
-            step()
+            got.append(self._gather(rec))
+            self.step()
         return _merge_brackets(
-            got, [dark_for(r) for r in records], [r.exposure_s for r in records]
+            got, [self.dark_for(r) for r in records], [r.exposure_s for r in records]
         )
 
-    geo = _RoiGeometry.of(rois, n_patch)
-    n_borrowed = 0
-    rgb = np.zeros((n_patch, len(use), 3))
-    std = np.zeros_like(rgb)
-    sat = np.zeros((n_patch, len(use)))
-    spds: dict[str, NDArray[np.float64]] = {}
+
+@dataclass
+class _ChannelStats:
+    """Per-channel results collected into responses and illuminants."""
+
+    layout: TargetLayout
+    use: list[str]
+    geo: _RoiGeometry
+    rgb: NDArray[np.float64]
+    std: NDArray[np.float64]
+    sat: NDArray[np.float64]
+    spds: dict[str, NDArray[np.float64]] = field(default_factory=dict)
     wl_nm: NDArray[np.float64] | None = None
-    flagged: list[tuple[str, str]] = []
-    for c in order:
-        j = use.index(c)
-        white = pixels(whites[c])
-        target = pixels(targets[c])
+    flagged: list[tuple[str, str]] = field(default_factory=list)
+    n_borrowed: int = 0
+
+    @classmethod
+    def empty(
+        cls, layout: TargetLayout, use: list[str], geo: _RoiGeometry
+    ) -> _ChannelStats:
+        rgb = np.zeros((layout.n_patches, len(use), 3))
+        sat = np.zeros((layout.n_patches, len(use)))
+        return cls(layout, use, geo, rgb, np.zeros_like(rgb), sat)
+
+    def add(self, session: Session, c: str, white: _Pixels, target: _Pixels) -> None:
+        """Flat field (Eq. 2) and ROI statistics of channel ``c``."""
+        n_patch_px = self.geo.n_patch_px
         flat = white.values[:, n_patch_px:]
         flat_ok = ~white.saturated[n_patch_px:]
         if flat_ok.sum() < 0.5 * flat_ok.size:
@@ -856,60 +984,57 @@ def process_session(
             )
         mean_b = flat[:, flat_ok].astype(np.float64).mean(axis=1)  # Eq. 2's mean A_B
         a_flat, borrowed = _flat_field(  # Eq. 2
-            target.values[:, :n_patch_px], white.values[:, :n_patch_px], mean_b, geo
+            target.values[:, :n_patch_px],
+            white.values[:, :n_patch_px],
+            mean_b,
+            self.geo,
         )
-        n_borrowed += int(borrowed.sum())
+        self.n_borrowed += int(borrowed.sum())
         clipped = target.saturated[:n_patch_px] | white.saturated[:n_patch_px]
-        m, s, f = _patch_stats(a_flat, clipped, geo)
-        rgb[:, j], std[:, j], sat[:, j] = m, s, f
+        m, s, f = _patch_stats(a_flat, clipped, self.geo)
+        j = self.use.index(c)
+        self.rgb[:, j], self.std[:, j], self.sat[:, j] = m, s, f
         for i in np.nonzero(f > SATURATION_TOLERANCE)[0]:
-            flagged.append((layout.patch_names[i], c))
-        ref = targets[c][0]
-        spd = session.read_spd(ref)
-        if wl_nm is None:
-            wl_nm = spd.wavelength_nm
-            spds[c] = spd.values[0] * ref.exposure_s
+            self.flagged.append((self.layout.patch_names[i], c))
+
+    def add_spd(self, c: str, spd: Spectra, exposure_s: float) -> None:
+        """The illuminant of channel ``c``: measured SPD x exposure (first grid kept)."""
+        if self.wl_nm is None:
+            self.wl_nm = spd.wavelength_nm
+            self.spds[c] = spd.values[0] * exposure_s
         else:
-            spds[c] = (
-                np.interp(wl_nm, spd.wavelength_nm, spd.values[0]) * ref.exposure_s
+            self.spds[c] = (
+                np.interp(self.wl_nm, spd.wavelength_nm, spd.values[0]) * exposure_s
             )
-    assert wl_nm is not None
-    if flagged:
-        chans = sorted({c for _, c in flagged}, key=use.index)
-        warnings.append(
-            f"{len(flagged)} patch/channel pair(s) have clipped pixels (channels "
+
+    def warnings(self) -> list[str]:
+        if not self.flagged:
+            return []
+        chans = sorted({c for _, c in self.flagged}, key=self.use.index)
+        return [
+            f"{len(self.flagged)} patch/channel pair(s) have clipped pixels (channels "
             f"{', '.join(chans[:6])}{' ...' if len(chans) > 6 else ''}); they are "
             "flagged saturated and left out of calibration"
+        ]
+
+    def responses(self, n_px: NDArray[np.int64]) -> Responses:
+        return Responses(
+            self.layout.patch_names,
+            tuple(self.use),
+            self.rgb,
+            self.std,
+            np.repeat(n_px[:, None], len(self.use), axis=1).astype(np.float64),
+            self.sat,
         )
-    responses = Responses(
-        layout.patch_names,
-        tuple(use),
-        rgb,
-        std,
-        np.repeat(n_px[:n_patch, None], len(use), axis=1).astype(np.float64),
-        sat,
-    )
-    illuminants = Spectra(
-        wl_nm,
-        np.stack([spds[c] for c in use]),
-        tuple(use),
-        {"unit": ILLUMINANT_UNIT, "source": str(session.root)},
-    )
-    return ProcessedSession(
-        responses=responses,
-        illuminants=illuminants,
-        layout=layout,
-        corners_source=source,
-        flagged=tuple(flagged),
-        warnings=tuple(warnings),
-        corner_residual_px=residual,
-        stats={
-            "frames_read": done,
-            "roi_pixels_per_patch_min": int(n_px[:n_patch].min()),
-            "flat_window_px": r1 - r0,
-            "flat_fields_borrowed": n_borrowed,
-        },
-    )
+
+    def illuminants(self, session: Session) -> Spectra:
+        assert self.wl_nm is not None
+        return Spectra(
+            self.wl_nm,
+            np.stack([self.spds[c] for c in self.use]),
+            tuple(self.use),
+            {"unit": ILLUMINANT_UNIT, "source": str(session.root)},
+        )
 
 
 def write_processed(

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from tunespec.core.errors import InputError, read_text
+from tunespec.core.errors import InputError, check_names, read_text
 from tunespec.core.limits import csv_rows, shown, valid_name, valid_number
 
 __all__ = ["CHANNELS", "Responses", "read_responses_csv", "write_responses_csv"]
@@ -107,10 +107,7 @@ class Responses:
 def _indices(have: tuple[str, ...], names: list[str] | None, what: str) -> list[int]:
     if names is None:
         return list(range(len(have)))
-    missing = [n for n in names if n not in have]
-    if missing:
-        shown = ", ".join(missing[:8]) + (" ..." if len(missing) > 8 else "")
-        raise InputError(f"{len(missing)} {what} name(s) not in the responses: {shown}")
+    check_names(names, have, f"{{n}} {what} name(s) not in the responses: {{names}}")
     return [have.index(n) for n in names]
 
 

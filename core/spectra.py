@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tunespec.core.errors import InputError, read_text
+from tunespec.core.errors import InputError, check_names, read_text
 from tunespec.core.limits import (
     MAX_VALUE,
     MAX_WAVELENGTH_NM,
@@ -194,10 +194,7 @@ class Spectra:
             Naming ``source`` and the missing names.
         """
         names = list(names)
-        missing = [n for n in names if n not in self.names]
-        if missing:
-            shown = ", ".join(missing[:8]) + (" ..." if len(missing) > 8 else "")
-            raise InputError(f"{len(missing)} name(s) not found: {shown}", path=source)
+        check_names(names, self.names, path=source)
         idx = [self.names.index(n) for n in names]
         return Spectra(self.wavelength_nm, self.values[idx], tuple(names), self.meta)
 

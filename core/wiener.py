@@ -28,7 +28,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from tunespec.core.errors import InputError, SingularSystemError
+from tunespec.core.errors import InputError, SingularSystemError, check_names
 from tunespec.core.forward_model import lighting_matrix
 from tunespec.core.responses import CHANNELS, Responses
 from tunespec.core.spectra import Grid, Spectra
@@ -189,6 +189,86 @@ def wiener_reflectance(
     >>> bool(np.abs(est.reflectance.values - sg.values[:2]).max() < 0.02)
     True
     """
+    wl, F, mean, K, prior = _wiener_system(
+        responses, illuminants, sensitivity, prior, noise_from, center_prior
+    )
+    m_rows = F.shape[0]
+    FK, G, scale = _gram(F, K)
+    var, ridge_floor, n_ridged = _ridged(
+        _noise_variance(responses, noise_std, noise_from), scale
+    )
+    patches, n_p = responses.patches, len(responses.patches)
+    resid = responses.rgb.reshape(n_p, m_rows) - F @ mean
+    est, post_var = _solve_patchwise(
+        G, FK, mean, resid, var.reshape(n_p, m_rows), np.diag(K), patches
+    )
+    est, clipped, n_clipped = _clip_estimate(est, patches, clip)
+    return WienerEstimate(
+        reflectance=Spectra(wl, est, patches, {"source": "wiener_reflectance (Eq. 5)"}),
+        clipped=clipped,
+        n_clipped_samples=n_clipped,
+        variance=post_var,
+        noise_variance=var,
+        ridge=ridge_floor if n_ridged else 0.0,
+        params={
+            "noise": "global" if noise_std is not None else "patch",
+            "noise_from": noise_from,
+            "center_prior": center_prior,
+            "clip": clip,
+            "n_prior": len(prior),
+            "n_ridged": n_ridged,
+        },
+    )
+
+
+def _default_prior(wl: NDArray[np.float64]) -> Spectra:
+    """The default prior of :func:`wiener_reflectance`: the ColorChecker SG on ``wl``."""
+    from tunespec.core.datasets import load_colorchecker_sg
+
+    return load_colorchecker_sg(Grid(float(wl[0]), float(wl[-1]), _step(wl)))
+
+
+def _gram(
+    F: NDArray[np.float64], K: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+    """``F K``, ``G = F K F^T`` of Eq. 5 (exactly symmetric) and its mean diagonal."""
+    FK = F @ K  # (3 n_i, n_wl) = (K F^T)^T, K symmetric
+    G = FK @ F.T
+    G = 0.5 * (G + G.T)  # exact symmetry for the solver; rounding made it inexact
+    scale = float(np.trace(G)) / F.shape[0]
+    if not (np.isfinite(scale) and scale > 0.0):
+        raise SingularSystemError(
+            "F K F^T is zero: the illuminants are dark, the sensitivity is zero or "
+            "the prior varies only where the camera sees nothing"
+        )
+    return FK, G, scale
+
+
+def _ridged(
+    var: NDArray[np.float64], scale: float
+) -> tuple[NDArray[np.float64], float, int]:
+    """Noise variances floored at ``RIDGE_RELATIVE * scale``, the floor, how many."""
+    ridge_floor = RIDGE_RELATIVE * scale
+    low = var < ridge_floor
+    return np.where(low, ridge_floor, var), ridge_floor, int(np.count_nonzero(low))
+
+
+def _wiener_system(
+    responses: Responses,
+    illuminants: Spectra,
+    sensitivity: Spectra,
+    prior: Spectra | None,
+    noise_from: str,
+    center_prior: bool,
+) -> tuple[
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    Spectra,
+]:
+    """Checked inputs of Eq. 5: the grid, ``F`` (Eq. 1/5), the prior's mean and
+    covariance ``K``, and the prior (default the ColorChecker SG)."""
     if noise_from not in NOISE_SOURCES:
         raise InputError(
             f"noise_from={noise_from!r}: expected one of {', '.join(NOISE_SOURCES)}"
@@ -198,9 +278,7 @@ def wiener_reflectance(
     S = _select(sensitivity, CHANNELS, "camera sensitivity").values
     _check_grid(sensitivity, wl, "camera sensitivity")
     if prior is None:
-        from tunespec.core.datasets import load_colorchecker_sg
-
-        prior = load_colorchecker_sg(Grid(float(wl[0]), float(wl[-1]), _step(wl)))
+        prior = _default_prior(wl)
     _check_grid(prior, wl, "prior reflectances")
     for spectra, values, names, role in (
         (illuminants, L, responses.illuminants, "illuminant spectra"),
@@ -212,31 +290,26 @@ def wiener_reflectance(
     _check_responses_finite(responses, rgb, "rgb")
 
     F = lighting_matrix(L, S, _step(wl))
-    m_rows = F.shape[0]
     mean, K = _prior_moments(prior.values, center_prior)
-    FK = F @ K  # (3 n_i, n_wl) = (K F^T)^T, K symmetric
-    G = FK @ F.T
-    G = 0.5 * (G + G.T)  # exact symmetry for the solver; rounding made it inexact
-    scale = float(np.trace(G)) / m_rows
-    if not (np.isfinite(scale) and scale > 0.0):
-        raise SingularSystemError(
-            "F K F^T is zero: the illuminants are dark, the sensitivity is zero or "
-            "the prior varies only where the camera sees nothing"
-        )
+    return wl, F, mean, K, prior
 
-    var = _noise_variance(responses, noise_std, noise_from)
-    ridge_floor = RIDGE_RELATIVE * scale
-    low = var < ridge_floor
-    n_ridged = int(np.count_nonzero(low))
-    var = np.where(low, ridge_floor, var)
 
-    n_p = len(responses.patches)
-    resid = rgb.reshape(n_p, m_rows) - F @ mean
-    noise = var.reshape(n_p, m_rows)
-    est = np.empty((n_p, wl.size))
-    post_var = np.empty((n_p, wl.size))
+def _solve_patchwise(
+    G: NDArray[np.float64],
+    FK: NDArray[np.float64],
+    mean: NDArray[np.float64],
+    resid: NDArray[np.float64],
+    noise: NDArray[np.float64],
+    prior_var: NDArray[np.float64],
+    patches: tuple[str, ...],
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Eq. 5-6 per patch with its own noise ``K_e``: the estimates and the diagonal
+    of their posterior covariance, solved in batches."""
+    m_rows = G.shape[0]
+    n_p = resid.shape[0]
+    est = np.empty((n_p, mean.size))
+    post_var = np.empty((n_p, mean.size))
     diag_idx = np.arange(m_rows)
-    prior_var = np.diag(K)
     for lo in range(0, n_p, _CHUNK):
         hi = min(lo + _CHUNK, n_p)
         A = np.repeat(G[None], hi - lo, axis=0)
@@ -256,7 +329,7 @@ def wiener_reflectance(
         est[lo:hi] = mean + sol[:, :, 0] @ FK
         post_var[lo:hi] = prior_var - np.einsum("jl,pjl->pl", FK, sol[:, :, 1:])
     if not np.all(np.isfinite(est)):
-        bad = [responses.patches[i] for i in np.flatnonzero(~np.isfinite(est).all(1))]
+        bad = [patches[i] for i in np.flatnonzero(~np.isfinite(est).all(1))]
         raise SingularSystemError(
             f"non-finite estimate for {len(bad)} patch(es), e.g. {bad[0]!r}: "
             "F K F^T + K_e is numerically singular"
@@ -265,33 +338,22 @@ def wiener_reflectance(
     # pin the spectrum down; rounding can make it slightly negative.
     np.maximum(post_var, 0.0, out=post_var)
 
+    return est, post_var
+
+
+def _clip_estimate(
+    est: NDArray[np.float64], patches: tuple[str, ...], clip: bool
+) -> tuple[NDArray[np.float64], tuple[str, ...], int]:
+    """Reflectances clipped to [0, 1], the patches clipped and the samples clipped."""
     clipped: tuple[str, ...] = ()
     n_clipped = 0
     if clip:
         out = (est < 0.0) | (est > 1.0)
         n_clipped = int(np.count_nonzero(out))
-        clipped = tuple(responses.patches[i] for i in np.flatnonzero(out.any(axis=1)))
+        clipped = tuple(patches[i] for i in np.flatnonzero(out.any(axis=1)))
         est = np.clip(est, 0.0, 1.0)
 
-    reflectance = Spectra(
-        wl, est, responses.patches, {"source": "wiener_reflectance (Eq. 5)"}
-    )
-    return WienerEstimate(
-        reflectance=reflectance,
-        clipped=clipped,
-        n_clipped_samples=n_clipped,
-        variance=post_var,
-        noise_variance=var,
-        ridge=ridge_floor if n_ridged else 0.0,
-        params={
-            "noise": "global" if noise_std is not None else "patch",
-            "noise_from": noise_from,
-            "center_prior": center_prior,
-            "clip": clip,
-            "n_prior": len(prior),
-            "n_ridged": n_ridged,
-        },
-    )
+    return est, clipped, n_clipped
 
 
 def _prior_moments(
@@ -366,14 +428,13 @@ def _source(spectra: Spectra) -> str | None:
 
 
 def _select(spectra: Spectra, names: tuple[str, ...], role: str) -> Spectra:
-    missing = [n for n in names if n not in spectra.names]
-    if missing:
-        shown = ", ".join(missing[:8]) + (" ..." if len(missing) > 8 else "")
-        raise InputError(
-            f"{role}: {len(missing)} name(s) not found: {shown} "
-            f"(have {', '.join(spectra.names[:8])}{' ...' if len(spectra) > 8 else ''})",
-            path=_source(spectra),
-        )
+    have = ", ".join(spectra.names[:8]) + (" ..." if len(spectra) > 8 else "")
+    check_names(
+        names,
+        spectra.names,
+        f"{role}: {{n}} name(s) not found: {{names}} (have {have})",
+        path=_source(spectra),
+    )
     return spectra.select(names)
 
 

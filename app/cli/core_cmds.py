@@ -10,8 +10,8 @@ import numpy as np
 
 from tunespec.app.cli.common import add_grid_option, progress_bar, seed_arg
 from tunespec.core.datasets import read_sensitivities
-from tunespec.core.errors import InputError
-from tunespec.core.io.export import read_sensitivity_meta, write_sensitivity_meta
+from tunespec.core.errors import InputError, check_names
+from tunespec.core.io.export import read_sensitivity_meta, write_sensitivities_csv
 from tunespec.core.limits import MAX_REFLECTANCE, dumps_json
 from tunespec.core.responses import Responses, read_responses_csv, write_responses_csv
 from tunespec.core.spectra import Grid, Spectra, read_spectra_csv, write_spectra_csv
@@ -23,6 +23,14 @@ METHOD_CHOICES = ("bayes", "pca", "smooth")
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the core subcommands."""
+    _add_calibrate(sub)
+    _add_estimate(sub)
+    _add_evaluate(sub)
+    _add_simulate_responses(sub)
+
+
+def _add_calibrate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The ``calibrate`` subcommand."""
     p = sub.add_parser(
         "calibrate",
         help="estimate camera sensitivities from a chart under all LEDs (Table 1)",
@@ -80,6 +88,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--stats", type=Path, help="write the statistics as JSON")
     p.set_defaults(func=cmd_calibrate, output_files=("output", "stats"))
 
+
+def _add_estimate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The ``estimate`` subcommand."""
     p = sub.add_parser(
         "estimate",
         help="Wiener reflectance estimation (Eq. 5-6)",
@@ -118,6 +129,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("-o", "--output", required=True, type=Path)
     p.set_defaults(func=cmd_estimate, output_files=("output",))
 
+
+def _add_evaluate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The ``evaluate`` subcommand."""
     p = sub.add_parser(
         "evaluate",
         help="spectral RMS and CIEDE2000 (D50) against references (Table 2)",
@@ -128,6 +142,11 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--stats", type=Path, help="write the statistics as JSON")
     p.set_defaults(func=cmd_evaluate, output_files=("stats",))
 
+
+def _add_simulate_responses(
+    sub: argparse._SubParsersAction[argparse.ArgumentParser],
+) -> None:
+    """The ``simulate-responses`` subcommand."""
     p = sub.add_parser(
         "simulate-responses",
         help="forward model (Eq. 1) with photon and read noise",
@@ -169,14 +188,13 @@ def _check_names(
     path: Path,
     names: tuple[str, ...],
 ) -> None:
-    missing = [n for n in names if n not in spectra.names]
-    if missing:
-        shown = ", ".join(missing[:6]) + (" ..." if len(missing) > 6 else "")
-        raise InputError(
-            f"{len(missing)} {what} name(s) of the responses are not columns here: "
-            f"{shown}",
-            path=path,
-        )
+    check_names(
+        names,
+        spectra.names,
+        f"{{n}} {what} name(s) of the responses are not columns here: {{names}}",
+        path=path,
+        limit=6,
+    )
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
@@ -221,8 +239,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     est = estimate_camera_sensitivity(
         fit, illuminants, reflectances, progress=progress_bar("calibrating"), **kwargs
     )
-    write_spectra_csv(est.sensitivity, args.output)
-    write_sensitivity_meta(args.output, est.sensitivity, est.covariance)
+    write_sensitivities_csv(args.output, est.sensitivity, est.covariance)
     report = calibration_report(
         est, responses, illuminants, reflectances, held_out_patches=held
     )

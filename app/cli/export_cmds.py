@@ -220,9 +220,11 @@ def cmd_report(args: argparse.Namespace) -> int:
 def _table1_from_files(
     args: argparse.Namespace, data: dict[str, Any], grid: Grid | None
 ) -> Any:
-    from tunespec.core.forward_model import render_rgb
     from tunespec.core.io.export import read_sensitivity_meta
-    from tunespec.core.sensitivity import correct_illuminants_from_meta
+    from tunespec.core.sensitivity import (
+        correct_illuminants_from_meta,
+        predict_responses,
+    )
     from tunespec.core.stats import prediction_stats
 
     need = [n for n in ("sensitivity", "illuminants", "responses") if n not in data]
@@ -248,5 +250,5 @@ def _table1_from_files(
         meta = read_sensitivity_meta(args.sensitivities)
         illum = correct_illuminants_from_meta(illum, meta)
     sens = sens.resample(work, source=str(args.sensitivities))
-    predicted = render_rgb(chart.values, illum.values, sens.values, work.step_nm)
-    return prediction_stats(responses.rgb, predicted)
+    predicted = predict_responses(sens, illum, chart)
+    return prediction_stats(responses.rgb, predicted.rgb)

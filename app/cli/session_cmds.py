@@ -50,8 +50,16 @@ def _floats(text: str) -> tuple[float, ...]:
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the session subcommands."""
-    # the registry's constant (pipeline.plan.DEMO_RESOLUTION is the same object): the
-    # the pipeline imports every step,, which ``tunespec --help`` must not pay
+    _add_demo(sub)
+    _add_capture(sub)
+    _add_process(sub)
+    _add_run(sub)
+
+
+def _add_demo(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The ``demo`` subcommand."""
+    # the registry's constant (pipeline.plan.DEMO_RESOLUTION is the same object):
+    # the pipeline imports every step, which ``tunespec --help`` must not pay
     from tunespec.devices.registry import DEFAULT_SIM_RESOLUTION as DEMO_RESOLUTION
 
     p = sub.add_parser(
@@ -75,6 +83,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--no-report", action="store_true", help="skip the HTML/PDF report")
     p.set_defaults(func=cmd_demo, output_dirs=("out",))
 
+
+def _add_capture(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The ``capture`` subcommand."""
     p = sub.add_parser(
         "capture",
         help="capture a session: darks, white background and target under each LED",
@@ -138,6 +149,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--seed", type=seed_arg, default=0, help="simulation seed")
     p.set_defaults(func=cmd_capture, output_dirs=("out",))
 
+
+def _add_process(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The ``process`` subcommand."""
     p = sub.add_parser(
         "process",
         help="responses and illuminants of a captured session",
@@ -176,6 +190,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--verify", action="store_true", help="check file checksums first")
     p.set_defaults(func=cmd_process, output_files=("output", "illuminants_out"))
 
+
+def _add_run(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The ``run`` subcommand."""
     p = sub.add_parser(
         "run",
         help="capture -> process -> calibrate -> estimate -> export from a config",

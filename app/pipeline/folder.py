@@ -3,29 +3,169 @@
 ::
 
     OUT/
-      chart/          the chart's capture session (``core.io.session``: manifest + frames)
-      sample/         the sample target's session
-      truth/          a simulated bench's truth (sensitivities, corners, scene)
-      summary.json    the headline numbers and Tables 1-2 (:meth:`write_summary`)
-      *.csv *.json *.ti3 report.html report.pdf   the exports (``core.io.export``)
+      measurement.json  what a front end needs to resume (layouts, capture options,
+                        method, threshold): :func:`write_measurement_doc`
+      chart/            the chart's capture session (``core.io.session``)
+      sample/           the sample target's session
+      calibration/      sensitivities and Table 1 (:func:`write_calibration`)
+      estimate/         reflectances, their references, Table 2 (:func:`write_estimate`)
+      export/           the wizard's exports and report (``exports.json`` lists them)
+      truth/            a simulated bench's truth (``tunespec run``/``demo``)
+      summary.json      the headline numbers and Tables 1-2 (``tunespec run``/``demo``)
+      *.csv *.json *.ti3 report.html report.pdf   the exports of ``tunespec run``/``demo``
 
-Every path of a measurement is named here once; readers and writers take a
-:class:`MeasurementFolder`, not a path they compose themselves.
+Every path of a measurement is named here once, and every result has one writer and
+one reader here: a measurement taken by the CLI opens in the GUI wizard (its
+calibration and estimate restore there) and the CLI resumes the wizard's sessions.
+Results store the fingerprint of the session they came from, so a result whose frames
+were retaken since is recognised as stale.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import json
+import logging
+from dataclasses import dataclass, field
 from os import PathLike
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
+from tunespec.core.errors import InputError, read_json
+from tunespec.core.io.export import read_sensitivity_meta, write_sensitivities_csv
 from tunespec.core.io.session import MANIFEST_NAME, atomic_write_text
-from tunespec.core.limits import dumps_json, read_json
+from tunespec.core.layout import TargetLayout
+from tunespec.core.limits import dumps_json
+from tunespec.core.spectra import Spectra, read_spectra_csv, write_spectra_csv
 
-__all__ = ["MeasurementFolder"]
+__all__ = [
+    "CALIBRATION_DIR",
+    "CHART_DIR",
+    "DEFAULT_THRESHOLD_RGB_MEAN",
+    "ESTIMATE_DIR",
+    "EXPORT_DIR",
+    "MEASUREMENT_FILE",
+    "MEASUREMENT_FORMAT",
+    "SAMPLE_DIR",
+    "CalibrationResult",
+    "EstimateResult",
+    "ExportResult",
+    "MeasurementFolder",
+    "read_calibration",
+    "read_estimate",
+    "read_measurement_doc",
+    "session_fingerprint",
+    "write_calibration",
+    "write_estimate",
+    "write_measurement_doc",
+]
+
+log = logging.getLogger(__name__)
+
+MEASUREMENT_FILE = "measurement.json"
+MEASUREMENT_FORMAT = "tunespec-measurement"
+CHART_DIR, SAMPLE_DIR = "chart", "sample"
+CALIBRATION_DIR, ESTIMATE_DIR, EXPORT_DIR = "calibration", "estimate", "export"
+#: Pass/fail limit on Table 1's RGB mean (full scale) when none is chosen.
+DEFAULT_THRESHOLD_RGB_MEAN = 0.005
 
 
+# -- results ---------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class CalibrationResult:
+    """The calibrate step: sensitivities and Table 1.
+
+    Parameters
+    ----------
+    sensitivity : Spectra R, G, B
+        Estimated sensitivities (absolute scale).
+    table1 : PredictionStats
+        Response prediction error on the fitted patches.
+    threshold
+        Pass/fail limit on Table 1's RGB mean (full scale).
+    method
+        Estimation method.
+    layout
+        The chart layout with the corners used (mosaic pixels).
+    excluded_patches
+        Patches left out of the fit (saturated).
+    warnings
+        Processing notes.
+    elapsed_s
+        Wall time of processing and estimation.
+    calibration, chart
+        ``pipeline.Calibration`` and the processed chart session; ``None`` when the
+        result was restored from disk (the export step recomputes them).
+    """
+
+    sensitivity: Spectra
+    table1: Any
+    threshold: float
+    method: str
+    layout: TargetLayout
+    excluded_patches: tuple[str, ...] = ()
+    warnings: tuple[str, ...] = ()
+    elapsed_s: float = 0.0
+    calibration: Any = None
+    chart: Any = None
+
+    @property
+    def rgb_mean(self) -> float:
+        """Table 1's RGB mean, the number compared with :attr:`threshold`."""
+        return float(self.table1.mean[3])
+
+    @property
+    def passed(self) -> bool:
+        """Whether Table 1's RGB mean is within the threshold."""
+        return self.rgb_mean <= self.threshold
+
+
+@dataclass(frozen=True, eq=False)
+class EstimateResult:
+    """The estimate step: reflectances and, with references, Table 2.
+
+    Parameters
+    ----------
+    reflectance : Spectra
+        Estimated reflectances named by patch.
+    table2 : ReflectanceStats or None
+        Deviation from the references.
+    reference : Spectra or None
+        The references of the estimated patches.
+    layout
+        The sample layout with the corners used.
+    clipped
+        Patches whose estimate was clipped to [0, 1].
+    warnings
+        Processing notes.
+    elapsed_s
+        Wall time.
+    estimation, sample
+        ``pipeline.Estimation`` and the processed sample session; ``None`` when
+        restored from disk.
+    """
+
+    reflectance: Spectra
+    table2: Any = None
+    reference: Spectra | None = None
+    layout: TargetLayout | None = None
+    clipped: tuple[str, ...] = ()
+    warnings: tuple[str, ...] = ()
+    elapsed_s: float = 0.0
+    estimation: Any = None
+    sample: Any = None
+
+
+@dataclass(frozen=True)
+class ExportResult:
+    """The export step: export kind -> file."""
+
+    paths: dict[str, Path] = field(default_factory=dict)
+    folder: Path | None = None
+
+
+# -- the folder ------------------------------------------------------------------------
 @dataclass(frozen=True)
 class MeasurementFolder:
     """The paths of one measurement below ``root``."""
@@ -39,17 +179,29 @@ class MeasurementFolder:
 
     def session_dir(self, which: str) -> Path:
         """The capture session of ``which`` (``"chart"`` or ``"sample"``)."""
-        if which not in ("chart", "sample"):
+        if which not in (CHART_DIR, SAMPLE_DIR):
             raise ValueError(f"unknown session {which!r}")
         return self.root / which
 
     @property
     def chart_dir(self) -> Path:
-        return self.session_dir("chart")
+        return self.root / CHART_DIR
 
     @property
     def sample_dir(self) -> Path:
-        return self.session_dir("sample")
+        return self.root / SAMPLE_DIR
+
+    @property
+    def calibration_dir(self) -> Path:
+        return self.root / CALIBRATION_DIR
+
+    @property
+    def estimate_dir(self) -> Path:
+        return self.root / ESTIMATE_DIR
+
+    @property
+    def export_dir(self) -> Path:
+        return self.root / EXPORT_DIR
 
     @property
     def truth_dir(self) -> Path:
@@ -58,6 +210,10 @@ class MeasurementFolder:
     @property
     def summary_path(self) -> Path:
         return self.root / "summary.json"
+
+    @property
+    def measurement_path(self) -> Path:
+        return self.root / MEASUREMENT_FILE
 
     def has_session(self, which: str) -> bool:
         """Whether a capture of ``which`` was started here."""
@@ -69,11 +225,261 @@ class MeasurementFolder:
         atomic_write_text(self.summary_path, dumps_json(summary))
         return self.summary_path
 
-    def read_summary(self) -> dict[str, Any]:
-        """``summary.json`` as written by :meth:`write_summary`."""
-        data = read_json(self.summary_path)
-        if not isinstance(data, dict):
-            from tunespec.core.errors import InputError
 
-            raise InputError("expected an object", path=self.summary_path)
-        return data
+def write_measurement_doc(
+    folder: MeasurementFolder,
+    *,
+    chart_layout: TargetLayout,
+    sample_layout: TargetLayout,
+    capture: dict[str, Any],
+    method: str | None,
+    threshold_rgb_mean: float = DEFAULT_THRESHOLD_RGB_MEAN,
+    reference_path: str | PathLike[str] | None = None,
+) -> Path:
+    """Write ``measurement.json`` atomically: what a front end needs to resume."""
+    doc = {
+        "format": MEASUREMENT_FORMAT,
+        "version": 1,
+        "chart_layout": chart_layout.to_dict(),
+        "sample_layout": sample_layout.to_dict(),
+        "capture": dict(capture),
+        "method": method,
+        "threshold_rgb_mean": threshold_rgb_mean,
+        "reference_path": str(reference_path) if reference_path else None,
+    }
+    folder.root.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(folder.measurement_path, dumps_json(doc, indent=1))
+    return folder.measurement_path
+
+
+def read_measurement_doc(folder: MeasurementFolder) -> dict[str, Any]:
+    """``measurement.json`` as :func:`write_measurement_doc` wrote it.
+
+    Raises
+    ------
+    InputError
+        No such file, or not a measurement file.
+    """
+    path = folder.measurement_path
+    if not path.exists():
+        raise InputError(
+            f"not a TuneSpec measurement (no {MEASUREMENT_FILE})", path=folder.root
+        )
+    doc = read_json(path)
+    if not isinstance(doc, dict) or doc.get("format") != MEASUREMENT_FORMAT:
+        raise InputError(
+            f"not a measurement file (format != {MEASUREMENT_FORMAT!r})", path=path
+        )
+    return doc
+
+
+# -- one writer and one reader per result ----------------------------------------------
+def session_fingerprint(session_root: Path) -> str | None:
+    """The session's :meth:`~tunespec.core.io.session.Session.fingerprint` (None: none)."""
+    from tunespec.core.io.session import Session
+
+    try:
+        return Session.open(session_root).fingerprint()
+    except InputError:
+        return None
+
+
+def _is_current(doc: dict[str, object], session_root: Path, what: str) -> bool:
+    """False (with a log line) if the session changed since ``doc`` was computed."""
+    saved = doc.get("session_fingerprint")
+    if saved is None or saved == session_fingerprint(session_root):
+        return True
+    log.warning(
+        "the %s was computed from frames that have since been retaken: run it again",
+        what,
+    )
+    return False
+
+
+def write_calibration(
+    out_dir: Path, result: CalibrationResult, fingerprint: str | None = None
+) -> None:
+    from tunespec.core.io.session import atomic_write_text
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    # with the fitted SPD shift (and the covariance) beside it, which the CSV cannot
+    # hold (pipeline.estimate and the export need them)
+    covariance = getattr(
+        getattr(result.calibration, "estimate", None), "covariance", None
+    )
+    write_sensitivities_csv(out_dir / "sensitivity.csv", result.sensitivity, covariance)
+    if result.chart is not None:
+        _write_processed(out_dir, result.chart)
+    doc = {
+        "table1": result.table1.as_dict(),
+        "threshold_rgb_mean": result.threshold,
+        "passed": result.passed,
+        "method": result.method,
+        "layout": result.layout.to_dict(),
+        "excluded_patches": list(result.excluded_patches),
+        "warnings": list(result.warnings),
+        "session_fingerprint": fingerprint,
+    }
+    # written last: its presence marks the step done
+    atomic_write_text(out_dir / "calibration.json", dumps_json(doc, indent=1))
+
+
+def read_calibration(folder: Path, chart_root: Path) -> CalibrationResult | None:
+    from tunespec.core.stats import STAT_ROWS, PredictionStats
+
+    try:
+        doc = read_json(folder / "calibration.json")
+        if not _is_current(doc, chart_root, "calibration"):
+            return None
+        sensitivity = read_spectra_csv(folder / "sensitivity.csv", allow_negative=True)
+        side = read_sensitivity_meta(folder / "sensitivity.csv")
+        extra = {"spd_shift_nm": repr(side.get("spd_shift_nm", 0.0))}
+        if "led_correction" in side:
+            extra["led_correction"] = json.dumps(side["led_correction"])
+        sensitivity = Spectra(
+            sensitivity.wavelength_nm,
+            sensitivity.values,
+            sensitivity.names,
+            {**sensitivity.meta, **extra},
+        )
+        t = doc["table1"]
+        table1 = PredictionStats(
+            mean=np.array([t[r]["mean"] for r in STAT_ROWS]),
+            max=np.array([t[r]["max"] for r in STAT_ROWS]),
+            p95=np.array([t[r]["p95"] for r in STAT_ROWS]),
+            n_stimuli=int(t["n_stimuli"]),
+        )
+        return CalibrationResult(
+            sensitivity=sensitivity,
+            table1=table1,
+            threshold=float(doc["threshold_rgb_mean"]),
+            method=str(doc["method"]),
+            layout=TargetLayout.from_dict(doc["layout"]),
+            excluded_patches=tuple(doc.get("excluded_patches", ())),
+            warnings=tuple(doc.get("warnings", ())),
+        )
+    except (OSError, ValueError, KeyError, InputError) as exc:
+        log.warning("no usable calibration in %s: %s", folder, exc)
+        return None
+
+
+def write_estimate(
+    out_dir: Path, result: EstimateResult, fingerprint: str | None = None
+) -> None:
+    from tunespec.core.io.session import atomic_write_text
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    write_spectra_csv(result.reflectance, out_dir / "reflectance.csv")
+    if result.sample is not None:
+        _write_processed(out_dir, result.sample)
+    if result.reference is not None:
+        write_spectra_csv(result.reference, out_dir / "reference.csv")
+    doc = {
+        "layout": None if result.layout is None else result.layout.to_dict(),
+        "clipped": list(result.clipped),
+        "warnings": list(result.warnings),
+        "session_fingerprint": fingerprint,
+    }
+    atomic_write_text(out_dir / "estimate.json", dumps_json(doc, indent=1))
+
+
+def read_estimate(folder: Path, sample_root: Path) -> EstimateResult | None:
+    from tunespec.app.pipeline.steps import evaluate  # scipy-free, but heavy
+
+    try:
+        doc = read_json(folder / "estimate.json")
+        if not _is_current(doc, sample_root, "estimate"):
+            return None
+        reflectance = read_spectra_csv(folder / "reflectance.csv")
+        reference = None
+        if (folder / "reference.csv").is_file():
+            reference = read_spectra_csv(folder / "reference.csv")
+        table2 = (
+            None
+            if reference is None
+            else evaluate(reflectance.select(reference.names), reference)
+        )
+        layout = doc.get("layout")
+        return EstimateResult(
+            reflectance=reflectance,
+            table2=table2,
+            reference=reference,
+            layout=None if layout is None else TargetLayout.from_dict(layout),
+            clipped=tuple(doc.get("clipped", ())),
+            warnings=tuple(doc.get("warnings", ())),
+        )
+    except (OSError, ValueError, KeyError, InputError) as exc:
+        log.warning("no usable estimate in %s: %s", folder, exc)
+        return None
+
+
+# -- the processed sessions beside a result (the export needs no raw frame again) ------
+PROCESSED_FILES = ("responses.csv", "illuminants.csv")
+
+
+def _write_processed(out_dir: Path, processed: Any) -> None:
+    from tunespec.core.processing import write_processed
+
+    write_processed(processed, *(out_dir / name for name in PROCESSED_FILES))
+
+
+def read_processed(
+    result_dir: Path, layout: TargetLayout, warnings: tuple[str, ...] = ()
+) -> Any:
+    """The processed session a calibrate or estimate step left in ``result_dir``.
+
+    The corners are the layout's (``corners_source = "layout"``), as they were used.
+    Returns ``None`` when the files are not there (a folder of an older version).
+    """
+    from tunespec.core.processing import ProcessedSession
+    from tunespec.core.responses import read_responses_csv
+
+    responses_csv, illuminants_csv = (result_dir / n for n in PROCESSED_FILES)
+    if not (responses_csv.is_file() and illuminants_csv.is_file()):
+        return None
+    return ProcessedSession(
+        responses=read_responses_csv(responses_csv),
+        illuminants=read_spectra_csv(illuminants_csv),
+        layout=layout,
+        corners_source="layout",
+        warnings=warnings,
+    )
+
+
+def restore_calibration_steps(
+    result_dir: Path, result: CalibrationResult, grid: Any = None
+) -> tuple[Any, Any] | None:
+    """The processed chart and the ``pipeline.Calibration`` of a restored result.
+
+    Nothing is estimated again: the sensitivities, their covariance and LED
+    corrections come from the files (``core.sensitivity.calibration_from_files``),
+    Table 1 is recomputed from them (``core.stats.calibration_report``). ``None``
+    when the processed chart is not in ``result_dir``.
+    """
+    from dataclasses import replace
+
+    from tunespec.app.pipeline.steps import Calibration
+    from tunespec.core.sensitivity import calibration_from_files
+    from tunespec.core.spectra import DEFAULT_GRID
+    from tunespec.core.stats import calibration_report
+    from tunespec.devices.registry import layout_reflectances
+
+    chart = read_processed(result_dir, result.layout, result.warnings)
+    if chart is None:
+        return None
+    csv = result_dir / "sensitivity.csv"
+    est = calibration_from_files(csv, read_sensitivity_meta(csv))
+    # the sensitivities as restored (with the SPD shift in their meta) and what the
+    # CSV cannot say: the method and the patches the fit left out
+    est = replace(
+        est,
+        sensitivity=result.sensitivity,
+        method=result.method,
+        excluded_patches=result.excluded_patches,
+    )
+    work = grid or DEFAULT_GRID
+    refl = layout_reflectances(result.layout, grid=work).resample(work)
+    report = calibration_report(
+        est, chart.responses, chart.illuminants.resample(work, average=True), refl
+    )
+    return chart, Calibration(est, report)

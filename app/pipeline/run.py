@@ -19,7 +19,16 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from tunespec.app.pipeline.folder import MeasurementFolder
+from tunespec.app.pipeline.folder import (
+    DEFAULT_THRESHOLD_RGB_MEAN,
+    CalibrationResult,
+    EstimateResult,
+    MeasurementFolder,
+    session_fingerprint,
+    write_calibration,
+    write_estimate,
+    write_measurement_doc,
+)
 from tunespec.app.pipeline.plan import (
     DEMO_RESOLUTION,
     Plan,
@@ -235,6 +244,62 @@ def _score_truth(
     return truth, truth_sens
 
 
+def _write_plan(folder: MeasurementFolder, plan: Plan) -> None:
+    """``measurement.json`` first: an interrupted run opens and resumes in the GUI."""
+    exposure = plan.exposure if isinstance(plan.exposure, str | float) else "auto"
+    write_measurement_doc(
+        folder,
+        chart_layout=plan.chart_layout,
+        sample_layout=plan.sample_layout,
+        capture={"exposure": exposure, "iso": plan.iso, "n_darks": 1},
+        method=plan.method,
+    )
+
+
+def _write_results(
+    folder: MeasurementFolder,
+    plan: Plan,
+    cal: Calibration,
+    chart: ProcessedSession,
+    est: Estimation,
+    sample: ProcessedSession,
+) -> None:
+    """The calibration and the estimate, by the writers the GUI wizard uses."""
+    write_calibration(
+        folder.calibration_dir,
+        CalibrationResult(
+            sensitivity=cal.sensitivity,
+            table1=cal.table1,
+            threshold=DEFAULT_THRESHOLD_RGB_MEAN,
+            method=str(cal.estimate.method),
+            layout=chart.layout,
+            excluded_patches=tuple(cal.estimate.excluded_patches),
+            warnings=tuple(chart.warnings),
+            calibration=cal,
+            chart=chart,
+        ),
+        session_fingerprint(folder.chart_dir),
+    )
+    reference = None
+    if plan.reference is not None:
+        names = [n for n in est.reflectance.names if n in plan.reference.names]
+        reference = plan.reference.select(names) if names else None
+    write_estimate(
+        folder.estimate_dir,
+        EstimateResult(
+            reflectance=est.reflectance,
+            table2=est.table2,
+            reference=reference,
+            layout=sample.layout,
+            clipped=tuple(est.wiener.clipped),
+            warnings=tuple(sample.warnings),
+            estimation=est,
+            sample=sample,
+        ),
+        session_fingerprint(folder.sample_dir),
+    )
+
+
 @dataclass
 class _Hooks:
     """The callbacks of one run (not part of the plan: they belong to the caller)."""
@@ -291,6 +356,7 @@ def _run_on(
     """Every step of ``plan`` on an open ``bench``."""
     hooks = _Hooks(_Stages(progress, _STAGE_WEIGHTS), should_stop, on_frame)
     folder = MeasurementFolder.at(plan.out_dir)
+    _write_plan(folder, plan)
     # a simulated bench is opened showing the chart; hardware shows what the
     # operator puts there (the stage asks)
     chart_session, chart = _capture_and_process(
@@ -332,6 +398,7 @@ def _run_on(
             calibration=cal.estimate,
         ),
     )
+    _write_results(folder, plan, cal, chart, est, sample)
     truth, truth_sens = _score_truth(
         folder, plan, (bench, sample_bench), (chart, sample), cal
     )

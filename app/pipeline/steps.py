@@ -31,7 +31,6 @@ from tunespec.core.errors import InputError
 from tunespec.core.io.export import (
     export_measurement,
     write_colorimetry_csv,
-    write_sensitivity_meta,
 )
 from tunespec.core.io.session import Session
 from tunespec.core.layout import TargetLayout
@@ -353,14 +352,9 @@ def export(
             manufacturer=cam.get("vendor", ""),
             model=cam.get("model", ""),
             uncertainty=estimation.uncertainty,
+            sensitivity_covariance=calibration.estimate.covariance,
         )
     )
-    if calibration.estimate.covariance is not None:
-        write_sensitivity_meta(
-            files["sensitivities_csv"],
-            calibration.sensitivity,
-            calibration.estimate.covariance,
-        )
     unc = estimation.uncertainty
     if unc is not None:
         names = estimation.reflectance.names

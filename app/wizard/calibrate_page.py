@@ -47,16 +47,17 @@ class CalibratePage(StepPage):
     inputs = ("dark", "white", "target")
     produces = "calibration"
 
+    step_title = "Calibrate"
+    step_description = (
+        "The chart frames are dark-corrected and flat-fielded, the patches "
+        "located, and the camera sensitivities estimated. Table 1 compares the "
+        "captured responses with those the sensitivities predict (Eq. 1)."
+    )
+    step_start_text = "Calibrate"
+    step_retake_text = "Recalibrate"
+
     def __init__(self, measurement: Any, parent: QWidget | None = None) -> None:
-        super().__init__(
-            measurement,
-            "Calibrate",
-            "The chart frames are dark-corrected and flat-fielded, the patches "
-            "located, and the camera sensitivities estimated. Table 1 compares the "
-            "captured responses with those the sensitivities predict (Eq. 1).",
-            start_text="Calibrate",
-            retake_text="Recalibrate",
-        )
+        super().__init__(measurement)
         m = measurement
         self.corners_combo = QComboBox()
         for label, value in CORNER_CHOICES:

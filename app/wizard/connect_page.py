@@ -22,15 +22,16 @@ class ConnectPage(StepPage):
 
     key = "connect"
 
+    step_title = "Connect"
+    step_description = (
+        "Choose the light source and the camera in the <b>Devices</b> panel "
+        "(<i>sim</i> is the simulated bench, used when no hardware is present), "
+        "then connect. The LEDs warm up while you prepare the bench."
+    )
+    step_start_text = "Connect"
+
     def __init__(self, measurement: Any, parent: QWidget | None = None) -> None:
-        super().__init__(
-            measurement,
-            "Connect",
-            "Choose the light source and the camera in the <b>Devices</b> panel "
-            "(<i>sim</i> is the simulated bench, used when no hardware is present), "
-            "then connect. The LEDs warm up while you prepare the bench.",
-            start_text="Connect",
-        )
+        super().__init__(measurement)
         self.abort_button.hide()
         self.progress_bar.hide()
         c = measurement.controller

@@ -38,16 +38,17 @@ class EstimatePage(StepPage):
     inputs = ("calibrate", "sample")
     produces = "estimate"
 
+    step_title = "Estimate reflectances"
+    step_description = (
+        "The sample frames are processed like the chart, and each patch's "
+        "reflectance is estimated from its responses under all LEDs (Wiener, "
+        "Eq. 5-6). Give reference reflectances to see Table 2."
+    )
+    step_start_text = "Estimate"
+    step_retake_text = "Estimate again"
+
     def __init__(self, measurement: Any, parent: QWidget | None = None) -> None:
-        super().__init__(
-            measurement,
-            "Estimate reflectances",
-            "The sample frames are processed like the chart, and each patch's "
-            "reflectance is estimated from its responses under all LEDs (Wiener, "
-            "Eq. 5-6). Give reference reflectances to see Table 2.",
-            start_text="Estimate",
-            retake_text="Estimate again",
-        )
+        super().__init__(measurement)
         m = measurement
         self.reference_edit = QLineEdit(str(m.reference_path or ""))
         self.reference_edit.setPlaceholderText(

@@ -26,16 +26,17 @@ class ExportPage(StepPage):
     inputs = ("calibrate", "estimate")
     produces = "export"
 
+    step_title = "Export"
+    step_description = (
+        "Writes the sensitivities (CSV, rawtoaces JSON), the reflectances (CSV, "
+        "CGATS .ti3), the responses, Tables 1 and 2 and an HTML/PDF report into "
+        "the measurement's <i>export</i> folder."
+    )
+    step_start_text = "Export"
+    step_retake_text = "Export again"
+
     def __init__(self, measurement: Any, parent: QWidget | None = None) -> None:
-        super().__init__(
-            measurement,
-            "Export",
-            "Writes the sensitivities (CSV, rawtoaces JSON), the reflectances (CSV, "
-            "CGATS .ti3), the responses, Tables 1 and 2 and an HTML/PDF report into "
-            "the measurement's <i>export</i> folder.",
-            start_text="Export",
-            retake_text="Export again",
-        )
+        super().__init__(measurement)
         self.files_list = QListWidget()
         self.open_button = QPushButton("Open the folder")
         self.open_button.setEnabled(False)

@@ -19,33 +19,63 @@ those in :class:`Measurement` on the GUI thread.
 from __future__ import annotations
 
 import contextlib
-import json
 import logging
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from PySide6.QtCore import QObject, Signal
 
+from tunespec.app.pipeline.folder import (
+    CALIBRATION_DIR,
+    CHART_DIR,
+    ESTIMATE_DIR,
+    EXPORT_DIR,
+    MEASUREMENT_FILE,
+    SAMPLE_DIR,
+    CalibrationResult,
+    EstimateResult,
+    ExportResult,
+    MeasurementFolder,
+    read_calibration,
+    read_estimate,
+    read_measurement_doc,
+    read_processed,
+    restore_calibration_steps,
+    session_fingerprint,
+    write_calibration,
+    write_estimate,
+    write_measurement_doc,
+)
 from tunespec.app.settings import AppSettings
 from tunespec.app.workers import DeviceContext, DeviceController
 from tunespec.core.datasets import resource_path
 from tunespec.core.errors import InputError, read_json
-from tunespec.core.io.export import read_sensitivity_meta, write_sensitivity_meta
 from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import dumps_json
-from tunespec.core.progress import Cancelled, ProgressFn, StopFn, check_stop
+from tunespec.core.progress import (
+    Cancelled,
+    ProgressFn,
+    StopFn,
+    check_stop,
+    sub_progress,
+)
 from tunespec.core.spectra import (
     DEFAULT_GRID,
     Spectra,
     read_spectra_csv,
-    write_spectra_csv,
 )
 
-__all__ = [
+__all__ = [  # the results and folder names are re-exported from app.pipeline.folder
+    "CALIBRATION_DIR",
+    "CHART_DIR",
+    "ESTIMATE_DIR",
+    "EXPORT_DIR",
+    "MEASUREMENT_FILE",
+    "SAMPLE_DIR",
     "CalibrationResult",
     "CaptureOptions",
     "EstimateResult",
@@ -56,10 +86,6 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-MEASUREMENT_FILE = "measurement.json"
-MEASUREMENT_FORMAT = "tunespec-measurement"
-CHART_DIR, SAMPLE_DIR = "chart", "sample"
-CALIBRATION_DIR, ESTIMATE_DIR, EXPORT_DIR = "calibration", "estimate", "export"
 #: Capture kinds in the order of the capture sequence (devices.capture).
 PHASES = ("dark", "white", "target")
 
@@ -128,99 +154,6 @@ class PhaseResult:
         if self.warnings:
             text += " Note: " + "; ".join(self.warnings)
         return text
-
-
-@dataclass(frozen=True, eq=False)
-class CalibrationResult:
-    """The calibrate step: sensitivities and Table 1.
-
-    Parameters
-    ----------
-    sensitivity : Spectra R, G, B
-        Estimated sensitivities (absolute scale).
-    table1 : PredictionStats
-        Response prediction error on the fitted patches.
-    threshold
-        Pass/fail limit on Table 1's RGB mean (full scale).
-    method
-        Estimation method.
-    layout
-        The chart layout with the corners used (mosaic pixels).
-    excluded_patches
-        Patches left out of the fit (saturated).
-    warnings
-        Processing notes.
-    elapsed_s
-        Wall time of processing and estimation.
-    calibration, chart
-        ``pipeline.Calibration`` and the processed chart session; ``None`` when the
-        result was restored from disk (the export step recomputes them).
-    """
-
-    sensitivity: Spectra
-    table1: Any
-    threshold: float
-    method: str
-    layout: TargetLayout
-    excluded_patches: tuple[str, ...] = ()
-    warnings: tuple[str, ...] = ()
-    elapsed_s: float = 0.0
-    calibration: Any = None
-    chart: Any = None
-
-    @property
-    def rgb_mean(self) -> float:
-        """Table 1's RGB mean, the number compared with :attr:`threshold`."""
-        return float(self.table1.mean[3])
-
-    @property
-    def passed(self) -> bool:
-        """Whether Table 1's RGB mean is within the threshold."""
-        return self.rgb_mean <= self.threshold
-
-
-@dataclass(frozen=True, eq=False)
-class EstimateResult:
-    """The estimate step: reflectances and, with references, Table 2.
-
-    Parameters
-    ----------
-    reflectance : Spectra
-        Estimated reflectances named by patch.
-    table2 : ReflectanceStats or None
-        Deviation from the references.
-    reference : Spectra or None
-        The references of the estimated patches.
-    layout
-        The sample layout with the corners used.
-    clipped
-        Patches whose estimate was clipped to [0, 1].
-    warnings
-        Processing notes.
-    elapsed_s
-        Wall time.
-    estimation, sample
-        ``pipeline.Estimation`` and the processed sample session; ``None`` when
-        restored from disk.
-    """
-
-    reflectance: Spectra
-    table2: Any = None
-    reference: Spectra | None = None
-    layout: TargetLayout | None = None
-    clipped: tuple[str, ...] = ()
-    warnings: tuple[str, ...] = ()
-    elapsed_s: float = 0.0
-    estimation: Any = None
-    sample: Any = None
-
-
-@dataclass(frozen=True)
-class ExportResult:
-    """The export step: export kind -> file."""
-
-    paths: dict[str, Path] = field(default_factory=dict)
-    folder: Path | None = None
 
 
 # -- the model --------------------------------------------------------------------------
@@ -314,16 +247,8 @@ class Measurement(QObject):
     def open(self, folder: str | Path) -> None:
         """Reopen the measurement in ``folder`` (its pages then restore themselves)."""
         folder = Path(folder)
+        doc = read_measurement_doc(MeasurementFolder(folder))
         path = folder / MEASUREMENT_FILE
-        if not path.exists():
-            raise InputError(
-                f"not a TuneSpec measurement (no {MEASUREMENT_FILE})", path=folder
-            )
-        doc = read_json(path)
-        if doc.get("format") != MEASUREMENT_FORMAT:
-            raise InputError(
-                f"not a measurement file (format != {MEASUREMENT_FORMAT!r})", path=path
-            )
         self.folder = folder
         self.chart_layout = TargetLayout.from_dict(
             doc["chart_layout"], source=str(path)
@@ -357,19 +282,15 @@ class Measurement(QObject):
         """Write ``measurement.json`` (atomically)."""
         if self.folder is None:
             return
-        from tunespec.core.io.session import atomic_write_text
-
-        doc = {
-            "format": MEASUREMENT_FORMAT,
-            "version": 1,
-            "chart_layout": self.chart_layout.to_dict(),
-            "sample_layout": self.sample_layout.to_dict(),
-            "capture": self.capture_options.to_dict(),
-            "method": self.method,
-            "threshold_rgb_mean": self.threshold,
-            "reference_path": str(self.reference_path) if self.reference_path else None,
-        }
-        atomic_write_text(self.folder / MEASUREMENT_FILE, dumps_json(doc, indent=1))
+        write_measurement_doc(
+            MeasurementFolder(self.folder),
+            chart_layout=self.chart_layout,
+            sample_layout=self.sample_layout,
+            capture=self.capture_options.to_dict(),
+            method=self.method,
+            threshold_rgb_mean=self.threshold,
+            reference_path=self.reference_path,
+        )
 
     def save_settings(self) -> None:
         """Remember the options for the next measurement."""
@@ -431,7 +352,7 @@ class Measurement(QObject):
         """The calibration saved in the folder, or None."""
         if self.folder is None:
             return None
-        result = _read_calibration(
+        result = read_calibration(
             self.folder / CALIBRATION_DIR, self.folder / CHART_DIR
         )
         if result is not None:
@@ -443,7 +364,7 @@ class Measurement(QObject):
         """The estimate saved in the folder, or None."""
         if self.folder is None:
             return None
-        result = _read_estimate(self.folder / ESTIMATE_DIR, self.folder / SAMPLE_DIR)
+        result = read_estimate(self.folder / ESTIMATE_DIR, self.folder / SAMPLE_DIR)
         if result is not None:
             self.estimate = result
             self.estimated.emit(result)
@@ -622,13 +543,6 @@ def capture_job(
     )
 
 
-def _staged(progress: ProgressFn | None, lo: float, hi: float) -> ProgressFn | None:
-    """A progress callback mapping [0, 1] onto [lo, hi] of ``progress``."""
-    if progress is None:
-        return None
-    return lambda f: progress(lo + (hi - lo) * f)
-
-
 def _process(
     session_root: Path,
     target_layout: TargetLayout,
@@ -678,8 +592,8 @@ def calibrate_job(
         chart_root,
         chart_layout,
         corners,
-        out_dir,
-        _staged(progress, 0, 0.6),
+        None,  # written with the result (pipeline.folder.write_calibration)
+        sub_progress(progress, 0, 0.6),
         should_stop,
     )
     check_stop(should_stop)
@@ -687,7 +601,7 @@ def calibrate_job(
         chart,
         layout_reflectances(chart_layout, grid=DEFAULT_GRID),
         method=method,
-        progress=_staged(progress, 0.6, 1.0),
+        progress=sub_progress(progress, 0.6, 1.0),
         should_stop=should_stop,
     )
     result = CalibrationResult(
@@ -702,7 +616,7 @@ def calibrate_job(
         calibration=cal,
         chart=chart,
     )
-    _write_calibration(out_dir, result, _fingerprint(chart_root))
+    write_calibration(out_dir, result, session_fingerprint(chart_root))
     return result
 
 
@@ -730,8 +644,8 @@ def estimate_job(
         sample_root,
         sample_layout,
         corners,
-        out_dir,
-        _staged(progress, 0, 0.8),
+        None,  # written with the result (pipeline.folder.write_estimate)
+        sub_progress(progress, 0, 0.8),
         should_stop,
     )
     check_stop(should_stop)
@@ -758,7 +672,7 @@ def estimate_job(
         estimation=type(est)(est.wiener, table2, est.uncertainty),
         sample=sample,
     )
-    _write_estimate(out_dir, result, _fingerprint(sample_root))
+    write_estimate(out_dir, result, session_fingerprint(sample_root))
     return result
 
 
@@ -781,7 +695,11 @@ def export_job(
     from tunespec.devices.registry import layout_reflectances
 
     chart, cal = calibration.chart, calibration.calibration
-    if chart is None or cal is None:
+    if (chart is None or cal is None) and (
+        restored := restore_calibration_steps(folder / CALIBRATION_DIR, calibration)
+    ) is not None:
+        chart, cal = restored
+    if chart is None or cal is None:  # a folder of an older version: process again
         chart = _process(
             folder / CHART_DIR, calibration.layout, "editor", None, None, should_stop
         )
@@ -796,7 +714,11 @@ def export_job(
     sample, est = estimated.sample, estimated.estimation
     if sample is None or est is None:
         assert estimated.layout is not None
-        sample = _process(
+        # the processed sample beside the estimate; only the (closed-form) Wiener
+        # estimate is computed again, from the same numbers
+        sample = read_processed(
+            folder / ESTIMATE_DIR, estimated.layout, estimated.warnings
+        ) or _process(
             folder / SAMPLE_DIR, estimated.layout, "editor", None, None, should_stop
         )
         est = estimate(sample, cal.sensitivity, reference=None)
@@ -832,136 +754,3 @@ def export_job(
     if progress is not None:
         progress(1.0)
     return ExportResult({k: Path(p) for k, p in files.items()}, Path(out_dir))
-
-
-# -- what the steps leave on disk ----------------------------------------------------------
-def _fingerprint(session_root: Path) -> str | None:
-    """The session's :meth:`~tunespec.core.io.session.Session.fingerprint` (None: none)."""
-    from tunespec.core.io.session import Session
-
-    try:
-        return Session.open(session_root).fingerprint()
-    except InputError:
-        return None
-
-
-def _is_current(doc: dict[str, object], session_root: Path, what: str) -> bool:
-    """False (with a log line) if the session changed since ``doc`` was computed."""
-    saved = doc.get("session_fingerprint")
-    if saved is None or saved == _fingerprint(session_root):
-        return True
-    log.warning(
-        "the %s was computed from frames that have since been retaken: run it again",
-        what,
-    )
-    return False
-
-
-def _write_calibration(
-    out_dir: Path, result: CalibrationResult, fingerprint: str | None = None
-) -> None:
-    from tunespec.core.io.session import atomic_write_text
-
-    out_dir.mkdir(parents=True, exist_ok=True)
-    write_spectra_csv(result.sensitivity, out_dir / "sensitivity.csv")
-    # the fitted SPD shift, which the CSV cannot hold (pipeline.estimate needs it)
-    write_sensitivity_meta(out_dir / "sensitivity.csv", result.sensitivity)
-    doc = {
-        "table1": result.table1.as_dict(),
-        "threshold_rgb_mean": result.threshold,
-        "passed": result.passed,
-        "method": result.method,
-        "layout": result.layout.to_dict(),
-        "excluded_patches": list(result.excluded_patches),
-        "warnings": list(result.warnings),
-        "session_fingerprint": fingerprint,
-    }
-    # written last: its presence marks the step done
-    atomic_write_text(out_dir / "calibration.json", dumps_json(doc, indent=1))
-
-
-def _read_calibration(folder: Path, chart_root: Path) -> CalibrationResult | None:
-    from tunespec.core.stats import STAT_ROWS, PredictionStats
-
-    try:
-        doc = read_json(folder / "calibration.json")
-        if not _is_current(doc, chart_root, "calibration"):
-            return None
-        sensitivity = read_spectra_csv(folder / "sensitivity.csv", allow_negative=True)
-        side = read_sensitivity_meta(folder / "sensitivity.csv")
-        extra = {"spd_shift_nm": repr(side.get("spd_shift_nm", 0.0))}
-        if "led_correction" in side:
-            extra["led_correction"] = json.dumps(side["led_correction"])
-        sensitivity = Spectra(
-            sensitivity.wavelength_nm,
-            sensitivity.values,
-            sensitivity.names,
-            {**sensitivity.meta, **extra},
-        )
-        t = doc["table1"]
-        table1 = PredictionStats(
-            mean=np.array([t[r]["mean"] for r in STAT_ROWS]),
-            max=np.array([t[r]["max"] for r in STAT_ROWS]),
-            p95=np.array([t[r]["p95"] for r in STAT_ROWS]),
-            n_stimuli=int(t["n_stimuli"]),
-        )
-        return CalibrationResult(
-            sensitivity=sensitivity,
-            table1=table1,
-            threshold=float(doc["threshold_rgb_mean"]),
-            method=str(doc["method"]),
-            layout=TargetLayout.from_dict(doc["layout"]),
-            excluded_patches=tuple(doc.get("excluded_patches", ())),
-            warnings=tuple(doc.get("warnings", ())),
-        )
-    except (OSError, ValueError, KeyError, InputError) as exc:
-        log.warning("no usable calibration in %s: %s", folder, exc)
-        return None
-
-
-def _write_estimate(
-    out_dir: Path, result: EstimateResult, fingerprint: str | None = None
-) -> None:
-    from tunespec.core.io.session import atomic_write_text
-
-    out_dir.mkdir(parents=True, exist_ok=True)
-    write_spectra_csv(result.reflectance, out_dir / "reflectance.csv")
-    if result.reference is not None:
-        write_spectra_csv(result.reference, out_dir / "reference.csv")
-    doc = {
-        "layout": None if result.layout is None else result.layout.to_dict(),
-        "clipped": list(result.clipped),
-        "warnings": list(result.warnings),
-        "session_fingerprint": fingerprint,
-    }
-    atomic_write_text(out_dir / "estimate.json", dumps_json(doc, indent=1))
-
-
-def _read_estimate(folder: Path, sample_root: Path) -> EstimateResult | None:
-    from tunespec.app.pipeline.steps import evaluate
-
-    try:
-        doc = read_json(folder / "estimate.json")
-        if not _is_current(doc, sample_root, "estimate"):
-            return None
-        reflectance = read_spectra_csv(folder / "reflectance.csv")
-        reference = None
-        if (folder / "reference.csv").is_file():
-            reference = read_spectra_csv(folder / "reference.csv")
-        table2 = (
-            None
-            if reference is None
-            else evaluate(reflectance.select(reference.names), reference)
-        )
-        layout = doc.get("layout")
-        return EstimateResult(
-            reflectance=reflectance,
-            table2=table2,
-            reference=reference,
-            layout=None if layout is None else TargetLayout.from_dict(layout),
-            clipped=tuple(doc.get("clipped", ())),
-            warnings=tuple(doc.get("warnings", ())),
-        )
-    except (OSError, ValueError, KeyError, InputError) as exc:
-        log.warning("no usable estimate in %s: %s", folder, exc)
-        return None

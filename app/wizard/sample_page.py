@@ -22,16 +22,17 @@ class SamplePage(StepPage):
 
     key = "sample"
 
+    step_title = "Sample target"
+    step_description = (
+        "Take the chart away. The sample target is captured like the chart: "
+        "dark frame, white background and the <b>sample</b> under every LED; "
+        "you are asked when to put the white board and the sample in place."
+    )
+    step_start_text = "Capture sample"
+    step_retake_text = "Retake sample frames"
+
     def __init__(self, measurement: Any, parent: QWidget | None = None) -> None:
-        super().__init__(
-            measurement,
-            "Sample target",
-            "Take the chart away. The sample target is captured like the chart: "
-            "dark frame, white background and the <b>sample</b> under every LED; "
-            "you are asked when to put the white board and the sample in place.",
-            start_text="Capture sample",
-            retake_text="Retake sample frames",
-        )
+        super().__init__(measurement)
         self.body.addStretch(1)
 
     def refresh(self) -> None:

@@ -75,18 +75,28 @@ class StepPage(QWidget):
     #: The :class:`Measurement` result this step makes (``"calibration"``...), which
     #: is dropped when the step is reset, so later steps cannot use a stale one.
     produces: str | None = None
+    #: The defaults of the constructor's texts: a page sets them once as class
+    #: attributes instead of repeating the constructor call.
+    step_title = ""
+    step_description = ""
+    step_start_text = "Start"
+    step_retake_text = "Retake"
 
     def __init__(
         self,
         measurement: Any,
-        title: str,
-        description: str,
+        title: str | None = None,
+        description: str | None = None,
         *,
-        start_text: str = "Start",
-        retake_text: str = "Retake",
+        start_text: str | None = None,
+        retake_text: str | None = None,
         parent: QWidget | None = None,
     ) -> None:
         super().__init__(parent)
+        title = self.step_title if title is None else title
+        description = self.step_description if description is None else description
+        start_text = self.step_start_text if start_text is None else start_text
+        retake_text = self.step_retake_text if retake_text is None else retake_text
         self.measurement = measurement
         self.title = title
         self.state = StepState.PENDING

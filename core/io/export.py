@@ -51,7 +51,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tunespec.core.colorimetry import lab_d50, xyz_d50
-from tunespec.core.errors import InputError, read_json
+from tunespec.core.errors import InputError, check_names, read_json
 from tunespec.core.io.cgats import CgatsTable, ti3_table, write_cgats
 from tunespec.core.limits import dumps_json
 from tunespec.core.responses import Responses, write_responses_csv
@@ -74,6 +74,7 @@ __all__ = [
     "write_colorimetry_csv",
     "write_prediction_stats_csv",
     "write_reflectance_stats_csv",
+    "write_sensitivities_csv",
     "write_sensitivity_json",
     "write_sensitivity_meta",
 ]
@@ -104,6 +105,23 @@ def sensitivity_meta_path(sensitivity_csv: str | PathLike[str]) -> Path:
     """``SENSITIVITIES.csv.meta.json``: what a sensitivities CSV cannot hold."""
     p = Path(sensitivity_csv)
     return p.with_name(p.name + ".meta.json")
+
+
+def write_sensitivities_csv(
+    path: str | PathLike[str],
+    sensitivity: Spectra,
+    covariance: NDArray[np.float64] | None = None,
+) -> Path:
+    """Write calibrated sensitivities: the spectral CSV and its ``.meta.json``.
+
+    The one writer of a calibration's result (``tunespec calibrate``, the exports and
+    the wizard's ``calibration/`` folder): the CSV holds the curves, the side file the
+    estimator, the fitted SPD shift or LED corrections and, if given, the covariance
+    (:func:`write_sensitivity_meta`), which ``estimate`` and the report need.
+    """
+    write_spectra_csv(sensitivity, path)
+    write_sensitivity_meta(path, sensitivity, covariance)
+    return Path(path)
 
 
 def write_sensitivity_meta(
@@ -494,11 +512,7 @@ def _responses_rgb(
             f"illuminant {illuminant!r} not in the responses "
             f"({', '.join(responses.illuminants)})"
         )
-    missing = [n for n in names if n not in responses.patches]
-    if missing:
-        raise InputError(
-            f"{len(missing)} patch(es) have no responses: {', '.join(missing[:8])}"
-        )
+    check_names(names, responses.patches, "{n} patch(es) have no responses: {names}")
     sub = responses.subset(list(names), [illuminant])
     return sub.rgb[:, 0, :], illuminant
 
@@ -649,6 +663,7 @@ def export_measurement(
     model: str = "",
     created: datetime | str | None = None,
     uncertainty: Any = None,
+    sensitivity_covariance: NDArray[np.float64] | None = None,
 ) -> dict[str, Path]:
     """Write every export of a measurement into ``out_dir`` (see the module table).
 
@@ -701,8 +716,9 @@ def export_measurement(
         return paths[kind]
 
     if sensitivity is not None:
-        write_spectra_csv(sensitivity, target("sensitivities_csv"))
-        write_sensitivity_meta(paths["sensitivities_csv"], sensitivity)
+        write_sensitivities_csv(
+            target("sensitivities_csv"), sensitivity, sensitivity_covariance
+        )
         paths["sensitivities_meta"] = sensitivity_meta_path(paths["sensitivities_csv"])
         write_sensitivity_json(
             sensitivity,

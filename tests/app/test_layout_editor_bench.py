@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from PySide6.QtCore import QSettings
 
-from tests.app.test_wizard import SIM, run_step
+from tests.app.test_wizard import SIM, capture_chart, run_step
 from tunespec.app.main_window import TAB_LAYOUT, MainWindow
 from tunespec.app.settings import AppSettings
 from tunespec.core.processing import find_session_corners
@@ -36,13 +36,7 @@ def window(qtbot, tmp_path):
 def test_find_corners_works_on_the_bench_frames(window, qtbot, tmp_path):
     wizard, editor = window.wizard_panel, window.layout_editor
     assert wizard.new_measurement(tmp_path / "m")
-    for page in (
-        wizard.connect_page,
-        wizard.dark_page,
-        wizard.white_page,
-        wizard.chart_page,
-    ):
-        run_step(qtbot, wizard, page)
+    capture_chart(qtbot, wizard)
     truth = np.asarray(window._truth["corners_px"])
     window.tabs.setCurrentIndex(TAB_LAYOUT)
     assert editor.session_root == tmp_path / "m" / "chart"

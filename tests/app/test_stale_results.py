@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 
 from tests.core.test_session import LAYOUT, _commit, _settings
-from tunespec.app.wizard import measurement as m
+from tunespec.app.pipeline import folder as m
 from tunespec.core.io.session import Session
 
 
@@ -23,5 +23,5 @@ def test_saved_results_are_dropped_when_their_session_changed(tmp_path, caplog) 
     folder.mkdir()
     (folder / "calibration.json").write_text(json.dumps(doc))
     caplog.clear()
-    assert m._read_calibration(folder, tmp_path / m.CHART_DIR) is None
+    assert m.read_calibration(folder, tmp_path / m.CHART_DIR) is None
     assert "since been retaken" in caplog.text

@@ -41,6 +41,17 @@ def run_step(qtbot, wizard, page, *, expect=StepState.DONE):
     return page.result_label.text()
 
 
+def capture_chart(qtbot, wizard):
+    """Run the wizard's connect, dark, white and chart steps."""
+    for page in (
+        wizard.connect_page,
+        wizard.dark_page,
+        wizard.white_page,
+        wizard.chart_page,
+    ):
+        run_step(qtbot, wizard, page)
+
+
 def test_chart_capture_steps_fill_the_session(window, qtbot, tmp_path):
     wizard = window.wizard_panel
     assert wizard.new_measurement(tmp_path / "m")
