@@ -262,3 +262,26 @@ def test_pdf_tables_wrap_long_cells_instead_of_cutting_them() -> None:
 def test_default_provenance_names_the_colorimetry_data() -> None:
     text = render_html(ReportData(), figures=[])
     assert COLORIMETRY_DATA.licence in text and "colour-matching functions" in text
+
+
+def test_a_bayes_report_states_the_validated_accuracy_and_the_led_corrections() -> None:
+    import numpy as np
+
+    from tunespec.app.report.report import ReportData, render_html
+    from tunespec.core.sensitivity_bayes import LedCorrection
+    from tunespec.core.spectra import Spectra
+
+    wl = np.arange(400.0, 701.0, 10.0)
+    sens = Spectra(wl, np.ones((3, wl.size)), ("R", "G", "B"))
+    corr = LedCorrection(("LED410",), (1.02,), (0.4,), 0.1, (0.003,), (0.05,))
+    html = render_html(
+        ReportData(
+            sensitivity=sens,
+            sensitivity_method="bayes",
+            sensitivity_std=np.full((3, wl.size), 0.01),
+            led_correction=corr,
+        ),
+        figures=[],
+    )
+    assert "Validated accuracy of the calibration method" in html
+    assert "LED410" in html and "1.0200 ± 0.0030" in html and "+0.40 ± 0.05" in html
