@@ -71,6 +71,7 @@ __all__ = [
     "BAYES_MUS",
     "SIGMA_GAIN",
     "SIGMA_SHIFT_NM",
+    "CORRECTION_MODES",
     "BayesFit",
     "LedCorrection",
     "apply_led_corrections",
@@ -480,8 +481,8 @@ def _jacobian_blocks(
     """Blocks of ``J'WJ`` and ``J'W e`` for the corrections, given sensitivities S.
 
     Returns ``Hsg, Hsd`` (3, n, n_i): coupling of ``s_k`` with ``gamma_j`` and
-    ``d_j``; ``Hgg, Hgd, Hdd`` (n_i,) the diagonal correction blocks; and the
-    gradient parts ``(g_gamma, g_d)`` stacked (2, n_i) as the last value... (see code).
+    ``d_j``; ``Hc`` (3, n_i): the diagonal correction blocks ``Hgg, Hgd, Hdd``;
+    ``g`` (2, n_i): ``J'W e`` for ``gamma`` and ``d``; and the residuals ``e``.
     """
     step = data.step
     R, C = data.R, data.C
