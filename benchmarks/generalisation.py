@@ -63,7 +63,12 @@ from tunespec.core.sensitivity import (
     SensitivityEstimate,
     estimate_camera_sensitivity,
 )
-from tunespec.core.sensitivity_bayes import _data, _nnls_quadratic, _normal, _penalties
+from tunespec.core.sensitivity_bayes import (
+    _data,
+    _nnls_quadratic,
+    _normal,
+    _smoothness_penalty,
+)
 from tunespec.core.simulate import NoiseModel, scale_to_exposure, simulate_responses
 from tunespec.core.spectra import DEFAULT_GRID, Grid, Spectra
 from tunespec.core.stats import calibration_report, sensitivity_rms
@@ -99,7 +104,6 @@ class Score:
 
 def nnls_reference(responses, reported: Spectra, chart: Spectra) -> SensitivityEstimate:
     """Plain smoothness-penalised NNLS (fixed ``NNLS_LAMBDA``), no database, no shift."""
-    n_p, n_i = len(responses.patches), len(responses.illuminants)
     var = (
         1e-8
         + responses.rgb_std**2 / responses.n_pixels[..., None]
@@ -109,14 +113,13 @@ def nnls_reference(responses, reported: Spectra, chart: Spectra) -> SensitivityE
         chart.select(responses.patches).values, responses.rgb, var, chart.step_nm
     )
     G, b = _normal(data, reported.select(responses.illuminants).values)
-    Om, _ = _penalties(chart.wavelength_nm.size, [None, None, None])
+    Om = _smoothness_penalty(chart.wavelength_nm.size)
     S = np.stack(
         [
             _nnls_quadratic(G[k] + NNLS_LAMBDA * np.trace(G[k]) / G.shape[1] * Om, b[k])
             for k in range(3)
         ]
     )
-    del n_p, n_i
     sens = Spectra(chart.wavelength_nm, S, ("R", "G", "B"), {"source": "nnls"})
     return SensitivityEstimate(sens, "nnls")
 

@@ -54,7 +54,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.interpolate import CubicSpline
 from scipy.linalg import eigh, solve_triangular
 from scipy.optimize import minimize_scalar
 
@@ -63,7 +62,14 @@ from tunespec.core.errors import InputError, SingularSystemError
 from tunespec.core.forward_model import render_rgb
 from tunespec.core.progress import ProgressFn, StopFn, check_stop, report
 from tunespec.core.responses import CHANNELS, Responses
-from tunespec.core.sensitivity_bayes import LedCorrection, _nnls_quadratic, fit_bayes
+from tunespec.core.sensitivity_bayes import (
+    LedCorrection,
+    _nnls_quadratic,
+    _smoothness_penalty,
+    apply_led_corrections,
+    fit_bayes,
+)
+from tunespec.core.sensitivity_bayes import _subspace_penalty as _basis_penalty
 from tunespec.core.simulate import check_rgb_sensitivity, check_same_grid
 from tunespec.core.spectra import Grid, Spectra
 
@@ -542,14 +548,15 @@ def _shift_values(
 
     A cubic spline, not linear interpolation: on a 5 nm grid a narrowband LED spans a
     few samples, and linear interpolation would blur it by more than the shift.
-    Outside the grid the end values are held.
+    Outside the grid the end values are held. The common-shift case of
+    :func:`~tunespec.core.sensitivity_bayes.apply_led_corrections`.
     """
     if shift_nm == 0.0:
         return np.asarray(values, dtype=np.float64)
-    wl = wavelength_nm
-    spline = CubicSpline(wl, values, axis=1)
-    out = spline(np.clip(wl + shift_nm, wl[0], wl[-1]))
-    return np.maximum(np.asarray(out, dtype=np.float64), 0.0)
+    n = np.atleast_2d(values).shape[0]
+    return apply_led_corrections(
+        wavelength_nm, np.atleast_2d(values), np.ones(n), np.full(n, float(shift_nm))
+    )
 
 
 def correct_spd_shift(illuminants: Spectra, spd_shift_nm: float) -> Spectra:
@@ -777,36 +784,21 @@ def _check_positive(s: NDArray[np.float64], channel: int) -> None:
         )
 
 
-def _second_difference(n: int) -> NDArray[np.float64]:
-    """``D2`` (n - 2, n): ``(D2 s)[j] = s[j] - 2 s[j + 1] + s[j + 2]``."""
-    return np.diff(np.eye(n), 2, axis=0)
-
-
-def _smoothness_penalty(n: int) -> NDArray[np.float64]:
-    """``D2' D2`` (n, n), scaled to trace ``n`` (mean diagonal 1) like the data term."""
-    D2 = _second_difference(n)
-    Om = D2.T @ D2
-    Om *= n / np.trace(Om)
-    return Om
-
-
 def _subspace_penalty(
     database: Mapping[str, Spectra], channel: int, n: int
 ) -> NDArray[np.float64]:
     """``I - P' P`` (n, n), the squared distance to the database subspace of ``channel``.
 
     ``P`` are the first :data:`SMOOTH_PRIOR_COMPONENTS` components
-    (:func:`database_basis`); the matrix is scaled to mean diagonal 1. An empty
-    database gives zeros (no subspace penalty).
+    (:func:`database_basis`); scaled to mean diagonal 1. An empty database gives
+    zeros (no subspace penalty).
     """
     if not database:
-        return np.zeros((n, n))
+        return _basis_penalty(None, n)
     P, _ = database_basis(
         database, channel, min(SMOOTH_PRIOR_COMPONENTS, len(database))
     )
-    Q = np.eye(n) - P.T @ P
-    Q *= n / max(np.trace(Q), 1.0)
-    return Q
+    return _basis_penalty(P, n)
 
 
 def _estimate_sensitivity_smooth(

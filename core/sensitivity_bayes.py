@@ -259,12 +259,12 @@ def _corrected(
     shift_nm: NDArray[np.float64],
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Corrected spectra and their derivative with respect to the shift."""
-    spline = CubicSpline(wl, reported, axis=1)
-    deriv = spline.derivative()
     x = np.clip(wl[None, :] + shift_nm[:, None], wl[0], wl[-1])
-    rows = np.arange(reported.shape[0])
-    val = np.stack([spline(x[j])[j] for j in rows])
-    der = np.stack([deriv(x[j])[j] for j in rows])
+    val = np.empty(reported.shape)
+    der = np.empty(reported.shape)
+    for j, row in enumerate(np.asarray(reported, dtype=np.float64)):
+        spline = CubicSpline(wl, row)  # each LED at its own shifted wavelengths
+        val[j], der[j] = spline(x[j]), spline(x[j], 1)
     inside = (wl[None, :] + shift_nm[:, None] >= wl[0]) & (
         wl[None, :] + shift_nm[:, None] <= wl[-1]
     )
@@ -313,20 +313,27 @@ def _normal(data: _Data, L: NDArray[np.float64]) -> tuple[NDArray, NDArray]:
     return G, b
 
 
-def _penalties(n: int, bases: list[NDArray | None]) -> tuple[NDArray, list[NDArray]]:
-    """Smoothness ``Omega`` and per-channel subspace ``Q_k``, each mean diagonal 1."""
+def _smoothness_penalty(n: int) -> NDArray[np.float64]:
+    """``D2' D2`` (n, n) of the second difference, scaled to mean diagonal 1."""
     D2 = np.diff(np.eye(n), 2, axis=0)
     Om = D2.T @ D2
     Om *= n / np.trace(Om)
-    Qs = []
-    for P in bases:
-        if P is None:
-            Qs.append(np.zeros((n, n)))
-            continue
-        Q = np.eye(n) - P.T @ P
-        Q *= n / max(np.trace(Q), 1.0)
-        Qs.append(Q)
-    return Om, Qs
+    return Om
+
+
+def _subspace_penalty(P: NDArray | None, n: int) -> NDArray[np.float64]:
+    """``I - P' P`` (n, n), the squared distance to the span of ``P``'s rows, scaled
+    to mean diagonal 1; zeros without a basis (no database prior)."""
+    if P is None:
+        return np.zeros((n, n))
+    Q = np.eye(n) - P.T @ P
+    Q *= n / max(np.trace(Q), 1.0)
+    return Q
+
+
+def _penalties(n: int, bases: list[NDArray | None]) -> tuple[NDArray, list[NDArray]]:
+    """Smoothness ``Omega`` and per-channel subspace ``Q_k``, each mean diagonal 1."""
+    return _smoothness_penalty(n), [_subspace_penalty(P, n) for P in bases]
 
 
 def _logdet(A: NDArray[np.float64]) -> float | None:
