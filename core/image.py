@@ -39,6 +39,9 @@ of the bin (prior and modelled noise, the flat-field residual
 :data:`~tunespec.core.uncertainty.FLAT_FIELD_RESIDUAL` included in ``K_e``). Its mean
 diagonal gives the RMS uncertainty of the spectrum and ``T^T P_b T`` (ASTM E308 D50
 weights ``T``) that of XYZ, from which ``u(L*)`` follows by the derivative of L*.
+The flat-field residual is also added as what it physically is, a ratio of
+irradiances common to all responses of a pixel (``u(Y) = 0.003 Y``), which the
+averaging over LEDs does not reduce.
 
 References
 ----------
@@ -201,9 +204,9 @@ def block_noise_stats(
     """Mean level and noise variance of flat image blocks (one photon-transfer point
     per block and channel).
 
-    The variance is half the mean square difference of horizontally adjacent pixels
-    (EMVA 1288's difference method, applied within a frame): a smooth light field
-    cancels in the difference, the noise of both pixels adds.
+    The variance is half the variance of the differences of horizontally adjacent
+    pixels (EMVA 1288's difference method, applied within a frame): a smooth light
+    field only shifts the differences' mean, the noise of both pixels adds.
 
     Parameters
     ----------
@@ -226,7 +229,9 @@ def block_noise_stats(
     blocks = x.reshape(3, hb, block_px, wb, block_px)
     level = blocks.mean(axis=(2, 4)).reshape(3, -1)
     d = np.diff(blocks, axis=4)
-    var = 0.5 * (d * d).mean(axis=(2, 4)).reshape(3, -1)
+    # the variance (not the mean square) of the differences: a gradient of the
+    # light field across the block shifts their mean, not their spread
+    var = 0.5 * d.var(axis=(2, 4)).reshape(3, -1)
     keep = np.ones(hb * wb, dtype=bool)
     if saturated is not None:
         s = saturated[: hb * block_px, : wb * block_px]
@@ -638,6 +643,11 @@ def estimate_pixels(
     xyz = (bank.T.T.astype(np.float32) @ est).astype(np.float32)
     lab = lab_from_xyz(xyz)
     var_rms, var_y = _bin_variances(bank, c, phi, bins, rest)
+    # the flat field's residual is a ratio of irradiances, common to all responses
+    # of a pixel: it scales the whole estimate (no averaging over the LEDs)
+    fr2 = bank.flat_residual**2
+    var_y += fr2 * xyz[1].astype(np.float64) ** 2
+    var_rms += fr2 * np.mean(np.square(est, dtype=np.float64), axis=0)
     u_l = _u_lightness(xyz[1], var_y)
     u_rms = np.minimum(np.sqrt(var_rms), 0.5).astype(np.float32)
     return PixelEstimate(est, xyz, lab, u_l, u_rms, sat, bins)
