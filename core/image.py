@@ -53,6 +53,7 @@ JCGM 100:2008 (GUM) Sec. 5 (propagation of uncertainty).
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -225,17 +226,24 @@ def block_noise_stats(
     hb, wb = h // block_px, w // block_px
     if hb < 1 or wb < 1:
         raise InputError(f"planes {w}x{h} are smaller than one {block_px} px block")
-    x = planes[:, : hb * block_px, : wb * block_px].astype(np.float64)
-    blocks = x.reshape(3, hb, block_px, wb, block_px)
+    # every ``row_step``-th row of blocks: tens of thousands of blocks are plenty
+    row_step = max(1, (hb * wb) // 20000)
+    rows = np.arange(0, hb, row_step)
+    x = planes[:, : hb * block_px, : wb * block_px].reshape(
+        3, hb, block_px, wb, block_px
+    )
+    blocks = x[:, rows].astype(np.float64)
     level = blocks.mean(axis=(2, 4)).reshape(3, -1)
     d = np.diff(blocks, axis=4)
     # the variance (not the mean square) of the differences: a gradient of the
     # light field across the block shifts their mean, not their spread
     var = 0.5 * d.var(axis=(2, 4)).reshape(3, -1)
-    keep = np.ones(hb * wb, dtype=bool)
+    keep = np.ones(rows.size * wb, dtype=bool)
     if saturated is not None:
-        s = saturated[: hb * block_px, : wb * block_px]
-        keep = ~s.reshape(hb, block_px, wb, block_px).any(axis=(1, 3)).ravel()
+        s = saturated[: hb * block_px, : wb * block_px].reshape(
+            hb, block_px, wb, block_px
+        )
+        keep = ~s[rows].any(axis=(1, 3)).ravel()
     return level[:, keep], var[:, keep]
 
 
@@ -348,8 +356,9 @@ class WienerBank:
         Relative flat-field residual added to ``K_e`` (and so to the uncertainty).
     level_edges : (n_lev + 1,)
         Bin edges of ``rho``; ``phi_edges`` : (n_phi + 1,) those of ``phi``.
-    W : (n_bins, n_wl, m) float32
-        The bins' Wiener matrices, ``b = level_bin * n_phi + phi_bin``.
+    Wt : (n_bins, m, n_wl) float32
+        The bins' Wiener matrices, transposed (pixels are rows: ``r^T = c^T W^T``),
+        ``b = level_bin * n_phi + phi_bin``.
     offset : (n_bins, n_wl) float32
         ``mean - W F mean``: the estimate is ``offset + W c``.
     var_rms : (n_bins,)
@@ -370,7 +379,7 @@ class WienerBank:
     flat_residual: float
     level_edges: NDArray[np.float64]
     phi_edges: NDArray[np.float64]
-    W: NDArray[np.float32]
+    Wt: NDArray[np.float32]
     offset: NDArray[np.float32]
     var_rms: NDArray[np.float64]
     xyz_cov: NDArray[np.float64]
@@ -389,8 +398,8 @@ class WienerBank:
     def bins_of(
         self, c: NDArray[np.float32], phi: NDArray[np.floating]
     ) -> NDArray[np.int64]:
-        """Bin index of each pixel, ``c`` (m, n) without NaN, ``phi`` (n,)."""
-        rho = self.level_weights @ c
+        """Bin index of each pixel, ``c`` (n, m) without NaN, ``phi`` (n,)."""
+        rho = c @ self.level_weights
         lev = _bin_index(np.sqrt(np.maximum(rho, 0.0)), np.sqrt(self.level_edges))
         ph = _bin_index(np.log(np.maximum(phi, 1e-6)), np.log(self.phi_edges))
         return lev * self.n_phi + ph
@@ -406,9 +415,9 @@ class WienerBank:
     def noise_variance(
         self, c: NDArray[np.floating], phi: NDArray[np.floating]
     ) -> NDArray[np.float64]:
-        """Exact per-pixel ``K_e`` diagonal for responses ``c`` (m, n), ``phi`` (n,):
+        """Exact per-pixel ``K_e`` diagonal for responses ``c`` (n, m), ``phi`` (n,):
         the noise model at each response plus the flat-field residual, (n, m)."""
-        cc = np.asarray(c, dtype=np.float64).T
+        cc = np.asarray(c, dtype=np.float64)
         p = np.asarray(phi, dtype=np.float64)[:, None]
         var = self.noise.variance(cc, p, self.channel_index)
         var += (self.flat_residual * cc) ** 2
@@ -484,12 +493,12 @@ def build_wiener_bank(
     --------
     >>> import numpy as np
     >>> rng = np.random.default_rng(0)
-    >>> F = rng.uniform(0, 1, (6, 8)); P = rng.uniform(0, 1, (20, 8))
+    >>> F = rng.uniform(0, 1, (6, 31)); P = rng.uniform(0, 1, (20, 31))
     >>> nm = NoiseModel([1e-6] * 3, [1e-5] * 3)
-    >>> bank = build_wiener_bank(F, P, F @ np.full(8, 0.9), nm,
-    ...                          np.arange(400.0, 440.0, 5.0), n_levels=4)
-    >>> bank.W.shape, bank.n_phi
-    ((4, 8, 6), 1)
+    >>> bank = build_wiener_bank(F, P, F @ np.full(31, 0.9), nm,
+    ...                          np.arange(400.0, 701.0, 10.0), n_levels=4)
+    >>> bank.Wt.shape, bank.n_phi
+    ((4, 6, 31), 1)
     """
     from tunespec.core.colorimetry import astm_e308_weights_d50
     from tunespec.core.uncertainty import FLAT_FIELD_RESIDUAL
@@ -527,11 +536,11 @@ def build_wiener_bank(
     T = astm_e308_weights_d50(wl)
     bank = WienerBank(
         wl, F, mean, K, w, channel, noise, float(flat_residual), level_edges,
-        phi_edges, np.empty((0, n_wl, m), np.float32), np.empty((0, n_wl), np.float32),
+        phi_edges, np.empty((0, m, n_wl), np.float32), np.empty((0, n_wl), np.float32),
         np.empty(0), np.empty((0, 3, 3)), T,
     )  # fmt: skip
     rho, phi = bank.centres()
-    c_model = rho[None, :] * w[:, None]  # (m, n_bins): c ~= rho w
+    c_model = rho[:, None] * w[None, :]  # (n_bins, m): c ~= rho w
     Ke = np.maximum(bank.noise_variance(c_model, phi), RIDGE_RELATIVE * scale)
     n_bins = rho.size
     A = np.repeat(G[None], n_bins, axis=0)
@@ -549,7 +558,8 @@ def build_wiener_bank(
     offset = mean[None] - W @ (F @ mean)
     return WienerBank(
         wl, F, mean, K, w, channel, noise, float(flat_residual), level_edges,
-        phi_edges, W.astype(np.float32), offset.astype(np.float32), var_rms, xyz_cov,
+        phi_edges, np.ascontiguousarray(sol, dtype=np.float32),
+        offset.astype(np.float32), var_rms, xyz_cov,
         T, {"n_levels": n_levels, "n_phi": int(phi_edges.size - 1),
             "level_max": top, "ridge": RIDGE_RELATIVE * scale},
     )  # fmt: skip
@@ -558,13 +568,14 @@ def build_wiener_bank(
 # -- estimation ------------------------------------------------------------------------
 @dataclass(frozen=True, eq=False)
 class PixelEstimate:
-    """Per-pixel results of :func:`estimate_pixels` for ``n`` pixels.
+    """Per-pixel results of :func:`estimate_pixels` for ``n`` pixels (pixels are rows,
+    as in a band-interleaved-by-pixel image).
 
     Parameters
     ----------
-    reflectance : (n_wl, n) float32
+    reflectance : (n, n_wl) float32
         Reflectance factors (clipped to [0, 1] if asked).
-    xyz, lab : (3, n) float32
+    xyz, lab : (n, 3) float32
         CIE XYZ (D50, 1931 2 degree, Y of the perfect diffuser 100) and CIELAB
         (ICC D50 white) of the reflectance.
     u_lab_l : (n,) float32
@@ -601,9 +612,9 @@ def estimate_pixels(
     ----------
     bank
         From :func:`build_wiener_bank`.
-    c : (m, n) float32
-        Flat-fielded responses of ``n`` pixels (illuminant-major rows, as ``F``);
-        NaN marks a clipped response.
+    c : (n, m) float32
+        Flat-fielded responses of ``n`` pixels, one row each (illuminant-major
+        columns, as the rows of ``F``); NaN marks a clipped response.
     phi : (n,)
         Flat-field factor of each pixel.
     clip
@@ -616,60 +627,98 @@ def estimate_pixels(
     Returns
     -------
     PixelEstimate
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> rng = np.random.default_rng(0)
+    >>> F = rng.uniform(0, 1, (6, 31)); P = rng.uniform(0, 1, (20, 31))
+    >>> nm = NoiseModel([1e-6] * 3, [1e-5] * 3)
+    >>> bank = build_wiener_bank(F, P, F @ np.full(31, 0.9), nm,
+    ...                          np.arange(400.0, 701.0, 10.0))
+    >>> est = estimate_pixels(bank, (P[:3] @ F.T).astype(np.float32), np.ones(3))
+    >>> est.reflectance.shape, est.lab.shape
+    ((3, 31), (3, 3))
     """
     c = np.asarray(c, dtype=np.float32)
-    m, n = c.shape
-    if m != bank.F.shape[0] or np.shape(phi) != (n,):
+    phi = np.asarray(phi)
+    n, m = c.shape
+    if m != bank.F.shape[0] or phi.shape != (n,):
         raise InputError(
-            f"pixels: responses {c.shape} and phi {np.shape(phi)} do not fit the "
+            f"pixels: responses {c.shape} and phi {phi.shape} do not fit the "
             f"bank's {bank.F.shape[0]} responses"
         )
-    sat = np.isnan(c).any(axis=0)
-    n_wl = bank.mean.size
-    est = np.empty((n_wl, n), dtype=np.float32)
+    sat = np.isnan(c).any(axis=1)
     bins = np.full(n, -1, dtype=np.int64)
     ok = ~sat if not exact else np.zeros(n, dtype=bool)
-    if ok.any():
-        sel = np.flatnonzero(ok) if not ok.all() else None
-        cs = c if sel is None else c[:, sel]
-        b = bank.bins_of(cs, phi if sel is None else phi[sel])
-        _apply_bins(bank, cs, b, est, sel)
-        bins[ok] = b
+    if ok.all():
+        bins = bank.bins_of(c, phi)
+        est = _apply_bins(bank, c, bins)
+    else:
+        est = np.empty((n, bank.mean.size), dtype=np.float32)
+        if ok.any():
+            b = bank.bins_of(c[ok], phi[ok])
+            est[ok] = _apply_bins(bank, c[ok], b)
+            bins[ok] = b
     rest = np.flatnonzero(~ok)
     if rest.size:
-        est[:, rest] = wiener_pixels_exact(bank, c[:, rest], phi[rest]).T
+        est[rest] = wiener_pixels_exact(bank, c[rest], phi[rest])
     if clip:
         np.clip(est, 0.0, 1.0, out=est)
-    xyz = (bank.T.T.astype(np.float32) @ est).astype(np.float32)
-    lab = lab_from_xyz(xyz)
+    xyz = est @ bank.T.astype(np.float32)
+    lab = lab_from_xyz(xyz.T).T
     var_rms, var_y = _bin_variances(bank, c, phi, bins, rest)
     # the flat field's residual is a ratio of irradiances, common to all responses
     # of a pixel: it scales the whole estimate (no averaging over the LEDs)
     fr2 = bank.flat_residual**2
-    var_y += fr2 * xyz[1].astype(np.float64) ** 2
-    var_rms += fr2 * np.mean(np.square(est, dtype=np.float64), axis=0)
-    u_l = _u_lightness(xyz[1], var_y)
+    var_y += fr2 * xyz[:, 1].astype(np.float64) ** 2
+    var_rms += fr2 * np.mean(np.square(est, dtype=np.float64), axis=1)
+    u_l = _u_lightness(xyz[:, 1], var_y)
     u_rms = np.minimum(np.sqrt(var_rms), 0.5).astype(np.float32)
-    return PixelEstimate(est, xyz, lab, u_l, u_rms, sat, bins)
+    return PixelEstimate(est, xyz, np.ascontiguousarray(lab), u_l, u_rms, sat, bins)
 
 
 def _apply_bins(
-    bank: WienerBank,
-    c: NDArray[np.float32],
-    bins: NDArray[np.int64],
-    out: NDArray[np.float32],
-    sel: NDArray[np.int64] | None,
-) -> None:
-    """``out[:, px] = offset_b + W_b c[:, px]`` bin by bin (one matrix product each)."""
-    order = np.argsort(bins, kind="stable")
-    counts = np.bincount(bins, minlength=bank.W.shape[0])
+    bank: WienerBank, c: NDArray[np.float32], bins: NDArray[np.int64]
+) -> NDArray[np.float32]:
+    """``r = offset_b + c W_b^T`` for every pixel (row), bin by bin.
+
+    The pixels are sorted by bin once (a row gather: each pixel's responses are
+    contiguous), every bin is one matrix product on a contiguous slice, written
+    in place, and one more gather puts the rows back in order. The sorted
+    buffers are kept per thread: large fresh arrays cost a page fault per 4 kB,
+    as much as the products themselves.
+    """
+    n, m = c.shape
+    n_wl = bank.mean.size
+    # bins are small integers: a stable sort of int16 is numpy's radix sort, O(n)
+    order = np.argsort(bins.astype(np.int16), kind="stable")
+    counts = np.bincount(bins, minlength=bank.Wt.shape[0])
+    cs = _workspace("sorted_c", (n, m))
+    np.take(c, order, axis=0, out=cs)
+    es = _workspace("sorted_r", (n, n_wl))
     start = 0
     for b in np.flatnonzero(counts):
-        px = order[start : start + counts[b]]
-        start += counts[b]
-        block = bank.W[b] @ c[:, px]
-        block += bank.offset[b][:, None]
-        out[:, px if sel is None else sel[px]] = block
+        sl = slice(start, start + int(counts[b]))
+        start += int(counts[b])
+        np.matmul(cs[sl], bank.Wt[b], out=es[sl])
+        es[sl] += bank.offset[b]
+    inverse = np.empty_like(order)
+    inverse[order] = np.arange(order.size)
+    return np.take(es, inverse, axis=0)
+
+
+_THREAD = threading.local()
+
+
+def _workspace(name: str, shape: tuple[int, int]) -> NDArray[np.float32]:
+    """A float32 scratch array of ``shape`` for this thread, reused across calls."""
+    buf = getattr(_THREAD, name, None)
+    size = shape[0] * shape[1]
+    if buf is None or buf.size < size:
+        buf = np.empty(size, dtype=np.float32)
+        setattr(_THREAD, name, buf)
+    return buf[:size].reshape(shape)
 
 
 def _bin_variances(
@@ -681,13 +730,11 @@ def _bin_variances(
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Per pixel: the RMS spectral variance and the variance of Y (from the bin's
     posterior; exactly solved pixels get their own)."""
-    var_rms = np.empty(bins.size)
-    var_y = np.empty(bins.size)
-    binned = bins >= 0
-    var_rms[binned] = bank.var_rms[bins[binned]]
-    var_y[binned] = bank.xyz_cov[bins[binned], 1, 1]
+    safe = np.maximum(bins, 0)
+    var_rms = bank.var_rms[safe]
+    var_y = bank.xyz_cov[safe, 1, 1]
     if rest.size:
-        P = _posterior_exact(bank, c[:, rest], phi[rest])
+        P = _posterior_exact(bank, c[rest], phi[rest])
         var_rms[rest] = np.einsum("pll->p", P) / P.shape[1]
         t = bank.T[:, 1]
         var_y[rest] = np.einsum("l,plk,k->p", t, P, t)
@@ -705,9 +752,25 @@ def _u_lightness(
         (1.0 / 3.0) * np.cbrt(np.maximum(t, _LAB_EPS)) ** -2,
         1.0 / (3.0 * (6.0 / 29.0) ** 2),
     )
-    return (116.0 * dfdt / _D50_WHITE[1] * np.sqrt(np.maximum(var_y, 0.0))).astype(
-        np.float32
-    )
+    u = 116.0 * dfdt / _D50_WHITE[1] * np.sqrt(np.maximum(var_y, 0.0))
+    return u.astype(np.float32)
+
+
+def _exact_system(
+    bank: WienerBank, c: NDArray[np.floating], phi: NDArray[np.floating]
+) -> tuple[
+    NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]
+]:
+    """``c`` without NaN, each pixel's ``K_e`` diagonal, ``F K`` and ``F K F^T``."""
+    c64 = np.asarray(c, dtype=np.float64)
+    nan = np.isnan(c64)
+    c64 = np.where(nan, 0.0, c64)
+    var = bank.noise_variance(c64, phi)
+    var[nan] = SATURATED_VARIANCE
+    var = np.maximum(var, bank.params.get("ridge", 0.0))
+    FK = bank.F @ bank.K
+    G = FK @ bank.F.T
+    return c64, var, FK, 0.5 * (G + G.T)
 
 
 def wiener_pixels_exact(
@@ -723,33 +786,24 @@ def wiener_pixels_exact(
     ----------
     bank
         For ``F``, the prior and the noise model.
-    c : (m, n)
+    c : (n, m)
     phi : (n,)
 
     Returns
     -------
     (n, n_wl) float64
     """
-    c64 = np.asarray(c, dtype=np.float64)
-    nan = np.isnan(c64)
-    c64 = np.where(nan, 0.0, c64)
-    var = bank.noise_variance(c64, phi)
-    var[nan.T] = SATURATED_VARIANCE
-    F, K, mean = bank.F, bank.K, bank.mean
-    FK = F @ K
-    G = FK @ F.T
-    G = 0.5 * (G + G.T)
-    var = np.maximum(var, bank.params.get("ridge", 0.0))
-    m, n = c64.shape
-    out = np.empty((n, mean.size))
+    c64, var, FK, G = _exact_system(bank, c, phi)
+    n, m = c64.shape
+    out = np.empty((n, bank.mean.size))
     idx = np.arange(m)
-    resid = c64.T - F @ mean
+    resid = c64 - bank.F @ bank.mean
     for lo in range(0, n, _EXACT_CHUNK):
         hi = min(lo + _EXACT_CHUNK, n)
         A = np.repeat(G[None], hi - lo, axis=0)
         A[:, idx, idx] += var[lo:hi]
         x = np.linalg.solve(A, resid[lo:hi, :, None])[..., 0]
-        out[lo:hi] = mean + x @ FK
+        out[lo:hi] = bank.mean + x @ FK
     return out
 
 
@@ -757,18 +811,11 @@ def _posterior_exact(
     bank: WienerBank, c: NDArray[np.floating], phi: NDArray[np.floating]
 ) -> NDArray[np.float64]:
     """Posterior covariances (n, n_wl, n_wl) of exactly solved pixels."""
-    c64 = np.asarray(c, dtype=np.float64)
-    nan = np.isnan(c64)
-    var = bank.noise_variance(np.where(nan, 0.0, c64), phi)
-    var[nan.T] = SATURATED_VARIANCE
-    var = np.maximum(var, bank.params.get("ridge", 0.0))
-    FK = bank.F @ bank.K
-    G = FK @ bank.F.T
-    G = 0.5 * (G + G.T)
-    n = var.shape[0]
-    m = G.shape[0]
+    _, var, FK, G = _exact_system(bank, c, phi)
+    n, m = var.shape
     idx = np.arange(m)
-    out = np.empty((n, bank.K.shape[0], bank.K.shape[0]))
+    n_wl = bank.K.shape[0]
+    out = np.empty((n, n_wl, n_wl))
     for lo in range(0, n, _EXACT_CHUNK):
         hi = min(lo + _EXACT_CHUNK, n)
         A = np.repeat(G[None], hi - lo, axis=0)

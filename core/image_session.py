@@ -571,27 +571,29 @@ def estimate_block(
         The sRGB preview of the block.
     """
     if rectification is None:
-        c = read_response_rows(job, row0, row1)
+        planes = read_response_rows(job, row0, row1)
         phi = _read_phi(job, row0, row1)
     else:
-        c, phi = _rectified(job, rectification, row0, row1)
-    m, r, cols = c.shape
-    est = estimate_pixels(bank, c.reshape(m, r * cols), phi.reshape(-1), clip=clip)
+        planes, phi = _rectified(job, rectification, row0, row1)
+    m, r, cols = planes.shape
+    # pixels as rows (band-interleaved by pixel, as the outputs)
+    c = np.ascontiguousarray(planes.reshape(m, r * cols).T)
+    del planes
+    est = estimate_pixels(bank, c, phi.reshape(-1), clip=clip)
     del c
-    n_wl = est.reflectance.shape[0]
-    unc = np.stack([est.u_lab_l, est.u_rms])
+    unc = np.stack([est.u_lab_l, est.u_rms], axis=1)
     if systematic is not None:
-        add_l, add_rms = systematic.lookup(est.lab)
-        unc = np.sqrt(unc.astype(np.float64) ** 2 + np.stack([add_l, add_rms]))
+        add_l, add_rms = systematic.lookup(est.lab.T)
+        unc = np.sqrt(unc.astype(np.float64) ** 2 + np.stack([add_l, add_rms], axis=1))
         unc = unc.astype(np.float32)
     outputs.write_rows(
         row0,
-        est.reflectance.reshape(n_wl, r, cols),
-        est.xyz.reshape(3, r, cols),
-        est.lab.reshape(3, r, cols),
-        unc.reshape(2, r, cols),
+        est.reflectance.reshape(r, cols, -1),
+        est.xyz.reshape(r, cols, 3),
+        est.lab.reshape(r, cols, 3),
+        unc.reshape(r, cols, 2),
     )
-    return srgb8_from_xyz_d50(est.xyz).reshape(r, cols, 3)
+    return srgb8_from_xyz_d50(est.xyz.T).reshape(r, cols, 3)
 
 
 def _rectified(
@@ -806,7 +808,7 @@ def systematic_table(
     unc = reflectance_uncertainty(
         est, resp, reported.resample(cal_grid, average=True), calibration, prior
     )
-    bins = bank.bins_of(c.T.astype(np.float32), phi)
+    bins = bank.bins_of(c.astype(np.float32), phi)
     y = unc.xyz[:, 1]
     u_l_bin = _u_lightness(y, bank.xyz_cov[bins, 1, 1]).astype(np.float64)
     ex_l = np.maximum(unc.lab_std[:, 0] ** 2 - u_l_bin**2, 0.0)

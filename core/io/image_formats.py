@@ -2,7 +2,7 @@
 
 One folder per session (:class:`ImageOutputs`)::
 
-    cube.hdr, cube.img   ENVI, float32, band-interleaved by line, wavelengths in nm
+    cube.hdr, cube.img   ENVI, float32, band-interleaved by pixel, wavelengths in nm
                          (Spectral Python ``spectral.open_image``, ENVI, GDAL)
     cube.zarr/           the same cube as a chunked Zarr array (rows, cols, bands),
                          attribute ``wavelength_nm``; for big data and parallel writes
@@ -44,6 +44,8 @@ __all__ = [
     "CUBE_HDR",
     "PROVENANCE",
     "ImageOutputs",
+    "SpectralImage",
+    "open_image_outputs",
     "read_provenance",
 ]
 
@@ -124,7 +126,7 @@ class ImageOutputs:
             },
             shape=(rows, cols, wl.size),
             dtype=np.float32,
-            interleave="bil",
+            interleave="bip",
             byteorder=0,
             force=True,
         )
@@ -177,26 +179,26 @@ class ImageOutputs:
 
         Parameters
         ----------
-        cube : (n_bands, r, cols)
-        xyz, lab : (3, r, cols)
-        uncertainty : (2, r, cols)
+        cube : (r, cols, n_bands)
+        xyz, lab : (r, cols, 3)
+        uncertainty : (r, cols, 2)
         """
         import zarr
 
-        n_bands, r, cols = cube.shape
+        r, cols, n_bands = cube.shape
         if row0 % self.block_rows or cols != self.shape[1] or n_bands != self.n_bands:
             raise InputError(
                 f"block at row {row0} of shape {cube.shape} does not fit the images "
                 f"{self.shape} x {self.n_bands} in blocks of {self.block_rows} rows"
             )
-        # ENVI BIL: for each row, every band's row in turn
-        bil = np.ascontiguousarray(cube.transpose(1, 0, 2), dtype="<f4")
-        self._pwrite(CUBE_IMG, row0 * n_bands * cols * 4, bil)
+        # ENVI BIP: each pixel's bands in turn, rows one after the other
+        bip = np.ascontiguousarray(cube, dtype="<f4")
+        self._pwrite(CUBE_IMG, row0 * n_bands * cols * 4, bip)
         arr = zarr.open_array(str(self.folder / CUBE_ZARR), mode="r+")
-        arr[row0 : row0 + r] = cube.transpose(1, 2, 0)
+        arr[row0 : row0 + r] = bip
         for name, data in ((XYZ_TIF, xyz), (LAB_TIF, lab), (UNC_TIF, uncertainty)):
-            samples = data.shape[0]
-            pix = np.ascontiguousarray(data.transpose(1, 2, 0), dtype="<f4")
+            samples = data.shape[2]
+            pix = np.ascontiguousarray(data, dtype="<f4")
             self._pwrite(name, self.offsets[name] + row0 * cols * samples * 4, pix)
 
     def _pwrite(self, name: str, offset: int, data: NDArray[Any]) -> None:
@@ -251,3 +253,86 @@ def _flat(provenance: dict[str, Any]) -> dict[str, str]:
         f"tunespec_{k}": v if isinstance(v, str) else json.dumps(v)
         for k, v in provenance.items()
     }
+
+
+@dataclass(frozen=True, eq=False)
+class SpectralImage:
+    """A finished image folder, opened for reading (memory-mapped, nothing loaded).
+
+    Parameters
+    ----------
+    folder
+        The folder.
+    wavelength_nm : (n_bands,)
+    cube : (rows, cols, n_bands) float32, read-only memory map (ENVI BIP)
+    lab, xyz : (rows, cols, 3) float32, read-only memory maps (the TIFFs)
+    uncertainty : (rows, cols, 2) float32: u(L*), RMS u(reflectance)
+    provenance : dict
+    """
+
+    folder: Path
+    wavelength_nm: NDArray[np.float64]
+    cube: NDArray[np.float32]
+    lab: NDArray[np.float32]
+    xyz: NDArray[np.float32]
+    uncertainty: NDArray[np.float32]
+    provenance: dict[str, Any]
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return (int(self.cube.shape[0]), int(self.cube.shape[1]))
+
+    def srgb(self) -> NDArray[np.uint8]:
+        """The sRGB preview, (rows, cols, 3) uint8."""
+        import cv2
+
+        img = cv2.imread(str(self.folder / SRGB_PNG), cv2.IMREAD_COLOR)
+        if img is None:
+            raise InputError("cannot read the preview", path=self.folder / SRGB_PNG)
+        return np.ascontiguousarray(img[:, :, ::-1])
+
+    def region(self, row0: int, row1: int, col0: int, col1: int) -> dict[str, Any]:
+        """Mean and spread of a rectangle: L*a*b* (mean, std), the mean spectrum and
+        its standard deviation over the pixels, and the pixel count."""
+        r0, r1 = sorted((max(0, row0), min(self.shape[0], row1)))
+        c0, c1 = sorted((max(0, col0), min(self.shape[1], col1)))
+        if r1 <= r0 or c1 <= c0:
+            raise InputError("the region holds no pixel")
+        lab = np.asarray(self.lab[r0:r1, c0:c1], dtype=np.float64).reshape(-1, 3)
+        spec = np.asarray(self.cube[r0:r1, c0:c1], dtype=np.float64)
+        spec = spec.reshape(-1, spec.shape[-1])
+        return {
+            "n_pixels": int(lab.shape[0]),
+            "lab_mean": lab.mean(axis=0),
+            "lab_std": lab.std(axis=0),
+            "reflectance_mean": spec.mean(axis=0),
+            "reflectance_std": spec.std(axis=0),
+        }
+
+
+def open_image_outputs(folder: str | PathLike[str]) -> SpectralImage:
+    """Open a finished image folder (see the module notes) without loading it.
+
+    Raises
+    ------
+    InputError
+        The folder is not finished (no ``provenance.json``) or a file is missing.
+    """
+    import spectral
+    import tifffile
+
+    out = Path(folder)
+    prov = read_provenance(out)
+    if prov is None:
+        raise InputError(
+            "not a finished image folder (no provenance.json); run estimate-image",
+            path=out,
+        )
+    try:
+        envi = spectral.open_image(str(out / CUBE_HDR))
+        cube = envi.open_memmap(writable=False)
+        wl = np.asarray(envi.bands.centers, dtype=np.float64)
+        maps = [tifffile.memmap(out / n, mode="r") for n in (LAB_TIF, XYZ_TIF, UNC_TIF)]
+    except (OSError, ValueError) as exc:
+        raise InputError(f"cannot open the images: {exc}", path=out) from None
+    return SpectralImage(out, wl, cube, maps[0], maps[1], maps[2], prov)

@@ -53,10 +53,10 @@ def system() -> dict:
 
 
 def _noisy(F, truth, phi, rng, noise=CAMERA_NOISE):
-    """Flat-fielded responses with the model's photon + read noise, (m, n)."""
-    c = F @ truth.T
+    """Flat-fielded responses with the model's photon + read noise, (n, m)."""
+    c = truth @ F.T
     channel = np.tile(np.arange(3), F.shape[0] // 3)
-    var = noise.variance(c.T, phi[:, None], channel).T
+    var = noise.variance(c, phi[:, None], channel)
     return (c + rng.standard_normal(c.shape) * np.sqrt(var)).astype(np.float32)
 
 
@@ -106,11 +106,11 @@ def test_bin_centre_pixel_equals_the_exact_solve(system) -> None:
                              phi_range=(0.9, 1.4), n_levels=16, n_phi=3)  # fmt: skip
     rho, phi = bank.centres()
     b = 20
-    c = (rho[b] * white)[:, None].astype(np.float32)
+    c = (rho[b] * white)[None, :].astype(np.float32)
     got = estimate_pixels(bank, c, np.array([phi[b]]), clip=False)
     assert got.bins[0] == b
     exact = wiener_pixels_exact(bank, c.astype(np.float64), np.array([phi[b]]))
-    np.testing.assert_allclose(got.reflectance[:, 0], exact[0], atol=1e-5)
+    np.testing.assert_allclose(got.reflectance[0], exact[0], atol=1e-5)
 
 
 def test_binned_estimate_is_close_to_exact_and_to_truth(system) -> None:
@@ -128,8 +128,8 @@ def test_binned_estimate_is_close_to_exact_and_to_truth(system) -> None:
     binned = estimate_pixels(bank, c, phi, clip=False)
     exact = estimate_pixels(bank, c, phi, clip=False, exact=True)
     diff = np.sqrt(np.mean((binned.reflectance - exact.reflectance) ** 2))
-    err_exact = np.sqrt(np.mean((exact.reflectance.T - truth) ** 2))
-    err_binned = np.sqrt(np.mean((binned.reflectance.T - truth) ** 2))
+    err_exact = np.sqrt(np.mean((exact.reflectance - truth) ** 2))
+    err_binned = np.sqrt(np.mean((binned.reflectance - truth) ** 2))
     assert diff < RTOL_BINNING * err_exact
     # the exact K_e uses the noisy responses (a low draw gets more weight), the
     # binned one a smooth level: binning is not less accurate against the truth
@@ -148,10 +148,10 @@ def test_uncertainty_is_calibrated_on_prior_like_pixels(system) -> None:
     bank = build_wiener_bank(F, sg, white, CAMERA_NOISE, GRID.wavelength_nm,
                              phi_range=(1.0, 1.5), flat_residual=0.0)  # fmt: skip
     est = estimate_pixels(bank, c, phi, clip=False)
-    z = (est.reflectance.T - truth) / est.u_rms[:, None]
+    z = (est.reflectance - truth) / est.u_rms[:, None]
     cover = np.mean(np.abs(z) < 1.96)
     lab_true = xyz_to_lab_d50(truth @ bank.T)
-    zl = (est.lab[0] - lab_true[:, 0]) / est.u_lab_l
+    zl = (est.lab[:, 0] - lab_true[:, 0]) / est.u_lab_l
     cover_l = np.mean(np.abs(zl) < 1.96)
     assert COVERAGE_RANGE[0] < cover < COVERAGE_RANGE[1]
     assert COVERAGE_RANGE[0] < cover_l < COVERAGE_RANGE[1]
@@ -161,14 +161,14 @@ def test_saturated_response_is_left_out(system) -> None:
     F, white, sg = system["F"], system["white"], system["sg"]
     bank = build_wiener_bank(F, sg.values, white, CAMERA_NOISE, GRID.wavelength_nm)
     truth = sg.values[:3]
-    c = (F @ truth.T).astype(np.float32)
+    c = (truth @ F.T).astype(np.float32)
     clean = estimate_pixels(bank, c.copy(), np.ones(3), clip=False)
-    c[5, 1] = np.nan  # one clipped response of pixel 1
+    c[1, 5] = np.nan  # one clipped response of pixel 1
     got = estimate_pixels(bank, c, np.ones(3), clip=False)
     assert got.saturated.tolist() == [False, True, False]
     assert got.bins[1] == -1 and np.all(np.isfinite(got.reflectance))
     # 65 of 66 noise-free responses still pin the spectrum down
-    assert np.abs(got.reflectance[:, 1] - clean.reflectance[:, 1]).max() < 0.02
+    assert np.abs(got.reflectance[1] - clean.reflectance[1]).max() < 0.02
 
 
 def test_bank_rejects_mismatched_inputs(system) -> None:
@@ -179,7 +179,7 @@ def test_bank_rejects_mismatched_inputs(system) -> None:
         build_wiener_bank(F, sg.values, -white, CAMERA_NOISE, GRID.wavelength_nm)
     bank = build_wiener_bank(F, sg.values, white, CAMERA_NOISE, GRID.wavelength_nm)
     with pytest.raises(InputError):
-        estimate_pixels(bank, np.zeros((5, 2), np.float32), np.ones(2))
+        estimate_pixels(bank, np.zeros((2, 5), np.float32), np.ones(2))
 
 
 def test_lab_and_srgb_match_colour_science() -> None:
@@ -211,27 +211,27 @@ def test_image_outputs_round_trip(tmp_path) -> None:
 
     rng = np.random.default_rng(4)
     rows, cols, wl = 10, 7, np.arange(400.0, 430.0, 5.0)
-    cube = rng.uniform(0, 1, (wl.size, rows, cols)).astype(np.float32)
-    xyz = rng.uniform(0, 100, (3, rows, cols)).astype(np.float32)
-    lab = rng.uniform(-50, 100, (3, rows, cols)).astype(np.float32)
-    unc = rng.uniform(0, 1, (2, rows, cols)).astype(np.float32)
+    cube = rng.uniform(0, 1, (rows, cols, wl.size)).astype(np.float32)
+    xyz = rng.uniform(0, 100, (rows, cols, 3)).astype(np.float32)
+    lab = rng.uniform(-50, 100, (rows, cols, 3)).astype(np.float32)
+    unc = rng.uniform(0, 1, (rows, cols, 2)).astype(np.float32)
     out = ImageOutputs.create(tmp_path / "img", (rows, cols), wl, block_rows=4,
                               provenance={"session": "s", "grid_nm": [400, 425, 5]})  # fmt: skip
     for r0 in (8, 0, 4):  # any order, as parallel workers finish
         sl = slice(r0, r0 + 4)
-        out.write_rows(r0, cube[:, sl], xyz[:, sl], lab[:, sl], unc[:, sl])
+        out.write_rows(r0, cube[sl], xyz[sl], lab[sl], unc[sl])
     assert read_provenance(tmp_path / "img") is None  # not finished yet
     envi = spectral.open_image(str(tmp_path / "img" / "cube.hdr"))
     np.testing.assert_allclose(envi.bands.centers, wl)
-    np.testing.assert_array_equal(np.array(envi.open_memmap()), cube.transpose(1, 2, 0))
+    np.testing.assert_array_equal(np.array(envi.open_memmap()), cube)
     z = zarr.open_array(str(tmp_path / "img" / "cube.zarr"), mode="r")
-    np.testing.assert_array_equal(z[:], cube.transpose(1, 2, 0))
+    np.testing.assert_array_equal(z[:], cube)
     assert z.attrs["wavelength_nm"] == wl.tolist()
     np.testing.assert_array_equal(tifffile.imread(tmp_path / "img" / "xyz.tif"),
-                                  xyz.transpose(1, 2, 0))  # fmt: skip
+                                  xyz)  # fmt: skip
     np.testing.assert_array_equal(tifffile.imread(tmp_path / "img" / "uncertainty.tif"),
-                                  unc.transpose(1, 2, 0))  # fmt: skip
+                                  unc)  # fmt: skip
     out.write_provenance({"session": "s"})
     assert read_provenance(tmp_path / "img") == {"session": "s"}
     with pytest.raises(InputError):
-        out.write_rows(3, cube[:, :4], xyz[:, :4], lab[:, :4], unc[:, :4])
+        out.write_rows(3, cube[:4], xyz[:4], lab[:4], unc[:4])
