@@ -223,20 +223,20 @@ def test_rectified_images(bench_session, tmp_path) -> None:
 @pytest.mark.filterwarnings("ignore::DeprecationWarning")
 @pytest.mark.filterwarnings("ignore::ResourceWarning")
 def test_local_cluster_gives_identical_images(bench_session, images, tmp_path) -> None:
-    """A dask.distributed LocalCluster with 2 worker processes computes exactly the
-    images of the local threaded scheduler."""
-    from distributed import Client, LocalCluster
-
-    from tunespec.app.pipeline.image import estimate_images
+    """``--scheduler ADDRESS`` of a dask.distributed LocalCluster with 2 worker
+    processes computes exactly the images of the local threaded scheduler."""
+    from distributed import LocalCluster
 
     out = tmp_path / "cluster"
-    with (
-        LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                     dashboard_address=None) as cluster,
-        Client(cluster) as client,
-    ):  # fmt: skip
-        estimate_images(bench_session["session"], bench_session["sens"], out,
-                        scheduler=client)  # fmt: skip
+    with LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+    ) as cluster:
+        code = main([
+            "estimate-image", str(bench_session["session"]), "--sensitivities",
+            str(bench_session["sens"]), "--out", str(out),
+            "--scheduler", cluster.scheduler_address,
+        ])  # fmt: skip
+    assert code == 0
     got = _read(out)
     for key in ("cube", "zarr", "xyz", "lab", "unc"):
         np.testing.assert_array_equal(got[key], images[key], err_msg=key)
