@@ -20,9 +20,9 @@ factor, so ``var(c) = f^2 a + f b c``.
 **The approximation (binning by signal level).** Per pixel the noise variances of
 the ``3 n_i`` responses follow from two scalars: the flat-field factor ``phi`` of
 the pixel (common to all responses: the light field's shape is the LEDs' common
-geometry and the lens's vignetting) and its level ``rho``, the mean of ``c_k /
-w_k`` over the responses (``w_k`` the white board's Eq. 2 normaliser, so ``rho`` is a
-brightness relative to the white board). Responses are modelled as
+geometry and the lens's vignetting) and its level ``rho = sum_k c_k / sum_k w_k``
+(``w_k`` the white board's Eq. 2 normaliser, so ``rho`` is a brightness relative to
+the white board, dominated by the bright responses and so hardly noisy). Responses are modelled as
 ``c_k ~= rho w_k``, so ``K_e(rho, phi) = diag(phi^2 a + phi b rho w)``, and
 ``(rho, phi)`` is quantised into bins (levels uniform in ``sqrt(rho)``, as photon
 noise is; ``phi`` geometric). Each bin has one Wiener matrix ``W_b = K F^T (F K F^T +
@@ -226,8 +226,8 @@ def block_noise_stats(
     hb, wb = h // block_px, w // block_px
     if hb < 1 or wb < 1:
         raise InputError(f"planes {w}x{h} are smaller than one {block_px} px block")
-    # every ``row_step``-th row of blocks: tens of thousands of blocks are plenty
-    row_step = max(1, (hb * wb) // 20000)
+    # every ``row_step``-th row of blocks: a few thousand blocks per frame are plenty
+    row_step = max(1, (hb * wb) // 4000)
     rows = np.arange(0, hb, row_step)
     x = planes[:, : hb * block_px, : wb * block_px].reshape(
         3, hb, block_px, wb, block_px
@@ -392,14 +392,24 @@ class WienerBank:
 
     @property
     def level_weights(self) -> NDArray[np.float32]:
-        """``v`` with ``rho = v . c`` (mean of ``c_k / w_k``), (m,) float32."""
-        return (1.0 / (self.white * self.white.size)).astype(np.float32)
+        """``v`` with ``rho = v . c = sum(c) / sum(w)``, (m,) float32.
+
+        The white-weighted mean of ``c_k / w_k``: the bright responses dominate, so
+        the level is not as noisy as a plain mean of the ratios would be (a weak
+        LED's ratio is mostly read noise).
+        """
+        return np.full(self.white.size, 1.0 / self.white.sum(), dtype=np.float32)
 
     def bins_of(
         self, c: NDArray[np.float32], phi: NDArray[np.floating]
     ) -> NDArray[np.int64]:
         """Bin index of each pixel, ``c`` (n, m) without NaN, ``phi`` (n,)."""
-        rho = c @ self.level_weights
+        return self.bins_of_level(c @ self.level_weights, phi)
+
+    def bins_of_level(
+        self, rho: NDArray[np.floating], phi: NDArray[np.floating]
+    ) -> NDArray[np.int64]:
+        """Bin index from the level ``rho`` (n,) and ``phi`` (n,)."""
         lev = _bin_index(np.sqrt(np.maximum(rho, 0.0)), np.sqrt(self.level_edges))
         ph = _bin_index(np.log(np.maximum(phi, 1e-6)), np.log(self.phi_edges))
         return lev * self.n_phi + ph
@@ -648,16 +658,17 @@ def estimate_pixels(
             f"pixels: responses {c.shape} and phi {phi.shape} do not fit the "
             f"bank's {bank.F.shape[0]} responses"
         )
-    sat = np.isnan(c).any(axis=1)
+    rho = c @ bank.level_weights
+    sat = np.isnan(rho)  # a NaN (clipped) response makes its pixel's level NaN
     bins = np.full(n, -1, dtype=np.int64)
     ok = ~sat if not exact else np.zeros(n, dtype=bool)
     if ok.all():
-        bins = bank.bins_of(c, phi)
+        bins = bank.bins_of_level(rho, phi)
         est = _apply_bins(bank, c, bins)
     else:
         est = np.empty((n, bank.mean.size), dtype=np.float32)
         if ok.any():
-            b = bank.bins_of(c[ok], phi[ok])
+            b = bank.bins_of_level(rho[ok], phi[ok])
             est[ok] = _apply_bins(bank, c[ok], b)
             bins[ok] = b
     rest = np.flatnonzero(~ok)
@@ -672,7 +683,7 @@ def estimate_pixels(
     # of a pixel: it scales the whole estimate (no averaging over the LEDs)
     fr2 = bank.flat_residual**2
     var_y += fr2 * xyz[:, 1].astype(np.float64) ** 2
-    var_rms += fr2 * np.mean(np.square(est, dtype=np.float64), axis=1)
+    var_rms += fr2 / est.shape[1] * np.einsum("ij,ij->i", est, est)
     u_l = _u_lightness(xyz[:, 1], var_y)
     u_rms = np.minimum(np.sqrt(var_rms), 0.5).astype(np.float32)
     return PixelEstimate(est, xyz, np.ascontiguousarray(lab), u_l, u_rms, sat, bins)
