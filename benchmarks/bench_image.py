@@ -94,28 +94,34 @@ print(json.dumps({{"wall_s": wall, "peak_rss_bytes": rss, "user_s": ru.ru_utime,
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def _wiener_vs_matmul() -> dict[str, float]:
-    """The binned Wiener stage of one block against one float32 product."""
+def _synthetic_system() -> tuple:
+    """Grid, F (22 LEDs x the 5D Mark III, the white board at 0.75 full scale in
+    each LED's strongest channel), the white levels and the camera's noise model."""
     import numpy as np
 
-    from tunespec.core.datasets import load_camera, load_colorchecker_sg, load_led_set
+    from tunespec.core.datasets import load_camera, load_led_set
     from tunespec.core.forward_model import lighting_matrix
-    from tunespec.core.image import (
-        NoiseModel,
-        _apply_bins,
-        build_wiener_bank,
-        estimate_pixels,
-    )
-    from tunespec.core.image_session import BLOCK_PIXELS
+    from tunespec.core.image import NoiseModel
     from tunespec.core.spectra import Grid
 
     grid = Grid(400.0, 700.0, 5.0)
     F = lighting_matrix(load_led_set(grid).values, load_camera(grid=grid).values, 5.0)
     white = F @ np.full(grid.n, 0.9)
     F *= np.repeat(0.75 / white.reshape(-1, 3).max(axis=1), 3)[:, None]
-    white = F @ np.full(grid.n, 0.9)
-    sg = load_colorchecker_sg(grid).values
     noise = NoiseModel.from_camera(full_well_e=67000.0, read_noise_e=30.0)
+    return grid, F, F @ np.full(grid.n, 0.9), noise
+
+
+def _wiener_vs_matmul() -> dict[str, float]:
+    """The binned Wiener stage of one block against one float32 product."""
+    import numpy as np
+
+    from tunespec.core.datasets import load_colorchecker_sg
+    from tunespec.core.image import _apply_bins, build_wiener_bank, estimate_pixels
+    from tunespec.core.image_session import BLOCK_PIXELS
+
+    grid, F, white, noise = _synthetic_system()
+    sg = load_colorchecker_sg(grid).values
     bank = build_wiener_bank(
         F, sg, white, noise, grid.wavelength_nm, phi_range=(1, 1.9)
     )
@@ -157,21 +163,12 @@ def _binning_error() -> dict[str, float]:
 
     from tunespec.core.colorimetry import delta_e_2000, lab_d50
     from tunespec.core.datasets import (
-        load_camera,
         load_colorchecker_sg,
-        load_led_set,
         load_training_reflectances_190,
     )
-    from tunespec.core.forward_model import lighting_matrix
-    from tunespec.core.image import NoiseModel, build_wiener_bank, estimate_pixels
-    from tunespec.core.spectra import Grid
+    from tunespec.core.image import build_wiener_bank, estimate_pixels
 
-    grid = Grid(400.0, 700.0, 5.0)
-    F = lighting_matrix(load_led_set(grid).values, load_camera(grid=grid).values, 5.0)
-    white = F @ np.full(grid.n, 0.9)
-    F *= np.repeat(0.75 / white.reshape(-1, 3).max(axis=1), 3)[:, None]
-    white = F @ np.full(grid.n, 0.9)
-    noise = NoiseModel.from_camera(full_well_e=67000.0, read_noise_e=30.0)
+    grid, F, white, noise = _synthetic_system()
     bank = build_wiener_bank(
         F, load_colorchecker_sg(grid).values, white, noise, grid.wavelength_nm,
         phi_range=(1.0, 1.9),

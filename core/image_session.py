@@ -43,7 +43,6 @@ section "Capturing and Processing", Eq. 1, 2, 5 and 6.
 from __future__ import annotations
 
 import math
-import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from os import PathLike
@@ -65,7 +64,7 @@ from tunespec.core.image import (
     photon_transfer_fit,
     srgb8_from_xyz_d50,
 )
-from tunespec.core.io.image_formats import ImageOutputs
+from tunespec.core.io.image_formats import ImageOutputs, pwrite_all
 from tunespec.core.io.raw import load_raw
 from tunespec.core.io.session import Session, find_darks, frames_by_channel
 from tunespec.core.spectra import Grid, Spectra
@@ -399,7 +398,7 @@ def prepare_channel(job: ImageJob, j: int) -> ChannelResult:
         target[k] *= factor  # Eq. 2: A' = mean(A_B) A / A_B
         target[k][sat] = np.nan
     offset = 3 * j * h * w * 4
-    _pwrite(job.work_path(RESPONSES), offset, target)
+    pwrite_all(job.work_path(RESPONSES), offset, target)
     return ChannelResult(
         mean_b, level, var, factor_grid[1].astype(np.float32),
         tuple(int(k) for k in np.flatnonzero(~own)), int(sat.sum()),
@@ -427,17 +426,6 @@ def _window(shape: tuple[int, int]) -> tuple[int, int, int, int]:
     from tunespec.core.processing import flat_window
 
     return flat_window(shape, FLAT_WINDOW_PX)
-
-
-def _pwrite(path: Path, offset: int, data: NDArray[Any]) -> None:
-    fd = os.open(path, os.O_WRONLY)
-    try:
-        view = memoryview(np.ascontiguousarray(data)).cast("B")
-        done = 0
-        while done < view.nbytes:
-            done += os.pwrite(fd, view[done:], offset + done)
-    finally:
-        os.close(fd)
 
 
 def read_response_rows(

@@ -19,8 +19,9 @@ output folders at the same paths (a shared file system).
 
 from __future__ import annotations
 
+import contextlib
 import shutil
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from os import PathLike
@@ -117,7 +118,8 @@ def session_graph(
     out_dir: str | PathLike[str],
     settings: ImageSettings,
 ) -> Any:
-    """The Dask graph of one session; computing it returns the provenance dict."""
+    """The Dask graph of one session: the final task (computing it returns the
+    provenance dict) and the blocks of rows (for progress on a cluster)."""
     from dask import delayed
 
     from tunespec.core import image_session as st
@@ -171,9 +173,10 @@ def session_graph(
         )
         for r0 in range(0, shape[0], rows)
     ]
-    return delayed(_finish, pure=True)(
+    final = delayed(_finish, pure=True)(
         job, outputs, bank, blocks, provenance, dask_key_name=f"finish-{job.work}"
     )
+    return final, blocks
 
 
 def _after(func: Any) -> Any:
@@ -275,42 +278,65 @@ def _provenance(
     }  # fmt: skip
 
 
+@contextlib.contextmanager
+def _scheduler(scheduler: Any) -> Iterator[Any]:
+    """The scheduler to compute on: ``"threads"``/``"sync"`` (local), or a connected
+    ``distributed.Client`` (an address is connected to, and closed again, here) --
+    before any work is planned, so a wrong address fails at once."""
+    if scheduler is None or scheduler in ("threads", "sync", "synchronous"):
+        yield scheduler or "threads"
+        return
+    from distributed import Client
+
+    if isinstance(scheduler, Client):
+        yield scheduler
+        return
+    try:
+        client = Client(str(scheduler), timeout="10s")
+    except (OSError, TimeoutError) as exc:
+        raise InputError(
+            f"--scheduler {scheduler}: cannot connect to a dask.distributed "
+            f"scheduler ({exc})"
+        ) from None
+    try:
+        yield client
+    finally:
+        client.close()
+
+
 def _compute(
-    graphs: Sequence[Any],
+    graphs: Sequence[tuple[Any, list[Any]]],
     scheduler: Any,
     progress: ProgressFn | None,
     should_stop: StopFn | None,
 ) -> list[Any]:
-    """Compute the graphs locally (threads) or on a ``dask.distributed`` cluster."""
-    if scheduler is None or scheduler in ("threads", "sync", "synchronous"):
-        return _compute_local(graphs, scheduler or "threads", progress, should_stop)
-    from distributed import Client, as_completed
+    """Compute ``(final, parts)`` graphs locally or on a ``dask.distributed`` client;
+    returns the finals' results. On a cluster, progress counts the parts (the blocks
+    of rows) as they finish."""
+    if isinstance(scheduler, str):
+        finals = [g for g, _ in graphs]
+        return _compute_local(finals, scheduler, progress, should_stop)
+    from distributed import as_completed
 
-    client = scheduler if isinstance(scheduler, Client) else None
-    own = client is None
-    if own:
-        try:
-            client = Client(str(scheduler), timeout="10s")
-        except (OSError, TimeoutError) as exc:
-            raise InputError(
-                f"--scheduler {scheduler}: cannot connect to a dask.distributed "
-                f"scheduler ({exc})"
-            ) from None
-    assert client is not None
+    client = scheduler
+    finals = [g for g, _ in graphs]
+    parts = [p for _, ps in graphs for p in ps]
+    futures = client.compute([*finals, *parts])
+    results: list[Any] = [None] * len(finals)
     try:
-        futures = client.compute(list(graphs))
-        index = {f.key: i for i, f in enumerate(futures)}
-        results: list[Any] = [None] * len(futures)
         for done, fut in enumerate(as_completed(futures), start=1):
             if should_stop is not None and should_stop():
-                client.cancel(futures)
                 raise Cancelled()
-            results[index[fut.key]] = fut.result()
+            i = futures.index(fut)
+            if i < len(finals):
+                results[i] = fut.result()
+            else:
+                fut.result()  # raises the task's error here
             report(progress, done / len(futures))
-        return results
-    finally:
-        if own:
-            client.close()
+    except BaseException:
+        client.cancel(futures)
+        raise
+    return results
 
 
 def _compute_local(
@@ -375,8 +401,9 @@ def estimate_images(
     """
     grid = settings.grid or _default_grid()
     cal = _load_calibration(sensitivities, grid)
-    graph = session_graph(session_dir, cal, out_dir, settings)
-    return _compute([graph], scheduler, progress, should_stop)[0]
+    with _scheduler(scheduler) as sched:
+        graph = session_graph(session_dir, cal, out_dir, settings)
+        return _compute([graph], sched, progress, should_stop)[0]
 
 
 def _default_grid() -> Grid:
@@ -445,15 +472,16 @@ def batch_images(
         else:
             todo.append((s, out))
     group = max(1, int(sessions_at_once))
-    for k in range(0, len(todo), group):
-        part = todo[k : k + group]
-        base = k / len(todo)
+    with _scheduler(scheduler) as sched:
+        for k in range(0, len(todo), group):
+            part = todo[k : k + group]
+            base = k / len(todo)
 
-        def sub(f: float, base: float = base, n: int = len(part)) -> None:
-            report(progress, base + f * n / len(todo))
+            def sub(f: float, base: float = base, n: int = len(part)) -> None:
+                report(progress, base + f * n / len(todo))
 
-        graphs = [session_graph(s, cal, out, settings) for s, out in part]
-        _compute(graphs, scheduler, sub, should_stop)
-        done.extend(str(s) for s, _ in part)
+            graphs = [session_graph(s, cal, out, settings) for s, out in part]
+            _compute(graphs, sched, sub, should_stop)
+            done.extend(str(s) for s, _ in part)
     report(progress, 1.0)
     return {"done": done, "skipped": skipped, "calibration_sha256": cal.sha256}

@@ -46,6 +46,7 @@ __all__ = [
     "ImageOutputs",
     "SpectralImage",
     "open_image_outputs",
+    "pwrite_all",
     "read_provenance",
 ]
 
@@ -202,14 +203,7 @@ class ImageOutputs:
             self._pwrite(name, self.offsets[name] + row0 * cols * samples * 4, pix)
 
     def _pwrite(self, name: str, offset: int, data: NDArray[Any]) -> None:
-        fd = os.open(self.folder / name, os.O_WRONLY)
-        try:
-            view = memoryview(data).cast("B")
-            done = 0
-            while done < view.nbytes:
-                done += os.pwrite(fd, view[done:], offset + done)
-        finally:
-            os.close(fd)
+        pwrite_all(self.folder / name, offset, data)
 
     def write_preview(self, srgb: NDArray[np.uint8]) -> Path:
         """The sRGB preview (rows, cols, 3) as PNG."""
@@ -227,6 +221,19 @@ class ImageOutputs:
         path = self.folder / PROVENANCE
         atomic_write_text(path, dumps_json(provenance))
         return path
+
+
+def pwrite_all(path: str | PathLike[str], offset: int, data: NDArray[Any]) -> None:
+    """Write an array's bytes at ``offset`` of an existing file (positioned I/O: any
+    number of writers may fill disjoint ranges of one file at the same time)."""
+    fd = os.open(path, os.O_WRONLY)
+    try:
+        view = memoryview(np.ascontiguousarray(data)).cast("B")
+        done = 0
+        while done < view.nbytes:
+            done += os.pwrite(fd, view[done:], offset + done)
+    finally:
+        os.close(fd)
 
 
 def read_provenance(folder: str | PathLike[str]) -> dict[str, Any] | None:
