@@ -14,7 +14,7 @@ from tunespec.core.errors import InputError, check_names
 from tunespec.core.io.export import read_sensitivity_meta, write_sensitivities_csv
 from tunespec.core.limits import MAX_REFLECTANCE, dumps_json
 from tunespec.core.responses import Responses, read_responses_csv, write_responses_csv
-from tunespec.core.spectra import Grid, Spectra, read_spectra_csv, write_spectra_csv
+from tunespec.core.spectra import Spectra, read_spectra_csv, write_spectra_csv
 
 #: ``core.sensitivity.SENSITIVITY_METHODS``'s keys (a test checks), named here because
 #: importing the estimators (scipy) would cost ``tunespec --help`` a third of a second.
@@ -271,13 +271,15 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
 def cmd_estimate(args: argparse.Namespace) -> int:
     from tunespec.core.datasets import load_colorchecker_sg
+    from tunespec.core.wiener import integration_grid, wiener_reflectance
 
     responses = read_responses_csv(args.responses)
-    reported = read_spectra_csv(args.illuminants, args.grid, average=True)
-    sensitivity = read_sensitivities(args.sensitivities, args.grid)
+    sensitivity = read_sensitivities(args.sensitivities)
+    fine = integration_grid(sensitivity, args.grid)
+    sensitivity = sensitivity.resample(fine)
+    reported = read_spectra_csv(args.illuminants, fine, average=True)
     # imported after the inputs are read (scipy): an error in them is reported at once
     from tunespec.core.sensitivity import correct_illuminants_from_meta
-    from tunespec.core.wiener import wiener_reflectance
 
     meta = read_sensitivity_meta(args.sensitivities)
     illuminants = correct_illuminants_from_meta(reported, meta, args.spd_shift_nm)
@@ -297,7 +299,7 @@ def cmd_estimate(args: argparse.Namespace) -> int:
     )
     write_spectra_csv(est.reflectance, args.output)
     if "covariance" in meta and args.spd_shift_nm is None and args.noise_std is None:
-        _write_uncertainty(args, est, responses, prior, meta)
+        _write_uncertainty(args, est, responses, reported, meta)
     if est.clipped:
         print(
             f"clipped to [0, 1]: {est.n_clipped_samples} sample(s) in "
@@ -309,7 +311,11 @@ def cmd_estimate(args: argparse.Namespace) -> int:
 
 
 def _write_uncertainty(
-    args: argparse.Namespace, est: Any, responses: Responses, prior: Spectra, meta: dict
+    args: argparse.Namespace,
+    est: Any,
+    responses: Responses,
+    reported: Spectra,
+    meta: dict,
 ) -> None:
     """Standard uncertainties beside the reflectances (see the README's formats)."""
     from tunespec.core.io.export import write_colorimetry_csv
@@ -317,13 +323,7 @@ def _write_uncertainty(
     from tunespec.core.uncertainty import reflectance_uncertainty
 
     calibration = calibration_from_files(args.sensitivities, meta)
-    wl = calibration.sensitivity.wavelength_nm
-    reported = read_spectra_csv(
-        args.illuminants,
-        Grid(float(wl[0]), float(wl[-1]), calibration.sensitivity.step_nm),
-        average=True,
-    )
-    unc = reflectance_uncertainty(est, responses, reported, calibration, prior)
+    unc = reflectance_uncertainty(est, responses, reported, calibration)
     u_path = args.output.with_name(args.output.stem + "_uncertainty.csv")
     write_spectra_csv(est.reflectance.with_values(unc.reflectance_std), u_path)
     lab_path = args.output.with_name(args.output.stem + "_colorimetry.csv")

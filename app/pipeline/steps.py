@@ -284,23 +284,24 @@ def estimate(
     """
     from tunespec.core.sensitivity import correct_illuminants_from_meta
     from tunespec.core.uncertainty import reflectance_uncertainty
-    from tunespec.core.wiener import wiener_reflectance
+    from tunespec.core.wiener import integration_grid, wiener_reflectance
 
     prior = prior if prior is not None else load_colorchecker_sg(grid)
     illuminants = correct_illuminants_from_meta(
         sample.illuminants, sensitivity.meta, spd_shift_nm
     )
+    fine = integration_grid(sensitivity, grid)
     est = wiener_reflectance(
         sample.responses,
-        illuminants.resample(grid, average=True),
-        sensitivity.resample(grid),
+        illuminants.resample(fine, average=True),
+        sensitivity.resample(fine),
         prior.resample(grid),
     )
     table2 = None if reference is None else evaluate(est.reflectance, reference)
     unc = None
     if calibration is not None and calibration.covariance is not None:
         unc = reflectance_uncertainty(
-            est, sample.responses, sample.illuminants, calibration, prior.resample(grid)
+            est, sample.responses, sample.illuminants, calibration
         )
     return Estimation(est, table2, unc)
 
