@@ -13,7 +13,9 @@ TuneSpec again:
 ``sensitivities.json``           the same in the rawtoaces-data camera schema (as
                                  ``resources/cameras/*.json``), normalised to peak 1,
                                  on 380-780 nm at 5 nm (all rawtoaces reads; 0 where
-                                 not estimated)
+                                 not estimated); the absolute scale is in its
+                                 comments, where TuneSpec's reader finds it
+``sensitivities.json.meta.json`` the side file again, for the JSON
 ``reflectances.csv``             estimated reflectances, spectral CSV (0..1)
 ``reflectances.ti3``             ArgyllCMS CGATS: names, camera RGB (percent), XYZ and
                                  L*a*b* (D50, 2°), spectra (percent)
@@ -84,6 +86,7 @@ EXPORT_NAMES: dict[str, str] = {
     "sensitivities_csv": "sensitivities.csv",
     "sensitivities_meta": "sensitivities.csv.meta.json",
     "sensitivities_json": "sensitivities.json",
+    "sensitivities_json_meta": "sensitivities.json.meta.json",
     "reflectances_csv": "reflectances.csv",
     "reflectances_ti3": "reflectances.ti3",
     "reference_csv": "reference_reflectances.csv",
@@ -135,14 +138,15 @@ def write_sensitivity_meta(
     fills it (``source``, ``spd_shift_nm``).
     """
     path = sensitivity_meta_path(sensitivity_csv)
+    wl = sensitivity.wavelength_nm
     doc: dict[str, Any] = {
         "estimated_by": sensitivity.meta.get("source", ""),
+        "grid": f"{wl[0]:g}:{wl[-1]:g}:{sensitivity.step_nm:g}",
         "spd_shift_nm": float(sensitivity.meta.get("spd_shift_nm", 0.0)),
     }
     if "led_correction" in sensitivity.meta:
         doc["led_correction"] = json.loads(sensitivity.meta["led_correction"])
     if covariance is not None:
-        wl = sensitivity.wavelength_nm
         doc["covariance"] = {
             "parameters": "s_R, s_G, s_B at wavelength_nm, then log gain and "
             "shift_nm of each LED in led_correction order",
@@ -729,6 +733,13 @@ def export_measurement(
             comments="estimated with TuneSpec from a chart under a tunable LED source",
             created=created,
         )
+        # the JSON carries the curves; the calibration's LED corrections and
+        # covariance go beside it too, so 'estimate --sensitivities X.json' applies
+        # them as it does for the CSV
+        write_sensitivity_meta(
+            paths["sensitivities_json"], sensitivity, sensitivity_covariance
+        )
+        target("sensitivities_json_meta")
     ti3_rgb = responses
     if responses is not None and ti3_illuminant is None:
         ti3_rgb = responses if len(responses.illuminants) == 1 else None
