@@ -11,7 +11,7 @@ The reader also takes what instruments, spreadsheets and other libraries write:
 
 - the wavelength column headed ``wavelength``, ``wavelength (nm)``, ``nm``,
   ``lambda``, ``λ`` or ``wl`` (any case); colour-science's
-  ``colour.io.write_sds_to_csv`` writes ``wavelength`` and one column per spectrum;
+  ``colour.io.write_sds_to_csv_file`` writes ``wavelength`` and one column per spectrum;
 - comma, semicolon or tab separated (detected from the header line); with ``;`` or
   tab a decimal comma (``0,52``) is read as a decimal point;
 - one spectrum per *row*: a header such as ``SAMPLE_NAME,380,390,...`` or
