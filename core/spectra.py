@@ -29,8 +29,8 @@ __all__ = [
     "MAX_GRID_SAMPLES",
     "Grid",
     "Spectra",
-    "read_spectra_csv",
     "grid_from_data",
+    "read_spectra_csv",
     "resampling_matrix",
     "write_spectra_csv",
 ]
