@@ -85,6 +85,8 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     add_output_options(p)
     p.set_defaults(func=cmd_export_rawtoaces, output_files=("output",))
 
+    _add_export_camera(sub)
+
     p = sub.add_parser(
         "report",
         help="HTML and PDF report of a measurement from its files",
@@ -117,6 +119,99 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--session-id", help="session identifier shown in the report")
     _add_optional_grid(p)
     p.set_defaults(func=cmd_report, output_dirs=("out",))
+
+
+def _add_export_camera(
+    sub: argparse._SubParsersAction[argparse.ArgumentParser],
+) -> None:
+    p = sub.add_parser(
+        "export-camera",
+        help="the chart's camera .ti3 for ArgyllCMS colprof, ACES IDT and 3x3 CCMs",
+        description="From a chart's responses under all LEDs and the calibration: "
+        "chart_camera.ti3 (every patch's camera RGB under --under, with its "
+        "reference spectrum, XYZ and L*a*b* D50), which ArgyllCMS colprof turns into "
+        "an ICC input profile ('colprof -a m -O camera.icc chart_camera') and "
+        "profcheck checks ('profcheck chart_camera.ti3 camera.icc'); and "
+        "camera_transforms.json/.csv: the ACES IDT (colour-science matrix_idt, D55) "
+        "and white-preserving 3x3 colour-correction matrices for D50, D65 and A with "
+        "their CIEDE2000 training (chart) and test (190 rawtoaces reflectances) "
+        "errors.",
+    )
+    p.add_argument("--responses", required=True, type=Path, help="chart responses CSV")
+    p.add_argument(
+        "--illuminants", required=True, type=Path, help="the chart's LED spectra"
+    )
+    p.add_argument(
+        "--reflectances",
+        required=True,
+        type=Path,
+        help="the chart's reference reflectances (any format, 0-1 or percent)",
+    )
+    p.add_argument(
+        "--sensitivities", required=True, type=Path, help="calibrated sensitivities"
+    )
+    p.add_argument(
+        "--under",
+        default="D50",
+        help="the light of the camera RGB: D50, D65 or A (the LEDs mixed to match "
+        "it) or one LED's name (its responses as measured); default D50",
+    )
+    p.add_argument("-o", "--out", required=True, type=Path, help="output folder")
+    add_output_options(p)
+    p.set_defaults(func=cmd_export_camera, output_dirs=("out",))
+
+
+def cmd_export_camera(args: argparse.Namespace) -> int:
+    from tunespec.core.io.cgats import write_cgats
+    from tunespec.core.io.export import (
+        CAMERA_EXPORT_NAMES,
+        camera_ti3,
+        camera_transforms,
+        write_camera_transforms,
+    )
+    from tunespec.core.responses import read_responses_csv
+
+    out = Console(args)
+    responses = read_responses_csv(args.responses)
+    illuminants = read_spectral(args.illuminants, kind="illuminant")
+    chart = read_spectral(args.reflectances, kind="reflectance")
+    sens = _estimate_sensitivities(args.sensitivities)
+    out.inputs(illuminants, chart, sens)
+    args.out.mkdir(parents=True, exist_ok=True)
+    paths = {k: args.out / v for k, v in CAMERA_EXPORT_NAMES.items()}
+    table = camera_ti3(chart, responses, illuminants, under=args.under)
+    write_cgats(table, paths["chart_camera_ti3"])
+    transforms = camera_transforms(sens, chart)
+    write_camera_transforms(
+        transforms, paths["camera_transforms_json"], paths["camera_transforms_csv"]
+    )
+    out.say(f"{len(table)} patches with camera RGB under {args.under}: "
+            f"{paths['chart_camera_ti3']}")  # fmt: skip
+    for t in transforms:
+        out.say(
+            f"{t.kind:<8} {t.illuminant:<4} CIEDE2000 mean/max: training "
+            f"{t.training['mean_de00']:.2f}/{t.training['max_de00']:.2f} "
+            f"({t.training['set']}), test {t.test['mean_de00']:.2f}/"
+            f"{t.test['max_de00']:.2f} ({t.test['set']})"
+        )
+    out.summary(
+        {
+            "patches": len(table),
+            "under": args.under,
+            "transforms": [t.as_dict() for t in transforms],
+            "files": {k: str(v) for k, v in paths.items()},
+        }
+    )
+    return 0
+
+
+def _estimate_sensitivities(path: Path) -> Spectra:
+    sens = read_sensitivities(path)
+    if sens.meta.get("relative"):
+        raise InputError(
+            "sensitivities in relative units: give the calibration's CSV", path=path
+        )
+    return sens
 
 
 def _add_optional_grid(parser: argparse.ArgumentParser) -> None:

@@ -424,6 +424,7 @@ def _run_on(
             settings=settings,
             warnings=hooks.warnings,
             report=plan.report,
+            chart_reflectances=plan.chart_reflectances,
         ),
     )
     if sample_bench is not bench:
