@@ -30,7 +30,12 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         description="Write reflectances as an ArgyllCMS .ti3 (CGATS): SAMPLE_ID, "
         "SAMPLE_NAME, RGB_R/G/B (percent of full scale, from --responses), XYZ "
         "and L*a*b* (D50, CIE 1931 2°, ASTM E308, ICC D50 white) and SPEC_nnn "
-        "(percent). ArgyllCMS spec2cie, colverify and colprof read it.",
+        "(percent). ArgyllCMS spec2cie (recomputes XYZ/L*a*b* from the spectra) and "
+        "colverify (CIEDE2000 between two such files) read every one; colprof needs "
+        "device values, so only a file written with --responses and --illuminant "
+        "(COLOR_REP XYZ_RGB); for a camera profile from the whole chart use "
+        "'tunespec export-camera' (chart_camera.ti3). TuneSpec's own commands read "
+        "it back as reflectances.",
     )
     p.add_argument(
         "--reflectances",
@@ -60,7 +65,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         description="Write camera sensitivities (CSV with R, G, B columns) in the "
         "rawtoaces-data camera JSON schema, normalised to peak 1, on 380-780 nm at "
         "5 nm as rawtoaces requires (interpolated linearly; 0 where the file has "
-        "no data, which the header's comments say).",
+        "no data, which the header's comments say, with the absolute scale). "
+        "rawtoaces reads it from its camera data folder; TuneSpec's estimate, "
+        "simulate-responses and report read it back on the absolute scale.",
     )
     p.add_argument(
         "--sensitivities",
