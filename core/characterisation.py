@@ -196,10 +196,10 @@ def aces_idt(
 
     shape = colour.SpectralShape(380, 780, 5)
     wl = shape.wavelengths
+    src_wl = sensitivity.wavelength_nm
     s = np.stack(
-        [np.interp(wl, sensitivity.wavelength_nm, v, left=0.0, right=0.0)
-         for v in sensitivity.values]
-    )  # fmt: skip
+        [np.interp(wl, src_wl, v, left=0, right=0) for v in sensitivity.values]
+    )
     # colour-science (as rawtoaces) normalises the light by the channel with the
     # highest peak and then assumes it is green; a channel's scale only moves into
     # its white-balance multiplier, so R and B are scaled below G and that is undone

@@ -10,9 +10,10 @@ import argparse
 import sys
 import time
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any, TextIO
 
-from tunespec.core.errors import TuneSpecError
+from tunespec.core.errors import InputError, TuneSpecError
 from tunespec.core.progress import ProgressFn
 from tunespec.core.spectra import Grid, Spectra
 
@@ -23,6 +24,7 @@ __all__ = [
     "EXIT_INPUT",
     "Console",
     "TerminalProgress",
+    "absolute_sensitivities",
     "add_grid_option",
     "add_output_options",
     "close_progress",
@@ -129,6 +131,21 @@ class Console:
             return None
         # with --json, stdout holds the JSON alone
         return progress_bar(label, lines_to=sys.stderr if self.json else None)
+
+
+def absolute_sensitivities(path: Path) -> Spectra:
+    """Sensitivities for Eq. 1: any format, refused in relative units without a scale."""
+    from tunespec.core.datasets import read_sensitivities
+
+    sensitivity = read_sensitivities(path)
+    if sensitivity.meta.get("relative"):
+        raise InputError(
+            "sensitivities in relative units (normalised, no absolute scale): Eq. 1 "
+            "needs the calibration's scale; give the sensitivities CSV that "
+            "'tunespec calibrate' wrote, or a rawtoaces JSON written by TuneSpec",
+            path=path,
+        )
+    return sensitivity
 
 
 def resolve_grid(

@@ -10,12 +10,12 @@ import numpy as np
 
 from tunespec.app.cli.common import (
     Console,
+    absolute_sensitivities,
     add_grid_option,
     add_output_options,
     resolve_grid,
     seed_arg,
 )
-from tunespec.core.datasets import read_sensitivities
 from tunespec.core.errors import InputError, check_names
 from tunespec.core.io.export import read_sensitivity_meta, write_sensitivities_csv
 from tunespec.core.io.responses_csv import read_responses_csv, write_responses_csv
@@ -44,6 +44,17 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     _add_simulate_responses(sub)
 
 
+def _add_responses_and_illuminants(p: argparse.ArgumentParser) -> None:
+    """``--responses`` and ``--illuminants``, as calibrate and estimate take them."""
+    p.add_argument("--responses", required=True, type=Path, help="responses CSV")
+    p.add_argument(
+        "--illuminants",
+        required=True,
+        type=Path,
+        help="LED spectra: " + SPECTRAL_FORMATS,
+    )
+
+
 def _add_calibrate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """The ``calibrate`` subcommand."""
     p = sub.add_parser(
@@ -52,13 +63,7 @@ def _add_calibrate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> 
         description="Camera sensitivities from chart responses under all LEDs "
         "(paper Eq. 3-4 and better estimators); prints Table 1.",
     )
-    p.add_argument("--responses", required=True, type=Path, help="responses CSV")
-    p.add_argument(
-        "--illuminants",
-        required=True,
-        type=Path,
-        help="LED spectra: " + SPECTRAL_FORMATS,
-    )
+    _add_responses_and_illuminants(p)
     p.add_argument(
         "--reflectances",
         required=True,
@@ -121,13 +126,7 @@ def _add_estimate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
         description="Reflectances from responses under all LEDs by Wiener estimation "
         "with patch-wise noise covariance (Eq. 5-6).",
     )
-    p.add_argument("--responses", required=True, type=Path, help="responses CSV")
-    p.add_argument(
-        "--illuminants",
-        required=True,
-        type=Path,
-        help="LED spectra: " + SPECTRAL_FORMATS,
-    )
+    _add_responses_and_illuminants(p)
     p.add_argument(
         "--sensitivities",
         required=True,
@@ -336,23 +335,11 @@ def _prior(path: Path | None) -> Spectra:
     )
 
 
-def _read_sensitivities(path: Path) -> Spectra:
-    sensitivity = read_sensitivities(path)
-    if sensitivity.meta.get("relative"):
-        raise InputError(
-            "sensitivities in relative units (normalised, no absolute scale): Eq. 1 "
-            "needs the calibration's scale; give the sensitivities CSV that "
-            "'tunespec calibrate' wrote, or a rawtoaces JSON written by TuneSpec",
-            path=path,
-        )
-    return sensitivity
-
-
 def cmd_estimate(args: argparse.Namespace) -> int:
     out = Console(args)
     responses = read_responses_csv(args.responses)
     reported = read_spectral(args.illuminants, kind="illuminant")
-    sensitivity = _read_sensitivities(args.sensitivities)
+    sensitivity = absolute_sensitivities(args.sensitivities)
     prior = _prior(args.prior)
     out.inputs(reported, sensitivity, prior)
     grid = resolve_grid(
@@ -452,7 +439,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from tunespec.core.simulate import NoiseModel, scale_to_exposure, simulate_responses
 
     out = Console(args)
-    sens_in = _read_sensitivities(args.sensitivities)
+    sens_in = absolute_sensitivities(args.sensitivities)
     illum_in = read_spectral(args.illuminants, kind="illuminant")
     refl_in = read_spectral(args.reflectances, kind="reflectance")
     out.inputs(sens_in, illum_in, refl_in)

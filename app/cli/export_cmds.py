@@ -13,7 +13,12 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from tunespec.app.cli.common import Console, add_output_options, grid_arg
+from tunespec.app.cli.common import (
+    Console,
+    absolute_sensitivities,
+    add_output_options,
+    grid_arg,
+)
 from tunespec.core.datasets import read_sensitivities
 from tunespec.core.errors import InputError, read_json
 from tunespec.core.io.spectral import read_spectral
@@ -182,7 +187,7 @@ def cmd_export_camera(args: argparse.Namespace) -> int:
     responses = read_responses_csv(args.responses)
     illuminants = read_spectral(args.illuminants, kind="illuminant")
     chart = read_spectral(args.reflectances, kind="reflectance")
-    sens = _estimate_sensitivities(args.sensitivities)
+    sens = absolute_sensitivities(args.sensitivities)
     out.inputs(illuminants, chart, sens)
     args.out.mkdir(parents=True, exist_ok=True)
     paths = {k: args.out / v for k, v in CAMERA_EXPORT_NAMES.items()}
@@ -192,8 +197,8 @@ def cmd_export_camera(args: argparse.Namespace) -> int:
     write_camera_transforms(
         transforms, paths["camera_transforms_json"], paths["camera_transforms_csv"]
     )
-    out.say(f"{len(table)} patches with camera RGB under {args.under}: "
-            f"{paths['chart_camera_ti3']}")  # fmt: skip
+    ti3 = paths["chart_camera_ti3"]
+    out.say(f"{len(table)} patches with camera RGB under {args.under}: {ti3}")
     for t in transforms:
         out.say(
             f"{t.kind:<8} {t.illuminant:<4} CIEDE2000 mean/max: training "
@@ -210,15 +215,6 @@ def cmd_export_camera(args: argparse.Namespace) -> int:
         }
     )
     return 0
-
-
-def _estimate_sensitivities(path: Path) -> Spectra:
-    sens = read_sensitivities(path)
-    if sens.meta.get("relative"):
-        raise InputError(
-            "sensitivities in relative units: give the calibration's CSV", path=path
-        )
-    return sens
 
 
 def _add_optional_grid(parser: argparse.ArgumentParser) -> None:

@@ -130,7 +130,8 @@ class RunResult:
 
     def format_text(self) -> str:
         """Table 1 and Table 2 as the terminal shows them."""
-        parts = [self.table1.format_table("Table 1 - ColorChecker SG, RGB prediction")]
+        chart = self.chart.layout.name
+        parts = [self.table1.format_table(f"Table 1 - {chart}, RGB prediction")]
         if self.table2 is not None:
             parts.append(
                 "Table 2 - sample target vs. reference (CIEDE2000 D50, spectral RMS)\n"

@@ -196,6 +196,20 @@ def _check_wavelengths(wl: list[float], lines: list[int], path: str | None) -> N
         raise InputError("expected at least two wavelengths", path=path)
 
 
+def _data_rows(
+    numbered: list[tuple[int, list[str]]], n_fields: int, path: str | None
+) -> list[tuple[int, list[str]]]:
+    """The rows after the header, each checked to have the header's field count."""
+    for lineno, row in numbered[1:]:
+        if len(row) != n_fields:
+            raise InputError(
+                f"{len(row)} fields, expected {n_fields} as in the header",
+                path=path,
+                line=lineno,
+            )
+    return numbered[1:]
+
+
 def _by_columns(
     header: list[str], numbered: list[tuple[int, list[str]]], line0: int, opts: tuple
 ) -> Spectra:
@@ -206,13 +220,7 @@ def _by_columns(
     wl: list[float] = []
     wl_lines: list[int] = []
     data: list[list[float]] = []
-    for lineno, row in numbered[1:]:
-        if len(row) != len(header):
-            raise InputError(
-                f"{len(row)} fields, expected {len(header)} as in the header",
-                path=path,
-                line=lineno,
-            )
+    for lineno, row in _data_rows(numbered, len(header), path):
         nums = _numbers(row, header, lineno, opts)
         _check_value(nums[0], header[0], lineno, opts, wavelength=True)
         for col, v in zip(names, nums[1:], strict=True):
@@ -246,13 +254,7 @@ def _by_rows(
         name_col = others[0]
     names: list[str] = []
     data: list[list[float]] = []
-    for lineno, row in numbered[1:]:
-        if len(row) != len(header):
-            raise InputError(
-                f"{len(row)} fields, expected {len(header)} as in the header",
-                path=path,
-                line=lineno,
-            )
+    for lineno, row in _data_rows(numbered, len(header), path):
         cells = [row[j] for j in cols]
         nums = _numbers(cells, [header[j] for j in cols], lineno, opts)
         for j, v in zip(cols, nums, strict=True):
