@@ -35,6 +35,13 @@ EXPECTED XYZ 6
 """
 
 
+def test_chart_box_must_start_at_the_origin(tmp_path) -> None:
+    p = tmp_path / "d.cht"
+    p.write_text("BOXES 2\n  D ALL ALL _ _ 100 70 5 5 0 0\n  Y 1 3 A B 1 1 1 1 1 1\n")
+    with pytest.raises(InputError, match="origin"):
+        read_cht(p).to_layout()
+
+
 def test_small_template_as_layout(tmp_path) -> None:
     p = tmp_path / "t.cht"
     p.write_text(SMALL_CHT)
@@ -53,7 +60,7 @@ def test_small_template_as_layout(tmp_path) -> None:
 @pytest.mark.parametrize(
     ("text", "fragment"),
     [
-        ("BOXES 1\n  Y 1 3 A B 20 20 10 15 30 30\n", r"D \(chart\) box"),
+        ("BOXES 1\n  D ALL ALL _ _ 100 70 0 0 0 0\n", "X/Y patch lines"),
         ("BOXES 1\n  D ALL ALL _ _ 100 70 0 0 0 0\n  Y 1 3 A\n", "expected 10"),
         ("BOXES 1\n  D ALL ALL _ _ 100 70 0 0 0 0\n  Y 3 1 A B 1 1 1 1 1 1\n", "label"),
     ],
@@ -74,8 +81,10 @@ def test_argyll_templates() -> None:
     np.testing.assert_allclose(cc.patch_quads_mm(), ours.patch_quads_mm(), atol=1e-9)
     sg = read_cht(ARGYLL_REF / "ColorCheckerSG.cht").to_layout()
     assert sg.n_patches == 140 and sg.patch_names[:2] == ("A1", "B1")
+    passport = read_cht(ARGYLL_REF / "ColorCheckerPassport.cht")
+    assert len(passport.patch_names) == 50 and len(passport.expected) == 50
     with pytest.raises(InputError, match="5 patch grids"):
-        read_cht(ARGYLL_REF / "ColorCheckerPassport.cht").to_layout()
+        passport.to_layout()
 
 
 def test_shipped_colorchecker24_matches_its_reflectances() -> None:

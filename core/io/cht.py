@@ -64,7 +64,7 @@ class ChtTemplate:
 
     source: str
     fiducials: NDArray[np.float64]  # (4, 2), or (0, 2)
-    chart_box: tuple[float, float]  # (width, height) of the D box
+    chart_box: tuple[float, float] | None  # (width, height) of a D box at the origin
     grids: tuple[ChtGrid, ...]
     box_shrink: float
     expected: dict[str, tuple[float, ...]]
@@ -92,6 +92,12 @@ class ChtTemplate:
             raise InputError(
                 f"{len(self.grids)} patch grids: TuneSpec's layouts are one regular "
                 "grid (a .cht with several, e.g. the Passport, is not supported yet)",
+                path=self.source,
+            )
+        if self.chart_box is None:
+            raise InputError(
+                "no D (chart) box at the origin (D ALL ALL _ _ W H 0 0 ...): the "
+                "chart's outline is unknown",
                 path=self.source,
             )
         g = self.grids[0]
@@ -181,8 +187,8 @@ def read_cht(path: str | PathLike[str]) -> ChtTemplate:
     Raises
     ------
     InputError
-        Naming the file and line: no ``BOXES`` section, a malformed box line, no
-        ``D`` (chart) box, duplicate patch names.
+        Naming the file and line: no ``BOXES`` section with patch lines, a malformed
+        box line, duplicate patch names.
     """
     path = str(path)
     lines = read_text(path).splitlines()
@@ -208,20 +214,23 @@ def read_cht(path: str | PathLike[str]) -> ChtTemplate:
                 [_float(tokens, k, path=path, line=lineno) for k in range(3, 11)]
             ).reshape(4, 2)
         elif section == "BOXES" and key == "D":
-            chart_box = (
-                _float(tokens, 5, path=path, line=lineno),
-                _float(tokens, 6, path=path, line=lineno),
-            )
+            # D ALL ALL _ _ W H XO YO XI YI: a box at (XO, YO); the chart box when
+            # it starts at the origin (ColorChecker, SG, DC), a diagnostic area else
+            offset = [_float(tokens, k, path=path, line=lineno) for k in (7, 8)]
+            if offset == [0.0, 0.0]:
+                chart_box = (
+                    _float(tokens, 5, path=path, line=lineno),
+                    _float(tokens, 6, path=path, line=lineno),
+                )
         elif section == "BOXES" and key in ("X", "Y"):
             grids.append(_grid(tokens, path=path, line=lineno))
         elif section == "EXPECTED" and len(tokens) >= 2:
             expected[key] = tuple(
                 _float(tokens, k, path=path, line=lineno) for k in range(1, len(tokens))
             )
-    if chart_box is None or not grids:
+    if not grids:
         raise InputError(
-            "not an ArgyllCMS .cht: expected a BOXES section with a D (chart) box and "
-            "X/Y patch lines",
+            "not an ArgyllCMS .cht: expected a BOXES section with X/Y patch lines",
             path=path,
         )
     names = [n for g in grids for n in g.names]
