@@ -106,3 +106,18 @@ def test_grid_the_data_cannot_cover_is_one_line(calibrated, capsys):
     assert main([*map(str, argv), "--grid", "360:780:5"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "sg.csv" in err and "380-730 nm" in err
+
+
+def test_progress_plain_lines_in_a_log_and_a_bar_on_a_terminal(capsys) -> None:
+    from tunespec.app.cli.common import TerminalProgress, close_progress
+
+    log = TerminalProgress("work")  # pytest's stdout/stderr are not terminals
+    for k in range(101):
+        log(k / 100)
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("work: 0%") and out[-1].startswith("work: 100%")
+    assert len(out) == 11  # one line per 10 %
+    bar = TerminalProgress("work", force=True)  # as on a terminal: rich draws it
+    bar(0.5)
+    close_progress()  # an error mid-run stops the bar (main() does this)
+    assert "work" in capsys.readouterr().err

@@ -87,7 +87,6 @@ def add_output_options(parser: argparse.ArgumentParser) -> None:
         help="print one JSON object with the numbers on stdout instead of the text "
         "(progress and notes go to stderr)",
     )
-    parser.set_defaults(output_options=True)
 
 
 class Console:
