@@ -176,7 +176,7 @@ def run_camera(
         t1 = calibration_report(est, resp, used, chart_work).training
         # Eq. 1 integrated on the calibration's grid, reflectance on EST (as
         # `tunespec estimate` does)
-        fine = integration_grid(est.sensitivity, EST)
+        fine = integration_grid(est.sensitivity, EST, used)
         illum = est.correct_illuminants(used).resample(fine, average=True)
         sens = est.sensitivity.resample(fine)
         w = wiener_reflectance(resp_t, illum, sens, prior_est)

@@ -312,19 +312,26 @@ def _wiener_system(
     return wl, F, mean, K, prior
 
 
-def integration_grid(sensitivity: Spectra, estimate: Grid) -> Grid:
+def integration_grid(
+    sensitivity: Spectra, estimate: Grid, illuminants: Spectra | None = None
+) -> Grid:
     """Where Eq. 1 is integrated for estimates on ``estimate``.
 
-    The span of both grids at the finer step: the calibration's resolution is kept
-    (a sensitivity calibrated at 2 nm resolves an IR-cut edge a 10 nm estimation
-    grid cannot) and light beyond the estimation range still counts (with the
-    reflectance held at its end value, see :func:`integrated_lighting_matrix`).
+    Where the sensitivities (and the illuminants, if given) are known, at least the
+    estimation range, at the finer of the two steps: the calibration's resolution is
+    kept (a sensitivity calibrated at 2 nm resolves an IR-cut edge a 10 nm
+    estimation grid cannot) and light beyond the estimation range still counts
+    (with the reflectance held at its end value, see
+    :func:`integrated_lighting_matrix`).
     """
-    wl = sensitivity.wavelength_nm
+    lo, hi = float(sensitivity.wavelength_nm[0]), float(sensitivity.wavelength_nm[-1])
+    if illuminants is not None:
+        lo = max(lo, float(illuminants.wavelength_nm[0]))
+        hi = min(hi, float(illuminants.wavelength_nm[-1]))
+    lo, hi = min(lo, estimate.start_nm), max(hi, estimate.end_nm)
     step = min(sensitivity.step_nm, estimate.step_nm)
-    start = min(float(wl[0]), estimate.start_nm)
-    n = int(np.floor((max(float(wl[-1]), estimate.end_nm) - start) / step + 1e-6))
-    return Grid(start, start + n * step, step)
+    n = max(int(np.floor((hi - lo) / step + 1e-6)), 1)
+    return Grid(lo, lo + n * step, step)
 
 
 def integrated_lighting_matrix(

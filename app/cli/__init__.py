@@ -24,6 +24,7 @@ from tunespec.app.cli.common import (
     EXIT_INPUT,
     TerminalProgress,
     add_grid_option,
+    close_progress,
     grid_arg,
     progress_bar,
     seed_arg,
@@ -122,6 +123,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             file=sys.stderr,
         )
         return EXIT_INPUT
+    finally:
+        close_progress()
 
 
 def check_outputs(args: argparse.Namespace) -> None:
