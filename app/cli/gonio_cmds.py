@@ -1,0 +1,186 @@
+"""Gonio-imager commands: ``tunespec match-illuminant`` (and the gonio session commands).
+
+``tunespec match-illuminant --target D50 --illuminants L.csv -o levels.json`` finds the
+LED drive levels simulating the target (``core.illuminant_match``), prints Delta u'v',
+CIE Ra, TM-30 Rf and the reflectance set's dE00, and writes them with the levels as
+JSON. With ``--light SPEC`` it drives that light source to the levels and keeps the
+spectrum its spectroradiometer reports (``--measured-out``, spectral CSV).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from tunespec.core.errors import InputError
+from tunespec.core.spectra import Spectra
+
+__all__ = ["register"]
+
+
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Add the gonio-imager subcommands."""
+    _add_match(sub)
+
+
+def _add_match(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    p = sub.add_parser(
+        "match-illuminant",
+        help="LED levels simulating an illuminant (D50 by default)",
+        description="LED drive levels whose mix reproduces a target SPD: chromaticity "
+        "pinned to the target's, metamerism of a reflectance set minimised (CIEDE2000, "
+        "CIE 1931 2 deg). Prints Delta u'v', CIE Ra, TM-30 Rf, mean/max dE00.",
+    )
+    p.add_argument(
+        "--target",
+        default="D50",
+        help="a CIE illuminant colour-science knows (D50, D65, A, FL11, ...) or a "
+        "spectral CSV (default D50)",
+    )
+    p.add_argument("--target-column", help="the column of a multi-spectrum target CSV")
+    p.add_argument(
+        "--illuminants",
+        type=Path,
+        help="LED spectra CSV at level 1 (default: the shipped 22-LED CAL1 model)",
+    )
+    p.add_argument(
+        "--reflectances",
+        type=Path,
+        help="reflectance set whose metamerism is minimised (default: ColorChecker SG)",
+    )
+    p.add_argument(
+        "--max-level",
+        type=float,
+        default=1.0,
+        help="upper limit of every channel's level, in (0, 1] (default 1)",
+    )
+    p.add_argument("-o", "--output", type=Path, required=True, help="levels JSON")
+    p.add_argument(
+        "--light",
+        help="drive this light source (sim, cal1:///dev/ttyUSB0, cal1+socket://H:P) "
+        "to the levels and keep its measured SPD",
+    )
+    p.add_argument(
+        "--leds-from-light",
+        action="store_true",
+        help="with --light: measure every channel at level 1 with the light's "
+        "spectroradiometer first and match with those spectra (closes the loop on "
+        "a unit whose LEDs differ from the file's)",
+    )
+    p.add_argument(
+        "--measured-out",
+        type=Path,
+        help="with --light: the measured SPD as spectral CSV "
+        "(default OUTPUT with _measured.csv)",
+    )
+    p.set_defaults(func=cmd_match, output_files=("output", "measured_out"))
+
+
+def cmd_match(args: argparse.Namespace) -> int:
+    """Run ``match-illuminant``."""
+    from tunespec.core.datasets import load_colorchecker_sg, resource_path
+    from tunespec.core.illuminant_match import (
+        colour_rendering,
+        illuminant_spd,
+        match_illuminant,
+        spd_delta_uv,
+    )
+    from tunespec.core.io.session import atomic_write_text
+    from tunespec.core.limits import MAX_REFLECTANCE, dumps_json, valid_number
+    from tunespec.core.spectra import read_spectra_csv
+
+    max_level = valid_number(
+        args.max_level, "--max-level", lo=0.0, hi=1.0, lo_open=True
+    )
+    if args.leds_from_light and not args.light:
+        raise InputError("--leds-from-light needs --light SPEC")
+    led_path = args.illuminants or resource_path("leds", "cal1_model_22.csv")
+    leds = read_spectra_csv(led_path)
+    if args.leds_from_light:
+        leds, led_path = _measure_leds(args.light), f"measured from {args.light}"
+    target = illuminant_spd(args.target, args.target_column)
+    refl = (
+        read_spectra_csv(args.reflectances, max_value=MAX_REFLECTANCE)
+        if args.reflectances
+        else load_colorchecker_sg()
+    )
+    match = match_illuminant(leds, target, refl, max_level=max_level)
+    out = match.as_dict()
+    out["illuminants"] = str(led_path)
+    out["target_source"] = str(args.target)
+    if args.light:
+        path, spd = _drive_and_measure(args, match.levels, leds.names)
+        out["measured_spd"] = str(path)
+        out["metrics"]["measured_delta_uv"] = spd_delta_uv(spd, target)
+        out["metrics"]["measured_cri_ra"], out["metrics"]["measured_tm30_rf"] = (
+            colour_rendering(spd)
+        )
+    atomic_write_text(args.output, dumps_json(out))
+    m = out["metrics"]
+    if "measured_delta_uv" in m:
+        print(
+            f"measured by the light source: Delta u'v' {m['measured_delta_uv']:.2e}, "
+            f"CIE Ra {m['measured_cri_ra']:.2f}, TM-30 Rf {m['measured_tm30_rf']:.2f}"
+        )
+    print(
+        f"{target.names[0]} from {len(leds)} LEDs: Delta u'v' {m['delta_uv']:.2e}, "
+        f"CIE Ra {m['cri_ra']:.2f}, TM-30 Rf {m['tm30_rf']:.2f}, dE00 over "
+        f"{m['n_reflectances']} reflectances mean {m['mean_de00']:.3f} max "
+        f"{m['max_de00']:.3f}"
+    )
+    if not match.pinned:
+        print(
+            f"warning: the LEDs cannot reach the chromaticity of {target.names[0]} "
+            f"(Delta u'v' {m['delta_uv']:.4f}): the best fit is written",
+            file=sys.stderr,
+        )
+    print(f"levels -> {args.output}", file=sys.stderr)
+    return 0
+
+
+def _measure_leds(spec: str) -> Spectra:
+    """Each channel of the light at level 1, as its spectroradiometer reports it."""
+    import numpy as np
+
+    from tunespec.devices.registry import open_light_source
+
+    light = open_light_source(spec)
+    try:
+        names = [c.name for c in light.channels()]
+        rows = []
+        for j in range(len(names)):
+            light.set_levels(np.eye(len(names))[j])
+            rows.append(light.measure_spd())
+        light.all_off()
+    finally:
+        light.close()
+    return Spectra(rows[0].wavelength_nm, [r.values[0] for r in rows], tuple(names))
+
+
+def _drive_and_measure(
+    args: argparse.Namespace, levels: object, names: tuple[str, ...]
+) -> tuple[Path, Spectra]:
+    """Set the light to ``levels`` and write the SPD its spectroradiometer reports."""
+    import numpy as np
+
+    from tunespec.core.spectra import write_spectra_csv
+    from tunespec.devices.registry import open_light_source
+
+    path = args.measured_out or args.output.with_name(
+        args.output.stem + "_measured.csv"
+    )
+    light = open_light_source(args.light)
+    try:
+        channels = [c.name for c in light.channels()]
+        if len(channels) != len(names):
+            raise InputError(
+                f"the light source has {len(channels)} channels, the LED file "
+                f"{len(names)}: they must be the same LEDs in the same order"
+            )
+        light.set_levels(np.asarray(levels, dtype=np.float64))
+        spd = light.measure_spd()
+        write_spectra_csv(spd, path)
+    finally:
+        light.close()
+    return path, spd
