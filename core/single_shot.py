@@ -191,12 +191,15 @@ def _white_constrained_lstsq(
     xyz: NDArray[np.float64],
     phi_w: NDArray[np.float64],
     xyz_w: NDArray[np.float64],
+    weights: NDArray[np.float64] | None = None,
 ) -> NDArray[np.float64]:
     """Least-squares ``C`` (n_terms, 3), ``phi @ C ~ xyz``, with ``phi_w @ C = xyz_w``.
 
     Solved with a Lagrange multiplier (the KKT system), so the perfect white maps to
-    its XYZ exactly.
+    its XYZ exactly. ``weights`` (n,) weight the rows.
     """
+    if weights is not None:
+        phi, xyz = phi * weights[:, None], xyz * weights[:, None]
     n = phi.shape[1]
     kkt = np.block([[phi.T @ phi, phi_w[:, None]], [phi_w[None, :], np.zeros((1, 1))]])
     rhs = np.vstack([phi.T @ xyz, xyz_w[None, :]])
@@ -209,6 +212,7 @@ def xyz_transform(
     prior: Spectra,
     *,
     kind: str = "root-polynomial",
+    relative: bool = False,
 ) -> XyzTransform:
     """The camera-to-XYZ (D50) transform for captures under ``mix``.
 
@@ -225,6 +229,11 @@ def xyz_transform(
     kind
         ``"root-polynomial"`` (default) or ``"matrix"`` (a 3x3), see
         :func:`root_polynomial_terms`.
+    relative
+        Weight the prior's rows by ``1 / (Y + 1)`` (relative errors, as CIELAB
+        weighs dark colours): better for a prior of few materials with dark ones
+        (a gonio session's own spectra), slightly worse on broad sets (measured:
+        0.78 vs 0.73 mean dE00 on the 190 rawtoaces reflectances).
 
     Returns
     -------
@@ -263,6 +272,7 @@ def xyz_transform(
         xyz,
         root_polynomial_terms(rgb_w, kind),
         xyz_d50(np.ones(wl.size), wl),
+        1.0 / (np.maximum(xyz[:, 1], 0.0) + 1.0) if relative else None,
     )
     de = delta_e_2000(
         _lab_d50(np.maximum(root_polynomial_terms(rgb, kind) @ C, 1e-9)), _lab_d50(xyz)
