@@ -1,4 +1,4 @@
-"""A simulated goniometer: four rotation axes that move at once, with limits.
+"""The simulated gonio-imager: a goniometer, a glossy target's BRDF and its view.
 
 :class:`SimGoniometer` implements :class:`~tunespec.devices.goniometer.Goniometer`
 in process (no transport): axes ``theta_i``, ``phi_i``, ``theta_r``, ``phi_r`` with
@@ -6,6 +6,12 @@ travel limits, a reference that ``home`` sets (moves before it are refused, as a
 stage without reference would), position read-back with an optional repeatability
 error, ``stop``, and a failure injected after a given number of moves (for the
 kill-and-resume tests of a gonio session).
+
+:class:`GonioBench` renders what the camera sees at the goniometer's geometry: a BRDF
+per material (:func:`brdf_reflectance_factor`: Lambertian body + GGX microfacet lobe
+with Schlick's Fresnel term and a roughness per patch) and the projective view of the
+target (:func:`view_homography`), so every step of a gonio session is tested against
+truth.
 """
 
 from __future__ import annotations
