@@ -34,7 +34,6 @@ introduction and conclusion (the single-shot XYZ of the gonio-imager).
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import dataclass
 from os import PathLike
 from pathlib import Path
@@ -43,7 +42,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tunespec.core.colorimetry import CMFS_NAME, delta_e_2000
+from tunespec.core.colorimetry import CMFS_NAME, _colour, delta_e_2000
+from tunespec.core.colorimetry import _quiet_colour as _quiet
 from tunespec.core.errors import InputError
 from tunespec.core.spectra import Grid, Spectra, read_spectra_csv
 
@@ -70,23 +70,6 @@ MIN_MATCH_RANGE_NM = (400.0, 700.0)
 PINNED_DUV = 1e-5
 #: Weight of the white's rows in the linear start (relative to one reflectance).
 _WHITE_WEIGHT = 30.0
-
-
-def _colour() -> Any:
-    with np.printoptions():
-        import colour
-    return colour
-
-
-class _quiet(warnings.catch_warnings):
-    """Silence colour-science's own warnings (interpolation, extrapolation) only."""
-
-    def __enter__(self) -> Any:
-        out = super().__enter__()
-        u = _colour().utilities
-        for category in (u.ColourWarning, u.ColourRuntimeWarning, u.ColourUsageWarning):
-            warnings.simplefilter("ignore", category)
-        return out
 
 
 def illuminant_spd(target: str | PathLike[str], column: str | None = None) -> Spectra:
