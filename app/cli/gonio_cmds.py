@@ -11,18 +11,93 @@ from __future__ import annotations
 
 import argparse
 import sys
+import threading
+from collections.abc import Callable
 from pathlib import Path
+from typing import TextIO
 
 from tunespec.core.errors import InputError
 from tunespec.core.spectra import Spectra
 
-__all__ = ["register"]
+__all__ = ["add_zaber_emulator", "register", "run_zaber_emulator"]
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the gonio-imager subcommands."""
     _add_match(sub)
+    _add_gonio_plan(sub)
     _add_gonio_demo(sub)
+
+
+def _angles(text: str) -> list[float]:
+    try:
+        return [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected comma-separated angles in degrees, got {text!r}"
+        ) from None
+
+
+def _add_gonio_plan(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    p = sub.add_parser(
+        "gonio-plan",
+        help="write a gonio plan (geometry list, spectral and HDR geometries)",
+        description="Write a plan JSON for gonio-demo --plan: the camera at each "
+        "THETA_R in the plane of incidence (azimuth --phi-r) with the light at "
+        "--theta-i, plus --off-plane THETA_R:PHI_R views; full 22-LED captures at "
+        "--spectral angles, HDR brackets from --hdr-from degrees on.",
+    )
+    p.add_argument("-o", "--output", type=Path, required=True, help="plan JSON")
+    p.add_argument("--theta-i", type=float, default=45.0, help="light zenith (45)")
+    p.add_argument(
+        "--theta-r",
+        type=_angles,
+        default=[0, 10, 20, 30, 35, 40, 45, 50, 55, 60, 65, 70],
+        help="camera zenith angles, e.g. 0,15,30,45,60",
+    )
+    p.add_argument("--phi-r", type=float, default=180.0, help="camera azimuth (180)")
+    p.add_argument(
+        "--off-plane",
+        action="append",
+        default=[],
+        metavar="THETA_R:PHI_R",
+        help="an extra view (repeatable)",
+    )
+    p.add_argument(
+        "--spectral", type=_angles, default=[0, 20, 45], help="full-capture theta_r"
+    )
+    p.add_argument("--hdr-from", type=float, default=25.0, help="HDR from this theta_r")
+    p.set_defaults(func=cmd_gonio_plan, output_files=("output",))
+
+
+def cmd_gonio_plan(args: argparse.Namespace) -> int:
+    """Run ``gonio-plan``."""
+    from tunespec.app.pipeline.gonio import GeometryStep, GonioPlan
+    from tunespec.devices.goniometer import Geometry
+
+    views = [(t, args.phi_r) for t in args.theta_r]
+    for text in args.off_plane:
+        try:
+            t, ph = (float(v) for v in text.split(":"))
+        except ValueError:
+            raise InputError(f"--off-plane {text!r}: expected THETA_R:PHI_R") from None
+        views.append((t, ph))
+    missing = sorted(set(args.spectral) - set(args.theta_r))
+    if missing:
+        raise InputError(f"--spectral {missing} are not among --theta-r")
+    steps = tuple(
+        GeometryStep(
+            Geometry(args.theta_i, 0.0, t, ph),
+            spectral=ph == args.phi_r and t in args.spectral,
+            hdr=t >= args.hdr_from,
+        )
+        for t, ph in views
+    )
+    plan = GonioPlan(steps)
+    plan.save(args.output)
+    n_s = sum(s.spectral for s in steps)
+    print(f"{len(steps)} geometries ({n_s} spectral) -> {args.output}")
+    return 0
 
 
 def _add_gonio_demo(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -269,3 +344,54 @@ def _drive_and_measure(
     finally:
         light.close()
     return path, spd
+
+
+def add_zaber_emulator(
+    devices: argparse._SubParsersAction[argparse.ArgumentParser],
+    port_type: Callable[[str], int],
+) -> None:
+    """``tunespec emulate zaber``: added to ``emulate`` by the device commands."""
+    p = devices.add_parser(
+        "zaber",
+        help="emulate Zaber rotary stages (ASCII protocol) on a local TCP port",
+        description="Serve Zaber's ASCII protocol for daisy-chained rotary stages on "
+        "127.0.0.1:PORT (devices/zaber/emulator.py). Connect with the goniometer "
+        "spec zaber+socket://127.0.0.1:PORT.",
+    )
+    p.add_argument("--port", type=port_type, default=0, help="TCP port (0: a free one)")
+    p.add_argument(
+        "--devices", type=int, default=4, help="stages on the chain, 1-9 (default 4)"
+    )
+    p.set_defaults(func=lambda a: run_zaber_emulator(port=a.port, n_devices=a.devices))
+
+
+def run_zaber_emulator(
+    *,
+    port: int = 0,
+    n_devices: int = 4,
+    stop: threading.Event | None = None,
+    out: TextIO | None = None,
+) -> int:
+    """Serve the Zaber emulator until Ctrl-C (or ``stop``); exit code 0."""
+    from tunespec.devices.zaber.emulator import ZaberEmulator
+
+    if not 1 <= n_devices <= 9:
+        raise InputError(f"--devices: expected 1-9 stages, got {n_devices}")
+    out = out if out is not None else sys.stdout
+    stop = stop if stop is not None else threading.Event()
+    try:
+        emulator = ZaberEmulator(port, n_devices=n_devices)
+    except (OSError, OverflowError) as exc:
+        raise InputError(f"cannot listen on 127.0.0.1:{port} ({exc})") from None
+    with emulator as emu:
+        out.write(
+            f"Zaber emulator ({n_devices} stages) listening on {emu.host}:{emu.port}\n"
+            f"goniometer spec: {emu.spec()}\npress Ctrl-C to stop\n"
+        )
+        out.flush()
+        try:
+            while not stop.wait(0.5):
+                pass
+        except KeyboardInterrupt:
+            out.write("stopped\n")
+    return 0

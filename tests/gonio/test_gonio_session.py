@@ -168,3 +168,20 @@ def test_cli_kill_and_resume(tmp_path, capsys):
     assert main(args) == 2  # the folder holds a session: --resume is required
     assert main([*args, "--resume"]) == 0
     assert "4 geometries (2 spectral)" in capsys.readouterr().out
+
+
+def test_cli_writes_a_plan_and_refuses_bad_angles(tmp_path, capsys):
+    out = tmp_path / "p.json"
+    rc = main(["gonio-plan", "-o", str(out), "--theta-r", "0,15,30,45,60",
+               "--spectral", "0,45", "--off-plane", "30:90", "--hdr-from", "30"])  # fmt: skip
+    assert rc == 0
+    plan = GonioPlan.load(out)
+    assert [s.geometry.theta_r for s in plan.steps] == [0, 15, 30, 45, 60, 30]
+    assert [s.spectral for s in plan.steps] == [True, False, False, True, False, False]
+    assert [s.hdr for s in plan.steps] == [False, False, True, True, True, True]
+    assert (
+        main(["gonio-plan", "-o", str(out), "--theta-r", "0,95", "--spectral", "0"])
+        == 2
+    )
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "theta_r = 95 deg outside" in err[0]

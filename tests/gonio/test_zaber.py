@@ -188,3 +188,37 @@ def test_sim_goniometer():
     sim.move_to({"theta_r": 10.0})
     with pytest.raises(DeviceError, match="lost"):
         sim.move_to({"theta_r": 20.0})
+
+
+def test_cli_emulator_serves_the_driver():
+    import io
+    import re
+    import threading
+    import time
+
+    from tunespec.app.cli import build_parser
+    from tunespec.app.cli.gonio_cmds import run_zaber_emulator
+
+    args = build_parser().parse_args(["emulate", "zaber", "--devices", "2"])
+    assert args.devices == 2
+    stop, out = threading.Event(), io.StringIO()
+    t = threading.Thread(
+        target=run_zaber_emulator, kwargs={"n_devices": 2, "stop": stop, "out": out}
+    )
+    t.start()
+    try:
+        for _ in range(100):
+            if "spec:" in out.getvalue():
+                break
+            time.sleep(0.02)
+        spec = re.search(r"spec: (\S+)", out.getvalue()).group(1)
+        with open_zaber(
+            spec + "?axes=theta_i:1:1:0.01,theta_r:2:1:0.01", poll_s=0.005
+        ) as g:
+            g.home()
+            assert g.move_to({"theta_r": 30.0}) == pytest.approx(
+                {"theta_i": 0.0, "theta_r": 30.0}
+            )
+    finally:
+        stop.set()
+        t.join(5)
