@@ -127,6 +127,11 @@ def _add_gonio_demo(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         help="continue a session in --out where it stopped",
     )
     p.add_argument(
+        "--scheduler",
+        help="process the geometries on Dask: threads, processes, or a cluster's "
+        "address tcp://HOST:PORT (default: one after another)",
+    )
+    p.add_argument(
         "--fail-after-moves",
         type=int,
         metavar="N",
@@ -162,6 +167,7 @@ def cmd_gonio_demo(args: argparse.Namespace) -> int:
             n_geometries=args.geometries,
             seed=args.seed,
             fail_after_moves=args.fail_after_moves,
+            scheduler=args.scheduler,
             progress=progress_bar("gonio session"),
         )
     except Exception as exc:

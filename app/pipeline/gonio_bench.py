@@ -132,10 +132,14 @@ def run_gonio_demo(
     n_geometries: int = 14,
     seed: int = 0,
     fail_after_moves: int | None = None,
+    scheduler: str | None = None,
     progress: ProgressFn | None = None,
     should_stop: StopFn | None = None,
 ) -> dict[str, Any]:
-    """Run (or resume) the simulated gonio session in ``out``; return the summary."""
+    """Run (or resume) the simulated gonio session in ``out``; return the summary.
+
+    ``scheduler``: see :func:`~tunespec.app.pipeline.gonio_process.process_gonio`.
+    """
     from tunespec.app.pipeline.gonio_output import write_gonio_outputs
     from tunespec.app.pipeline.gonio_process import process_gonio, result_summary
     from tunespec.core.datasets import load_colorchecker_sg
@@ -151,7 +155,7 @@ def run_gonio_demo(
     capture_gonio(plan, root, bench, S, levels, should_stop=should_stop,
                   progress=sub_progress(progress, 0.0, 0.6))  # fmt: skip
     result = process_gonio(root, S, bench.layout, load_colorchecker_sg(),
-                           correct=correct, progress=sub_progress(progress, 0.6, 0.95),
+                           correct=correct, scheduler=scheduler, progress=sub_progress(progress, 0.6, 0.95),
                            should_stop=should_stop)  # fmt: skip
     files = write_gonio_outputs(result, root)
     summary = result_summary(result, _truth(bench, plan))

@@ -160,6 +160,7 @@ def process_gonio(
     prior: Spectra,
     *,
     correct: Correction | None = None,
+    scheduler: str | None = None,
     progress: ProgressFn | None = None,
     should_stop: StopFn | None = None,
 ) -> GonioResult:
@@ -176,6 +177,12 @@ def process_gonio(
         specular offsets added. The single-shot transform's prior is the sample's own
         body spectra (its least specular spectral estimate per patch) with flat
         offsets: never the XYZ it then measures.
+    scheduler
+        ``None``: geometries one after another here. Otherwise the per-geometry
+        work (target detection, HDR merge, ROI statistics) runs on Dask:
+        ``"threads"`` or ``"processes"`` locally, or a Dask distributed
+        scheduler's address (``tcp://host:8786``, needs the ``distributed``
+        package).
     """
     root = Path(folder)
     plan = GonioPlan.load(root / "plan.json")
@@ -183,13 +190,17 @@ def process_gonio(
     if not spectral_idx:
         raise InputError("the plan has no spectral geometry: fusion needs at least one")
     leds = list(plan.leds) or list(_led_names(root / plan.folder(spectral_idx[0])))
-    data = []
-    for i in range(len(plan.steps)):
-        check_stop(should_stop)
-        data.append(
-            _process_geometry(root / plan.folder(i), i, plan, layout, leds, correct)
-        )
-        report(progress, 0.8 * (i + 1) / len(plan.steps))
+    jobs = [(root / plan.folder(i), i, plan, layout, leds, correct)
+            for i in range(len(plan.steps))]  # fmt: skip
+    if scheduler is None:
+        data = []
+        for job in jobs:
+            check_stop(should_stop)
+            data.append(_process_geometry(*job))
+            report(progress, 0.8 * len(data) / len(jobs))
+    else:
+        data = _on_dask(jobs, scheduler)
+        report(progress, 0.8)
     n_p, n_g, wl = layout.n_patches, len(plan.steps), DEFAULT_GRID.wavelength_nm
     R = np.full((n_p, n_g, wl.size), np.nan)
     uR = np.full_like(R, np.nan)
@@ -227,6 +238,29 @@ def process_gonio(
     lab = xyz_to_lab_d50(xyz_d50(R, wl))
     return GonioResult(layout.patch_names, plan, [d.position for d in data], wl, R, uR,
                        xyz, u_xyz, lab, np.array([s.spectral for s in plan.steps]))  # fmt: skip
+
+
+def _on_dask(jobs: list[tuple[Any, ...]], scheduler: str) -> list[GeometryData]:
+    """``_process_geometry`` for every job on a Dask scheduler (local or by address)."""
+    try:
+        import dask
+    except ImportError:
+        raise InputError("processing on Dask needs the dask package") from None
+    tasks = [dask.delayed(_process_geometry)(*job) for job in jobs]
+    if "://" not in scheduler:
+        if scheduler not in ("threads", "processes", "sync"):
+            raise InputError(
+                f"scheduler {scheduler!r}: threads, processes, sync or tcp://HOST:PORT"
+            )
+        return list(dask.compute(*tasks, scheduler=scheduler))
+    try:
+        from distributed import Client
+    except ImportError:
+        raise InputError(
+            f"scheduler {scheduler}: a Dask cluster needs the distributed package"
+        ) from None
+    with Client(scheduler) as client:
+        return list(client.gather(client.compute(tasks)))
 
 
 def calibration_correction(

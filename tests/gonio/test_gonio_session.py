@@ -150,12 +150,14 @@ def test_killed_session_resumes_at_the_geometry_without_losing_a_frame(tmp_path)
     assert before and not any("g03" in str(p) for p in before)
     n_total = sum(len(frame_names(s, [f"x{i}" for i in range(22)])) for s in plan.steps)
     assert len(before) < n_total
-    s = run_gonio_demo(tmp_path, seed=1)
+    s = run_gonio_demo(tmp_path, seed=1, scheduler="threads")  # processed on Dask
     after = list(tmp_path.rglob("*.npy"))
     assert len(after) == n_total  # every frame, once
     for p, (mtime, data) in before.items():  # nothing taken before was taken again
         assert p.stat().st_mtime_ns == mtime and p.read_bytes() == data
     assert s["n_geometries"] == 6
+    # processing one geometry after another gives the same numbers
+    assert run_gonio_demo(tmp_path, seed=1) == s
 
 
 @pytest.mark.slow
