@@ -63,6 +63,7 @@ from tunespec.core.illuminant_match import (
 from tunespec.core.spectra import Spectra
 
 __all__ = [
+    "TRANSFORM_TERMS",
     "CameraMix",
     "XyzTransform",
     "apply_xyz_transform",
@@ -147,43 +148,60 @@ def _predicted(
     ]
 
 
+#: Exponents (of R, G, B) of each regressor, per transform kind: the degree-1
+#: (a 3x3), 2 and 3 root-polynomials of Finlayson et al. (2015). Every term is a
+#: product of powers summing to 1, so it scales with the exposure.
+TRANSFORM_TERMS = {
+    "matrix": ((1, 0, 0), (0, 1, 0), (0, 0, 1)),
+    "root-polynomial": (
+        (1, 0, 0), (0, 1, 0), (0, 0, 1),
+        (1 / 2, 1 / 2, 0), (0, 1 / 2, 1 / 2), (1 / 2, 0, 1 / 2),
+    ),
+    "root-polynomial-3": (
+        (1, 0, 0), (0, 1, 0), (0, 0, 1),
+        (1 / 2, 1 / 2, 0), (0, 1 / 2, 1 / 2), (1 / 2, 0, 1 / 2),
+        (1 / 3, 2 / 3, 0), (1 / 3, 0, 2 / 3), (2 / 3, 1 / 3, 0),
+        (0, 1 / 3, 2 / 3), (2 / 3, 0, 1 / 3), (0, 2 / 3, 1 / 3),
+        (1 / 3, 1 / 3, 1 / 3),
+    ),
+}  # fmt: skip
+
+
+def _exponents(kind: str) -> NDArray[np.float64]:
+    if kind not in TRANSFORM_TERMS:
+        raise InputError(
+            f"unknown transform kind {kind!r}: {', '.join(TRANSFORM_TERMS)}"
+        )
+    return np.array(TRANSFORM_TERMS[kind], dtype=np.float64)
+
+
 def root_polynomial_terms(
     rgb: ArrayLike, kind: str = "root-polynomial"
 ) -> NDArray[np.float64]:
-    """The regressors of a transform, ``(..., n_terms)``.
+    """The regressors of a transform, ``(..., n_terms)`` (:data:`TRANSFORM_TERMS`).
 
     ``"matrix"``: R, G, B (a 3x3). ``"root-polynomial"``: R, G, B, sqrt(RG), sqrt(GB),
-    sqrt(RB), the degree-2 root-polynomial of Finlayson et al. (2015): every term
-    scales with the exposure, so the transform holds at any exposure and HDR level.
-    Negative responses (noise around black) count as 0 in the roots.
+    sqrt(RB), the degree-2 root-polynomial of Finlayson et al. (2015);
+    ``"root-polynomial-3"`` adds the 7 cube-root terms of degree 3. Every term scales
+    with the exposure, so the transform holds at any exposure and HDR level. The
+    linear terms keep their sign; negative responses (noise around black) count as 0
+    in the roots.
     """
+    e = _exponents(kind)
     c = np.asarray(rgb, dtype=np.float64)
-    if kind == "matrix":
-        return c
-    if kind != "root-polynomial":
-        raise InputError(f"unknown transform kind {kind!r}: matrix or root-polynomial")
-    p = np.maximum(c, 0.0)
-    r, g, b = p[..., 0], p[..., 1], p[..., 2]
-    return np.concatenate(
-        [c, np.stack([np.sqrt(r * g), np.sqrt(g * b), np.sqrt(r * b)], -1)], -1
-    )
+    p = np.maximum(c, 0.0)[..., None, :]
+    terms = np.prod(np.where(e > 0, p**e, 1.0), axis=-1)
+    linear = (e == 1).any(axis=1)
+    terms[..., linear] = c @ e[linear].T
+    return terms
 
 
 def _terms_jacobian(rgb: NDArray[np.float64], kind: str) -> NDArray[np.float64]:
-    """d terms / d rgb, ``(..., n_terms, 3)``."""
-    c = np.asarray(rgb, dtype=np.float64)
-    eye = np.broadcast_to(np.eye(3), (*c.shape[:-1], 3, 3))
-    if kind == "matrix":
-        return eye
-    p = np.maximum(c, 1e-12)
-    r, g, b = p[..., 0], p[..., 1], p[..., 2]
-    z = np.zeros_like(r)
-    rows = [
-        np.stack([0.5 * np.sqrt(g / r), 0.5 * np.sqrt(r / g), z], -1),
-        np.stack([z, 0.5 * np.sqrt(b / g), 0.5 * np.sqrt(g / b)], -1),
-        np.stack([0.5 * np.sqrt(b / r), z, 0.5 * np.sqrt(r / b)], -1),
-    ]
-    return np.concatenate([eye, np.stack(rows, -2)], -2)
+    """d terms / d rgb, ``(..., n_terms, 3)``: ``e_jk t_j / c_k``."""
+    e = _exponents(kind)
+    c = np.maximum(np.asarray(rgb, dtype=np.float64), 1e-12)
+    t = root_polynomial_terms(c, kind)
+    return e * t[..., :, None] / c[..., None, :]
 
 
 def _white_constrained_lstsq(
@@ -227,8 +245,8 @@ def xyz_transform(
         Training reflectances (e.g. the ColorChecker SG); never the target being
         measured.
     kind
-        ``"root-polynomial"`` (default) or ``"matrix"`` (a 3x3), see
-        :func:`root_polynomial_terms`.
+        ``"root-polynomial"`` (default), ``"root-polynomial-3"`` or ``"matrix"``
+        (a 3x3), see :func:`root_polynomial_terms`.
     relative
         Weight the prior's rows by ``1 / (Y + 1)`` (relative errors, as CIELAB
         weighs dark colours): better for a prior of few materials with dark ones
