@@ -1,4 +1,5 @@
-"""Gonio-imager commands: ``tunespec match-illuminant`` (and the gonio session commands).
+"""Gonio-imager commands: ``match-illuminant``, ``gonio-plan``, ``gonio-demo`` and the
+Zaber emulator (``emulate zaber``, registered by the device commands).
 
 ``tunespec match-illuminant --target D50 --illuminants L.csv -o levels.json`` finds the
 LED drive levels simulating the target (``core.illuminant_match``), prints Delta u'v',

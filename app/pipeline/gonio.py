@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from tunespec.core.errors import InputError
+from tunespec.core.errors import InputError, check_names
 from tunespec.core.io.session import atomic_write_bytes, atomic_write_text
 from tunespec.core.limits import dumps_json, read_json, valid_number
 from tunespec.core.progress import ProgressFn, StopFn, check_stop, report
@@ -239,6 +239,7 @@ def capture_gonio(
     plan.save(root / "plan.json")
     channels = [c.name for c in bench.light.channels()]
     leds = list(plan.leds) or channels
+    check_names(leds, channels, "plan leds: {n} channel(s) the light lacks: {names}")
     taken: list[Path] = []
     if not bench.gonio.is_homed():
         bench.gonio.home()
