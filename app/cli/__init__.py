@@ -16,7 +16,13 @@ import errno
 import sys
 from collections.abc import Sequence
 
-from tunespec.app.cli import core_cmds, device_cmds, export_cmds, session_cmds
+from tunespec.app.cli import (
+    core_cmds,
+    device_cmds,
+    export_cmds,
+    gonio_cmds,
+    session_cmds,
+)
 from tunespec.app.cli.common import (
     EXIT_CANCELLED,
     EXIT_DEVICE,
@@ -49,7 +55,7 @@ __all__ = [
 
 #: The command modules, in the order ``--help`` lists them. Imported statically: each
 #: imports only what its commands need when they run (``tunespec --help`` stays light).
-COMMAND_MODULES = (core_cmds, device_cmds, session_cmds, export_cmds)
+COMMAND_MODULES = (core_cmds, device_cmds, session_cmds, export_cmds, gonio_cmds)
 
 
 class _VersionAction(argparse.Action):
