@@ -80,6 +80,7 @@ __all__ = [
     "estimate_block",
     "flat_block_px",
     "illuminants_of",
+    "lighting_for",
     "plan_image_job",
     "prepare_channel",
     "prepare_darks",
@@ -492,14 +493,13 @@ def setup_estimation(
     results
         :func:`prepare_channel`'s, in ``job.channels`` order.
     sensitivity : Spectra (R, G, B)
-        The calibration's sensitivities on ``grid``.
+        The calibration's sensitivities on their own grid.
     meta
         The calibration's side file (:func:`tunespec.core.io.export.read_sensitivity_meta`):
         its per-LED corrections (or common shift) are applied to the measured SPDs
-        by :func:`tunespec.core.sensitivity.correct_illuminants_from_meta`, as
-        ``tunespec estimate`` does.
+        as ``tunespec estimate`` does (:func:`lighting_for`).
     prior
-        Prior reflectances on ``grid``.
+        Prior reflectances on ``grid``, the estimation grid.
     noise
         The sensor's noise model; default: fitted to the white frames
         (:func:`tunespec.core.image.photon_transfer_fit`).
@@ -511,18 +511,12 @@ def setup_estimation(
     """
     import cv2
 
-    from tunespec.core.forward_model import lighting_matrix
-    from tunespec.core.sensitivity import correct_illuminants_from_meta
-
     if noise is None:
         noise = photon_transfer_fit(
             np.concatenate([r.ptc_level for r in results], axis=1),
             np.concatenate([r.ptc_var for r in results], axis=1),
         )
-    reported = illuminants_of(job).resample(grid, average=True)
-    corrected = correct_illuminants_from_meta(reported, meta)
-    S = sensitivity.select(("R", "G", "B")).values
-    F = lighting_matrix(corrected.values, S, grid.step_nm)
+    F = lighting_for(job, sensitivity, meta, grid)
     white = np.concatenate([r.white_mean for r in results])
     # phi: the flat-field factor of the brightest LED's G plane
     brightest = int(np.argmax([r.white_mean[1] for r in results]))
@@ -532,12 +526,48 @@ def setup_estimation(
     ).astype(np.float32)
     phi.tofile(job.work_path(PHI))
     bank = build_wiener_bank(
-        F, prior.values, white, noise, corrected.wavelength_nm,
+        F, prior.values, white, noise, grid.wavelength_nm,
         phi_range=(float(phi.min()), float(phi.max())),
         n_levels=n_levels, n_phi=n_phi,
     )  # fmt: skip
     bank.params["noise_source"] = noise.source
     return bank
+
+
+def _corrected_for(
+    job: ImageJob, sensitivity: Spectra, meta: dict[str, Any], grid: Grid
+) -> tuple[Spectra, Spectra, Grid]:
+    """The illuminants corrected as ``tunespec estimate`` corrects them (per-LED
+    corrections on the SPDs' own grid), and both illuminants and sensitivities on
+    the integration grid (:func:`tunespec.core.wiener.integration_grid`)."""
+    from tunespec.core.sensitivity import correct_illuminants_from_meta
+    from tunespec.core.wiener import integration_grid
+
+    corrected = correct_illuminants_from_meta(illuminants_of(job), meta)
+    fine = integration_grid(sensitivity, grid, corrected)
+    return (
+        corrected.resample(fine, average=True),
+        sensitivity.resample(fine, source=sensitivity.meta.get("source")),
+        fine,
+    )
+
+
+def lighting_for(
+    job: ImageJob, sensitivity: Spectra, meta: dict[str, Any], grid: Grid
+) -> NDArray[np.float64]:
+    """``F`` of Eq. 5 for the session, exactly as ``tunespec estimate`` builds it:
+    the calibration's corrections applied to the measured SPDs, Eq. 1 integrated on
+    the finer of the calibration's and the estimation grid, reflectance on ``grid``
+    (:func:`tunespec.core.wiener.integrated_lighting_matrix`)."""
+    from tunespec.core.wiener import integrated_lighting_matrix
+
+    L, S, fine = _corrected_for(job, sensitivity, meta, grid)
+    return integrated_lighting_matrix(
+        L.select(job.channels).values,
+        S.select(("R", "G", "B")).values,
+        fine.wavelength_nm,
+        grid.wavelength_nm,
+    )
 
 
 def estimate_block(
@@ -763,10 +793,7 @@ def systematic_table(
     from tunespec.core.datasets import read_sensitivities
     from tunespec.core.image import _u_lightness
     from tunespec.core.responses import Responses
-    from tunespec.core.sensitivity import (
-        calibration_from_files,
-        correct_illuminants_from_meta,
-    )
+    from tunespec.core.sensitivity import calibration_from_files
     from tunespec.core.uncertainty import reflectance_uncertainty
     from tunespec.core.wiener import wiener_reflectance
 
@@ -782,20 +809,11 @@ def systematic_table(
         names, job.channels, c.reshape(n, n_i, 3), std.reshape(n, n_i, 3),
         np.ones((n, n_i)),
     )  # fmt: skip
-    reported = illuminants_of(job)
-    sensitivity = read_sensitivities(sensitivity_csv, grid)
-    est = wiener_reflectance(
-        resp,
-        correct_illuminants_from_meta(reported.resample(grid, average=True), meta),
-        sensitivity,
-        prior,
-    )
+    sensitivity = read_sensitivities(sensitivity_csv)
+    L, S, _ = _corrected_for(job, sensitivity, meta, grid)
+    est = wiener_reflectance(resp, L, S, prior)
     calibration = calibration_from_files(sensitivity_csv, meta)
-    cwl = calibration.sensitivity.wavelength_nm
-    cal_grid = Grid(float(cwl[0]), float(cwl[-1]), calibration.sensitivity.step_nm)
-    unc = reflectance_uncertainty(
-        est, resp, reported.resample(cal_grid, average=True), calibration, prior
-    )
+    unc = reflectance_uncertainty(est, resp, illuminants_of(job), calibration)
     bins = bank.bins_of(c.astype(np.float32), phi)
     y = unc.xyz[:, 1]
     u_l_bin = _u_lightness(y, bank.xyz_cov[bins, 1, 1]).astype(np.float64)

@@ -156,18 +156,19 @@ def _patchwise(bench_session) -> tuple[np.ndarray, np.ndarray]:
         correct_illuminants_from_meta,
     )
     from tunespec.core.uncertainty import reflectance_uncertainty
-    from tunespec.core.wiener import wiener_reflectance
+    from tunespec.core.wiener import integration_grid, wiener_reflectance
 
     p = bench_session["processed"]
     meta = read_sensitivity_meta(bench_session["sens"])
-    sens = read_sensitivities(bench_session["sens"], GRID)
-    prior = load_colorchecker_sg(GRID)
-    ill = correct_illuminants_from_meta(
-        p.illuminants.resample(GRID, average=True), meta
-    )
-    est = wiener_reflectance(p.responses, ill, sens, prior)
+    sens = read_sensitivities(bench_session["sens"])
+    corrected = correct_illuminants_from_meta(p.illuminants, meta)
+    fine = integration_grid(sens, GRID, corrected)
+    est = wiener_reflectance(
+        p.responses, corrected.resample(fine, average=True), sens.resample(fine),
+        load_colorchecker_sg(GRID),
+    )  # fmt: skip
     cal = calibration_from_files(bench_session["sens"], meta)
-    unc = reflectance_uncertainty(est, p.responses, p.illuminants, cal, prior)
+    unc = reflectance_uncertainty(est, p.responses, p.illuminants, cal)
     return est.reflectance.values, unc.reflectance_std
 
 

@@ -20,6 +20,7 @@ from tunespec.app.cli import (
     core_cmds,
     device_cmds,
     export_cmds,
+    gonio_cmds,
     image_cmds,
     session_cmds,
 )
@@ -30,6 +31,7 @@ from tunespec.app.cli.common import (
     EXIT_INPUT,
     TerminalProgress,
     add_grid_option,
+    close_progress,
     grid_arg,
     progress_bar,
     seed_arg,
@@ -54,7 +56,14 @@ __all__ = [
 
 #: The command modules, in the order ``--help`` lists them. Imported statically: each
 #: imports only what its commands need when they run (``tunespec --help`` stays light).
-COMMAND_MODULES = (core_cmds, device_cmds, session_cmds, export_cmds, image_cmds)
+COMMAND_MODULES = (
+    core_cmds,
+    device_cmds,
+    session_cmds,
+    export_cmds,
+    gonio_cmds,
+    image_cmds,
+)
 
 
 class _VersionAction(argparse.Action):
@@ -128,6 +137,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             file=sys.stderr,
         )
         return EXIT_INPUT
+    finally:
+        close_progress()
 
 
 def check_outputs(args: argparse.Namespace) -> None:

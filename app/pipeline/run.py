@@ -130,7 +130,8 @@ class RunResult:
 
     def format_text(self) -> str:
         """Table 1 and Table 2 as the terminal shows them."""
-        parts = [self.table1.format_table("Table 1 - ColorChecker SG, RGB prediction")]
+        chart = self.chart.layout.name
+        parts = [self.table1.format_table(f"Table 1 - {chart}, RGB prediction")]
         if self.table2 is not None:
             parts.append(
                 "Table 2 - sample target vs. reference (CIEDE2000 D50, spectral RMS)\n"
@@ -424,6 +425,7 @@ def _run_on(
             settings=settings,
             warnings=hooks.warnings,
             report=plan.report,
+            chart_reflectances=plan.chart_reflectances,
         ),
     )
     if sample_bench is not bench:

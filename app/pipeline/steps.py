@@ -29,6 +29,7 @@ from tunespec.core.colorimetry import ReflectanceStats, reflectance_stats
 from tunespec.core.datasets import load_colorchecker_sg
 from tunespec.core.errors import InputError
 from tunespec.core.io.export import (
+    export_camera_characterisation,
     export_measurement,
     write_colorimetry_csv,
 )
@@ -284,23 +285,24 @@ def estimate(
     """
     from tunespec.core.sensitivity import correct_illuminants_from_meta
     from tunespec.core.uncertainty import reflectance_uncertainty
-    from tunespec.core.wiener import wiener_reflectance
+    from tunespec.core.wiener import integration_grid, wiener_reflectance
 
     prior = prior if prior is not None else load_colorchecker_sg(grid)
     illuminants = correct_illuminants_from_meta(
         sample.illuminants, sensitivity.meta, spd_shift_nm
     )
+    fine = integration_grid(sensitivity, grid, illuminants)
     est = wiener_reflectance(
         sample.responses,
-        illuminants.resample(grid, average=True),
-        sensitivity.resample(grid),
+        illuminants.resample(fine, average=True),
+        sensitivity.resample(fine),
         prior.resample(grid),
     )
     table2 = None if reference is None else evaluate(est.reflectance, reference)
     unc = None
     if calibration is not None and calibration.covariance is not None:
         unc = reflectance_uncertainty(
-            est, sample.responses, sample.illuminants, calibration, prior.resample(grid)
+            est, sample.responses, sample.illuminants, calibration
         )
     return Estimation(est, table2, unc)
 
@@ -323,8 +325,14 @@ def export(
     settings: Mapping[str, str] | None = None,
     warnings: Sequence[str] = (),
     report: bool = True,
+    chart_reflectances: Spectra | None = None,
 ) -> dict[str, Path]:
     """Write every export (``core.io.export``) and, if asked, the HTML/PDF report.
+
+    The chart's camera ``.ti3`` (for ArgyllCMS ``colprof``) and the camera transforms
+    (ACES IDT, CCMs for D50/D65/A) come from ``chart_reflectances`` (default: the
+    ColorChecker SG) and the calibration
+    (:func:`~tunespec.core.io.export.export_camera_characterisation`).
 
     Files: the chart's ``chart_responses.csv`` / ``chart_illuminants.csv``, the
     ``core.io.export`` set (sensitivities, reflectances, the sample's responses and
@@ -353,6 +361,17 @@ def export(
             model=cam.get("model", ""),
             uncertainty=estimation.uncertainty,
             sensitivity_covariance=calibration.estimate.covariance,
+        )
+    )
+    files.update(
+        export_camera_characterisation(
+            out,
+            sensitivity=calibration.sensitivity,
+            chart=chart_reflectances
+            if chart_reflectances is not None
+            else load_colorchecker_sg(),
+            responses=chart.responses,
+            illuminants=chart.illuminants,
         )
     )
     unc = estimation.uncertainty
