@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from tunespec.app.cli.common import add_grid_option, progress_bar
+from tunespec.app.cli.common import Console, add_grid_option, add_output_options
 from tunespec.core.errors import InputError
 from tunespec.core.spectra import Grid
 
@@ -65,7 +65,8 @@ def _common(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--no-clip", action="store_true", help="do not clip to [0, 1]")
     add_grid_option(p)
-    p.set_defaults(grid=None)
+    add_output_options(p)
+    p.set_defaults(grid=None)  # None: the pipeline's estimation grid, 400:700:5
 
 
 def _settings(args: argparse.Namespace) -> object:
@@ -80,19 +81,21 @@ def cmd_estimate_image(args: argparse.Namespace) -> int:
 
     if not (args.session / "manifest.json").is_file():
         raise InputError("not a session folder (no manifest.json)", path=args.session)
+    out = Console(args)
     prov = estimate_images(
         args.session,
         args.sensitivities,
         args.out,
         settings=_settings(args),  # type: ignore[arg-type]
         scheduler=args.scheduler,
-        progress=progress_bar("estimating images"),
+        progress=out.progress("estimating images"),
     )
     rows, cols = prov["shape"]
-    print(
+    out.say(
         f"{cols}x{rows} px x {len(prov['channels'])} LEDs -> {args.out} "
         "(cube.hdr/.img, cube.zarr, xyz.tif, lab.tif, uncertainty.tif, srgb.png)"
     )
+    out.summary({"out": str(args.out), **prov})
     return 0
 
 
@@ -101,6 +104,7 @@ def cmd_batch(args: argparse.Namespace) -> int:
 
     if args.sessions_at_once < 1:
         raise InputError(f"--sessions-at-once {args.sessions_at_once}: must be >= 1")
+    out = Console(args)
     result = batch_images(
         args.folder,
         args.sensitivities,
@@ -108,13 +112,14 @@ def cmd_batch(args: argparse.Namespace) -> int:
         settings=_settings(args),  # type: ignore[arg-type]
         scheduler=args.scheduler,
         sessions_at_once=args.sessions_at_once,
-        progress=progress_bar("batch"),
+        progress=out.progress("batch"),
     )
     for s in result["skipped"]:
-        print(f"skipped (already done): {s}")
+        out.say(f"skipped (already done): {s}")
     for s in result["done"]:
-        print(f"done: {s}")
-    print(
+        out.say(f"done: {s}")
+    out.say(
         f"{len(result['done'])} session(s) estimated, {len(result['skipped'])} skipped"
     )
+    out.summary(result)
     return 0
