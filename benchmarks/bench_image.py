@@ -70,19 +70,20 @@ def _decode_all(paths: list[Path]) -> tuple[float, float]:
 
 
 def _images(work: Path, out: Path, workers: int | None) -> dict[str, float]:
-    """``estimate_images`` in a child process: wall time and peak RSS."""
+    """``tunespec estimate-image`` in a child process: wall time, CPU, peak RSS."""
     code = f"""
 import json, resource, shutil, sys, time
 import dask
-from tunespec.app.pipeline.image import estimate_images
+from tunespec.app.cli import main
 shutil.rmtree({str(out)!r}, ignore_errors=True)
 if {workers!r}:
     dask.config.set(num_workers={workers!r})
 t0 = time.perf_counter()
-estimate_images({str(work / "session")!r},
-                {str(work / "truth" / "truth_sensitivity_absolute.csv")!r},
-                {str(out)!r})
+code = main(["estimate-image", {str(work / "session")!r}, "--sensitivities",
+             {str(work / "truth" / "truth_sensitivity_absolute.csv")!r},
+             "--out", {str(out)!r}, "--quiet"])
 wall = time.perf_counter() - t0
+assert code == 0, code
 ru = resource.getrusage(resource.RUSAGE_SELF)
 rss = ru.ru_maxrss * (1 if sys.platform == "darwin" else 1024)
 print(json.dumps({{"wall_s": wall, "peak_rss_bytes": rss, "user_s": ru.ru_utime,
