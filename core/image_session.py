@@ -302,17 +302,27 @@ def _dark(job: ImageJob, frame: _Frame) -> NDArray[np.float32]:
     return np.fromfile(path, dtype=np.float32).reshape(3, *job.plane_shape)
 
 
+#: Bracket merging treats a cell above this fraction of full scale as clipped: the
+#: sensor's full well clips the charge before the read noise is added, so a clipped
+#: photosite can read a little under the white level without being flagged.
+BRACKET_CLIP_LEVEL = 0.95
+
+
 def _merged(
     job: ImageJob, frames: Sequence[_Frame]
 ) -> tuple[NDArray[np.float32], NDArray[np.bool_]]:
     """Dark-subtracted planes of a bracket series (longest first), merged: a clipped
-    cell takes the next shorter exposure, scaled (as processing's brackets)."""
+    cell takes the next shorter exposure, scaled (as processing's brackets); with
+    brackets, cells above :data:`BRACKET_CLIP_LEVEL` count as clipped."""
     values, clipped = _planes(job, frames[0])
+    if len(frames) > 1:
+        clipped |= values.max(axis=0) > BRACKET_CLIP_LEVEL
     values -= _dark(job, frames[0])
     for f in frames[1:]:
         if not clipped.any():
             break
         planes, sat = _planes(job, f)
+        sat |= planes.max(axis=0) > BRACKET_CLIP_LEVEL
         use = clipped & ~sat
         planes -= _dark(job, f)
         values[:, use] = planes[:, use] * np.float32(
