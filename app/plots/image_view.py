@@ -22,6 +22,7 @@ from PySide6.QtWidgets import (
     QComboBox,
     QHBoxLayout,
     QLabel,
+    QLineEdit,
     QProgressBar,
     QPushButton,
     QSpinBox,
@@ -59,6 +60,12 @@ class ImageView(QWidget):
         self.progress.hide()
         self.cancel_button = QPushButton("Cancel")
         self.cancel_button.hide()
+        self.scheduler_edit = QLineEdit()
+        self.scheduler_edit.setPlaceholderText("local threads")
+        self.scheduler_edit.setToolTip(
+            "a dask.distributed scheduler (tcp://host:8786) to estimate on; "
+            "empty: Dask's local threads"
+        )
         self.status = QLabel("Estimate images or open an image folder.")
         self.region_label = QLabel("")
         self.region_label.setWordWrap(True)
@@ -67,6 +74,8 @@ class ImageView(QWidget):
         top.addWidget(self.layer_combo)
         top.addWidget(self.band_spin)
         top.addStretch(1)
+        top.addWidget(QLabel("Scheduler"))
+        top.addWidget(self.scheduler_edit)
         top.addWidget(self.progress)
         top.addWidget(self.cancel_button)
 
@@ -209,13 +218,16 @@ class ImageView(QWidget):
     def estimate(
         self, session: str | Path, sensitivities: str | Path, out: str | Path
     ) -> Any:
-        """Run ``estimate-image`` on the worker pool; the result is shown when done."""
-        from tunespec.app.pipeline.image import estimate_images
+        """Run ``estimate-image`` on the worker pool (on the Dask scheduler named in
+        :attr:`scheduler_edit`, else locally); the result is shown when done."""
+        from tunespec.app.pipeline import image as pipeline
         from tunespec.app.workers import Worker
 
+        scheduler = self.scheduler_edit.text().strip() or None
         self.worker = Worker(
-            estimate_images, str(session), str(sensitivities), str(out)
-        )
+            pipeline.estimate_images, str(session), str(sensitivities), str(out),
+            scheduler=scheduler,
+        )  # fmt: skip
         self.worker.signals.progressed.connect(self._on_worker_progressed)
         self.worker.signals.returned.connect(self._on_worker_returned)
         self.worker.signals.errored.connect(self._on_worker_errored)

@@ -77,7 +77,10 @@ def test_layers_pixel_spectrum_and_regions(qtbot, tmp_path) -> None:
 def test_estimate_runs_in_a_worker_with_progress(qtbot, tmp_path, monkeypatch) -> None:
     import tunespec.app.pipeline.image as pipeline
 
-    def fake(session, sens, out, *, progress=None, should_stop=None):
+    calls = []
+
+    def fake(session, sens, out, *, scheduler=None, progress=None, should_stop=None):
+        calls.append(scheduler)
         for k in range(5):
             progress((k + 1) / 5)
         _write_folder(out)
@@ -86,6 +89,7 @@ def test_estimate_runs_in_a_worker_with_progress(qtbot, tmp_path, monkeypatch) -
     monkeypatch.setattr(pipeline, "estimate_images", fake)
     view = ImageView()
     qtbot.addWidget(view)
+    view.scheduler_edit.setText(" tcp://cluster:8786 ")
     seen: list[float] = []
     with qtbot.waitSignal(view.estimate_finished, timeout=10_000):
         worker = view.estimate("S", "cal.csv", tmp_path / "out")
@@ -94,12 +98,13 @@ def test_estimate_runs_in_a_worker_with_progress(qtbot, tmp_path, monkeypatch) -
     qtbot.waitUntil(lambda: view.worker is None)
     assert seen and seen[-1] == pytest.approx(1.0)
     assert view.progress.isHidden()
+    assert calls == ["tcp://cluster:8786"]
 
 
 def test_estimate_can_be_cancelled(qtbot, tmp_path, monkeypatch) -> None:
     import tunespec.app.pipeline.image as pipeline
 
-    def slow(session, sens, out, *, progress=None, should_stop=None):
+    def slow(session, sens, out, *, scheduler=None, progress=None, should_stop=None):
         while True:
             check_stop(should_stop)
             time.sleep(0.01)
