@@ -21,6 +21,10 @@ The stages (each a plain function of picklable arguments, so that
    the lighting matrix and the bank of Wiener matrices
    (:func:`tunespec.core.image.build_wiener_bank`); the per-pixel flat-field factor
    ``phi`` is written as ``phi.f32``;
+   :func:`systematic_table` then takes what a pixel's own noise does not cover (the
+   calibration's covariance, a target unlike the prior) from
+   :func:`tunespec.core.uncertainty.reflectance_uncertainty` on sampled regions,
+   tabulated by CIELAB cell;
 4. :func:`estimate_block` - per block of rows: the responses are read from disk,
    each pixel gets Eq. 5 from its bin (:func:`tunespec.core.image.estimate_pixels`),
    and the cube, XYZ, L*a*b* and uncertainty rows are written
