@@ -437,10 +437,16 @@ class WienerBank:
 def _bin_index(
     x: NDArray[np.floating], edges: NDArray[np.float64]
 ) -> NDArray[np.int64]:
+    """Index of the bin of ``x`` between equidistant ``edges`` (outside: the end
+    bins); arithmetic rather than a search, one pass over the pixels."""
     n = edges.size - 1
     if n == 1:
         return np.zeros(np.shape(x), dtype=np.int64)
-    idx = np.searchsorted(edges[1:-1], x, side="right")
+    step = (edges[-1] - edges[0]) / n
+    idx = (np.asarray(x, dtype=np.float32) - np.float32(edges[0])) * np.float32(
+        1 / step
+    )
+    np.clip(idx, 0, n - 1, out=idx)
     return idx.astype(np.int64)
 
 
@@ -706,7 +712,8 @@ def _apply_bins(
     order = np.argsort(bins.astype(np.int16), kind="stable")
     counts = np.bincount(bins, minlength=bank.Wt.shape[0])
     cs = _workspace("sorted_c", (n, m))
-    np.take(c, order, axis=0, out=cs)
+    # indices from argsort are in range: "clip" skips numpy's bounds checks (2x)
+    np.take(c, order, axis=0, out=cs, mode="clip")
     es = _workspace("sorted_r", (n, n_wl))
     start = 0
     for b in np.flatnonzero(counts):
@@ -716,7 +723,7 @@ def _apply_bins(
         es[sl] += bank.offset[b]
     inverse = np.empty_like(order)
     inverse[order] = np.arange(order.size)
-    return np.take(es, inverse, axis=0)
+    return np.take(es, inverse, axis=0, mode="clip")
 
 
 _THREAD = threading.local()
