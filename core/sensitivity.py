@@ -71,7 +71,7 @@ from tunespec.core.sensitivity_bayes import (
 )
 from tunespec.core.sensitivity_bayes import _subspace_penalty as _basis_penalty
 from tunespec.core.simulate import check_rgb_sensitivity, check_same_grid
-from tunespec.core.spectra import Grid, Spectra
+from tunespec.core.spectra import Grid, Spectra, resampling_matrix
 
 __all__ = [
     "SENSITIVITY_METHODS",
@@ -661,18 +661,28 @@ def calibration_from_files(
     cov = meta.get("covariance")
     if cov is not None:
         n_led = len(corr.names) if corr is not None else 0
-        expected = 3 * sens.wavelength_nm.size + 2 * n_led
         wl = np.asarray(meta.get("covariance_wavelength_nm", sens.wavelength_nm))
-        if (
-            cov.shape != (expected, expected)
-            or wl.shape != sens.wavelength_nm.shape
-            or not np.allclose(wl, sens.wavelength_nm)
-        ):
+        expected = 3 * wl.size + 2 * n_led
+        if cov.shape != (expected, expected):
             raise InputError(
-                f"covariance is {cov.shape[0]} x {cov.shape[1]}; the sensitivities and "
-                f"LED corrections need {expected} x {expected} on their grid",
+                f"covariance is {cov.shape[0]} x {cov.shape[1]}; {wl.size} samples "
+                f"per channel and {n_led} LED corrections need {expected} x {expected}",
                 path=source,
             )
+        if wl.shape != sens.wavelength_nm.shape or not np.allclose(
+            wl, sens.wavelength_nm
+        ):
+            # sensitivities written on another grid (rawtoaces' 5 nm): the covariance
+            # follows the same linear resampling, T Sigma T'
+            T1 = resampling_matrix(wl, sens.wavelength_nm)
+            T = np.zeros((3 * T1.shape[0] + 2 * n_led, expected))
+            for k in range(3):
+                T[
+                    k * T1.shape[0] : (k + 1) * T1.shape[0],
+                    k * wl.size : (k + 1) * wl.size,
+                ] = T1
+            T[3 * T1.shape[0] :, 3 * wl.size :] = np.eye(2 * n_led)
+            cov = T @ cov @ T.T
     return SensitivityEstimate(
         sens,
         "bayes" if corr is not None else "unknown",
