@@ -1017,8 +1017,9 @@ def estimate_camera_sensitivity(
     reflectances : Spectra, (>= n_p, n_wl)
         Patch reflectances on the same grid; must contain every patch name.
     method
-        ``"smooth"`` (default) or ``"pca"`` (the paper's Eq. 4), see the module
-        docstring and :data:`SENSITIVITY_METHODS`.
+        ``"bayes"`` (default: empirical Bayes with per-LED self-calibration,
+        :mod:`.sensitivity_bayes`), ``"smooth"`` or ``"pca"`` (the paper's Eq. 4), see
+        the module docstring and :data:`SENSITIVITY_METHODS`.
     database
         Camera name -> sensitivities (R, G, B) on the inputs' grid, the a priori
         knowledge. Default: the shipped database (:func:`load_camera_database` on the
@@ -1040,9 +1041,13 @@ def estimate_camera_sensitivity(
         later readings of the same instrument) meet the sensitivity, e.g. in Wiener
         estimation. A 1 nm shift, uncorrected, costs about 0.3 CIEDE2000 on average
         (``benchmarks/loo_cameras.py``); sensitivities cannot absorb it. ``None``
-        (default): on for ``"smooth"``, off for ``"pca"`` (the paper's method as
-        published). The fitted shift is also kept in
+        (default): on for ``"bayes"`` and ``"smooth"``, off for ``"pca"`` (the
+        paper's method as published). The fitted shift is also kept in
         ``sensitivity.meta["spd_shift_nm"]``.
+    self_calibrate
+        ``"bayes"``: fit every LED's gain and wavelength offset too (default: with
+        ``fit_spd_shift``); the corrections are in ``.led_correction`` and applied
+        by :meth:`SensitivityEstimate.correct_illuminants`.
     progress, should_stop
         Progress callback (fraction 0..1) and cancellation check.
 
