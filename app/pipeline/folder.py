@@ -460,7 +460,7 @@ def restore_calibration_steps(
 
     from tunespec.app.pipeline.steps import Calibration
     from tunespec.core.sensitivity import calibration_from_files
-    from tunespec.core.spectra import DEFAULT_GRID
+    from tunespec.core.spectra import CALIBRATION_GRID
     from tunespec.core.stats import calibration_report
     from tunespec.devices.registry import layout_reflectances
 
@@ -477,7 +477,7 @@ def restore_calibration_steps(
         method=result.method,
         excluded_patches=result.excluded_patches,
     )
-    work = grid or DEFAULT_GRID
+    work = grid or CALIBRATION_GRID
     refl = layout_reflectances(result.layout, grid=work).resample(work)
     report = calibration_report(
         est, chart.responses, chart.illuminants.resample(work, average=True), refl
