@@ -43,6 +43,7 @@ from tunespec.devices.cal1.commands import (
     encode_reply,
 )
 from tunespec.devices.clock import Clock, RealClock
+from tunespec.devices.line_io import received_lines
 from tunespec.devices.protocols import ClosesOnExit
 from tunespec.devices.sim.led_physics import LedPhysics
 
@@ -257,28 +258,18 @@ class Cal1Emulator(ClosesOnExit):
 
     def _serve(self, conn: socket.socket) -> None:
         """Answer request lines until the client leaves, a drop fault or close()."""
-        rx = bytearray()
-        while not self._stop.is_set():
+
+        def overflow() -> None:
+            conn.sendall(encode_error(ErrorCode.LINE_TOO_LONG, "line too long"))
+
+        for line in received_lines(
+            conn, self._stop, TERMINATOR, MAX_LINE_BYTES, overflow
+        ):
             try:
-                data = conn.recv(4096)
-            except TimeoutError:
-                continue
+                if not self._respond(conn, line.removesuffix(b"\r")):
+                    return  # dropped on purpose
             except OSError:
-                return
-            if not data:
-                return
-            rx += data
-            while (end := rx.find(TERMINATOR)) >= 0:
-                line = bytes(rx[:end]).removesuffix(b"\r")
-                del rx[: end + len(TERMINATOR)]
-                try:
-                    if not self._respond(conn, line):
-                        return  # dropped on purpose
-                except OSError:
-                    return  # the client went away while we answered
-            if len(rx) > MAX_LINE_BYTES:
-                rx.clear()
-                conn.sendall(encode_error(ErrorCode.LINE_TOO_LONG, "line too long"))
+                return  # the client went away while we answered
 
     def _reject(self, conn: socket.socket) -> None:
         """Answer a second client's first request with ERR 409, then disconnect."""

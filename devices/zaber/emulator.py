@@ -25,6 +25,7 @@ import time
 from dataclasses import dataclass
 from typing import Literal
 
+from tunespec.devices.line_io import received_lines
 from tunespec.devices.protocols import ClosesOnExit
 from tunespec.devices.zaber.protocol import MAX_LINE_BYTES, checksum
 
@@ -148,30 +149,16 @@ class ZaberEmulator(ClosesOnExit):
                 conn.close()
 
     def _serve(self, conn: socket.socket) -> None:
-        rx = bytearray()
-        while not self._stop.is_set():
-            try:
-                data = conn.recv(4096)
-            except TimeoutError:
+        for raw in received_lines(conn, self._stop, b"\n", MAX_LINE_BYTES):
+            line = raw.decode("ascii", "replace").strip()
+            self.received.append(line)
+            fault = self._take_fault(line)
+            if fault == "drop":
+                return
+            if fault == "no_reply":
                 continue
-            except OSError:
-                return
-            if not data:
-                return
-            rx += data
-            while (end := rx.find(b"\n")) >= 0:
-                line = bytes(rx[:end]).decode("ascii", "replace").strip()
-                del rx[: end + 1]
-                self.received.append(line)
-                fault = self._take_fault(line)
-                if fault == "drop":
-                    return
-                if fault == "no_reply":
-                    continue
-                for out in self._execute(line):
-                    conn.sendall(out.encode("ascii") + b"\r\n")
-            if len(rx) > MAX_LINE_BYTES:
-                rx.clear()
+            for out in self._execute(line):
+                conn.sendall(out.encode("ascii") + b"\r\n")
 
     def _take_fault(self, line: str) -> FaultKind | None:
         with self._lock:
