@@ -73,6 +73,10 @@ class WorkerSignals(QObject):
 
     started = Signal()
     progressed = Signal(float)
+    #: What the job is doing now, in the operator's words ("metering LED495, 7 of 22").
+    stage_changed = Signal(str)
+    #: Something the operator must know about the result (e.g. a weak LED).
+    warned = Signal(str)
     returned = Signal(object)
     errored = Signal(object)
     finished = Signal()
@@ -304,9 +308,25 @@ class DeviceContext:
     #: Live frames during a sequence are shown at most this often (s).
     FRAME_PERIOD_S = 0.5
 
-    def __init__(self, controller: DeviceController) -> None:
+    def __init__(
+        self, controller: DeviceController, job: DeviceJob | None = None
+    ) -> None:
         self._controller = controller
+        self._job = job
         self._last_frame_s = -1e9
+
+    def set_stage(self, text: str) -> None:
+        """Say what the job does now (progress text and the log)."""
+        log.info("%s", text)
+        if self._job is not None:
+            self._job.signals.stage_changed.emit(text)
+
+    def warn(self, text: str) -> None:
+        """Pass a warning on to the GUI at once (the page logs and shows it)."""
+        if self._job is not None:
+            self._job.signals.warned.emit(text)
+        else:
+            log.warning("%s", text)
 
     @property
     def bench(self) -> Any:
@@ -649,7 +669,7 @@ class DeviceController(QObject):
         self._current_job = job
         self.busy_changed.emit(True)
         try:
-            job.execute(DeviceContext(self))
+            job.execute(DeviceContext(self, job))
         finally:
             self._current_job = None
             self.busy_changed.emit(False)

@@ -18,12 +18,13 @@ time accept ``progress`` and ``should_stop`` (``core.progress``):
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from os import PathLike
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from tunespec.app.pipeline.folder import add_capture_warnings, clear_capture_warnings
 from tunespec.app.pipeline.plan import ESTIMATION_GRID, chart_layout, sample_layout
 from tunespec.core.colorimetry import ReflectanceStats, reflectance_stats
 from tunespec.core.datasets import load_colorchecker_sg
@@ -143,14 +144,34 @@ def capture_target(
     progress: ProgressFn | None = None,
     should_stop: StopFn | None = None,
     on_frame: FrameCallback | None = None,
+    on_warning: Callable[[str], None] | None = None,
+    on_stage: Callable[[str], None] | None = None,
 ) -> tuple[Session, tuple[str, ...]]:
     """Capture (or resume) one session of ``layout`` on ``bench``.
+
+    Every warning is kept beside the session the moment it arises
+    (:func:`~tunespec.app.pipeline.folder.add_capture_warnings`), so the calibrate
+    and estimate steps report it even when the capture was resumed, by another
+    front end, or interrupted.
+
+    Parameters
+    ----------
+    on_warning, on_stage
+        ``devices.capture.capture``'s hooks: each warning as it arises, and the
+        stage that starts (``"metering LED495, 7 of 22"``).
 
     Returns
     -------
     (session, warnings)
+        ``warnings``: those of this run.
     """
     root = Path(session_dir)
+
+    def warned(text: str) -> None:
+        add_capture_warnings(root, [text])
+        if on_warning is not None:
+            on_warning(text)
+
     if (root / "manifest.json").is_file():
         if not resume:
             raise InputError("a session already exists here", path=root)
@@ -158,6 +179,7 @@ def capture_target(
         if session.layout is None:
             session.set_layout(layout.with_corners(None))
     else:
+        clear_capture_warnings(root)  # of an earlier session in this folder
         session = new_session(
             root,
             bench.light,
@@ -177,6 +199,8 @@ def capture_target(
         progress=progress,
         should_stop=should_stop,
         on_frame=on_frame,
+        on_warning=warned,
+        on_stage=on_stage,
     )
     return session, result.warnings
 

@@ -161,6 +161,11 @@ class CapturePage(StepPage):
     def restore(self) -> bool:
         """Done if the chart session already holds every frame of this kind."""
         if self.measurement.phase_complete("chart", self.kind):
-            self.mark_done(f"All {_NOUN[self.kind]} are in the session (resumed).")
+            # the exposures are metered in the first phase: its warnings show there
+            warnings = self.measurement.capture_warnings("chart")
+            self.mark_done(
+                f"All {_NOUN[self.kind]} are in the session (resumed).",
+                warnings=warnings if self.kind == "dark" else (),
+            )
             return True
         return False

@@ -41,11 +41,13 @@ from tunespec.app.pipeline.folder import (
     ExportResult,
     MeasurementFolder,
     read_calibration,
+    read_capture_warnings,
     read_estimate,
     read_measurement_doc,
     read_processed,
     restore_calibration_steps,
     session_fingerprint,
+    step_warnings,
     write_calibration,
     write_estimate,
     write_measurement_doc,
@@ -151,9 +153,7 @@ class PhaseResult:
             f"{len(self.captured)} frame(s) taken in {self.elapsed_s:.1f} s; the "
             f"{session} holds {self.n_frames} {noun}."
         )
-        if self.warnings:
-            text += " Note: " + "; ".join(self.warnings)
-        return text
+        return text  # the warnings are in the page's badge
 
 
 # -- the model --------------------------------------------------------------------------
@@ -341,6 +341,12 @@ class Measurement(QObject):
         root = self.folder / (CHART_DIR if which == "chart" else SAMPLE_DIR)
         return Session.open(root) if (root / MANIFEST_NAME).exists() else None
 
+    def capture_warnings(self, which: str) -> tuple[str, ...]:
+        """The warnings the captures of the chart or sample session raised."""
+        if self.folder is None:
+            return ()
+        return read_capture_warnings(MeasurementFolder(self.folder).session_dir(which))
+
     def phase_complete(self, which: str, kind: str | None) -> bool:
         """Whether the session holds every frame of ``kind`` (None: every frame)."""
         session = self.session(which)
@@ -448,6 +454,60 @@ def _bench_showing(context: DeviceContext, target_layout: TargetLayout) -> Any:
     return context.replace_bench(bench_for_target(bench, target_layout, seed=seed))
 
 
+def _frames_of(kind: str | None, n_channels: int, n_brackets: int, n_darks: int) -> int:
+    """Frames of ``kind`` a session will hold before its exposures are known (an
+    upper bound for the darks: one per LED exposure)."""
+    lit = n_channels * n_brackets
+    per_kind = {"dark": lit * n_darks, "white": lit, "target": lit}
+    return per_kind[kind] if kind is not None else sum(per_kind.values())
+
+
+class _PhaseProgress:
+    """The progress of one capture phase: metering (while exposures are unknown) and
+    the frames of the phase, counted from the session on disk.
+
+    ``capture()`` reports one step per metered channel and per frame; the fraction is
+    the steps done over the steps done plus those left, and never goes back (an
+    upper bound of the frames left is replaced by the real count once metered).
+    """
+
+    def __init__(
+        self,
+        kind: str | None,
+        n_channels: int,
+        options: CaptureOptions,
+        progress: ProgressFn | None,
+    ) -> None:
+        self._kind, self._n_channels = kind, n_channels
+        self._options = options
+        self._progress = progress
+        self.done = 0
+        self._last = 0.0
+
+    def left(self, session: Any) -> int:
+        """Steps left: channels to meter and frames of the phase to take."""
+        if session is None:
+            return self._n_channels + _frames_of(
+                self._kind, self._n_channels, 1, self._options.n_darks
+            )
+        settings = session.settings
+        if not settings.resolved:
+            n = len(settings.channels)
+            metered = sum(c in settings.exposures_s for c in settings.channels)
+            return (n - metered) + _frames_of(
+                self._kind, n, len(settings.bracket_factors), settings.n_darks
+            )
+        return sum(self._kind in (None, s.kind) for s in session.missing(verify=False))
+
+    def step(self, session: Any) -> None:
+        """One step done; report the fraction."""
+        self.done += 1
+        fraction = self.done / max(1, self.done + self.left(session))
+        self._last = max(self._last, min(fraction, 1.0))
+        if self._progress is not None:
+            self._progress(self._last)
+
+
 def capture_job(
     context: DeviceContext,
     root: Path,
@@ -464,7 +524,9 @@ def capture_job(
     ``pipeline.capture_target`` runs the capture sequence (resuming the session) and
     is stopped as soon as every frame of ``kind`` is in: a cancelled capture keeps
     its frames and the next phase resumes from there. A phase that is already
-    complete is taken again (its frames are marked bad first). Device thread.
+    complete is taken again (its frames are marked bad first). What it does now
+    (``"metering LED495, 7 of 22"``) and its warnings go to the page as they
+    happen (``context.set_stage``, ``context.warn``). Device thread.
 
     Parameters
     ----------
@@ -482,26 +544,14 @@ def capture_job(
     def session_now() -> Session | None:
         return Session.open(root) if (root / MANIFEST_NAME).exists() else None
 
-    def missing_of_kind(session: Session | None) -> int:
-        if session is None or not session.settings.resolved:
-            return -1  # unknown until created and metered: not complete
-        return sum(kind in (None, s.kind) for s in session.missing(verify=False))
-
     session = session_now()
-    if session is not None and missing_of_kind(session) == 0:
+    meter = _PhaseProgress(kind, len(light.channels()), options, progress)
+    if session is not None and session.settings.resolved and meter.left(session) == 0:
         retake = [f.id for f in session.frames if kind in (None, f.kind)]
         session.mark_bad(retake, "retaken by the operator")
         log.info("retaking %d %s frame(s)", len(retake), kind or "")
-    todo = [max(0, missing_of_kind(session))]
-    steps = [0]
     phase_done = [False]
     captured: list[str] = []
-
-    def on_step(_fraction: float) -> None:
-        # capture() reports one step per metered channel and per frame
-        steps[0] += 1
-        if progress is not None:
-            progress(min(1.0, steps[0] / max(1, steps[0] + todo[0])))
 
     def on_frame(record: Any, path: Path) -> None:
         captured.append(record.id)
@@ -509,15 +559,17 @@ def capture_job(
         now = session_now()
         if record.spd_file is not None and now is not None:
             context.show_spd(now.read_spd(record), _levels_of(light, record.channel))
-        todo[0] = max(0, missing_of_kind(now))
-        if kind is not None and todo[0] == 0:
+        if (
+            kind is not None
+            and now is not None
+            and now.settings.resolved
+            and meter.left(now) == 0
+        ):
             phase_done[0] = True
 
     def stop() -> bool:
         return phase_done[0] or bool(should_stop and should_stop())
 
-    if todo[0] == 0 and session is not None:
-        todo[0] = len(session.plan())
     warnings: tuple[str, ...] = ()
     try:
         session, warnings = capture_target(
@@ -528,9 +580,11 @@ def capture_job(
             iso=options.iso,
             n_darks=options.n_darks,
             resume=True,
-            progress=on_step,
+            progress=lambda _f: meter.step(session_now()),
             should_stop=stop,
             on_frame=on_frame,
+            on_warning=context.warn,
+            on_stage=context.set_stage,
         )
     except Cancelled:
         if not phase_done[0] or (should_stop and should_stop()):
@@ -611,7 +665,7 @@ def calibrate_job(
         method=str(cal.estimate.method),
         layout=chart.layout,
         excluded_patches=tuple(cal.estimate.excluded_patches),
-        warnings=tuple(chart.warnings),
+        warnings=step_warnings(chart_root, chart, cal.estimate.excluded_patches),
         elapsed_s=time.monotonic() - t0,
         calibration=cal,
         chart=chart,
@@ -667,7 +721,7 @@ def estimate_job(
         reference=ref,
         layout=sample.layout,
         clipped=tuple(est.wiener.clipped),
-        warnings=tuple(sample.warnings),
+        warnings=step_warnings(sample_root, sample),
         elapsed_s=time.monotonic() - t0,
         estimation=type(est)(est.wiener, table2, est.uncertainty),
         sample=sample,
@@ -746,7 +800,10 @@ def export_job(
             "chart corners": chart.corners_source,
             "sample corners": sample.corners_source,
         },
-        warnings=(*calibration.warnings, *estimated.warnings),
+        warnings=(
+            *(f"chart: {w}" for w in calibration.warnings),
+            *(f"sample: {w}" for w in estimated.warnings),
+        ),
     )
     (Path(out_dir) / "exports.json").write_text(
         dumps_json({k: Path(p).name for k, p in files.items()}, indent=1)

@@ -71,6 +71,9 @@ class SamplePage(StepPage):
     def restore(self) -> bool:
         """Done if the sample session is complete."""
         if self.measurement.phase_complete("sample", None):
-            self.mark_done("The sample session is complete (resumed).")
+            self.mark_done(
+                "The sample session is complete (resumed).",
+                warnings=self.measurement.capture_warnings("sample"),
+            )
             return True
         return False

@@ -167,6 +167,7 @@ class WizardPanel(QWidget):
                 lambda state, i=i: self._on_page_state_changed(i, state)
             )
             page.step_finished.connect(lambda _r, i=i: self._on_page_step_finished(i))
+            page.warnings_changed.connect(lambda _w, i=i: self._show_state(i))
         self.step_list.currentRowChanged.connect(self._on_step_list_row_changed)
         self.back_button.clicked.connect(self._on_back_button_clicked)
         self.next_button.clicked.connect(self._on_next_button_clicked)
@@ -240,8 +241,10 @@ class WizardPanel(QWidget):
         page = self.pages[index]
         mark, colour = _STATE_MARK[page.state]
         item = self.step_list.item(index)
-        item.setText(f"{mark}  {index + 1}. {page.title}")
+        badge = f"  ⚠ {len(page.warnings)}" if page.warnings else ""
+        item.setText(f"{mark}  {index + 1}. {page.title}{badge}")
         item.setForeground(QBrush(colour))
+        item.setToolTip("\n".join(page.warnings))
 
     # -- measurement folder ---------------------------------------------------------
     @property
