@@ -7,6 +7,7 @@ window holds no measurement logic of its own.
 
 from __future__ import annotations
 
+import gc
 import logging
 import math
 from typing import Any
@@ -386,6 +387,15 @@ class MainWindow(QMainWindow):
 
     @Slot()
     def _on_preload_finished(self) -> None:
+        # the modules' objects (hundreds of thousands, with colour-science and
+        # matplotlib) live as long as the program: a full collection walking them
+        # holds the GIL for about 100 ms, wherever it is triggered, and the GUI
+        # waits. Frozen, the collector leaves them out (gc.freeze, Python >= 3.7);
+        # once per process (a second window would freeze the first for good)
+        global _GC_FROZEN
+        if not _GC_FROZEN:
+            gc.freeze()
+            _GC_FROZEN = True
         self.preloaded = True
 
     # -- closing ----------------------------------------------------------------------
@@ -403,6 +413,9 @@ class MainWindow(QMainWindow):
         super().closeEvent(event)
 
 
+#: Whether the start-up objects were moved out of the collector's reach.
+_GC_FROZEN = False
+
 #: Modules the measurement steps need, imported in the background at start-up.
 PIPELINE_MODULES = (
     "tunespec.app.pipeline.run",
@@ -416,15 +429,29 @@ PIPELINE_MODULES = (
     "tunespec.core.wiener",
     "tunespec.core.colorimetry",
     "tunespec.core.io.export",
+    # imported lazily by colorimetry and the export: a big module imported by a
+    # step holds the GIL for tens of ms at a time (unmarshalling its code)
+    "colour",
+    "tunespec.app.report.report",
+    "tunespec.app.plots.frame_plot",
+    "cv2",
+    "rawpy",
+    "scipy.ndimage",
 )
 
 
 def _preload_pipeline() -> None:
-    """Import :data:`PIPELINE_MODULES` (pool thread)."""
+    """Import :data:`PIPELINE_MODULES` (pool thread); one that is not installed
+    (``rawpy`` is optional) is imported when needed, with its error then."""
     import importlib
 
     for name in PIPELINE_MODULES:
-        importlib.import_module(name)
+        try:
+            importlib.import_module(name)
+        except ImportError as exc:
+            log.debug("not preloaded: %s", exc)
+    if not _GC_FROZEN:
+        gc.collect()  # what importing left behind, before the rest is frozen
 
 
 def _reference_sensitivity() -> Any:

@@ -313,7 +313,7 @@ class DeviceContext:
     ) -> None:
         self._controller = controller
         self._job = job
-        self._last_frame_s = -1e9
+        self._last_frame_s = self._last_spd_s = -1e9
 
     def set_stage(self, text: str) -> None:
         """Say what the job does now (progress text and the log)."""
@@ -370,9 +370,18 @@ class DeviceContext:
             return
         self._controller.frame_acquired.emit(preview)
 
-    def show_spd(self, spd: Any, levels: Any) -> None:
-        """Show an SPD the light source reported (with the levels it was set to)."""
-        self._controller.spd_measured.emit(spd, levels)
+    def show_spd(self, read_spd: Callable[[], Any], levels: Any) -> None:
+        """Show an SPD the light source reported (with the levels it was set to).
+
+        ``read_spd()`` gives it; it is called only when the last one shown is
+        :attr:`FRAME_PERIOD_S` old (reading and drawing one per frame would keep
+        the device thread busy in Python, and the GUI waiting for the GIL).
+        """
+        now = time.monotonic()
+        if now - self._last_spd_s < self.FRAME_PERIOD_S:
+            return
+        self._last_spd_s = now
+        self._controller.spd_measured.emit(read_spd(), levels)
 
 
 class DeviceController(QObject):

@@ -2,7 +2,8 @@
 
 Drives the workstation (offscreen) on the simulated bench through connect, dark,
 white, chart and calibrate (``--all``: to the end) while a 10 ms QTimer ticks, and
-prints per step its wall time and the longest gap between ticks::
+prints per step its wall time and the longest gap between ticks (and, first, the
+same for the background imports the window starts with, which it waits for)::
 
     python tools/gui_timing.py                      # virtual time, 1536x1024
     python tools/gui_timing.py --realtime --exposure 0.5
@@ -56,7 +57,7 @@ def main(argv: list[str] | None = None) -> int:
         wizard.dark_page.exposure_combo.setCurrentIndex(1)
         wizard.dark_page.exposure_spin.setValue(args.exposure)
 
-    last = [0.0]
+    last = [time.perf_counter()]
     longest = [0.0]
 
     def on_tick() -> None:
@@ -67,12 +68,23 @@ def main(argv: list[str] | None = None) -> int:
     timer = QTimer()
     timer.setInterval(10)
     timer.timeout.connect(on_tick)
+    # the window imports the pipeline in the background while the operator looks at
+    # it: measured on its own, and over before the first step, as in real use
+    rows = []
+    timer.start()
+    t0 = time.perf_counter()
+    while not window.preloaded:
+        app.processEvents()
+        time.sleep(0.002)
+    timer.stop()
+    rows.append(
+        ("(start-up imports)", "done", time.perf_counter() - t0, 1000 * longest[0])
+    )
     pages = (
         wizard.pages
         if args.all
         else wizard.pages[: wizard.pages.index(wizard.calibrate_page) + 1]
     )
-    rows = []
     for page in pages:
         wizard.go_to(wizard.pages.index(page))
         for _ in range(5):
@@ -93,6 +105,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{'step':<24}{'state':<8}{'wall s':>9}{'longest stall ms':>18}")
     for title, state, elapsed, stall in rows:
         print(f"{title:<24}{state:<8}{elapsed:9.2f}{stall:18.1f}")
+    worst = max(stall for title, _, _, stall in rows[1:])
+    print(f"longest stall of any step: {worst:.1f} ms (goal <= 50 ms)")
     times = {t: e for t, _, e, _ in rows}
     if "Calibrate" in times:
         chart = times["Chart under all LEDs"]

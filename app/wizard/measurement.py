@@ -23,6 +23,7 @@ import logging
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -464,45 +465,54 @@ def _frames_of(kind: str | None, n_channels: int, n_brackets: int, n_darks: int)
 
 class _PhaseProgress:
     """The progress of one capture phase: metering (while exposures are unknown) and
-    the frames of the phase, counted from the session on disk.
+    the frames of the phase.
 
-    ``capture()`` reports one step per metered channel and per frame; the fraction is
-    the steps done over the steps done plus those left, and never goes back (an
-    upper bound of the frames left is replaced by the real count once metered).
+    ``capture()`` reports one step per metered channel, then one per frame; the
+    fraction is the steps done over the steps done plus those left, and never goes
+    back (before metering, the frames left are an upper bound, replaced by the real
+    count from the session when the first frame is in).
     """
 
     def __init__(
         self,
         kind: str | None,
+        session: Any,
         n_channels: int,
         options: CaptureOptions,
         progress: ProgressFn | None,
     ) -> None:
-        self._kind, self._n_channels = kind, n_channels
-        self._options = options
+        self._kind = kind
         self._progress = progress
         self.done = 0
         self._last = 0.0
-
-    def left(self, session: Any) -> int:
-        """Steps left: channels to meter and frames of the phase to take."""
         if session is None:
-            return self._n_channels + _frames_of(
-                self._kind, self._n_channels, 1, self._options.n_darks
-            )
-        settings = session.settings
-        if not settings.resolved:
+            self._n_meter = n_channels
+            self.frames_left = _frames_of(kind, n_channels, 1, options.n_darks)
+        elif not session.settings.resolved:
+            settings = session.settings
             n = len(settings.channels)
-            metered = sum(c in settings.exposures_s for c in settings.channels)
-            return (n - metered) + _frames_of(
-                self._kind, n, len(settings.bracket_factors), settings.n_darks
+            self._n_meter = n - sum(
+                c in settings.exposures_s for c in settings.channels
             )
-        return sum(self._kind in (None, s.kind) for s in session.missing(verify=False))
+            self.frames_left = _frames_of(
+                kind, n, len(settings.bracket_factors), settings.n_darks
+            )
+        else:
+            self._n_meter = 0
+            self.frame_taken(session)
 
-    def step(self, session: Any) -> None:
+    def frame_taken(self, session: Any) -> None:
+        """Count the frames of the phase still missing in ``session`` (resolved)."""
+        if session is not None and session.settings.resolved:
+            self._n_meter = 0
+            missing = session.missing(verify=False)
+            self.frames_left = sum(self._kind in (None, s.kind) for s in missing)
+
+    def step(self) -> None:
         """One step done; report the fraction."""
         self.done += 1
-        fraction = self.done / max(1, self.done + self.left(session))
+        left = max(0, self._n_meter - self.done) + self.frames_left
+        fraction = self.done / max(1, self.done + left)
         self._last = max(self._last, min(fraction, 1.0))
         if self._progress is not None:
             self._progress(self._last)
@@ -545,8 +555,8 @@ def capture_job(
         return Session.open(root) if (root / MANIFEST_NAME).exists() else None
 
     session = session_now()
-    meter = _PhaseProgress(kind, len(light.channels()), options, progress)
-    if session is not None and session.settings.resolved and meter.left(session) == 0:
+    meter = _PhaseProgress(kind, session, len(light.channels()), options, progress)
+    if session is not None and session.settings.resolved and meter.frames_left == 0:
         retake = [f.id for f in session.frames if kind in (None, f.kind)]
         session.mark_bad(retake, "retaken by the operator")
         log.info("retaking %d %s frame(s)", len(retake), kind or "")
@@ -557,14 +567,14 @@ def capture_job(
         captured.append(record.id)
         context.show_frame(path)
         now = session_now()
-        if record.spd_file is not None and now is not None:
-            context.show_spd(now.read_spd(record), _levels_of(light, record.channel))
-        if (
-            kind is not None
-            and now is not None
-            and now.settings.resolved
-            and meter.left(now) == 0
-        ):
+        if now is None:
+            return
+        if record.spd_file is not None:
+            context.show_spd(
+                partial(now.read_spd, record), _levels_of(light, record.channel)
+            )
+        meter.frame_taken(now)
+        if kind is not None and now.settings.resolved and meter.frames_left == 0:
             phase_done[0] = True
 
     def stop() -> bool:
@@ -580,7 +590,7 @@ def capture_job(
             iso=options.iso,
             n_darks=options.n_darks,
             resume=True,
-            progress=lambda _f: meter.step(session_now()),
+            progress=lambda _f: meter.step(),
             should_stop=stop,
             on_frame=on_frame,
             on_warning=context.warn,
