@@ -42,6 +42,7 @@ __all__ = [
     "chart_layout",
     "check_config",
     "demo_plan",
+    "example_config",
     "load_config",
     "plan_from_config",
     "sample_layout",
@@ -153,17 +154,33 @@ def demo_plan(
 def load_config(path: str | PathLike[str]) -> dict[str, Any]:
     """Read a run configuration (``.json`` or ``.toml``).
 
-    Keys (all optional)::
+    Every key is optional; the example with all of them and their defaults is
+    :func:`example_config` (``tunespec run --print-example``). A short one::
 
-        out = "run"                          # output folder, relative to the file
-        [bench]    light = "sim", camera = "sim", resolution = "1536x1024", seed = 0
-        [capture]  exposure = "auto" | seconds, brackets = [1.0], iso = 100
-        [chart]    layout = FILE (default the SG), reflectances = FILE
-        [sample]   layout = FILE (default the CMY target), reflectances = FILE,
-                   reference = FILE (for Table 2)
-        [calibrate] method = "smooth", grid = "380:730:5"
-        [estimate] prior = FILE (default the SG), grid = "400:700:5"
-        [export]   report = true
+        out = "run"                  # the measurement folder, relative to the file
+
+        [bench]
+        light = "sim"                # or "cal1:///dev/ttyUSB0"
+        camera = "sim"               # or "gphoto2"
+        resolution = "1536x1024"     # simulated camera only
+        seed = 0
+
+        [capture]
+        exposure = "auto"            # or seconds
+        brackets = [1.0]
+        iso = 100
+
+        [sample]
+        reference = "reference.csv"  # reflectances for Table 2
+
+        [calibrate]
+        method = "bayes"             # or "smooth", "pca"
+        grid = "380:730:5"
+
+    Sections: ``bench``, ``capture``, ``chart`` (``layout``, ``reflectances``),
+    ``sample`` (``layout``, ``reflectances``, ``reference``), ``calibrate``
+    (``method``, ``grid``), ``estimate`` (``prior``, ``grid``), ``export``
+    (``report``).
 
     Raises
     ------
@@ -206,6 +223,12 @@ def load_config(path: str | PathLike[str]) -> dict[str, Any]:
                 )
     cfg["_path"] = str(path)
     return cfg
+
+
+def example_config() -> str:
+    """The shipped example configuration (``resources/examples/run.toml``): every key
+    with its default, measuring on the simulated bench as it is."""
+    return read_text(resource_path("examples", "run.toml"))
 
 
 def plan_from_config(config: Mapping[str, Any] | str | PathLike[str]) -> Plan:

@@ -15,12 +15,12 @@ import numpy as np
 import pytest
 from PySide6.QtCore import QSettings
 
+from tests.app.test_wizard import SIM, STEP_TIMEOUT_MS, run_step
 from tunespec.app.main_window import MainWindow
 from tunespec.app.settings import AppSettings
 from tunespec.app.wizard.step_page import StepState
 from tunespec.core.datasets import resource_path
 from tunespec.core.spectra import read_spectra_csv, write_spectra_csv
-from tests.app.test_wizard import SIM, STEP_TIMEOUT_MS, run_step
 
 WEAK_LED = "LED700"
 #: The weak LED's power relative to the shipped model.
@@ -84,7 +84,9 @@ def test_weak_led_warning_reaches_the_step_the_list_and_the_log(
     # no other step carries it
     assert not wizard.white_page.warnings
     # kept beside the session: a reopened measurement shows it again
-    stored = json.loads((tmp_path / "m" / "chart" / "capture_warnings.json").read_text())
+    stored = json.loads(
+        (tmp_path / "m" / "chart" / "capture_warnings.json").read_text()
+    )
     assert stored["warnings"] == [text]
     assert wizard.open_measurement(tmp_path / "m")
     assert wizard.dark_page.state == StepState.DONE
