@@ -16,7 +16,6 @@ from PySide6.QtCore import QSettings, Qt, Slot
 from PySide6.QtGui import QAction, QCloseEvent, QKeySequence
 from PySide6.QtWidgets import (
     QDockWidget,
-    QFileDialog,
     QGridLayout,
     QMainWindow,
     QMessageBox,
@@ -181,6 +180,7 @@ class MainWindow(QMainWindow):
         )
         file_menu.addAction(self.new_action)
         file_menu.addAction(self.open_action)
+        file_menu.addMenu(self.wizard_panel.recent_menu)
         file_menu.addSeparator()
         file_menu.addAction(self.quit_action)
         edit_menu = self.menuBar().addMenu("&Edit")
@@ -232,21 +232,12 @@ class MainWindow(QMainWindow):
     # -- slots: menus -----------------------------------------------------------------
     @Slot()
     def _on_new_action_triggered(self) -> None:
-        folder = QFileDialog.getExistingDirectory(
-            self,
-            "Folder for the new measurement",
-            self.settings.get("session/root_dir"),
-        )
-        if folder:
-            self.wizard_panel.new_measurement(folder)
+        if self.wizard_panel.ask_new_measurement():
+            self.tabs.setCurrentIndex(TAB_MEASUREMENT)
 
     @Slot()
     def _on_open_action_triggered(self) -> None:
-        folder = QFileDialog.getExistingDirectory(
-            self, "Open a measurement to resume", self.settings.get("session/last_dir")
-        )
-        if folder:
-            self.wizard_panel.open_measurement(folder)
+        if self.wizard_panel.ask_open_measurement():
             self.tabs.setCurrentIndex(TAB_MEASUREMENT)
 
     @Slot()

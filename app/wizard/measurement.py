@@ -212,17 +212,41 @@ class Measurement(QObject):
         #: Opens the devices when the connect step runs (the main window sets it to
         #: its device panel's connect, so the specs chosen there are used).
         self.connector: Callable[[], None] = self._default_connect
+        #: Asks the operator where measurements go (the wizard sets it to a folder
+        #: dialog); ``None``: not chosen.
+        self.folder_chooser: Callable[[], Path | None] = lambda: None
         self.sim_options: dict[str, Any] = {}
 
     # -- folder ---------------------------------------------------------------------
     def require_folder(self) -> Path:
-        """The measurement folder; a fresh one is made in the settings' root if none."""
+        """The measurement folder; a fresh one if none is open.
+
+        It goes into the folder where measurements go (``session/root_dir``); the
+        first time, :attr:`folder_chooser` asks the operator for it, and it is
+        remembered.
+
+        Raises
+        ------
+        InputError
+            The operator did not choose a folder.
+        """
         if self.folder is None:
-            root = self.settings.get("session/root_dir") or str(
-                Path.home() / "TuneSpec"
-            )
-            stamp = time.strftime("%Y%m%d-%H%M%S")
-            self.new(Path(root) / f"measurement-{stamp}")
+            root = self.settings.get("session/root_dir")
+            if not root or not Path(root).is_dir():
+                chosen = self.folder_chooser()
+                if chosen is None:
+                    raise InputError(
+                        "no measurement folder: choose where measurements go "
+                        "(New… or Open / resume…)"
+                    )
+                root = str(chosen)
+                self.settings.set("session/root_dir", root)
+            folder = Path(root) / f"measurement-{time.strftime('%Y%m%d-%H%M%S')}"
+            n = 1
+            while folder.exists():  # two within a second
+                n += 1
+                folder = folder.with_name(f"{folder.name.split('_')[0]}_{n}")
+            self.new(folder)
         assert self.folder is not None
         return self.folder
 
@@ -241,7 +265,7 @@ class Measurement(QObject):
         self.folder = folder
         self.forget_all()
         self.save()
-        self.settings.set("session/last_dir", str(folder))
+        self.settings.remember_measurement(folder)
         log.info("new measurement in %s", folder)
         self.folder_changed.emit(folder)
 
@@ -263,7 +287,7 @@ class Measurement(QObject):
         ref = doc.get("reference_path")
         self.reference_path = Path(ref) if ref else None
         self.forget_all()
-        self.settings.set("session/last_dir", str(folder))
+        self.settings.remember_measurement(folder)
         self.folder_changed.emit(folder)
         self.layout_needed.emit(self.current_layout)
 
