@@ -538,7 +538,9 @@ def restore_calibration_steps(
     )
     work = grid or DEFAULT_GRID
     refl = layout_reflectances(result.layout, grid=work).resample(work)
-    report = calibration_report(
-        est, chart.responses, chart.illuminants.resample(work, average=True), refl
-    )
-    return chart, Calibration(est, report)
+    from tunespec.app.pipeline.steps import table1_by_patch
+
+    illum = chart.illuminants.resample(work, average=True)
+    report = calibration_report(est, chart.responses, illum, refl)
+    per_patch = table1_by_patch(est, chart.responses, illum, refl)
+    return chart, Calibration(est, report, per_patch)

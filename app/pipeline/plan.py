@@ -110,6 +110,9 @@ class Plan:
         Calibration grid and estimation/Table-2 grid.
     report
         Also write the HTML/PDF report.
+    input_files
+        The files the plan was read from (configuration, layouts, spectra): the
+        report lists them with their SHA-256.
     """
 
     out_dir: Path
@@ -130,6 +133,7 @@ class Plan:
     grid: Grid = DEFAULT_GRID
     estimation_grid: Grid = ESTIMATION_GRID
     report: bool = True
+    input_files: tuple[Path, ...] = ()
 
 
 def demo_plan(
@@ -304,6 +308,19 @@ def plan_from_config(config: Mapping[str, Any] | str | PathLike[str]) -> Plan:
         grid=grid,
         estimation_grid=est_grid,
         report=cfg.get("export", {}).get("report", True),
+        input_files=tuple(
+            p
+            for p in (
+                Path(src) if src else None,
+                chart_path,
+                sample_path,
+                rel(chart_cfg.get("reflectances")),
+                rel(sample_cfg.get("reflectances")),
+                rel(sample_cfg.get("reference")),
+                rel(est_cfg.get("prior")),
+            )
+            if p is not None
+        ),
     )
 
 

@@ -308,6 +308,20 @@ def _write_results(
     return cal_warnings, est_warnings
 
 
+def _provenance(folder: MeasurementFolder, plan: Plan, bench: Bench) -> dict[str, str]:
+    """The plan's choices the report's provenance lists."""
+    out = {
+        "measurement folder": str(folder.root.resolve()),
+        "light source": plan.light,
+        "camera": plan.camera or "default for the light source",
+    }
+    if bench.simulated:
+        width, height = bench.sim_camera.resolution
+        out["seed"] = str(plan.seed)
+        out["resolution"] = f"{width}x{height}"
+    return out
+
+
 @dataclass
 class _Hooks:
     """The callbacks of one run (not part of the plan: they belong to the caller)."""
@@ -428,6 +442,10 @@ def _run_on(
             settings=settings,
             warnings=warnings,
             report=plan.report,
+            provenance=_provenance(folder, plan, bench),
+            sessions={"chart": folder.chart_dir, "sample": folder.sample_dir},
+            input_files=plan.input_files,
+            threshold_rgb_mean=DEFAULT_THRESHOLD_RGB_MEAN,
         ),
     )
     if sample_bench is not bench:

@@ -24,6 +24,8 @@ from os import PathLike
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
 from tunespec.app.pipeline.folder import add_capture_warnings, clear_capture_warnings
 from tunespec.app.pipeline.plan import ESTIMATION_GRID, chart_layout, sample_layout
 from tunespec.core.colorimetry import ReflectanceStats, reflectance_stats
@@ -61,6 +63,8 @@ __all__ = [
     "evaluate",
     "export",
     "process",
+    "session_provenance",
+    "table1_by_patch",
 ]
 
 
@@ -79,6 +83,9 @@ class Calibration:
 
     estimate: SensitivityEstimate
     report: CalibrationReport
+    #: Table 1 per patch: the mean over the LEDs of the RGB error (RMS over R, G, B,
+    #: full scale); their mean is Table 1's RGB mean.
+    patch_rgb_error: Mapping[str, float] | None = None
 
     @property
     def sensitivity(self) -> Spectra:
@@ -283,7 +290,81 @@ def calibrate(
         **options,
     )
     rep = calibration_report(est, chart.responses, illum, refl)
-    return Calibration(est, rep)
+    return Calibration(est, rep, table1_by_patch(est, chart.responses, illum, refl))
+
+
+def table1_by_patch(
+    estimate: SensitivityEstimate,
+    responses: Any,
+    illuminants: Spectra,
+    reflectances: Spectra,
+) -> dict[str, float]:
+    """Table 1's RGB error per fitted patch (the report's map and worst patches).
+
+    For each patch the mean over its LEDs of the per-stimulus error
+    ``sqrt(mean_c (c - c_hat)^2)`` (the paper's Table 1, "RGB" row), with Eq. 1
+    predicting ``c_hat`` from the estimated sensitivities
+    (:func:`tunespec.core.sensitivity.predict_responses`), the illuminants corrected
+    as the calibration found. Patches the fit left out are not listed.
+    """
+    from tunespec.core.sensitivity import predict_responses
+
+    skip = set(estimate.excluded_patches)
+    patches = [p for p in responses.patches if p not in skip]
+    measured = responses.subset(patches)
+    predicted = predict_responses(
+        estimate.sensitivity,
+        estimate.correct_illuminants(illuminants),
+        reflectances,
+        patches=patches,
+        illuminant_names=measured.illuminants,
+    )
+    err = np.sqrt(np.mean((measured.rgb - predicted.rgb) ** 2, axis=2))
+    return {p: float(e) for p, e in zip(patches, np.mean(err, axis=1), strict=True)}
+
+
+def session_provenance(
+    sessions: Mapping[str, str | PathLike[str]],
+) -> tuple[dict[str, str], dict[str, float], list[tuple[str, str]]]:
+    """What the report's provenance says about the capture sessions.
+
+    Parameters
+    ----------
+    sessions
+        Role (``"chart"``, ``"sample"``) -> session folder.
+
+    Returns
+    -------
+    (items, exposures_s, input_files)
+        Session folders, their creation time, frame counts and fingerprints; the
+        chart's exposure per LED (s, first bracket); every manifest with its
+        SHA-256 (a manifest lists the SHA-256 of each of its frames).
+    """
+    from tunespec.core.io.session import MANIFEST_NAME, sha256_file
+
+    items: dict[str, str] = {}
+    exposures: dict[str, float] = {}
+    files: list[tuple[str, str]] = []
+    for role, folder in sessions.items():
+        root = Path(folder)
+        if not (root / MANIFEST_NAME).is_file():
+            continue
+        session = Session.open(root)
+        settings = session.settings
+        ok = session.ok_frames()
+        items[f"{role} session"] = str(root.resolve())
+        items[f"{role} captured (UTC)"] = str(session.manifest.get("created_utc", ""))
+        items[f"{role} frames"] = (
+            f"{len(ok)} ({sum(f.kind == 'dark' for f in ok)} dark), ISO "
+            f"{settings.iso}, exposure {settings.exposure_mode}"
+        )
+        items[f"{role} frames fingerprint (SHA-256)"] = session.fingerprint()
+        files.append(
+            (str(root.resolve() / MANIFEST_NAME), sha256_file(root / MANIFEST_NAME))
+        )
+        if not exposures:
+            exposures = {c: float(t[0]) for c, t in settings.exposures_s.items()}
+    return items, exposures, files
 
 
 def estimate(
@@ -347,12 +428,21 @@ def export(
     settings: Mapping[str, str] | None = None,
     warnings: Sequence[str] = (),
     report: bool = True,
+    provenance: Mapping[str, str] | None = None,
+    sessions: Mapping[str, str | PathLike[str]] | None = None,
+    input_files: Sequence[str | PathLike[str]] = (),
+    threshold_rgb_mean: float | None = None,
 ) -> dict[str, Path]:
     """Write every export (``core.io.export``) and, if asked, the HTML/PDF report.
 
     Files: the chart's ``chart_responses.csv`` / ``chart_illuminants.csv``, the
     ``core.io.export`` set (sensitivities, reflectances, the sample's responses and
     illuminants, Tables 1-2, ``.ti3``) and ``report.html`` / ``report.pdf``.
+
+    The report's provenance: ``provenance`` (seed, resolution, configuration...),
+    the ``sessions`` (:func:`session_provenance`) and the SHA-256 of every file of
+    ``input_files`` (layouts, references, the configuration). Its verdict compares
+    Table 1's RGB mean with ``threshold_rgb_mean``.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -392,7 +482,10 @@ def export(
         )
     if report:
         from tunespec.app.report.report import ReportData, write_report
+        from tunespec.core.io.session import sha256_file
 
+        items, exposures, inputs = session_provenance(sessions or {})
+        inputs += [(str(Path(f).resolve()), sha256_file(f)) for f in input_files]
         data = ReportData(
             title="TuneSpec measurement report",
             devices={k: dict(v) for k, v in (devices or {}).items()},
@@ -416,6 +509,12 @@ def export(
             led_correction=calibration.estimate.led_correction,
             flags=tuple(warnings),
             exports={k: p.name for k, p in files.items()},
+            threshold_rgb_mean=threshold_rgb_mean,
+            table1_patches=calibration.patch_rgb_error,
+            chart_layout=chart.layout,
+            provenance={**dict(provenance or {}), **items},
+            exposures_s=exposures,
+            input_files=tuple(inputs),
         )
         html, pdf = write_report(out, data)
         files["report_html"], files["report_pdf"] = html, pdf

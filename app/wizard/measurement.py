@@ -771,10 +771,15 @@ def export_job(
     estimated: EstimateResult,
     devices: dict[str, dict[str, str]],
     *,
+    provenance: dict[str, str] | None = None,
+    input_files: list[Path] | tuple[Path, ...] = (),
     progress: ProgressFn | None = None,
     should_stop: StopFn | None = None,
 ) -> ExportResult:
     """Write every export and the report (``pipeline.export``). Pool.
+
+    ``provenance`` (the simulated bench's seed and resolution...) and the files
+    read (``input_files``, with ``measurement.json``) go into the report.
 
     Results restored from disk lack the processed sessions; they are recomputed
     from the sessions with the corners used then.
@@ -838,6 +843,13 @@ def export_job(
             *(f"chart: {w}" for w in calibration.warnings),
             *(f"sample: {w}" for w in estimated.warnings),
         ),
+        provenance={
+            "measurement folder": str(Path(folder).resolve()),
+            **(provenance or {}),
+        },
+        sessions={"chart": folder / CHART_DIR, "sample": folder / SAMPLE_DIR},
+        input_files=[folder / MEASUREMENT_FILE, *input_files],
+        threshold_rgb_mean=calibration.threshold,
     )
     (Path(out_dir) / "exports.json").write_text(
         dumps_json({k: Path(p).name for k, p in files.items()}, indent=1)
