@@ -513,21 +513,26 @@ def _table1_patch_table(report: ReportData) -> _Table | None:
     errors = report.table1_patches
     if not errors:
         return None
-    items = list(errors.items())
-    per_row = 3
-    n_rows = math.ceil(len(items) / per_row)
+    return _Table(
+        "Table 1 per patch (RGB error, mean over the LEDs, full scale)",
+        ("Patch", "Error") * 3,
+        _side_by_side([(k, f"{v:.4f}") for k, v in errors.items()]),
+    )
+
+
+def _side_by_side(
+    pairs: Sequence[tuple[str, str]], per_row: int = 3
+) -> tuple[tuple[str, ...], ...]:
+    """(name, value) pairs in ``per_row`` column pairs, read down, then across."""
+    n_rows = math.ceil(len(pairs) / per_row)
     rows = []
     for r in range(n_rows):
         cells: list[str] = []
         for c in range(per_row):
-            k = c * n_rows + r  # column-major: read down, then across
-            cells += [items[k][0], f"{items[k][1]:.4f}"] if k < len(items) else ["", ""]
+            k = c * n_rows + r
+            cells += list(pairs[k]) if k < len(pairs) else ["", ""]
         rows.append(tuple(cells))
-    return _Table(
-        "Table 1 per patch (RGB error, mean over the LEDs, full scale)",
-        ("Patch", "Error") * per_row,
-        tuple(rows),
-    )
+    return tuple(rows)
 
 
 # --------------------------------------------------------------------------- plots
@@ -1148,22 +1153,11 @@ def _provenance_tables(report: ReportData) -> list[_Table]:
     summary += [(str(k), str(v)) for k, v in report.provenance.items()]
     tables.append(_Table("Measurement", ("Item", "Value"), tuple(summary)))
     if report.exposures_s:
-        items = list(report.exposures_s.items())
-        n_rows = math.ceil(len(items) / 3)
-        rows = []
-        for r in range(n_rows):
-            cells: list[str] = []
-            for c in range(3):
-                k = c * n_rows + r
-                cells += (
-                    [items[k][0], f"{items[k][1]:.4g}"] if k < len(items) else ["", ""]
-                )
-            rows.append(tuple(cells))
         tables.append(
             _Table(
                 "Exposure per LED (s)",
                 ("LED", "Exposure") * 3,
-                tuple(rows),
+                _side_by_side([(k, f"{v:.2f}") for k, v in report.exposures_s.items()]),
                 "Metered on the white board (or as set); the sample reuses the chart's.",
             )
         )
