@@ -409,32 +409,28 @@ class WizardPanel(QWidget):
             button.click()
 
     # -- asking for folders (the File menu uses the same) ---------------------------
+    def _ask_folder(self, caption: str) -> str:
+        """A folder dialog starting where the measurements are ("" if cancelled)."""
+        return QFileDialog.getExistingDirectory(
+            self, caption, self.measurement.settings.measurements_dir()
+        )
+
     def ask_new_measurement(self) -> bool:
         """Ask for the folder of a new measurement and start it there."""
-        folder = QFileDialog.getExistingDirectory(
-            self,
-            "Folder for the new measurement (an empty one)",
-            self.measurement.settings.measurements_dir(),
-        )
+        folder = self._ask_folder("Folder for the new measurement (an empty one)")
         return bool(folder) and self.new_measurement(folder)
 
     def ask_open_measurement(self) -> bool:
         """Ask for a measurement folder and open it (resume)."""
-        folder = QFileDialog.getExistingDirectory(
-            self,
-            "Open a measurement to resume",
-            self.measurement.settings.measurements_dir(),
-        )
+        folder = self._ask_folder("Open a measurement to resume")
         return bool(folder) and self.open_measurement(folder)
 
     def ask_measurements_dir(self) -> Path | None:
         """Where measurements go: asked once, when a step needs a folder and none was
         chosen (the measurement remembers the answer)."""
-        folder = QFileDialog.getExistingDirectory(
-            self,
+        folder = self._ask_folder(
             "Where should measurements be saved? (asked once; each measurement "
-            "gets its own folder there)",
-            self.measurement.settings.measurements_dir(),
+            "gets its own folder there)"
         )
         return Path(folder) if folder else None
 

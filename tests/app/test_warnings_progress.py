@@ -13,11 +13,9 @@ import json
 
 import numpy as np
 import pytest
-from PySide6.QtCore import QSettings
 
-from tests.app.test_wizard import SIM, STEP_TIMEOUT_MS, run_step
-from tunespec.app.main_window import MainWindow
-from tunespec.app.settings import AppSettings
+from tests.app.test_wizard import STEP_TIMEOUT_MS, run_step
+from tests.app.test_wizard import window as window  # the fixture
 from tunespec.app.wizard.step_page import StepState
 from tunespec.core.datasets import resource_path
 from tunespec.core.spectra import read_spectra_csv, write_spectra_csv
@@ -38,16 +36,14 @@ def weak_leds(tmp_path):
     return path
 
 
-@pytest.fixture
-def window(qtbot, tmp_path):
-    settings = AppSettings(
-        QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
-    )
-    w = MainWindow(settings, sim_options=SIM)
-    qtbot.addWidget(w)
-    w.show()
-    yield w
-    w.close()
+def _dark_page_ready(qtbot, window, folder):
+    """A new measurement, the devices connected, the dark frame step shown."""
+    wizard = window.wizard_panel
+    assert wizard.new_measurement(folder)
+    run_step(qtbot, wizard, wizard.connect_page)
+    page = wizard.dark_page
+    wizard.go_to(wizard.pages.index(page))
+    return wizard, page
 
 
 def _connect_weak(qtbot, window, weak_leds, folder):
@@ -93,20 +89,10 @@ def test_weak_led_warning_reaches_the_step_the_list_and_the_log(
     assert wizard.dark_page.warnings == [text]
 
 
-def _stages_and_values(page):
-    seen: list[tuple[str, int]] = []
-    page.progress_bar.valueChanged.connect(lambda v: seen.append((page.stage, v)))
-    return seen
-
-
 def test_progress_is_monotonic_through_metering_and_names_the_stage(
     window, qtbot, tmp_path
 ):
-    wizard = window.wizard_panel
-    assert wizard.new_measurement(tmp_path / "m")
-    run_step(qtbot, wizard, wizard.connect_page)
-    page = wizard.dark_page
-    wizard.go_to(wizard.pages.index(page))
+    _, page = _dark_page_ready(qtbot, window, tmp_path / "m")
     stages: list[str] = []
     page.progress_bar.valueChanged.connect(lambda _v: stages.append(page.stage))
     values: list[int] = []
@@ -129,11 +115,7 @@ def test_progress_is_monotonic_through_metering_and_names_the_stage(
 
 
 def test_progress_resets_on_abort_during_metering(window, qtbot, tmp_path):
-    wizard = window.wizard_panel
-    assert wizard.new_measurement(tmp_path / "m")
-    run_step(qtbot, wizard, wizard.connect_page)
-    page = wizard.dark_page
-    wizard.go_to(wizard.pages.index(page))
+    wizard, page = _dark_page_ready(qtbot, window, tmp_path / "m")
     reached: list[int] = []
 
     def on_value(value: int) -> None:
