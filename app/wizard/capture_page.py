@@ -155,7 +155,11 @@ class CapturePage(StepPage):
         )
 
     def accept_result(self, result: PhaseResult) -> str:
-        """Summary line for the operator."""
+        """Summary line for the operator; the dark frame step, where the exposures
+        are metered, shows every warning of the chart's capture (a retake does not
+        meter again, but a weak LED stays weak)."""
+        if self.kind == "dark":
+            self.add_warnings(self.measurement.capture_warnings("chart"))
         return result.summary(_NOUN[self.kind])
 
     def restore(self) -> bool:

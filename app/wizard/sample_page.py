@@ -65,7 +65,8 @@ class SamplePage(StepPage):
         )
 
     def accept_result(self, result: PhaseResult) -> str:
-        """Summary line for the operator."""
+        """Summary line for the operator (and every warning of the sample's capture)."""
+        self.add_warnings(self.measurement.capture_warnings("sample"))
         return result.summary("frames", "sample session")
 
     def restore(self) -> bool:
