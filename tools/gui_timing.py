@@ -6,7 +6,11 @@ prints per step its wall time and the longest gap between ticks (and, first, the
 same for the background imports the window starts with, which it waits for)::
 
     python tools/gui_timing.py                      # virtual time, 1536x1024
+    python tools/gui_timing.py --all --repeat 3      # every step, 3 runs
     python tools/gui_timing.py --realtime --exposure 0.5
+
+With ``--repeat N`` every step's stall is given as the median and the largest of the
+N runs (on a machine shared with other work a single run is noisy).
 
 ``--realtime`` waits the exposures as the real camera would (``--exposure`` fixes
 them; the default metering picks up to 30 s per LED).
@@ -16,36 +20,25 @@ from __future__ import annotations
 
 import argparse
 import os
+import statistics
 import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--resolution", default="1536x1024")
-    parser.add_argument("--realtime", action="store_true")
-    parser.add_argument(
-        "--exposure", type=float, help="fixed exposure in s (default: auto)"
-    )
-    parser.add_argument(
-        "--all", action="store_true", help="run every step, not only to Table 1"
-    )
-    args = parser.parse_args(argv)
-
+def _timed_run(app: Any, args: argparse.Namespace, tmp: Path) -> tuple[list, Any]:
+    """One run through the wizard: (rows of (step, state, wall s, stall ms), window)."""
     from PySide6.QtCore import QSettings, QTimer
-    from PySide6.QtWidgets import QApplication
 
     from tunespec.app.main_window import MainWindow
     from tunespec.app.settings import AppSettings
     from tunespec.app.wizard.measurement import CaptureOptions
     from tunespec.devices.registry import parse_resolution
 
-    app = QApplication.instance() or QApplication(sys.argv[:1])
-    tmp = Path(tempfile.mkdtemp(prefix="tunespec-timing-"))
     settings = AppSettings(QSettings(str(tmp / "s.ini"), QSettings.Format.IniFormat))
     sim = {"realtime": args.realtime, "resolution": parse_resolution(args.resolution)}
     window = MainWindow(settings, sim_options=sim)
@@ -68,18 +61,24 @@ def main(argv: list[str] | None = None) -> int:
     timer = QTimer()
     timer.setInterval(10)
     timer.timeout.connect(on_tick)
+
+    def measure(title: str, start: Any, running: Any) -> tuple[str, float, float]:
+        last[0], longest[0] = time.perf_counter(), 0.0
+        timer.start()
+        t0 = time.perf_counter()
+        start()
+        while running():
+            app.processEvents()
+            time.sleep(0.002)
+        timer.stop()
+        return title, time.perf_counter() - t0, 1000 * longest[0]
+
     # the window imports the pipeline in the background while the operator looks at
     # it: measured on its own, and over before the first step, as in real use
-    rows = []
-    timer.start()
-    t0 = time.perf_counter()
-    while not window.preloaded:
-        app.processEvents()
-        time.sleep(0.002)
-    timer.stop()
-    rows.append(
-        ("(start-up imports)", "done", time.perf_counter() - t0, 1000 * longest[0])
+    title, wall, stall = measure(
+        "(start-up imports)", lambda: None, lambda: not window.preloaded
     )
+    rows = [(title, "done", wall, stall)]
     pages = (
         wizard.pages
         if args.all
@@ -89,28 +88,62 @@ def main(argv: list[str] | None = None) -> int:
         wizard.go_to(wizard.pages.index(page))
         for _ in range(5):
             app.processEvents()
-        last[0], longest[0] = time.perf_counter(), 0.0
-        timer.start()
-        t0 = time.perf_counter()
-        page.start()
-        while page.running or page.state == "pending":
-            app.processEvents()
-            time.sleep(0.002)
-        elapsed = time.perf_counter() - t0
-        timer.stop()
-        rows.append((page.title, page.state, elapsed, 1000 * longest[0]))
+        title, wall, stall = measure(
+            page.title, page.start, lambda p=page: p.running or p.state == "pending"
+        )
+        rows.append((title, page.state, wall, stall))
         if page.state != "done":
             print(page.result_label.text())
             break
-    print(f"{'step':<24}{'state':<8}{'wall s':>9}{'longest stall ms':>18}")
-    for title, state, elapsed, stall in rows:
-        print(f"{title:<24}{state:<8}{elapsed:9.2f}{stall:18.1f}")
-    worst = max(stall for title, _, _, stall in rows[1:])
-    print(f"longest stall of any step: {worst:.1f} ms (goal <= 50 ms)")
-    times = {t: e for t, _, e, _ in rows}
+    return rows, window
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--resolution", default="1536x1024")
+    parser.add_argument("--realtime", action="store_true")
+    parser.add_argument(
+        "--exposure", type=float, help="fixed exposure in s (default: auto)"
+    )
+    parser.add_argument(
+        "--all", action="store_true", help="run every step, not only to Table 1"
+    )
+    parser.add_argument("--repeat", type=int, default=1, help="runs (default 1)")
+    args = parser.parse_args(argv)
+
+    from PySide6.QtWidgets import QApplication
+
+    app = QApplication.instance() or QApplication(sys.argv[:1])
+    runs = []
+    window = None
+    for k in range(max(1, args.repeat)):
+        if window is not None:
+            window.close()
+        tmp = Path(tempfile.mkdtemp(prefix="tunespec-timing-"))
+        rows, window = _timed_run(app, args, tmp)
+        runs.append(rows)
+        print(f"run {k + 1}: " + ", ".join(f"{r[0]} {r[3]:.0f} ms" for r in rows))
+    first = runs[0]
+    print(
+        f"\n{'step':<24}{'state':<8}{'wall s':>9}{'longest stall ms':>18}"
+        f"{'max of runs':>13}"
+    )
+    worst = 0.0
+    for i, (title, state, _, _) in enumerate(first):
+        walls = [r[i][2] for r in runs if i < len(r)]
+        stalls = [r[i][3] for r in runs if i < len(r)]
+        if i > 0:
+            worst = max(worst, statistics.median(stalls))
+        print(
+            f"{title:<24}{state:<8}{statistics.median(walls):9.2f}"
+            f"{statistics.median(stalls):18.1f}{max(stalls):13.1f}"
+        )
+    print(f"longest stall of any step (median of runs): {worst:.1f} ms (goal <= 50 ms)")
+    times = {t: e for t, _, e, _ in first}
     if "Calibrate" in times:
         chart = times["Chart under all LEDs"]
         print(f"start of chart capture to Table 1: {chart + times['Calibrate']:.2f} s")
+    assert window is not None
     session = window.measurement.session("chart")
     if session is not None:
         exposure = sum(f.exposure_s for f in session.frames if f.kind == "target")
