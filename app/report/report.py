@@ -1488,6 +1488,8 @@ def _summary_page(report: ReportData) -> Figure:
 
 def _draw_key_numbers(fig: Figure, y: float, t: _Table) -> float:
     """The key numbers as a table in the page's font; returns the y below it."""
+    from matplotlib.lines import Line2D
+
     fig.text(0.08, y, t.title, fontsize=11, weight="bold", va="top")
     y -= 0.028
     xs = (0.08, 0.62, 0.80)
@@ -1495,8 +1497,6 @@ def _draw_key_numbers(fig: Figure, y: float, t: _Table) -> float:
     for j, h in enumerate(t.header):
         fig.text(xs[j], y, h, fontsize=9, weight="bold", va="top", ha="left")
     y -= step
-    from matplotlib.lines import Line2D
-
     fig.add_artist(Line2D([0.08, 0.92], [y + 0.004, y + 0.004], color="0.6", lw=0.6))
     for row in t.rows:
         for j, cell in enumerate(row):
