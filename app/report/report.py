@@ -2,15 +2,19 @@
 
 :func:`write_report` renders a :class:`ReportData` (every field optional, so a caller
 fills what it has) into ``report.html`` (CSS inline, plots embedded as base64 PNG, no
-external assets, opens offline in any browser) and ``report.pdf`` (a multi-page PDF of
-the same content made with matplotlib's ``PdfPages``, no extra packages).
+external assets, opens offline in any browser) and ``report.pdf`` (the same content
+made with matplotlib's ``PdfPages``, every page A4 portrait, TrueType fonts embedded).
 
 Contents, each shown when its data are given:
 
-- summary and provenance: TuneSpec version, creation time, session id, devices and
-  serial numbers, settings, software versions, the data sets used and their licences
-  (by default the shipped ones, from ``resources/SOURCE.md``, and colour-science's CIE
-  data);
+- a summary first: the verdict (Table 1's RGB mean against the threshold), the key
+  numbers beside the paper's, every warning;
+- provenance: TuneSpec version, creation time, session id, the measurement and
+  session folders, the frames' fingerprints, seed and resolution of a simulated
+  bench, the exposure per LED, every input file with its SHA-256, devices and serial
+  numbers, settings, software versions, the exports (named for the reader), the data
+  sets used and their licences (by default the shipped ones, from
+  ``resources/SOURCE.md``, and colour-science's CIE data);
 - quality flags: saturated stimuli (from :class:`~tunespec.core.responses.Responses`
   ``saturated``), patches excluded from the sensitivity fit, clipped Wiener estimates,
   reflectances outside 0..1, and the caller's own flags;
@@ -18,6 +22,8 @@ Contents, each shown when its data are given:
 - the estimated camera sensitivities, with the reference (the truth in a simulation)
   when known, both normalised to peak 1;
 - a response map (peak channel per patch and LED, saturated cells marked);
+- Table 1 per patch: a map of the chart, a histogram, the worst patches and a table;
+  Table 2's CIEDE2000 histogram;
 - estimated against reference reflectance per patch, a grid of small plots like the
   paper's Figure 6, each titled with its CIEDE2000;
 - Table 1 (response prediction) and Table 2 (reflectance accuracy), next to the
@@ -1549,7 +1555,10 @@ def _write_pdf(
     }
     if isinstance(report.created, datetime):
         meta["CreationDate"] = report.created
-    with PdfPages(path, metadata=meta) as pdf:
+    from matplotlib import rc_context
+
+    # TrueType fonts embedded (not Type 3): sharp in print, text searchable
+    with rc_context({"pdf.fonttype": 42}), PdfPages(path, metadata=meta) as pdf:
         pdf.savefig(_summary_page(report))
         for _, fig in figures:
             pdf.savefig(fig)
