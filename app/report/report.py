@@ -1396,6 +1396,8 @@ def render_html(
 # ----------------------------------------------------------------------------- PDF
 
 _LINES_PER_PAGE = 84
+#: Marks a table's title among the lines of a flowed page.
+_TITLE_MARK = "\x00"
 _WRAP = 110
 
 
@@ -1519,6 +1521,7 @@ def _flow_pages(title: str, tables: Sequence[_Table]) -> Iterator[Figure]:
     pages: list[list[str]] = [[]]
     for t in tables:
         lines = _text_table(t)
+        lines[0] = _TITLE_MARK + lines[0]  # drawn as a heading
         room = _LINES_PER_PAGE - len(pages[-1])
         if len(lines) > room and len(lines) <= _LINES_PER_PAGE:
             pages.append([])
@@ -1536,12 +1539,25 @@ def _flow_pages(title: str, tables: Sequence[_Table]) -> Iterator[Figure]:
             continue
         pages[-1] += lines
     pages = [p for p in pages if p]
+    line_h = 7.2 * 1.18 / 72 / _A4_PORTRAIT_IN[1]  # figure units per line
     for k, lines in enumerate(pages):
         head = title if len(pages) <= 1 else f"{title} ({k + 1}/{len(pages)})"
         fig = _page(head)
-        fig.text(
-            0.08, 0.93, "\n".join(lines), fontsize=7.2, family="monospace", va="top"
-        )
+        y, run = 0.93, []
+        for line in [*lines, _TITLE_MARK]:  # the sentinel flushes the last run
+            if not line.startswith(_TITLE_MARK):
+                run.append(line)
+                continue
+            if run:
+                fig.text(
+                    0.08, y, "\n".join(run), fontsize=7.2, family="monospace", va="top"
+                )
+                y -= line_h * len(run)
+                run = []
+            if line != _TITLE_MARK:
+                y -= 0.3 * line_h  # a little air above a heading
+                fig.text(0.08, y, line[1:], fontsize=9, weight="bold", va="top")
+                y -= line_h
         yield fig
 
 
