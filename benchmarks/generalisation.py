@@ -73,7 +73,7 @@ from tunespec.core.simulate import NoiseModel, scale_to_exposure, simulate_respo
 from tunespec.core.spectra import DEFAULT_GRID, Grid, Spectra
 from tunespec.core.stats import calibration_report, sensitivity_rms
 from tunespec.core.uncertainty import reflectance_uncertainty
-from tunespec.core.wiener import wiener_reflectance
+from tunespec.core.wiener import integration_grid, wiener_reflectance
 
 WORK = DEFAULT_GRID
 EST = Grid(400.0, 700.0, 5.0)
@@ -174,8 +174,11 @@ def run_camera(
         secs = time.perf_counter() - t0
         used = scaled.resample(WORK, average=True) if variant == "truth" else reported
         t1 = calibration_report(est, resp, used, chart_work).training
-        illum = est.correct_illuminants(used).resample(EST, average=True)
-        sens = est.sensitivity.resample(EST)
+        # Eq. 1 integrated on the calibration's grid, reflectance on EST (as
+        # `tunespec estimate` does)
+        fine = integration_grid(est.sensitivity, EST, used)
+        illum = est.correct_illuminants(used).resample(fine, average=True)
+        sens = est.sensitivity.resample(fine)
         w = wiener_reflectance(resp_t, illum, sens, prior_est)
         st = reflectance_stats(w.reflectance, test_est)
         sc = Score(
@@ -191,7 +194,7 @@ def run_camera(
             seconds=secs,
         )
         if est.covariance is not None:
-            unc = reflectance_uncertainty(w, resp_t, reported, est, prior_est)
+            unc = reflectance_uncertainty(w, resp_t, reported, est)
             sc.coverage = coverage(
                 w.reflectance.values,
                 unc.reflectance_std,
@@ -275,6 +278,7 @@ def print_summary(summary: dict[str, Any], variants) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    global WORK, EST
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument(
         "--quick", action="store_true", help="2 cameras per family, CAL1 model only"
@@ -286,8 +290,21 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--lights", default="cal1-model,heldout-leds")
     ap.add_argument("--no-metering-error", action="store_true")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument(
+        "--grid",
+        type=Grid.parse,
+        default=WORK,
+        help=f"calibration grid START:END:STEP (default {WORK})",
+    )
+    ap.add_argument(
+        "--estimate-grid",
+        type=Grid.parse,
+        default=EST,
+        help=f"estimation grid START:END:STEP (default {EST})",
+    )
     ap.add_argument("--json")
     args = ap.parse_args(argv)
+    WORK, EST = args.grid, args.estimate_grid
     variants = [v for v in args.variants.split(",") if v]
     lights = args.lights.split(",")
     per_family = args.per_family

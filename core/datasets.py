@@ -5,16 +5,14 @@ Everything is read through :mod:`importlib.resources` so frozen builds work.
 
 from __future__ import annotations
 
-import json
 from functools import lru_cache
 from importlib import resources
 from os import PathLike
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
-from tunespec.core.errors import InputError, check_names
+from tunespec.core.errors import InputError
 from tunespec.core.spectra import DEFAULT_GRID, Grid, Spectra, read_spectra_csv
 
 __all__ = [
@@ -43,79 +41,52 @@ def resource_path(*parts: str) -> Path:
 
 
 def read_rawtoaces_json(path: str | PathLike[str]) -> Spectra:
-    """Read camera sensitivities in the rawtoaces-data JSON schema.
+    """Read camera sensitivities in the rawtoaces-data JSON schema, as stored.
 
     Returns
     -------
     Spectra
         Names ``R, G, B``; ``meta`` holds ``manufacturer`` and ``model``.
     """
-    path = Path(path)
-    try:
-        doc: dict[str, Any] = json.loads(path.read_text(encoding="utf-8"))
-        header = doc.get("header", {})
-        main = doc["spectral_data"]["data"]["main"]
-        index = doc["spectral_data"].get("index", {}).get("main", ["R", "G", "B"])
-        wl = np.array([float(k) for k in main])
-        vals = np.array([main[k] for k in main], dtype=np.float64).T
-    except FileNotFoundError:
-        raise InputError("file not found", path=path) from None
-    except json.JSONDecodeError as exc:
-        raise InputError(
-            f"not valid JSON: {exc.msg}", path=path, line=exc.lineno
-        ) from None
-    except (KeyError, TypeError, ValueError) as exc:
-        raise InputError(
-            f"not a rawtoaces camera file (spectral_data.data.main: {exc})", path=path
-        ) from None
-    if [c.upper() for c in index] != ["R", "G", "B"]:
-        raise InputError(f"expected channels R, G, B, found {index}", path=path)
-    order = np.argsort(wl)
-    if not np.all(np.isfinite(vals)):
-        raise InputError("non-finite sensitivity values", path=path)
-    meta = {
-        "manufacturer": str(header.get("manufacturer", "")),
-        "model": str(header.get("model", "")),
-        "source": str(path),
-    }
-    return Spectra(wl[order], vals[:, order], ("R", "G", "B"), meta)
+    from tunespec.core.io.spectral import rawtoaces_spectra
+    from tunespec.core.limits import read_json
+
+    s = rawtoaces_spectra(read_json(path), source=str(path))
+    if [c.upper() for c in s.names] != ["R", "G", "B"]:
+        raise InputError(f"expected channels R, G, B, found {list(s.names)}", path=path)
+    return Spectra(
+        s.wavelength_nm, s.values, ("R", "G", "B"), {**s.meta, "source": str(path)}
+    )
 
 
 def read_sensitivities(path: str | PathLike[str], grid: Grid | None = None) -> Spectra:
-    """Camera sensitivities from a spectral CSV (R, G, B columns) or a rawtoaces JSON.
+    """Camera sensitivities from any spectral file with channels R, G, B.
+
+    Spectral CSV, CGATS or rawtoaces JSON, found from the content
+    (:func:`tunespec.core.io.spectral.read_spectral` with ``kind="sensitivity"``: a
+    rawtoaces JSON written by TuneSpec is put back on its absolute scale).
 
     Parameters
     ----------
     path
-        ``.json``: the rawtoaces-data schema; anything else: a spectral CSV with at
-        least the columns ``R``, ``G``, ``B`` (others are ignored).
+        The file.
     grid
         Working grid to resample onto; ``None`` keeps the file's wavelengths.
 
     Returns
     -------
     Spectra
-        Names ``R, G, B``; ``meta["source"]`` is the file.
+        Names ``R, G, B``; ``meta["source"]`` is the file, ``meta["relative"]`` is
+        set for sensitivities in relative units without an absolute scale.
 
     Raises
     ------
     InputError
         Naming the file: unreadable, a channel missing, a range too short for the grid.
     """
-    path = Path(path)
-    if path.suffix.lower() == ".json":
-        s = read_rawtoaces_json(path)
-    else:
-        s = read_spectra_csv(path)
-        check_names(
-            ("R", "G", "B"),
-            s.names,
-            "missing column(s) {names}; expected R, G, B",
-            path=path,
-        )
-        s = s.select(["R", "G", "B"])
-    s = Spectra(s.wavelength_nm, s.values, s.names, {**s.meta, "source": str(path)})
-    return s if grid is None else s.resample(grid, source=str(path))
+    from tunespec.core.io.spectral import read_spectral
+
+    return read_spectral(path, grid, kind="sensitivity")
 
 
 @lru_cache(maxsize=1)

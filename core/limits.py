@@ -294,9 +294,9 @@ def check_tree(value: Any, *, path: str | PathLike[str] | None = None) -> None:
 
 
 def csv_rows(
-    text: str, *, path: str | PathLike[str] | None = None
+    text: str, *, path: str | PathLike[str] | None = None, delimiter: str = ","
 ) -> list[tuple[int, list[str]]]:
-    """Non-blank CSV rows with their line numbers, within the limits.
+    """Non-blank CSV rows (``delimiter``-separated) with their line numbers, within the limits.
 
     Raises
     ------
@@ -304,7 +304,7 @@ def csv_rows(
         A field over :data:`MAX_FIELD_CHARS`, more than :data:`MAX_ROWS` rows or
         :data:`MAX_COLUMNS` columns, or a malformed row (with the line).
     """
-    reader = csv.reader(text.splitlines())
+    reader = csv.reader(text.splitlines(), delimiter=delimiter)
     out: list[tuple[int, list[str]]] = []
     old = csv.field_size_limit()
     csv.field_size_limit(MAX_FIELD_CHARS)

@@ -1,6 +1,7 @@
-"""Camera responses per patch and illuminant, and their long-format CSV.
+"""Camera responses per patch and illuminant.
 
-CSV columns: ``patch,illuminant,R,G,B`` and optionally ``R_std,G_std,B_std`` (per-pixel
+Their long-format CSV is read and written in :mod:`tunespec.core.io.responses_csv`
+(the functions here delegate). CSV columns: ``patch,illuminant,R,G,B`` and optionally ``R_std,G_std,B_std`` (per-pixel
 standard deviation inside the patch ROI, as Eq. 6 of the paper uses), ``n_pixels`` and
 ``saturated`` (fraction of ROI pixels at or above the white level). Values are linear,
 dark-corrected and flat-fielded, in units of full scale (1.0 = saturation).
@@ -8,18 +9,13 @@ dark-corrected and flat-fielded, in units of full scale (1.0 = saturation).
 
 from __future__ import annotations
 
-import csv
-import math
-from collections import Counter
 from dataclasses import dataclass
 from os import PathLike
-from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
-from tunespec.core.errors import InputError, check_names, read_text
-from tunespec.core.limits import csv_rows, shown, valid_name, valid_number
+from tunespec.core.errors import InputError, check_names
 
 __all__ = ["CHANNELS", "Responses", "read_responses_csv", "write_responses_csv"]
 
@@ -112,129 +108,16 @@ def _indices(have: tuple[str, ...], names: list[str] | None, what: str) -> list[
 
 
 def read_responses_csv(path: str | PathLike[str]) -> Responses:
-    """Read a long-format responses CSV.
+    """Read a long-format responses CSV
+    (:func:`tunespec.core.io.responses_csv.read_responses_csv`)."""
+    from tunespec.core.io.responses_csv import read_responses_csv as read
 
-    Raises
-    ------
-    InputError
-        Missing columns, bad or non-finite numbers, negative standard deviations,
-        duplicate or missing (patch, illuminant) pairs; each names the file and line.
-    """
-    path = Path(path)
-    rows = csv_rows(read_text(path), path=path)  # blank lines skipped, numbered
-    if not rows:
-        raise InputError("empty file, expected a responses CSV", path=path)
-    header_line, header = rows[0]
-    header = [h.strip() for h in header]
-    dup = sorted(h for h, k in Counter(header).items() if k > 1)
-    if dup:
-        raise InputError(
-            f"duplicate column(s) {', '.join(map(shown, dup))}",
-            path=path,
-            line=header_line,
-        )
-    required = ["patch", "illuminant", *CHANNELS]
-    missing = [c for c in required if c not in header]
-    if missing:
-        raise InputError(
-            f"missing column(s) {', '.join(missing)}; expected patch,illuminant,R,G,B",
-            path=path,
-            line=header_line,
-        )
-    col = {h: i for i, h in enumerate(header)}
-    has_std = all(c in col for c in _STD)
-    if any(c in col for c in _STD) and not has_std:
-        raise InputError(
-            "give all of R_std,G_std,B_std or none", path=path, line=header_line
-        )
-    has_n = "n_pixels" in col
-    has_sat = "saturated" in col
-    records: dict[tuple[str, str], tuple[list[float], list[float], float, float]] = {}
-    # dicts as ordered sets: a membership test per row stays O(1)
-    patches: dict[str, None] = {}
-    illums: dict[str, None] = {}
-    for lineno, row in rows[1:]:
-        if len(row) != len(header):
-            raise InputError(
-                f"{len(row)} fields, expected {len(header)}", path=path, line=lineno
-            )
-        p, il = row[col["patch"]].strip(), row[col["illuminant"]].strip()
-        if not p or not il:
-            raise InputError("empty patch or illuminant name", path=path, line=lineno)
-        valid_name(p, "patch", path=path, line=lineno)
-        valid_name(il, "illuminant", path=path, line=lineno)
-        if (p, il) in records:
-            raise InputError(
-                f"duplicate row for patch {shown(p)} under {shown(il)}",
-                path=path,
-                line=lineno,
-            )
-
-        def num(key: str, lineno: int = lineno, row: list[str] = row) -> float:
-            cell = row[col[key]]
-            try:
-                v = float(cell)
-            except ValueError:
-                raise InputError(
-                    f"{key}: not a number: {shown(cell)}", path=path, line=lineno
-                ) from None
-            return float(valid_number(v, key, path=path, line=lineno))
-
-        rgb = [num(c) for c in CHANNELS]
-        std = [num(c) for c in _STD] if has_std else [math.nan] * 3
-        if has_std and min(std) < 0:
-            raise InputError("negative standard deviation", path=path, line=lineno)
-        npx = num("n_pixels") if has_n else math.nan
-        sat = num("saturated") if has_sat else math.nan
-        records[(p, il)] = (rgb, std, npx, sat)
-        patches.setdefault(p)
-        illums.setdefault(il)
-    if not records:
-        raise InputError("no data rows", path=path)
-    n_absent = len(patches) * len(illums) - len(records)
-    if n_absent:
-        # stops at the first gap: the full product may be huge
-        p, i = next((p, i) for p in patches for i in illums if (p, i) not in records)
-        raise InputError(
-            f"{n_absent} (patch, illuminant) pair(s) missing, e.g. patch {shown(p)} "
-            f"under {shown(i)}: every patch needs a row for every illuminant",
-            path=path,
-        )
-    rgb_a = np.array([[records[(p, i)][0] for i in illums] for p in patches])
-    std_a = np.array([[records[(p, i)][1] for i in illums] for p in patches])
-    n_a = np.array([[records[(p, i)][2] for i in illums] for p in patches])
-    s_a = np.array([[records[(p, i)][3] for i in illums] for p in patches])
-    return Responses(
-        tuple(patches),
-        tuple(illums),
-        rgb_a,
-        std_a if has_std else None,
-        n_a if has_n else None,
-        s_a if has_sat else None,
-    )
+    return read(path)
 
 
 def write_responses_csv(responses: Responses, path: str | PathLike[str]) -> None:
-    """Write ``responses`` in long format (one row per patch and illuminant)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    header = ["patch", "illuminant", *CHANNELS]
-    if responses.rgb_std is not None:
-        header += list(_STD)
-    if responses.n_pixels is not None:
-        header.append("n_pixels")
-    if responses.saturated is not None:
-        header.append("saturated")
-    with path.open("w", newline="", encoding="utf-8") as fh:
-        w = csv.writer(fh, lineterminator="\n")
-        w.writerow(header)
-        for a, p in enumerate(responses.patches):
-            for b, il in enumerate(responses.illuminants):
-                row: list[str] = [p, il, *(repr(float(v)) for v in responses.rgb[a, b])]
-                if responses.rgb_std is not None:
-                    row += [repr(float(v)) for v in responses.rgb_std[a, b]]
-                if responses.n_pixels is not None:
-                    row.append(str(int(responses.n_pixels[a, b])))
-                if responses.saturated is not None:
-                    row.append(repr(float(responses.saturated[a, b])))
-                w.writerow(row)
+    """Write ``responses`` in long format
+    (:func:`tunespec.core.io.responses_csv.write_responses_csv`)."""
+    from tunespec.core.io.responses_csv import write_responses_csv as write
+
+    write(responses, path)

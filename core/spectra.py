@@ -1,11 +1,8 @@
-"""Spectral data: a wavelength grid and named spectra, spectral CSV in and out.
+"""Spectral data: a wavelength grid and named spectra on it.
 
-A spectral CSV has a first column whose header contains ``wavelength`` (in nm, strictly
-increasing), then one column per named spectrum::
-
-    wavelength_nm,A1,A2
-    380,0.108,0.0068
-    390,0.200,0.0067
+The files are read and written in :mod:`tunespec.core.io.spectral` (CSV, CGATS,
+rawtoaces JSON, found from the content) and :mod:`tunespec.core.io.spectral_csv`;
+``read_spectra_csv`` and ``write_spectra_csv`` here delegate to them.
 
 Every input is resampled onto one working :class:`Grid` before any computation, so
 reflectances, illuminants and sensitivities always share their wavelength axis.
@@ -13,24 +10,18 @@ reflectances, illuminants and sensitivities always share their wavelength axis.
 
 from __future__ import annotations
 
-import csv
 import math
-from collections import Counter
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from os import PathLike
-from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tunespec.core.errors import InputError, check_names, read_text
+from tunespec.core.errors import InputError, check_names
 from tunespec.core.limits import (
     MAX_VALUE,
-    MAX_WAVELENGTH_NM,
-    csv_rows,
     shown,
-    valid_name,
 )
 
 __all__ = [
@@ -38,6 +29,7 @@ __all__ = [
     "MAX_GRID_SAMPLES",
     "Grid",
     "Spectra",
+    "grid_from_data",
     "read_spectra_csv",
     "resampling_matrix",
     "write_spectra_csv",
@@ -245,6 +237,67 @@ class Spectra:
         )
 
 
+#: The coarsest step :func:`grid_from_data` chooses, in nm.
+MAX_DATA_GRID_STEP_NM = 10.0
+
+
+def grid_from_data(
+    spectra: Sequence[Spectra],
+    *,
+    sets_step: Sequence[bool] | None = None,
+    max_step_nm: float = MAX_DATA_GRID_STEP_NM,
+) -> Grid:
+    """The working grid the inputs support: the widest range every input covers.
+
+    The step is the finest step of the inputs whose ``sets_step`` is true (by
+    default all), at most ``max_step_nm``. Light-source spectra are band-averaged onto
+    any grid (:meth:`Spectra.resample`), keeping their area and centroid, so callers
+    pass them with ``sets_step=False``: a spectroradiometer's 1 nm SPDs then set the
+    range but do not force a 1 nm calibration of 5 nm chart data. Start and end are
+    put on multiples of an integer step (380, 385, ... for 5 nm).
+
+    Raises
+    ------
+    InputError
+        No inputs, or no common range (naming each input's range and file).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> a = Spectra(np.arange(380.0, 781.0, 1.0), np.ones((1, 401)), ("L",))
+    >>> b = Spectra(np.arange(400.0, 731.0, 10.0), np.ones((1, 34)), ("A1",))
+    >>> str(grid_from_data([a, b], sets_step=[False, True]))
+    '400:730:10'
+    """
+    if not spectra:
+        raise InputError("no spectral inputs to choose a grid from")
+    sets = list(sets_step) if sets_step is not None else [True] * len(spectra)
+    if not any(sets):
+        sets = [True] * len(spectra)
+    start = max(float(s.wavelength_nm[0]) for s in spectra)
+    end = min(float(s.wavelength_nm[-1]) for s in spectra)
+    steps = [
+        float(np.min(np.diff(s.wavelength_nm)))
+        for s, k in zip(spectra, sets, strict=True)
+        if k and s.wavelength_nm.size > 1
+    ]
+    step = min([*steps, max_step_nm])
+    if abs(step - round(step)) < _WL_TOL_NM and round(step) >= 1:
+        step = float(round(step))
+        start = math.ceil(start / step - 1e-9) * step
+        end = math.floor(end / step + 1e-9) * step
+    else:
+        end = start + math.floor((end - start) / step + 1e-9) * step
+    if end - start < step - _WL_TOL_NM:
+        ranges = "; ".join(
+            f"{s.meta.get('source', ', '.join(s.names[:3]))}: "
+            f"{s.wavelength_nm[0]:g}-{s.wavelength_nm[-1]:g} nm"
+            for s in spectra
+        )
+        raise InputError(f"the inputs share no wavelength range ({ranges})")
+    return Grid(start, end, step)
+
+
 def resampling_matrix(
     wl: NDArray[np.float64], target: NDArray[np.float64], *, average: bool = False
 ) -> NDArray[np.float64]:
@@ -309,122 +362,22 @@ def read_spectra_csv(
     max_value: float = MAX_VALUE,
     average: bool = False,
 ) -> Spectra:
-    """Read a spectral CSV and optionally resample it onto ``grid``.
+    """Read spectral data (CSV, CGATS or rawtoaces JSON) and optionally resample it.
 
-    ``average``: resample light-source spectra by band averaging
-    (:meth:`Spectra.resample`).
-
-    Parameters
-    ----------
-    path
-        The CSV file; first column header contains ``wavelength``.
-    grid
-        Working grid; ``None`` keeps the file's wavelengths.
-    allow_negative
-        Accept negative values (e.g. signed basis functions); otherwise they are
-        an error, as are NaN and empty cells.
-    max_value
-        Largest magnitude accepted (:data:`~tunespec.core.limits.MAX_REFLECTANCE`
-        for reflectances).
-
-    Raises
-    ------
-    InputError
-        With the file, the line and what was expected.
+    Kept for the callers of the numerics; the reader is
+    :func:`tunespec.core.io.spectral.read_spectral` (formats live in ``core.io``).
     """
-    path = Path(path)
-    text = read_text(path)
-    numbered = csv_rows(text, path=path)
-    if not numbered:
-        raise InputError("empty file, expected a spectral CSV", path=path)
-    line0, header = numbered[0]
-    header = [h.strip() for h in header]
-    if "wavelength" not in header[0].lower():
-        raise InputError(
-            f"first column header is {shown(header[0])}; expected one containing "
-            "'wavelength' (e.g. wavelength_nm)",
-            path=path,
-            line=line0,
-        )
-    names = header[1:]
-    if not names or any(not n for n in names):
-        raise InputError(
-            "expected named spectrum columns after the wavelength column",
-            path=path,
-            line=line0,
-        )
-    for n in names:
-        valid_name(n, "column name", path=path, line=line0)
-    if len(set(names)) != len(names):
-        dup = sorted(n for n, k in Counter(names).items() if k > 1)
-        raise InputError(
-            f"duplicate column names: {', '.join(dup)}", path=path, line=line0
-        )
-    wl: list[float] = []
-    data: list[list[float]] = []
-    for lineno, row in numbered[1:]:
-        if len(row) != len(header):
-            raise InputError(
-                f"{len(row)} fields, expected {len(header)} as in the header",
-                path=path,
-                line=lineno,
-            )
-        try:
-            nums = [float(c) for c in row]
-        except ValueError:
-            bad = next(c for c in row if not _is_float(c))
-            raise InputError(
-                f"not a number: {shown(bad)}", path=path, line=lineno
-            ) from None
-        for j, (col, v) in enumerate(zip(header, nums, strict=True)):
-            if not math.isfinite(v):
-                raise InputError(
-                    f"{col}: value {v} is not finite", path=path, line=lineno
-                )
-            if v < 0 and not allow_negative and j > 0:
-                raise InputError(f"{col}: negative value {v}", path=path, line=lineno)
-            limit = MAX_WAVELENGTH_NM if j == 0 else max_value
-            if abs(v) > limit:
-                raise InputError(
-                    f"{shown(col)}: value {v:g} out of range (at most {limit:g} in "
-                    "magnitude)",
-                    path=path,
-                    line=lineno,
-                )
-        if wl and nums[0] <= wl[-1]:
-            raise InputError(
-                f"wavelength {nums[0]:g} nm is not above the previous row's {wl[-1]:g} nm",
-                path=path,
-                line=lineno,
-            )
-        wl.append(nums[0])
-        data.append(nums[1:])
-    if len(wl) < 2:
-        raise InputError("expected at least two wavelength rows", path=path)
-    spectra = Spectra(
-        np.array(wl), np.array(data).T, tuple(names), {"source": str(path)}
+    from tunespec.core.io.spectral import read_spectral
+
+    return read_spectral(
+        path, grid, allow_negative=allow_negative, max_value=max_value, average=average
     )
-    if grid is None:
-        return spectra
-    return spectra.resample(grid, source=str(path), average=average)
 
 
 def write_spectra_csv(
     spectra: Spectra, path: str | PathLike[str], *, header: str = "wavelength_nm"
 ) -> None:
-    """Write ``spectra`` as a spectral CSV (full float precision, round-trips exactly)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open("w", newline="", encoding="utf-8") as fh:
-        w = csv.writer(fh, lineterminator="\n")
-        w.writerow([header, *spectra.names])
-        for i, wl in enumerate(spectra.wavelength_nm):
-            w.writerow([f"{wl:g}", *(repr(float(v)) for v in spectra.values[:, i])])
+    """Write a spectral CSV (:func:`tunespec.core.io.spectral_csv.write_spectra_csv`)."""
+    from tunespec.core.io.spectral_csv import write_spectra_csv as write
 
-
-def _is_float(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
+    write(spectra, path, header=header)

@@ -39,12 +39,11 @@ from numpy.typing import NDArray
 
 from tunespec.core.colorimetry import astm_e308_weights_d50, xyz_to_lab_d50
 from tunespec.core.errors import InputError
-from tunespec.core.forward_model import lighting_matrix
 from tunespec.core.responses import Responses
 from tunespec.core.sensitivity import SensitivityEstimate
 from tunespec.core.sensitivity_bayes import _corrected
 from tunespec.core.spectra import Spectra, resampling_matrix
-from tunespec.core.wiener import WienerEstimate, _prior_moments
+from tunespec.core.wiener import WienerEstimate
 
 __all__ = [
     "FLAT_FIELD_RESIDUAL",
@@ -151,11 +150,22 @@ def fit_generic_prior(
                 nll[j, lo:hi] = np.sum(z**2, axis=1) + 2.0 * np.sum(
                     np.log(np.diagonal(Lc, axis1=1, axis2=2)), axis=1
                 )
-        pick = np.argmin(nll, axis=0)
-        total = float(np.sum(nll[pick, np.arange(n_p)]))
+        # posterior over the (alpha, sigma) grid (flat prior on it): the error
+        # covariance is linear in alpha^2 and sigma^2, so their posterior means
+        # carry the hyper-parameters' own uncertainty (a point estimate would not)
+        low = np.min(nll, axis=0)
+        post = np.exp(-0.5 * (nll - low[None]))
+        evidence = low - 2.0 * np.log(np.sum(post, axis=0) / len(grid))
+        total = float(np.sum(evidence))
         if total < best_total:
-            chosen = np.array(grid)[pick]
-            best_total, best = total, (chosen[:, 0], chosen[:, 1], float(length))
+            post /= np.sum(post, axis=0, keepdims=True)
+            g = np.array(grid)
+            best_total = total
+            best = (
+                np.sqrt(post.T @ g[:, 0] ** 2),
+                np.sqrt(post.T @ g[:, 1] ** 2),
+                float(length),
+            )
     return best
 
 
@@ -314,7 +324,6 @@ def reflectance_uncertainty(
     responses: Responses,
     illuminants: Spectra,
     calibration: SensitivityEstimate,
-    prior: Spectra,
 ) -> ReflectanceUncertainty:
     """Error covariance of a Wiener estimate, with the calibration's uncertainty.
 
@@ -323,7 +332,8 @@ def reflectance_uncertainty(
     wiener
         The estimate, computed by :func:`~tunespec.core.wiener.wiener_reflectance`
         with ``calibration.correct_illuminants(illuminants)`` and
-        ``calibration.sensitivity``, both on the estimate's grid, and ``prior``.
+        ``calibration.sensitivity`` (on one grid, the estimate's or a finer one) and
+        ``prior``.
     responses
         The responses it was computed from (``rgb_std`` and ``n_pixels`` give the
         noise; without them only the calibration and prior terms count).
@@ -333,8 +343,6 @@ def reflectance_uncertainty(
     calibration
         The sensitivity estimate; its covariance (``"bayes"``) adds the
         calibration term, else that term is left out.
-    prior
-        The prior reflectances the estimate used.
 
     Returns
     -------
@@ -342,22 +350,11 @@ def reflectance_uncertainty(
     """
     refl = wiener.reflectance
     wl = refl.wavelength_nm
-    step = refl.step_nm
-    p = wiener.params
-    corrected = calibration.correct_illuminants(illuminants)
-    L = _hold_resample(
-        corrected.wavelength_nm,
-        corrected.select(responses.illuminants).values,
-        wl,
-        average=True,
-    )
-    S = _hold_resample(
-        calibration.sensitivity.wavelength_nm, calibration.sensitivity.values, wl
-    )
-    F = lighting_matrix(L, S, step)
+    # F and the prior exactly as the estimate used them (integrated on the
+    # calibration's grid, see integrated_lighting_matrix)
+    F, K, mean = wiener.lighting, wiener.prior_covariance, wiener.prior_mean
+    assert F is not None and K is not None and mean is not None
     m_rows = F.shape[0]
-    pv = _hold_resample(prior.wavelength_nm, prior.values, wl)
-    _, K = _prior_moments(pv, bool(p.get("center_prior", True)))
     n_p = len(responses.patches)
     used = wiener.noise_variance.reshape(n_p, m_rows)
     rgb = responses.rgb.reshape(n_p, m_rows)
@@ -389,7 +386,6 @@ def reflectance_uncertainty(
     noise_all[:, idx, idx] = true_var
     if cal is not None:
         noise_all += cal
-    mean, _ = _prior_moments(pv, bool(p.get("center_prior", True)))
     alpha, sigma, length = fit_generic_prior(F, K, mean, rgb, noise_all, wl)
     IM = matern32(wl, length)
     FK = F @ K

@@ -31,9 +31,16 @@ from numpy.typing import NDArray
 from tunespec.core.errors import InputError, SingularSystemError, check_names
 from tunespec.core.forward_model import lighting_matrix
 from tunespec.core.responses import CHANNELS, Responses
-from tunespec.core.spectra import Grid, Spectra
+from tunespec.core.spectra import Grid, Spectra, resampling_matrix
 
-__all__ = ["NOISE_SOURCES", "RIDGE_RELATIVE", "WienerEstimate", "wiener_reflectance"]
+__all__ = [
+    "NOISE_SOURCES",
+    "RIDGE_RELATIVE",
+    "WienerEstimate",
+    "integrated_lighting_matrix",
+    "integration_grid",
+    "wiener_reflectance",
+]
 
 #: Accepted values of ``noise_from``: the per-pixel standard deviation as Eq. 6 uses it,
 #: or the standard error of the ROI mean (per-pixel variance / ``n_pixels``).
@@ -66,7 +73,7 @@ class WienerEstimate:
     ----------
     reflectance : Spectra, (n_p, n_wl)
         Estimated reflectance factors, one spectrum per patch, named by patch and on
-        the illuminants' wavelength grid; limited to [0, 1] if ``clip`` was set.
+        the prior's wavelength grid; limited to [0, 1] if ``clip`` was set.
     clipped : tuple of str
         Patches with at least one sample that was clipped to [0, 1].
     n_clipped_samples : int
@@ -84,6 +91,10 @@ class WienerEstimate:
     params : dict
         The settings used: ``noise`` (``"patch"`` or ``"global"``), ``noise_from``,
         ``center_prior``, ``clip``, ``n_prior``, ``n_ridged`` (entries floored).
+    lighting : (3 n_i, n_wl)
+        ``F`` of Eq. 5 as used (:func:`integrated_lighting_matrix`).
+    prior_mean, prior_covariance : (n_wl,), (n_wl, n_wl)
+        ``m`` and ``K`` of the prior as used.
     """
 
     reflectance: Spectra
@@ -93,6 +104,9 @@ class WienerEstimate:
     noise_variance: NDArray[np.float64]
     ridge: float
     params: dict[str, object] = field(default_factory=dict)
+    lighting: NDArray[np.float64] | None = None
+    prior_mean: NDArray[np.float64] | None = None
+    prior_covariance: NDArray[np.float64] | None = None
 
     @property
     def std(self) -> NDArray[np.float64]:
@@ -218,6 +232,9 @@ def wiener_reflectance(
             "n_prior": len(prior),
             "n_ridged": n_ridged,
         },
+        lighting=F,
+        prior_mean=mean,
+        prior_covariance=K,
     )
 
 
@@ -273,13 +290,14 @@ def _wiener_system(
         raise InputError(
             f"noise_from={noise_from!r}: expected one of {', '.join(NOISE_SOURCES)}"
         )
-    wl = illuminants.wavelength_nm
+    wl_int = illuminants.wavelength_nm
     L = _select(illuminants, responses.illuminants, "illuminant spectra").values
     S = _select(sensitivity, CHANNELS, "camera sensitivity").values
-    _check_grid(sensitivity, wl, "camera sensitivity")
+    _check_grid(sensitivity, wl_int, "camera sensitivity")
     if prior is None:
-        prior = _default_prior(wl)
-    _check_grid(prior, wl, "prior reflectances")
+        prior = _default_prior(wl_int)
+    wl = prior.wavelength_nm
+    _check_within(prior, wl_int)
     for spectra, values, names, role in (
         (illuminants, L, responses.illuminants, "illuminant spectra"),
         (sensitivity, S, CHANNELS, "camera sensitivity"),
@@ -289,9 +307,56 @@ def _wiener_system(
     rgb = responses.rgb
     _check_responses_finite(responses, rgb, "rgb")
 
-    F = lighting_matrix(L, S, _step(wl))
+    F = integrated_lighting_matrix(L, S, wl_int, wl)
     mean, K = _prior_moments(prior.values, center_prior)
     return wl, F, mean, K, prior
+
+
+def integration_grid(
+    sensitivity: Spectra, estimate: Grid, illuminants: Spectra | None = None
+) -> Grid:
+    """Where Eq. 1 is integrated for estimates on ``estimate``.
+
+    Where the sensitivities (and the illuminants, if given) are known, at least the
+    estimation range, at the finer of the two steps: the calibration's resolution is
+    kept (a sensitivity calibrated at 2 nm resolves an IR-cut edge a 10 nm
+    estimation grid cannot) and light beyond the estimation range still counts
+    (with the reflectance held at its end value, see
+    :func:`integrated_lighting_matrix`).
+    """
+    lo, hi = float(sensitivity.wavelength_nm[0]), float(sensitivity.wavelength_nm[-1])
+    if illuminants is not None:
+        lo = max(lo, float(illuminants.wavelength_nm[0]))
+        hi = min(hi, float(illuminants.wavelength_nm[-1]))
+    lo, hi = min(lo, estimate.start_nm), max(hi, estimate.end_nm)
+    step = min(sensitivity.step_nm, estimate.step_nm)
+    n = max(int(np.floor((hi - lo) / step + 1e-6)), 1)
+    return Grid(lo, lo + n * step, step)
+
+
+def integrated_lighting_matrix(
+    illuminant: NDArray[np.float64],
+    sensitivity: NDArray[np.float64],
+    wavelength_nm: NDArray[np.float64],
+    estimate_nm: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """``F`` of Eq. 5 for reflectances sampled on ``estimate_nm``, (3 n_i, n_est).
+
+    Eq. 1 is integrated on the illuminants' and sensitivities' own (finer) grid
+    ``wavelength_nm``, with the reflectance between the estimation samples
+    interpolated linearly (a hat-function basis; end values held outside):
+    ``F = F_int Phi`` with ``Phi`` the interpolation matrix. Integrating a narrow LED
+    against a steep sensitivity edge on a coarse grid instead misplaces light by
+    several per cent (an IR-cut edge within one LED's band), an error no
+    reflectance prior can absorb. On one grid ``Phi = I`` and this is
+    :func:`~tunespec.core.forward_model.lighting_matrix`.
+    """
+    F = lighting_matrix(illuminant, sensitivity, _step(wavelength_nm))
+    if estimate_nm.size == wavelength_nm.size and np.allclose(
+        estimate_nm, wavelength_nm, rtol=0, atol=_WL_TOL_NM
+    ):
+        return F
+    return F @ resampling_matrix(estimate_nm, wavelength_nm)
 
 
 def _solve_patchwise(
@@ -449,6 +514,18 @@ def _check_grid(spectra: Spectra, wl: NDArray[np.float64], role: str) -> None:
             f"{role}: wavelength grid {_describe(other)} differs from the illuminant "
             f"spectra's {_describe(wl)}; resample both onto one Grid",
             path=_source(spectra),
+        )
+
+
+def _check_within(prior: Spectra, wl_int: NDArray[np.float64]) -> None:
+    """The estimation grid (the prior's) lies within the illuminants' grid."""
+    wl = prior.wavelength_nm
+    if wl[0] < wl_int[0] - _WL_TOL_NM or wl[-1] > wl_int[-1] + _WL_TOL_NM:
+        raise InputError(
+            f"prior reflectances: wavelength grid {_describe(wl)} reaches beyond the "
+            f"illuminant spectra's {_describe(wl_int)}; resample the prior onto "
+            "a grid within it",
+            path=_source(prior),
         )
 
 

@@ -130,32 +130,9 @@ def write_dng(
     """
     path = Path(path)
     mosaic = np.asarray(mosaic)
-    if mosaic.ndim != 2 or mosaic.dtype != np.uint16:
-        raise ValueError(
-            f"mosaic must be a 2-D uint16 array, got {mosaic.dtype} {mosaic.shape}"
-        )
-    height, width = mosaic.shape
-    if height < _MIN_SIZE_PX or width < _MIN_SIZE_PX:
-        raise ValueError(
-            f"mosaic {width}x{height} is too small for LibRaw (>= {_MIN_SIZE_PX} px)"
-        )
-    if cfa_pattern not in CFA_PATTERNS:
-        raise ValueError(
-            f"unknown CFA pattern {cfa_pattern!r}; known: {', '.join(CFA_PATTERNS)}"
-        )
-    blacks = np.atleast_1d(np.asarray(black_level, dtype=float))
-    if blacks.size not in (1, 4):
-        raise ValueError("black_level must be one value or four (CFA-cell order)")
-    if (
-        not (0 < white_level <= 65535)
-        or np.any(blacks < 0)
-        or np.any(blacks >= white_level)
-    ):
-        raise ValueError(
-            f"need 0 <= black_level < white_level <= 65535, got {blacks.tolist()} "
-            f"and {white_level}"
-        )
-
+    height, width, blacks = _checked_mosaic(
+        mosaic, cfa_pattern, black_level, white_level
+    )
     ifd0: dict[int, tuple[int, bytes]] = {
         254: _long(0),  # NewSubFileType: the main image
         256: _long(width),
@@ -193,6 +170,62 @@ def write_dng(
         ifd0[50778] = _short(_D65)  # CalibrationIlluminant1
     if description:
         ifd0[270] = _ascii(description)
+    exif = _exif_tags(ifd0, exposure_s, iso, timestamp)
+
+    head = _tiff_bytes(ifd0, exif)
+    pixels = np.ascontiguousarray(mosaic, dtype="<u2")
+    _write_atomic(path, (head, memoryview(pixels).cast("B")))
+    return path
+
+
+def _checked_mosaic(
+    mosaic: NDArray,
+    cfa_pattern: str,
+    black_level: float | Sequence[float],
+    white_level: int,
+) -> tuple[int, int, NDArray[np.float64]]:
+    """(height, width, black levels) of a mosaic :func:`write_dng` can write.
+
+    Raises
+    ------
+    ValueError
+        See :func:`write_dng`.
+    """
+    if mosaic.ndim != 2 or mosaic.dtype != np.uint16:
+        raise ValueError(
+            f"mosaic must be a 2-D uint16 array, got {mosaic.dtype} {mosaic.shape}"
+        )
+    height, width = mosaic.shape
+    if height < _MIN_SIZE_PX or width < _MIN_SIZE_PX:
+        raise ValueError(
+            f"mosaic {width}x{height} is too small for LibRaw (>= {_MIN_SIZE_PX} px)"
+        )
+    if cfa_pattern not in CFA_PATTERNS:
+        raise ValueError(
+            f"unknown CFA pattern {cfa_pattern!r}; known: {', '.join(CFA_PATTERNS)}"
+        )
+    blacks = np.atleast_1d(np.asarray(black_level, dtype=float))
+    if blacks.size not in (1, 4):
+        raise ValueError("black_level must be one value or four (CFA-cell order)")
+    if (
+        not (0 < white_level <= 65535)
+        or np.any(blacks < 0)
+        or np.any(blacks >= white_level)
+    ):
+        raise ValueError(
+            f"need 0 <= black_level < white_level <= 65535, got {blacks.tolist()} "
+            f"and {white_level}"
+        )
+    return height, width, blacks
+
+
+def _exif_tags(
+    ifd0: dict[int, tuple[int, bytes]],
+    exposure_s: float | None,
+    iso: int | None,
+    timestamp: datetime | None,
+) -> dict[int, tuple[int, bytes]]:
+    """The EXIF sub-IFD's tags (and their copies and pointer in ``ifd0``)."""
     exif: dict[int, tuple[int, bytes]] = {}
     if exposure_s is not None:
         if not exposure_s > 0:
@@ -210,11 +243,7 @@ def write_dng(
     if exif:
         exif[36864] = (_UNDEFINED, b"0230")  # ExifVersion
         ifd0[34665] = _long(0)  # ExifIFD: set below
-
-    head = _tiff_bytes(ifd0, exif)
-    pixels = np.ascontiguousarray(mosaic, dtype="<u2")
-    _write_atomic(path, (head, memoryview(pixels).cast("B")))
-    return path
+    return exif
 
 
 # -- a minimal TIFF encoder (little endian) ---------------------------------------

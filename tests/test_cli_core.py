@@ -199,11 +199,14 @@ def test_short_wavelength_range_is_reported(files, tmp_path, capsys) -> None:
         str(short),
         str(files / "leds.csv"),
         str(files / "sg.csv"),
+        "--grid",
+        "380:730:5",
         "-o",
         str(tmp_path / "x.csv"),
     )
     err = capsys.readouterr().err
     assert code == 2 and "too short for the grid" in err and str(short) in err
+    assert "420-700 nm" in err and len(err.strip().splitlines()) == 1
 
 
 def test_more_bad_input_is_one_line_exit_2(files, tmp_path, capsys) -> None:

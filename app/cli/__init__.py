@@ -16,7 +16,13 @@ import errno
 import sys
 from collections.abc import Sequence
 
-from tunespec.app.cli import core_cmds, device_cmds, export_cmds, session_cmds
+from tunespec.app.cli import (
+    core_cmds,
+    device_cmds,
+    export_cmds,
+    gonio_cmds,
+    session_cmds,
+)
 from tunespec.app.cli.common import (
     EXIT_CANCELLED,
     EXIT_DEVICE,
@@ -24,6 +30,7 @@ from tunespec.app.cli.common import (
     EXIT_INPUT,
     TerminalProgress,
     add_grid_option,
+    close_progress,
     grid_arg,
     progress_bar,
     seed_arg,
@@ -48,7 +55,7 @@ __all__ = [
 
 #: The command modules, in the order ``--help`` lists them. Imported statically: each
 #: imports only what its commands need when they run (``tunespec --help`` stays light).
-COMMAND_MODULES = (core_cmds, device_cmds, session_cmds, export_cmds)
+COMMAND_MODULES = (core_cmds, device_cmds, session_cmds, export_cmds, gonio_cmds)
 
 
 class _VersionAction(argparse.Action):
@@ -122,6 +129,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             file=sys.stderr,
         )
         return EXIT_INPUT
+    finally:
+        close_progress()
 
 
 def check_outputs(args: argparse.Namespace) -> None:

@@ -9,20 +9,28 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, TextIO
 
-from tunespec.core.errors import TuneSpecError
+from tunespec.core.errors import InputError, TuneSpecError
 from tunespec.core.progress import ProgressFn
-from tunespec.core.spectra import DEFAULT_GRID, Grid
+from tunespec.core.spectra import Grid, Spectra
 
 __all__ = [
     "EXIT_CANCELLED",
     "EXIT_DEVICE",
     "EXIT_DISK_FULL",
     "EXIT_INPUT",
+    "Console",
     "TerminalProgress",
+    "absolute_sensitivities",
     "add_grid_option",
+    "add_output_options",
+    "close_progress",
     "grid_arg",
     "progress_bar",
+    "resolve_grid",
     "seed_arg",
 ]
 
@@ -53,57 +61,193 @@ def seed_arg(text: str) -> int:
 
 
 def add_grid_option(parser: argparse.ArgumentParser) -> None:
-    """The shared ``--grid`` option."""
+    """The shared ``--grid`` option (default: from the data, :func:`resolve_grid`)."""
     parser.add_argument(
         "--grid",
         type=grid_arg,
-        default=DEFAULT_GRID,
+        default=None,
         metavar="START:END:STEP",
-        help=f"working wavelength grid in nm (default {DEFAULT_GRID})",
+        help="working wavelength grid in nm (default: from the data, the widest range "
+        "every input covers at the finest step of the chart, prior and sensitivity "
+        "data, at most 10 nm; printed and kept in the outputs' metadata)",
     )
 
 
-class TerminalProgress:
-    """A one-line progress bar on stderr, usable as a :data:`ProgressFn`.
+def add_output_options(parser: argparse.ArgumentParser) -> None:
+    """``--quiet`` and ``--json``, on every command that reports numbers."""
+    parser.add_argument(
+        "-q",
+        "--quiet",
+        action="store_true",
+        help="print nothing but warnings and errors (no progress, no tables)",
+    )
+    parser.add_argument(
+        "--json",
+        action="store_true",
+        help="print one JSON object with the numbers on stdout instead of the text "
+        "(progress and notes go to stderr)",
+    )
 
-    Redraws at most 10 times a second, shows elapsed and remaining time, and stays
-    silent when stderr is not a terminal unless ``force`` (then it prints a line per
-    10 % so logs still show progress).
+
+class Console:
+    """Where a command's text goes, after ``--quiet`` and ``--json``.
+
+    ``say``: the text report on stdout (neither option); ``note``: what was
+    converted or chosen, on stderr (not with ``--quiet``); ``warn``: always, on
+    stderr; ``summary``: the machine-readable result, on stdout with ``--json``.
     """
 
-    def __init__(self, label: str, *, width: int = 30, force: bool = False) -> None:
+    def __init__(self, args: argparse.Namespace) -> None:
+        self.quiet = bool(getattr(args, "quiet", False))
+        self.json = bool(getattr(args, "json", False))
+
+    def say(self, text: str = "") -> None:
+        if not (self.quiet or self.json):
+            print(text)
+
+    def note(self, text: str) -> None:
+        if not self.quiet:
+            print(f"note: {text}", file=sys.stderr)
+
+    def warn(self, text: str) -> None:
+        print(f"warning: {text}", file=sys.stderr)
+
+    def inputs(self, *spectra: Spectra) -> None:
+        """Report what the readers converted (percent, absolute scale) per file."""
+        for s in spectra:
+            if "note" in s.meta:
+                self.note(f"{s.meta.get('source', '')}: {s.meta['note']}")
+
+    def summary(self, doc: dict[str, Any]) -> None:
+        if self.json:
+            from tunespec.core.limits import dumps_json
+
+            print(dumps_json(doc))
+
+    def progress(self, label: str) -> ProgressFn | None:
+        """A progress callback (none with ``--quiet``)."""
+        if self.quiet:
+            return None
+        # with --json, stdout holds the JSON alone
+        return progress_bar(label, lines_to=sys.stderr if self.json else None)
+
+
+def absolute_sensitivities(path: Path) -> Spectra:
+    """Sensitivities for Eq. 1: any format, refused in relative units without a scale."""
+    from tunespec.core.datasets import read_sensitivities
+
+    sensitivity = read_sensitivities(path)
+    if sensitivity.meta.get("relative"):
+        raise InputError(
+            "sensitivities in relative units (normalised, no absolute scale): Eq. 1 "
+            "needs the calibration's scale; give the sensitivities CSV that "
+            "'tunespec calibrate' wrote, or a rawtoaces JSON written by TuneSpec",
+            path=path,
+        )
+    return sensitivity
+
+
+def resolve_grid(
+    args: argparse.Namespace,
+    inputs: Sequence[tuple[Spectra, bool]],
+    out: Console,
+) -> Grid:
+    """The working grid: ``--grid``, else from the data (printed).
+
+    ``inputs``: each spectral input with whether its step counts
+    (:func:`~tunespec.core.spectra.grid_from_data`; light spectra are band-averaged
+    and pass ``False``).
+    """
+    from tunespec.core.spectra import grid_from_data
+
+    if args.grid is not None:
+        out.say(f"working grid {args.grid} nm (--grid)")
+        return args.grid
+    grid = grid_from_data([s for s, _ in inputs], sets_step=[k for _, k in inputs])
+    out.say(
+        f"working grid {grid} nm (from the data: the range every input covers; "
+        "--grid overrides)"
+    )
+    return grid
+
+
+_OPEN_BARS: list[TerminalProgress] = []
+
+
+class TerminalProgress:
+    """A progress callback (:data:`ProgressFn`) on stderr.
+
+    On a terminal a real progress bar on stderr (``rich``: bar, percentage, elapsed
+    and remaining time); otherwise (logs, CI) a plain line at every 10 % on
+    ``lines_to`` (default stdout, so that stderr keeps to warnings and the one error
+    line), so a log shows how far the work got. :func:`close_progress` stops bars left open by an error.
+    """
+
+    def __init__(
+        self, label: str, *, force: bool = False, lines_to: TextIO | None = None
+    ) -> None:
         self.label = label
-        self.width = width
-        self._tty = sys.stderr.isatty()
-        self._force = force
+        self._tty = sys.stderr.isatty() or force
+        self._lines_to = lines_to
         self._t0 = time.monotonic()
-        self._last_draw = 0.0
         self._last_decile = -1
+        self._bar: Any = None
+        self._task: Any = None
+
+    def _start(self) -> None:
+        from rich.console import Console as RichConsole
+        from rich.progress import (
+            BarColumn,
+            Progress,
+            TaskProgressColumn,
+            TextColumn,
+            TimeElapsedColumn,
+            TimeRemainingColumn,
+        )
+
+        self._bar = Progress(
+            TextColumn("{task.description:<14}"),
+            BarColumn(),
+            TaskProgressColumn(),
+            TimeElapsedColumn(),
+            TimeRemainingColumn(),
+            console=RichConsole(file=sys.stderr),
+        )
+        self._bar.start()
+        self._task = self._bar.add_task(self.label, total=1.0)
+        _OPEN_BARS.append(self)
 
     def __call__(self, fraction: float) -> None:
-        now = time.monotonic()
-        elapsed = now - self._t0
+        fraction = min(max(float(fraction), 0.0), 1.0)
         if self._tty:
-            if fraction < 1.0 and now - self._last_draw < 0.1:
-                return
-            self._last_draw = now
-            filled = round(self.width * fraction)
-            eta = elapsed / fraction * (1 - fraction) if fraction > 0 else float("nan")
-            eta_s = f"{eta:5.0f}s left" if eta == eta else "   ?s left"
-            bar = "#" * filled + "-" * (self.width - filled)
-            sys.stderr.write(f"\r{self.label:<28} [{bar}] {fraction:6.1%} {eta_s}")
+            if self._bar is None:
+                self._start()
+            self._bar.update(self._task, completed=fraction)
             if fraction >= 1.0:
-                sys.stderr.write(
-                    f"\r{self.label:<28} [{bar}] done in {elapsed:.1f}s   \n"
-                )
-            sys.stderr.flush()
-        elif self._force:
-            decile = int(fraction * 10)
-            if decile > self._last_decile:
-                self._last_decile = decile
-                sys.stderr.write(f"{self.label}: {fraction:.0%} ({elapsed:.1f}s)\n")
+                self.close()
+            return
+        decile = int(fraction * 10)
+        if decile > self._last_decile:
+            self._last_decile = decile
+            elapsed = time.monotonic() - self._t0
+            stream = self._lines_to or sys.stdout
+            stream.write(f"{self.label}: {fraction:.0%} ({elapsed:.1f} s)\n")
+            stream.flush()
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.stop()
+            self._bar = None
+            if self in _OPEN_BARS:
+                _OPEN_BARS.remove(self)
 
 
-def progress_bar(label: str) -> ProgressFn:
-    """A terminal progress callback for ``label``."""
-    return TerminalProgress(label)
+def close_progress() -> None:
+    """Stop every progress bar still drawing (a command ended early)."""
+    for bar in list(_OPEN_BARS):
+        bar.close()
+
+
+def progress_bar(label: str, *, lines_to: TextIO | None = None) -> ProgressFn:
+    """A progress callback for ``label`` (:class:`TerminalProgress`)."""
+    return TerminalProgress(label, lines_to=lines_to)

@@ -8,13 +8,28 @@ from typing import Any
 
 import numpy as np
 
-from tunespec.app.cli.common import add_grid_option, progress_bar, seed_arg
-from tunespec.core.datasets import read_sensitivities
+from tunespec.app.cli.common import (
+    Console,
+    absolute_sensitivities,
+    add_grid_option,
+    add_output_options,
+    resolve_grid,
+    seed_arg,
+)
 from tunespec.core.errors import InputError, check_names
 from tunespec.core.io.export import read_sensitivity_meta, write_sensitivities_csv
-from tunespec.core.limits import MAX_REFLECTANCE, dumps_json
-from tunespec.core.responses import Responses, read_responses_csv, write_responses_csv
-from tunespec.core.spectra import Grid, Spectra, read_spectra_csv, write_spectra_csv
+from tunespec.core.io.responses_csv import read_responses_csv, write_responses_csv
+from tunespec.core.io.spectral import read_spectral
+from tunespec.core.io.spectral_csv import write_spectra_csv
+from tunespec.core.limits import dumps_json
+from tunespec.core.responses import Responses
+from tunespec.core.spectra import Grid, Spectra
+
+#: What the spectral options accept (any of these, found from the content).
+SPECTRAL_FORMATS = (
+    "spectral CSV (any separator; wavelengths down or one spectrum per row), "
+    "CGATS (.ti3/.cie/.sp, i1Profiler) or rawtoaces JSON"
+)
 
 #: ``core.sensitivity.SENSITIVITY_METHODS``'s keys (a test checks), named here because
 #: importing the estimators (scipy) would cost ``tunespec --help`` a third of a second.
@@ -29,6 +44,17 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     _add_simulate_responses(sub)
 
 
+def _add_responses_and_illuminants(p: argparse.ArgumentParser) -> None:
+    """``--responses`` and ``--illuminants``, as calibrate and estimate take them."""
+    p.add_argument("--responses", required=True, type=Path, help="responses CSV")
+    p.add_argument(
+        "--illuminants",
+        required=True,
+        type=Path,
+        help="LED spectra: " + SPECTRAL_FORMATS,
+    )
+
+
 def _add_calibrate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """The ``calibrate`` subcommand."""
     p = sub.add_parser(
@@ -37,10 +63,12 @@ def _add_calibrate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> 
         description="Camera sensitivities from chart responses under all LEDs "
         "(paper Eq. 3-4 and better estimators); prints Table 1.",
     )
-    p.add_argument("--responses", required=True, type=Path, help="responses CSV")
-    p.add_argument("--illuminants", required=True, type=Path, help="LED spectra CSV")
+    _add_responses_and_illuminants(p)
     p.add_argument(
-        "--reflectances", required=True, type=Path, help="chart reflectances"
+        "--reflectances",
+        required=True,
+        type=Path,
+        help="chart reflectances, 0-1 or percent (detected): " + SPECTRAL_FORMATS,
     )
     p.add_argument(
         "--method",
@@ -84,6 +112,7 @@ def _add_calibrate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> 
         help="fit without every N-th patch and report Table 1 on them too",
     )
     add_grid_option(p)
+    add_output_options(p)
     p.add_argument("-o", "--output", required=True, type=Path, help="sensitivities CSV")
     p.add_argument("--stats", type=Path, help="write the statistics as JSON")
     p.set_defaults(func=cmd_calibrate, output_files=("output", "stats"))
@@ -97,15 +126,17 @@ def _add_estimate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
         description="Reflectances from responses under all LEDs by Wiener estimation "
         "with patch-wise noise covariance (Eq. 5-6).",
     )
-    p.add_argument("--responses", required=True, type=Path)
-    p.add_argument("--illuminants", required=True, type=Path)
+    _add_responses_and_illuminants(p)
     p.add_argument(
         "--sensitivities",
         required=True,
         type=Path,
-        help="sensitivities CSV (R,G,B columns) or rawtoaces JSON",
+        help="sensitivities with R, G, B: the CSV of 'tunespec calibrate' or its rawtoaces "
+        "JSON ('export-rawtoaces', the demo's sensitivities.json), CGATS",
     )
-    p.add_argument("--prior", type=Path, help="prior reflectances CSV (default: SG)")
+    p.add_argument(
+        "--prior", type=Path, help="prior reflectances (default: the SG), any format"
+    )
     p.add_argument(
         "--noise-std",
         type=float,
@@ -126,6 +157,7 @@ def _add_estimate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
         "SENSITIVITIES.meta.json written by calibrate, else 0)",
     )
     add_grid_option(p)
+    add_output_options(p)
     p.add_argument("-o", "--output", required=True, type=Path)
     p.set_defaults(func=cmd_estimate, output_files=("output",))
 
@@ -136,9 +168,17 @@ def _add_evaluate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
         "evaluate",
         help="spectral RMS and CIEDE2000 (D50) against references (Table 2)",
     )
-    p.add_argument("--estimated", required=True, type=Path)
-    p.add_argument("--reference", required=True, type=Path)
+    p.add_argument(
+        "--estimated",
+        required=True,
+        type=Path,
+        help="reflectances: " + SPECTRAL_FORMATS,
+    )
+    p.add_argument(
+        "--reference", required=True, type=Path, help="references, 0-1 or percent"
+    )
     add_grid_option(p)
+    add_output_options(p)
     p.add_argument("--stats", type=Path, help="write the statistics as JSON")
     p.set_defaults(func=cmd_evaluate, output_files=("stats",))
 
@@ -171,6 +211,7 @@ def _add_simulate_responses(
     p.add_argument("--no-noise", action="store_true")
     p.add_argument("--seed", type=seed_arg, default=0)
     add_grid_option(p)
+    add_output_options(p)
     p.add_argument("-o", "--output", required=True, type=Path)
     p.set_defaults(func=cmd_simulate, output_files=("output", "illuminants_out"))
 
@@ -197,16 +238,23 @@ def _check_names(
     )
 
 
+def _resampled(spectra: Spectra, grid: Grid, *, average: bool = False) -> Spectra:
+    return spectra.resample(grid, source=spectra.meta.get("source"), average=average)
+
+
 def cmd_calibrate(args: argparse.Namespace) -> int:
+    out = Console(args)
     if args.hold_out_every and args.hold_out_every < 2:
         raise InputError(
             f"--hold-out-every {args.hold_out_every}: N must be at least 2 (0: off)"
         )
     responses = read_responses_csv(args.responses)
-    illuminants = read_spectra_csv(args.illuminants, args.grid, average=True)
-    reflectances = read_spectra_csv(
-        args.reflectances, args.grid, max_value=MAX_REFLECTANCE
-    )
+    illum_in = read_spectral(args.illuminants, kind="illuminant")
+    refl_in = read_spectral(args.reflectances, kind="reflectance")
+    out.inputs(illum_in, refl_in)
+    grid = resolve_grid(args, [(illum_in, False), (refl_in, True)], out)
+    illuminants = _resampled(illum_in, grid, average=True)
+    reflectances = _resampled(refl_in, grid)
     # The estimator checks the names of the patches it fits; checking all of them
     # here (held-aside ones included) fails before a fit of several seconds.
     _check_names(
@@ -237,119 +285,167 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         kwargs["n_components"] = args.components
         kwargs["explained_variance"] = args.explained_variance
     est = estimate_camera_sensitivity(
-        fit, illuminants, reflectances, progress=progress_bar("calibrating"), **kwargs
+        fit, illuminants, reflectances, progress=out.progress("calibrating"), **kwargs
     )
     write_sensitivities_csv(args.output, est.sensitivity, est.covariance)
     report = calibration_report(
         est, responses, illuminants, reflectances, held_out_patches=held
     )
-    if est.excluded_patches:
-        print(f"left out (saturated): {', '.join(est.excluded_patches)}")
-    print(report.format_text())
-    if est.spd_shift_nm:
-        print(f"spectroradiometer wavelength shift fitted: {est.spd_shift_nm:+.2f} nm")
-    corr = est.led_correction
-    if corr is not None and corr.gain_std:
-        print("light source self-calibration (gain, wavelength offset per LED):")
-        for j, name in enumerate(corr.names):
-            print(
-                f"  {name:<12} gain {corr.gain[j]:.4f} +- {corr.gain_std[j]:.4f}   "
-                f"offset {corr.shift_nm[j]:+.2f} +- {corr.shift_std_nm[j]:.2f} nm"
-            )
-    print(f"sensitivities written to {args.output}")
-    _write_json(
-        args.stats,
-        {
-            "method": est.method,
-            "params": _jsonable(est.params),
-            "excluded_patches": list(est.excluded_patches),
-            **report.as_dict(),
-        },
-    )
+    _print_calibration(out, est, report)
+    out.say(f"sensitivities written to {args.output}")
+    stats = {
+        "method": est.method,
+        "grid": str(grid),
+        "params": _jsonable(est.params),
+        "excluded_patches": list(est.excluded_patches),
+        **report.as_dict(),
+    }
+    _write_json(args.stats, stats)
+    out.summary({**stats, "output": str(args.output)})
     return 0
 
 
-def cmd_estimate(args: argparse.Namespace) -> int:
-    from tunespec.core.datasets import load_colorchecker_sg
+def _print_calibration(out: Console, est: Any, report: Any) -> None:
+    """Table 1 and the light source's corrections, as text."""
+    if est.excluded_patches:
+        out.say(f"left out (saturated): {', '.join(est.excluded_patches)}")
+    out.say(report.format_text())
+    if est.spd_shift_nm:
+        out.say(
+            f"spectroradiometer wavelength shift fitted: {est.spd_shift_nm:+.2f} nm"
+        )
+    corr = est.led_correction
+    if corr is not None and corr.gain_std:
+        out.say("light source self-calibration (gain, wavelength offset per LED):")
+        for j, name in enumerate(corr.names):
+            out.say(
+                f"  {name:<12} gain {corr.gain[j]:.4f} +- {corr.gain_std[j]:.4f}   "
+                f"offset {corr.shift_nm[j]:+.2f} +- {corr.shift_std_nm[j]:.2f} nm"
+            )
 
+
+def _prior(path: Path | None) -> Spectra:
+    """The Wiener prior: the file given, else the shipped ColorChecker SG."""
+    if path is not None:
+        return read_spectral(path, kind="reflectance")
+    from tunespec.core.datasets import resource_path
+
+    return read_spectral(
+        resource_path("charts", "colorchecker_sg.csv"), kind="reflectance"
+    )
+
+
+def cmd_estimate(args: argparse.Namespace) -> int:
+    out = Console(args)
     responses = read_responses_csv(args.responses)
-    reported = read_spectra_csv(args.illuminants, args.grid, average=True)
-    sensitivity = read_sensitivities(args.sensitivities, args.grid)
+    reported = read_spectral(args.illuminants, kind="illuminant")
+    sensitivity = absolute_sensitivities(args.sensitivities)
+    prior = _prior(args.prior)
+    out.inputs(reported, sensitivity, prior)
+    grid = resolve_grid(
+        args, [(reported, False), (sensitivity, True), (prior, True)], out
+    )
     # imported after the inputs are read (scipy): an error in them is reported at once
     from tunespec.core.sensitivity import correct_illuminants_from_meta
-    from tunespec.core.wiener import wiener_reflectance
+    from tunespec.core.wiener import integration_grid, wiener_reflectance
 
     meta = read_sensitivity_meta(args.sensitivities)
-    illuminants = correct_illuminants_from_meta(reported, meta, args.spd_shift_nm)
-    prior = (
-        read_spectra_csv(args.prior, args.grid, max_value=MAX_REFLECTANCE)
-        if args.prior
-        else load_colorchecker_sg(args.grid)
-    )
+    # corrected on the spectra's own grid, then resampled: as the main job does;
+    # Eq. 1 integrated on the sensitivities' (finer) grid, reflectance on `grid`
+    corrected = correct_illuminants_from_meta(reported, meta, args.spd_shift_nm)
+    fine = integration_grid(sensitivity, grid, corrected)
     est = wiener_reflectance(
         responses,
-        illuminants,
-        sensitivity,
-        prior,
+        _resampled(corrected, fine, average=True),
+        _resampled(sensitivity, fine),
+        _resampled(prior, grid),
         noise_std=args.noise_std,
         center_prior=not args.uncentred_prior,
         clip=not args.no_clip,
     )
     write_spectra_csv(est.reflectance, args.output)
+    files = {"reflectances": str(args.output)}
     if "covariance" in meta and args.spd_shift_nm is None and args.noise_std is None:
-        _write_uncertainty(args, est, responses, prior, meta)
+        files.update(_write_uncertainty(args, meta, est, responses, reported))
+    _write_json(
+        _meta_path(args.output),
+        {"grid": str(grid), "sensitivities": str(args.sensitivities), **files},
+    )
     if est.clipped:
-        print(
+        out.warn(
             f"clipped to [0, 1]: {est.n_clipped_samples} sample(s) in "
             f"{len(est.clipped)} patch(es): {', '.join(est.clipped[:10])}"
             f"{' ...' if len(est.clipped) > 10 else ''}"
         )
-    print(f"{len(est.reflectance)} reflectances written to {args.output}")
+    out.say(f"{len(est.reflectance)} reflectances written to {args.output}")
+    out.summary(
+        {
+            "grid": str(grid),
+            "patches": list(est.reflectance.names),
+            "clipped": list(est.clipped),
+            "n_clipped_samples": int(est.n_clipped_samples),
+            "files": files,
+        }
+    )
     return 0
 
 
+def _meta_path(path: Path) -> Path:
+    return path.with_name(path.name + ".meta.json")
+
+
 def _write_uncertainty(
-    args: argparse.Namespace, est: Any, responses: Responses, prior: Spectra, meta: dict
-) -> None:
+    args: argparse.Namespace,
+    meta: dict[str, Any],
+    est: Any,
+    responses: Responses,
+    reported: Spectra,
+) -> dict[str, str]:
     """Standard uncertainties beside the reflectances (see the README's formats)."""
     from tunespec.core.io.export import write_colorimetry_csv
     from tunespec.core.sensitivity import calibration_from_files
     from tunespec.core.uncertainty import reflectance_uncertainty
 
     calibration = calibration_from_files(args.sensitivities, meta)
-    wl = calibration.sensitivity.wavelength_nm
-    reported = read_spectra_csv(
-        args.illuminants,
-        Grid(float(wl[0]), float(wl[-1]), calibration.sensitivity.step_nm),
-        average=True,
-    )
-    unc = reflectance_uncertainty(est, responses, reported, calibration, prior)
+    unc = reflectance_uncertainty(est, responses, reported, calibration)
     u_path = args.output.with_name(args.output.stem + "_uncertainty.csv")
     write_spectra_csv(est.reflectance.with_values(unc.reflectance_std), u_path)
     lab_path = args.output.with_name(args.output.stem + "_colorimetry.csv")
     write_colorimetry_csv(lab_path, est.reflectance.names, unc)
-    print(f"standard uncertainties written to {u_path} and {lab_path}")
+    Console(args).say(f"standard uncertainties written to {u_path} and {lab_path}")
+    return {"uncertainty": str(u_path), "colorimetry": str(lab_path)}
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from tunespec.core.colorimetry import reflectance_stats
 
-    estimated = read_spectra_csv(args.estimated, args.grid, max_value=MAX_REFLECTANCE)
-    reference = read_spectra_csv(args.reference, args.grid, max_value=MAX_REFLECTANCE)
-    stats = reflectance_stats(estimated, reference)
-    print(stats.format_table())
-    _write_json(args.stats, stats.as_dict())
+    out = Console(args)
+    estimated = read_spectral(args.estimated, kind="reflectance")
+    reference = read_spectral(args.reference, kind="reflectance")
+    out.inputs(estimated, reference)
+    grid = resolve_grid(args, [(estimated, True), (reference, True)], out)
+    stats = reflectance_stats(_resampled(estimated, grid), _resampled(reference, grid))
+    out.say(stats.format_table())
+    doc = {"grid": str(grid), **stats.as_dict()}
+    _write_json(args.stats, doc)
+    out.summary(doc)
     return 0
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     from tunespec.core.simulate import NoiseModel, scale_to_exposure, simulate_responses
 
-    sensitivity = read_sensitivities(args.sensitivities, args.grid)
-    illuminants = read_spectra_csv(args.illuminants, args.grid, average=True)
-    reflectances = read_spectra_csv(
-        args.reflectances, args.grid, max_value=MAX_REFLECTANCE
+    out = Console(args)
+    sens_in = absolute_sensitivities(args.sensitivities)
+    illum_in = read_spectral(args.illuminants, kind="illuminant")
+    refl_in = read_spectral(args.reflectances, kind="reflectance")
+    out.inputs(sens_in, illum_in, refl_in)
+    grid = resolve_grid(
+        args, [(sens_in, True), (illum_in, False), (refl_in, True)], out
     )
+    sensitivity = _resampled(sens_in, grid)
+    illuminants = _resampled(illum_in, grid, average=True)
+    reflectances = _resampled(refl_in, grid)
     if args.exposure_target is not None:
         illuminants = scale_to_exposure(
             reflectances, illuminants, sensitivity, target=args.exposure_target
@@ -375,9 +471,18 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     )
     write_responses_csv(responses, args.output)
     n_sat = 0 if responses.saturated is None else int(np.sum(responses.saturated > 0))
-    print(
+    out.say(
         f"{len(responses.patches)} patches x {len(responses.illuminants)} illuminants "
         f"written to {args.output}" + (f" ({n_sat} saturated)" if n_sat else "")
+    )
+    out.summary(
+        {
+            "grid": str(grid),
+            "patches": len(responses.patches),
+            "illuminants": len(responses.illuminants),
+            "saturated": n_sat,
+            "output": str(args.output),
+        }
     )
     return 0
 

@@ -76,6 +76,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="drop the connection on the request after the N-th",
     )
     cal1.set_defaults(func=_emulate_cal1)
+    from tunespec.app.cli.gonio_cmds import add_zaber_emulator
+
+    add_zaber_emulator(devices, _port)
 
 
 FAULT_KINDS = ("delay", "no_reply", "drop", "garbage", "error")

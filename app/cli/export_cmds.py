@@ -13,11 +13,16 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from tunespec.app.cli.common import grid_arg
+from tunespec.app.cli.common import (
+    Console,
+    absolute_sensitivities,
+    add_output_options,
+    grid_arg,
+)
 from tunespec.core.datasets import read_sensitivities
 from tunespec.core.errors import InputError, read_json
-from tunespec.core.limits import MAX_REFLECTANCE
-from tunespec.core.spectra import Grid, Spectra, read_spectra_csv
+from tunespec.core.io.spectral import read_spectral
+from tunespec.core.spectra import Grid, Spectra
 
 __all__ = ["register"]
 
@@ -30,9 +35,19 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         description="Write reflectances as an ArgyllCMS .ti3 (CGATS): SAMPLE_ID, "
         "SAMPLE_NAME, RGB_R/G/B (percent of full scale, from --responses), XYZ "
         "and L*a*b* (D50, CIE 1931 2°, ASTM E308, ICC D50 white) and SPEC_nnn "
-        "(percent). ArgyllCMS spec2cie, colverify and colprof read it.",
+        "(percent). ArgyllCMS spec2cie (recomputes XYZ/L*a*b* from the spectra) and "
+        "colverify (CIEDE2000 between two such files) read every one; colprof needs "
+        "device values, so only a file written with --responses and --illuminant "
+        "(COLOR_REP XYZ_RGB); for a camera profile from the whole chart use "
+        "'tunespec export-camera' (chart_camera.ti3). TuneSpec's own commands read "
+        "it back as reflectances.",
     )
-    p.add_argument("--reflectances", required=True, type=Path, help="spectral CSV")
+    p.add_argument(
+        "--reflectances",
+        required=True,
+        type=Path,
+        help="reflectances, 0-1 or percent (detected): spectral CSV, CGATS or JSON",
+    )
     p.add_argument(
         "--responses", type=Path, help="responses CSV: adds RGB_R/G/B (percent)"
     )
@@ -46,6 +61,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     p.add_argument("--descriptor", default="TuneSpec reflectances", help="DESCRIPTOR")
     p.add_argument("-o", "--output", required=True, type=Path, help=".ti3 file")
+    add_output_options(p)
     p.set_defaults(func=cmd_export_cgats, output_files=("output",))
 
     p = sub.add_parser(
@@ -54,9 +70,18 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         description="Write camera sensitivities (CSV with R, G, B columns) in the "
         "rawtoaces-data camera JSON schema, normalised to peak 1, on 380-780 nm at "
         "5 nm as rawtoaces requires (interpolated linearly; 0 where the file has "
-        "no data, which the header's comments say).",
+        "no data, which the header's comments say, with the absolute scale). "
+        "rawtoaces reads it from its camera data folder; TuneSpec's estimate, "
+        "simulate-responses and report read it back on the absolute scale.",
     )
-    p.add_argument("--sensitivities", required=True, type=Path, help="R,G,B CSV")
+    p.add_argument(
+        "--sensitivities",
+        required=True,
+        type=Path,
+        help="R, G, B sensitivities (the CSV of 'tunespec calibrate', or any format "
+        "with those channels); its .meta.json (LED corrections) is copied beside "
+        "the JSON",
+    )
     p.add_argument("--manufacturer", default="", help='e.g. "Canon"')
     p.add_argument("--model", default="", help='e.g. "EOS 5D Mark III"')
     p.add_argument(
@@ -69,7 +94,10 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "(the only grid rawtoaces reads)",
     )
     p.add_argument("-o", "--output", required=True, type=Path, help="JSON file")
+    add_output_options(p)
     p.set_defaults(func=cmd_export_rawtoaces, output_files=("output",))
+
+    _add_export_camera(sub)
 
     p = sub.add_parser(
         "report",
@@ -105,6 +133,90 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.set_defaults(func=cmd_report, output_dirs=("out",))
 
 
+def _add_export_camera(
+    sub: argparse._SubParsersAction[argparse.ArgumentParser],
+) -> None:
+    p = sub.add_parser(
+        "export-camera",
+        help="the chart's camera .ti3 for ArgyllCMS colprof, ACES IDT and 3x3 CCMs",
+        description="From a chart's responses under all LEDs and the calibration: "
+        "chart_camera.ti3 (every patch's camera RGB under --under, with its "
+        "reference spectrum, XYZ and L*a*b* D50), which ArgyllCMS colprof turns into "
+        "an ICC input profile ('colprof -a m -O camera.icc chart_camera') and "
+        "profcheck checks ('profcheck chart_camera.ti3 camera.icc'); and "
+        "camera_transforms.json/.csv: the ACES IDT (colour-science matrix_idt, D55) "
+        "and white-preserving 3x3 colour-correction matrices for D50, D65 and A with "
+        "their CIEDE2000 training (chart) and test (190 rawtoaces reflectances) "
+        "errors.",
+    )
+    p.add_argument("--responses", required=True, type=Path, help="chart responses CSV")
+    p.add_argument(
+        "--illuminants", required=True, type=Path, help="the chart's LED spectra"
+    )
+    p.add_argument(
+        "--reflectances",
+        required=True,
+        type=Path,
+        help="the chart's reference reflectances (any format, 0-1 or percent)",
+    )
+    p.add_argument(
+        "--sensitivities", required=True, type=Path, help="calibrated sensitivities"
+    )
+    p.add_argument(
+        "--under",
+        default="D50",
+        help="the light of the camera RGB: D50, D65 or A (the LEDs mixed to match "
+        "it) or one LED's name (its responses as measured); default D50",
+    )
+    p.add_argument("-o", "--out", required=True, type=Path, help="output folder")
+    add_output_options(p)
+    p.set_defaults(func=cmd_export_camera, output_dirs=("out",))
+
+
+def cmd_export_camera(args: argparse.Namespace) -> int:
+    from tunespec.core.io.cgats import write_cgats
+    from tunespec.core.io.export import (
+        CAMERA_EXPORT_NAMES,
+        camera_ti3,
+        camera_transforms,
+        write_camera_transforms,
+    )
+    from tunespec.core.responses import read_responses_csv
+
+    out = Console(args)
+    responses = read_responses_csv(args.responses)
+    illuminants = read_spectral(args.illuminants, kind="illuminant")
+    chart = read_spectral(args.reflectances, kind="reflectance")
+    sens = absolute_sensitivities(args.sensitivities)
+    out.inputs(illuminants, chart, sens)
+    args.out.mkdir(parents=True, exist_ok=True)
+    paths = {k: args.out / v for k, v in CAMERA_EXPORT_NAMES.items()}
+    table = camera_ti3(chart, responses, illuminants, under=args.under)
+    write_cgats(table, paths["chart_camera_ti3"])
+    transforms = camera_transforms(sens, chart)
+    write_camera_transforms(
+        transforms, paths["camera_transforms_json"], paths["camera_transforms_csv"]
+    )
+    ti3 = paths["chart_camera_ti3"]
+    out.say(f"{len(table)} patches with camera RGB under {args.under}: {ti3}")
+    for t in transforms:
+        out.say(
+            f"{t.kind:<8} {t.illuminant:<4} CIEDE2000 mean/max: training "
+            f"{t.training['mean_de00']:.2f}/{t.training['max_de00']:.2f} "
+            f"({t.training['set']}), test {t.test['mean_de00']:.2f}/"
+            f"{t.test['max_de00']:.2f} ({t.test['set']})"
+        )
+    out.summary(
+        {
+            "patches": len(table),
+            "under": args.under,
+            "transforms": [t.as_dict() for t in transforms],
+            "files": {k: str(v) for k, v in paths.items()},
+        }
+    )
+    return 0
+
+
 def _add_optional_grid(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--grid",
@@ -120,9 +232,9 @@ def cmd_export_cgats(args: argparse.Namespace) -> int:
     from tunespec.core.io.export import reflectance_ti3
     from tunespec.core.responses import read_responses_csv
 
-    reflectance = read_spectra_csv(
-        args.reflectances, args.grid, max_value=MAX_REFLECTANCE
-    )
+    out = Console(args)
+    reflectance = read_spectral(args.reflectances, args.grid, kind="reflectance")
+    out.inputs(reflectance)
     responses = None if args.responses is None else read_responses_csv(args.responses)
     if args.illuminant and responses is None:
         raise InputError("--illuminant needs --responses")
@@ -136,17 +248,29 @@ def cmd_export_cgats(args: argparse.Namespace) -> int:
     write_cgats(table, args.output)
     fields = "names" + (", RGB" if table.rgb is not None else "") + ", XYZ, Lab"
     fields += "" if args.no_spectra else f", {reflectance.wavelength_nm.size} bands"
-    print(f"{len(table)} patches ({fields}) written to {args.output}")
+    out.say(f"{len(table)} patches ({fields}) written to {args.output}")
+    out.summary(
+        {
+            "patches": len(table),
+            "rgb": table.rgb is not None,
+            "bands": 0 if args.no_spectra else int(reflectance.wavelength_nm.size),
+            "output": str(args.output),
+        }
+    )
     return 0
 
 
 def cmd_export_rawtoaces(args: argparse.Namespace) -> int:
+    import shutil
+
     from tunespec.core.io.export import (
         RAWTOACES_GRID,
+        sensitivity_meta_path,
         tunespec_version,
         write_sensitivity_json,
     )
 
+    out = Console(args)
     sens = read_sensitivities(args.sensitivities, None)
     grid = None if args.keep_grid else RAWTOACES_GRID
     write_sensitivity_json(
@@ -158,10 +282,21 @@ def cmd_export_rawtoaces(args: argparse.Namespace) -> int:
         measurement_equipment=f"TuneSpec {tunespec_version()}",
         grid=grid,
     )
+    meta = sensitivity_meta_path(args.sensitivities)
+    if meta.is_file():
+        # LED corrections and covariance: 'estimate' finds them beside the JSON
+        shutil.copyfile(meta, sensitivity_meta_path(args.output))
     wl = sens.wavelength_nm if grid is None else grid.wavelength_nm
-    print(
+    out.say(
         f"sensitivities ({wl.size} wavelengths, {wl[0]:g}-{wl[-1]:g} nm) written to "
         f"{args.output}"
+    )
+    out.summary(
+        {
+            "wavelengths": int(wl.size),
+            "range_nm": [float(wl[0]), float(wl[-1])],
+            "output": str(args.output),
+        }
     )
     return 0
 
@@ -184,12 +319,10 @@ def cmd_report(args: argparse.Namespace) -> int:
     grid = args.grid
     data: dict[str, Any] = {"title": args.title, "session_id": args.session_id}
     if args.reflectances:
-        data["reflectance"] = read_spectra_csv(
-            args.reflectances, grid, max_value=MAX_REFLECTANCE
-        )
+        data["reflectance"] = read_spectral(args.reflectances, grid, kind="reflectance")
     if args.reference:
-        data["reflectance_reference"] = read_spectra_csv(
-            args.reference, grid, max_value=MAX_REFLECTANCE
+        data["reflectance_reference"] = read_spectral(
+            args.reference, grid, kind="reflectance"
         )
     if args.sensitivities:
         data["sensitivity"] = read_sensitivities(args.sensitivities, grid)
@@ -198,7 +331,7 @@ def cmd_report(args: argparse.Namespace) -> int:
             args.reference_sensitivities, grid
         )
     if args.illuminants:
-        data["illuminants"] = read_spectra_csv(args.illuminants, grid, average=True)
+        data["illuminants"] = read_spectral(args.illuminants, grid, kind="illuminant")
     if args.responses:
         data["responses"] = read_responses_csv(args.responses)
     if "reflectance" in data and "reflectance_reference" in data:
@@ -239,16 +372,15 @@ def _table1_from_files(
     sens: Spectra = data["sensitivity"]
     wl = sens.wavelength_nm
     work = Grid(float(wl[0]), float(wl[-1]), sens.step_nm) if grid is None else grid
-    chart = read_spectra_csv(args.chart, work).select(
+    chart = read_spectral(args.chart, work, kind="reflectance").select(
         responses.patches, source=str(args.chart)
     )
     illum = data["illuminants"].resample(work, source=str(args.illuminants))
     illum = illum.select(responses.illuminants, source=str(args.illuminants))
     # The SPD shift fitted with the sensitivities (their .meta.json) is undone on the
     # LED spectra, as 'calibrate' did for its Table 1 and 'estimate' does.
-    if args.sensitivities.suffix.lower() != ".json":
-        meta = read_sensitivity_meta(args.sensitivities)
-        illum = correct_illuminants_from_meta(illum, meta)
+    meta = read_sensitivity_meta(args.sensitivities)
+    illum = correct_illuminants_from_meta(illum, meta)
     sens = sens.resample(work, source=str(args.sensitivities))
     predicted = predict_responses(sens, illum, chart)
     return prediction_stats(responses.rgb, predicted.rgb)

@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 
-from tunespec.app.cli.common import progress_bar, seed_arg
+from tunespec.app.cli.common import Console, add_output_options, seed_arg
 from tunespec.core.errors import InputError
 from tunespec.core.io.session import Session, SessionLock
 from tunespec.core.layout import TargetLayout
@@ -81,6 +80,7 @@ def _add_demo(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         f"{DEMO_RESOLUTION[1]}; the 5D Mark III has 5760x3840)",
     )
     p.add_argument("--no-report", action="store_true", help="skip the HTML/PDF report")
+    add_output_options(p)
     p.set_defaults(func=cmd_demo, output_dirs=("out",))
 
 
@@ -147,6 +147,7 @@ def _add_capture(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
         help="simulated camera resolution",
     )
     p.add_argument("--seed", type=seed_arg, default=0, help="simulation seed")
+    add_output_options(p)
     p.set_defaults(func=cmd_capture, output_dirs=("out",))
 
 
@@ -188,6 +189,7 @@ def _add_process(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
         help="leave out channels with missing frames",
     )
     p.add_argument("--verify", action="store_true", help="check file checksums first")
+    add_output_options(p)
     p.set_defaults(func=cmd_process, output_files=("output", "illuminants_out"))
 
 
@@ -208,35 +210,43 @@ def _add_run(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="print an example configuration with every key and its default "
         "(it runs on the simulated bench as it is) and exit",
     )
+    add_output_options(p)
     p.set_defaults(func=cmd_run)
 
 
-def _print_result(result: object, wall_s: float) -> None:
-    print(result.format_text())  # type: ignore[attr-defined]
+def _print_result(out: Console, result: object, wall_s: float) -> None:
+    out.say(result.format_text())  # type: ignore[attr-defined]
     for w in result.warnings:  # type: ignore[attr-defined]
-        print(f"warning: {w}", file=sys.stderr)
+        out.warn(w)
     files = result.files  # type: ignore[attr-defined]
-    print(
+    out.say(
         f"\n{len(files)} files in {result.out_dir}, e.g. "  # type: ignore[attr-defined]
         + ", ".join(p.name for p in list(files.values())[:6])
     )
     if "report_html" in files:
-        print(f"report: {files['report_html']}")
-    print(f"done in {wall_s:.1f} s")
+        out.say(f"report: {files['report_html']}")
+    out.say(f"done in {wall_s:.1f} s")
+    out.summary(
+        {
+            **result.summary(),  # type: ignore[attr-defined]
+            "files": {k: str(v) for k, v in files.items()},
+        }
+    )
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
     from tunespec.app.pipeline.run import run_demo
 
+    out = Console(args)
     t0 = time.perf_counter()
     result = run_demo(
         args.out,
-        progress=progress_bar("demo"),
+        progress=out.progress("demo"),
         seed=args.seed,
         resolution=args.resolution,
         report_files=not args.no_report,
     )
-    _print_result(result, time.perf_counter() - t0)
+    _print_result(out, result, time.perf_counter() - t0)
     return 0
 
 
@@ -251,6 +261,7 @@ def cmd_capture(args: argparse.Namespace) -> int:
 
 
 def _capture_cmd(args: argparse.Namespace, resume: bool) -> int:
+    out = Console(args)
     from tunespec.devices.capture import capture, new_session
     from tunespec.devices.registry import open_bench
 
@@ -297,12 +308,20 @@ def _capture_cmd(args: argparse.Namespace, resume: bool) -> int:
             resume=resume,
             retake=args.retake,
             max_exposure_s=args.max_exposure,
-            progress=progress_bar("capturing"),
-            on_warning=lambda w: print(f"warning: {w}", file=sys.stderr),
+            progress=out.progress("capturing"),
+            on_warning=out.warn,
         )
-    print(
+    out.say(
         f"{len(result.captured)} frame(s) captured, {result.skipped} already there; "
         f"session {args.out} is complete"
+    )
+    out.summary(
+        {
+            "captured": len(result.captured),
+            "skipped": result.skipped,
+            "session": str(args.out),
+            "warnings": list(result.warnings),
+        }
     )
     return 0
 
@@ -328,6 +347,7 @@ def cmd_process(args: argparse.Namespace) -> int:
         args.output.stem + "_illuminants.csv"
     )
     check_output_file(illum, "--illuminants-out")
+    out = Console(args)
     session = Session.open(args.session)
     layout = TargetLayout.load(args.layout) if args.layout else None
     processed = process_session(
@@ -337,19 +357,29 @@ def cmd_process(args: argparse.Namespace) -> int:
         roi_fraction=args.roi_fraction,
         allow_incomplete=args.allow_incomplete,
         verify=args.verify,
-        progress=progress_bar("processing"),
+        progress=out.progress("processing"),
     )
     write_processed(processed, args.output, illum)
     for w in processed.warnings:
-        print(f"warning: {w}", file=sys.stderr)
+        out.warn(w)
     r = processed.responses
     corners = processed.layout.corners_px or ()
-    print(
+    out.say(
         f"{len(r.patches)} patches x {len(r.illuminants)} illuminants; corners "
         f"({processed.corners_source}): "
         + " ".join(f"({x:.1f},{y:.1f})" for x, y in corners)
     )
-    print(f"responses written to {args.output}, illuminants to {illum}")
+    out.say(f"responses written to {args.output}, illuminants to {illum}")
+    out.summary(
+        {
+            "patches": len(r.patches),
+            "illuminants": len(r.illuminants),
+            "corners_source": processed.corners_source,
+            "corners_px": [list(map(float, c)) for c in corners],
+            "warnings": list(processed.warnings),
+            "files": {"responses": str(args.output), "illuminants": str(illum)},
+        }
+    )
     return 0
 
 
@@ -365,7 +395,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         )
     from tunespec.app.pipeline.run import run_config
 
+    out = Console(args)
     t0 = time.perf_counter()
-    result = run_config(args.config, progress=progress_bar("run"))
-    _print_result(result, time.perf_counter() - t0)
+    result = run_config(args.config, progress=out.progress("run"))
+    _print_result(out, result, time.perf_counter() - t0)
     return 0

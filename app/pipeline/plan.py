@@ -17,6 +17,7 @@ from typing import Any
 
 from tunespec.core.datasets import resource_path
 from tunespec.core.errors import InputError
+from tunespec.core.io.spectral import read_spectral
 from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import (
     check_output_dir,
@@ -262,7 +263,8 @@ def plan_from_config(config: Mapping[str, Any] | str | PathLike[str]) -> Plan:
 
     def spectra(p: str | None) -> Spectra | None:
         q = rel(p)
-        return None if q is None else read_spectra_csv(q, grid)
+        # reflectances, references and priors: any format, percent detected
+        return None if q is None else read_spectral(q, grid, kind="reflectance")
 
     c_refl = spectra(chart_cfg.get("reflectances"))
     if c_refl is None and chart_path is not None:

@@ -131,7 +131,8 @@ class RunResult:
 
     def format_text(self) -> str:
         """Table 1 and Table 2 as the terminal shows them."""
-        parts = [self.table1.format_table("Table 1 - ColorChecker SG, RGB prediction")]
+        chart = self.chart.layout.name
+        parts = [self.table1.format_table(f"Table 1 - {chart}, RGB prediction")]
         if self.table2 is not None:
             parts.append(
                 "Table 2 - sample target vs. reference (CIEDE2000 D50, spectral RMS)\n"
@@ -446,6 +447,7 @@ def _run_on(
             sessions={"chart": folder.chart_dir, "sample": folder.sample_dir},
             input_files=plan.input_files,
             threshold_rgb_mean=DEFAULT_THRESHOLD_RGB_MEAN,
+            chart_reflectances=plan.chart_reflectances,
         ),
     )
     if sample_bench is not bench:

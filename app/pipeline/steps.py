@@ -32,6 +32,7 @@ from tunespec.core.colorimetry import ReflectanceStats, reflectance_stats
 from tunespec.core.datasets import load_colorchecker_sg
 from tunespec.core.errors import InputError
 from tunespec.core.io.export import (
+    export_camera_characterisation,
     export_measurement,
     write_colorimetry_csv,
 )
@@ -389,23 +390,24 @@ def estimate(
     """
     from tunespec.core.sensitivity import correct_illuminants_from_meta
     from tunespec.core.uncertainty import reflectance_uncertainty
-    from tunespec.core.wiener import wiener_reflectance
+    from tunespec.core.wiener import integration_grid, wiener_reflectance
 
     prior = prior if prior is not None else load_colorchecker_sg(grid)
     illuminants = correct_illuminants_from_meta(
         sample.illuminants, sensitivity.meta, spd_shift_nm
     )
+    fine = integration_grid(sensitivity, grid, illuminants)
     est = wiener_reflectance(
         sample.responses,
-        illuminants.resample(grid, average=True),
-        sensitivity.resample(grid),
+        illuminants.resample(fine, average=True),
+        sensitivity.resample(fine),
         prior.resample(grid),
     )
     table2 = None if reference is None else evaluate(est.reflectance, reference)
     unc = None
     if calibration is not None and calibration.covariance is not None:
         unc = reflectance_uncertainty(
-            est, sample.responses, sample.illuminants, calibration, prior.resample(grid)
+            est, sample.responses, sample.illuminants, calibration
         )
     return Estimation(est, table2, unc)
 
@@ -432,8 +434,14 @@ def export(
     sessions: Mapping[str, str | PathLike[str]] | None = None,
     input_files: Sequence[str | PathLike[str]] = (),
     threshold_rgb_mean: float | None = None,
+    chart_reflectances: Spectra | None = None,
 ) -> dict[str, Path]:
     """Write every export (``core.io.export``) and, if asked, the HTML/PDF report.
+
+    The chart's camera ``.ti3`` (for ArgyllCMS ``colprof``) and the camera transforms
+    (ACES IDT, CCMs for D50/D65/A) come from ``chart_reflectances`` (default: the
+    ColorChecker SG) and the calibration
+    (:func:`~tunespec.core.io.export.export_camera_characterisation`).
 
     Files: the chart's ``chart_responses.csv`` / ``chart_illuminants.csv``, the
     ``core.io.export`` set (sensitivities, reflectances, the sample's responses and
@@ -469,6 +477,17 @@ def export(
             sensitivity_covariance=calibration.estimate.covariance,
         )
     )
+    files.update(
+        export_camera_characterisation(
+            out,
+            sensitivity=calibration.sensitivity,
+            chart=chart_reflectances
+            if chart_reflectances is not None
+            else load_colorchecker_sg(),
+            responses=chart.responses,
+            illuminants=chart.illuminants,
+        )
+    )
     unc = estimation.uncertainty
     if unc is not None:
         names = estimation.reflectance.names
@@ -481,41 +500,79 @@ def export(
             out / "colorimetry.csv", names, unc
         )
     if report:
-        from tunespec.app.report.report import ReportData, write_report
-        from tunespec.core.io.session import sha256_file
-
-        items, exposures, inputs = session_provenance(sessions or {})
-        inputs += [(str(Path(f).resolve()), sha256_file(f)) for f in input_files]
-        data = ReportData(
-            title="TuneSpec measurement report",
-            devices={k: dict(v) for k, v in (devices or {}).items()},
-            settings=dict(settings or {}),
-            illuminants=sample.illuminants,
-            sensitivity=calibration.sensitivity,
-            sensitivity_reference=truth_sensitivity,
-            sensitivity_reference_label="simulation truth",
-            sensitivity_method=str(calibration.estimate.method),
-            reflectance=estimation.reflectance,
-            reflectance_reference=reference,
-            table1=calibration.table1,
-            table2=estimation.table2,
-            responses=chart.responses,
-            excluded_patches=tuple(calibration.estimate.excluded_patches),
-            clipped_patches=tuple(estimation.wiener.clipped),
-            sensitivity_std=calibration.estimate.std,
-            reflectance_std=None if unc is None else unc.reflectance_std,
-            lab=None if unc is None else unc.lab,
-            lab_std=None if unc is None else unc.lab_std,
-            led_correction=calibration.estimate.led_correction,
-            flags=tuple(warnings),
-            exports={k: p.name for k, p in files.items()},
+        files["report_html"], files["report_pdf"] = _write_report(
+            out,
+            files,
+            calibration=calibration,
+            estimation=estimation,
+            chart=chart,
+            sample=sample,
+            reference=reference,
+            truth_sensitivity=truth_sensitivity,
+            devices=devices or {},
+            settings=settings or {},
+            warnings=warnings,
+            provenance=provenance or {},
+            sessions=sessions or {},
+            input_files=input_files,
             threshold_rgb_mean=threshold_rgb_mean,
-            table1_patches=calibration.patch_rgb_error,
-            chart_layout=chart.layout,
-            provenance={**dict(provenance or {}), **items},
-            exposures_s=exposures,
-            input_files=tuple(inputs),
         )
-        html, pdf = write_report(out, data)
-        files["report_html"], files["report_pdf"] = html, pdf
     return files
+
+
+def _write_report(
+    out: Path,
+    files: Mapping[str, Path],
+    *,
+    calibration: Calibration,
+    estimation: Estimation,
+    chart: ProcessedSession,
+    sample: ProcessedSession,
+    reference: Spectra | None,
+    truth_sensitivity: Spectra | None,
+    devices: Mapping[str, Mapping[str, str]],
+    settings: Mapping[str, str],
+    warnings: Sequence[str],
+    provenance: Mapping[str, str],
+    sessions: Mapping[str, str | PathLike[str]],
+    input_files: Sequence[str | PathLike[str]],
+    threshold_rgb_mean: float | None,
+) -> tuple[Path, Path]:
+    """``report.html`` and ``report.pdf`` of :func:`export` (``app.report``)."""
+    from tunespec.app.report.report import ReportData, write_report
+    from tunespec.core.io.session import sha256_file
+
+    unc = estimation.uncertainty
+    items, exposures, inputs = session_provenance(sessions)
+    inputs += [(str(Path(f).resolve()), sha256_file(f)) for f in input_files]
+    data = ReportData(
+        title="TuneSpec measurement report",
+        devices={k: dict(v) for k, v in devices.items()},
+        settings=dict(settings),
+        illuminants=sample.illuminants,
+        sensitivity=calibration.sensitivity,
+        sensitivity_reference=truth_sensitivity,
+        sensitivity_reference_label="simulation truth",
+        sensitivity_method=str(calibration.estimate.method),
+        reflectance=estimation.reflectance,
+        reflectance_reference=reference,
+        table1=calibration.table1,
+        table2=estimation.table2,
+        responses=chart.responses,
+        excluded_patches=tuple(calibration.estimate.excluded_patches),
+        clipped_patches=tuple(estimation.wiener.clipped),
+        sensitivity_std=calibration.estimate.std,
+        reflectance_std=None if unc is None else unc.reflectance_std,
+        lab=None if unc is None else unc.lab,
+        lab_std=None if unc is None else unc.lab_std,
+        led_correction=calibration.estimate.led_correction,
+        flags=tuple(warnings),
+        exports={k: p.name for k, p in files.items()},
+        threshold_rgb_mean=threshold_rgb_mean,
+        table1_patches=calibration.patch_rgb_error,
+        chart_layout=chart.layout,
+        provenance={**dict(provenance), **items},
+        exposures_s=exposures,
+        input_files=tuple(inputs),
+    )
+    return write_report(out, data)

@@ -574,6 +574,75 @@ def _check_fields(fields: list[str], *, path: str | None, lineno: int) -> None:
         raise InputError(f"duplicate field(s) {', '.join(dup)}", path=path, line=lineno)
 
 
+def _text_fields(
+    fields: list[str],
+    rows: list[tuple[str, ...]],
+    row_lines: list[int],
+    quoted: set[int],
+    *,
+    path: str | None,
+) -> set[str]:
+    """The fields holding text; numbers checked where a field must hold them."""
+    text_fields = set()
+    for j, name in enumerate(fields):
+        if name in _TEXT_FIELDS or j in quoted:
+            text_fields.add(name)
+            continue
+        must_be_number = bool(
+            _NUMERIC_FIELD.match(name) or spectral_field_wavelength(name) is not None
+        )
+        for r, lineno in zip(rows, row_lines, strict=True):
+            if not _NUMBER.match(r[j]):
+                if must_be_number:
+                    raise InputError(
+                        f"{name}: not a number: {shown(r[j])}", path=path, line=lineno
+                    )
+                text_fields.add(name)
+                break
+            if not abs(float(r[j])) <= MAX_VALUE:
+                raise InputError(
+                    f"{name}: {shown(r[j])} is out of range (at most {MAX_VALUE:g} in "
+                    "magnitude)",
+                    path=path,
+                    line=lineno,
+                )
+    return text_fields
+
+
+def _check_end(
+    state: str,
+    rows: list,
+    n_sets: int | None,
+    lines: tuple[int, int, int, int],
+    *,
+    path: str | None,
+) -> None:
+    """Errors for a table cut short, empty, or with a wrong ``NUMBER_OF_SETS``."""
+    last, fields_line, data_line, n_sets_line = lines
+    if state == "id":
+        raise InputError("empty file, expected a CGATS table", path=path)
+    if state == "fields":
+        raise InputError("END_DATA_FORMAT missing", path=path, line=fields_line or last)
+    if state in ("header", "data"):
+        raise InputError(
+            "BEGIN_DATA ... END_DATA missing"
+            if state == "header"
+            else "END_DATA missing (file cut short?)",
+            path=path,
+            line=last,
+        )
+    if not rows:
+        raise InputError(
+            "no data sets between BEGIN_DATA and END_DATA", path=path, line=data_line
+        )
+    if n_sets is not None and n_sets != len(rows):
+        raise InputError(
+            f"NUMBER_OF_SETS is {n_sets} but {len(rows)} sets follow",
+            path=path,
+            line=n_sets_line,
+        )
+
+
 def parse_cgats(text: str, *, source: str | None = None) -> CgatsTable:
     """Parse CGATS text (the first table); see :func:`read_cgats`."""
     path = source
@@ -664,52 +733,14 @@ def parse_cgats(text: str, *, source: str | None = None) -> CgatsTable:
             rows.append(tuple(t for t, _ in tokens))
             row_lines.append(lineno)
             quoted.update(j for j, (_, q) in enumerate(tokens) if q)
-    last = len(lines)
-    if state == "id":
-        raise InputError("empty file, expected a CGATS table", path=path)
-    if state == "fields":
-        raise InputError("END_DATA_FORMAT missing", path=path, line=fields_line or last)
-    if state in ("header", "data"):
-        raise InputError(
-            "BEGIN_DATA ... END_DATA missing"
-            if state == "header"
-            else "END_DATA missing (file cut short?)",
-            path=path,
-            line=last,
-        )
-    if not rows:
-        raise InputError(
-            "no data sets between BEGIN_DATA and END_DATA", path=path, line=data_line
-        )
-    if n_sets is not None and n_sets != len(rows):
-        raise InputError(
-            f"NUMBER_OF_SETS is {n_sets} but {len(rows)} sets follow",
-            path=path,
-            line=n_sets_line,
-        )
-    text_fields = set()
-    for j, name in enumerate(fields):
-        if name in _TEXT_FIELDS or j in quoted:
-            text_fields.add(name)
-            continue
-        must_be_number = bool(
-            _NUMERIC_FIELD.match(name) or spectral_field_wavelength(name) is not None
-        )
-        for r, lineno in zip(rows, row_lines, strict=True):
-            if not _NUMBER.match(r[j]):
-                if must_be_number:
-                    raise InputError(
-                        f"{name}: not a number: {shown(r[j])}", path=path, line=lineno
-                    )
-                text_fields.add(name)
-                break
-            if not abs(float(r[j])) <= MAX_VALUE:
-                raise InputError(
-                    f"{name}: {shown(r[j])} is out of range (at most {MAX_VALUE:g} in "
-                    "magnitude)",
-                    path=path,
-                    line=lineno,
-                )
+    _check_end(
+        state,
+        rows,
+        n_sets,
+        (len(lines), fields_line, data_line, n_sets_line),
+        path=path,
+    )
+    text_fields = _text_fields(fields, rows, row_lines, quoted, path=path)
     assert file_id is not None
     return CgatsTable(
         file_id, keywords, tuple(fields), tuple(rows), frozenset(text_fields), source
@@ -743,6 +774,54 @@ def read_cgats(path: str | PathLike[str]) -> CgatsTable:
         # Instrument software on Windows writes CGATS in the ANSI code page.
         text = raw.decode("latin-1")
     return parse_cgats(text, source=str(path))
+
+
+def _triplet_columns(
+    n: int, *, rgb: ArrayLike | None, xyz: ArrayLike | None, lab: ArrayLike | None
+) -> dict[str, list[str]]:
+    """``RGB_*`` (percent), ``XYZ_*`` and ``LAB_*`` columns of :func:`ti3_table`."""
+    columns: dict[str, list[str]] = {}
+    for what, arr, fields, percent in (
+        ("rgb", rgb, ("RGB_R", "RGB_G", "RGB_B"), True),
+        ("xyz", xyz, ("XYZ_X", "XYZ_Y", "XYZ_Z"), False),
+        ("lab", lab, ("LAB_L", "LAB_A", "LAB_B"), False),
+    ):
+        if arr is None:
+            continue
+        a = np.asarray(arr, dtype=np.float64)
+        if a.shape != (n, 3):
+            raise InputError(f"{what} has shape {a.shape}, expected {(n, 3)}")
+        if not np.all(np.isfinite(a)):
+            raise InputError(f"{what} has non-finite values")
+        conv = _percent_text if percent else _float_text
+        for k, name in enumerate(fields):
+            columns[name] = [conv(v) for v in a[:, k]]
+    return columns
+
+
+def _spectral_columns(
+    names: list[str], reflectance: Spectra, kw: dict[str, str]
+) -> dict[str, list[str]]:
+    """``SPEC_nnn`` columns (percent); the ``SPECTRAL_*`` keywords go into ``kw``."""
+    columns: dict[str, list[str]] = {}
+    refl = reflectance.select(names)
+    if not np.all(np.isfinite(refl.values)):
+        raise InputError("reflectance has non-finite values")
+    wl = refl.wavelength_nm
+    if wl.size < 2:
+        raise InputError("reflectance needs at least two wavelengths")
+    refl.step_nm  # noqa: B018 - raises InputError for a non-equidistant grid
+    spec_names = [ti3_field_name(w) for w in wl]
+    if len(set(spec_names)) != len(spec_names):
+        raise InputError(
+            "wavelength step below 1 nm: Argyll's SPEC_nnn names would repeat"
+        )
+    kw["SPECTRAL_BANDS"] = str(wl.size)
+    kw["SPECTRAL_START_NM"] = _float_text(wl[0])
+    kw["SPECTRAL_END_NM"] = _float_text(wl[-1])
+    for j, name in enumerate(spec_names):
+        columns[name] = [_percent_text(v) for v in refl.values[:, j]]
+    return columns
 
 
 def ti3_table(
@@ -828,39 +907,9 @@ def ti3_table(
     if rgb is not None:
         kw["COLOR_REP"] = "XYZ_RGB"
     columns: dict[str, list[str]] = {"SAMPLE_ID": names, "SAMPLE_NAME": names}
-    for what, arr, fields, percent in (
-        ("rgb", rgb, ("RGB_R", "RGB_G", "RGB_B"), True),
-        ("xyz", xyz, ("XYZ_X", "XYZ_Y", "XYZ_Z"), False),
-        ("lab", lab, ("LAB_L", "LAB_A", "LAB_B"), False),
-    ):
-        if arr is None:
-            continue
-        a = np.asarray(arr, dtype=np.float64)
-        if a.shape != (n, 3):
-            raise InputError(f"{what} has shape {a.shape}, expected {(n, 3)}")
-        if not np.all(np.isfinite(a)):
-            raise InputError(f"{what} has non-finite values")
-        conv = _percent_text if percent else _float_text
-        for k, name in enumerate(fields):
-            columns[name] = [conv(v) for v in a[:, k]]
+    columns.update(_triplet_columns(n, rgb=rgb, xyz=xyz, lab=lab))
     if reflectance is not None:
-        refl = reflectance.select(names)
-        if not np.all(np.isfinite(refl.values)):
-            raise InputError("reflectance has non-finite values")
-        wl = refl.wavelength_nm
-        if wl.size < 2:
-            raise InputError("reflectance needs at least two wavelengths")
-        refl.step_nm  # noqa: B018 - raises InputError for a non-equidistant grid
-        spec_names = [ti3_field_name(w) for w in wl]
-        if len(set(spec_names)) != len(spec_names):
-            raise InputError(
-                "wavelength step below 1 nm: Argyll's SPEC_nnn names would repeat"
-            )
-        kw["SPECTRAL_BANDS"] = str(wl.size)
-        kw["SPECTRAL_START_NM"] = _float_text(wl[0])
-        kw["SPECTRAL_END_NM"] = _float_text(wl[-1])
-        for j, name in enumerate(spec_names):
-            columns[name] = [_percent_text(v) for v in refl.values[:, j]]
+        columns.update(_spectral_columns(names, reflectance, kw))
     for key, value in (keywords or {}).items():
         kw[str(key)] = str(value)
     text = {"SAMPLE_ID", "SAMPLE_NAME"}

@@ -13,7 +13,9 @@ TuneSpec again:
 ``sensitivities.json``           the same in the rawtoaces-data camera schema (as
                                  ``resources/cameras/*.json``), normalised to peak 1,
                                  on 380-780 nm at 5 nm (all rawtoaces reads; 0 where
-                                 not estimated)
+                                 not estimated); the absolute scale is in its
+                                 comments, where TuneSpec's reader finds it
+``sensitivities.json.meta.json`` the side file again, for the JSON
 ``reflectances.csv``             estimated reflectances, spectral CSV (0..1)
 ``reflectances.ti3``             ArgyllCMS CGATS: names, camera RGB (percent), XYZ and
                                  L*a*b* (D50, 2°), spectra (percent)
@@ -62,8 +64,12 @@ if TYPE_CHECKING:
     from tunespec.core.stats import CalibrationReport, PredictionStats
 
 __all__ = [
+    "CAMERA_EXPORT_NAMES",
     "EXPORT_NAMES",
     "RAWTOACES_GRID",
+    "camera_ti3",
+    "camera_transforms",
+    "export_camera_characterisation",
     "export_measurement",
     "read_sensitivity_meta",
     "read_spd_shift",
@@ -71,6 +77,7 @@ __all__ = [
     "sensitivity_meta_path",
     "sensitivity_rawtoaces_document",
     "tunespec_version",
+    "write_camera_transforms",
     "write_colorimetry_csv",
     "write_prediction_stats_csv",
     "write_reflectance_stats_csv",
@@ -84,6 +91,7 @@ EXPORT_NAMES: dict[str, str] = {
     "sensitivities_csv": "sensitivities.csv",
     "sensitivities_meta": "sensitivities.csv.meta.json",
     "sensitivities_json": "sensitivities.json",
+    "sensitivities_json_meta": "sensitivities.json.meta.json",
     "reflectances_csv": "reflectances.csv",
     "reflectances_ti3": "reflectances.ti3",
     "reference_csv": "reference_reflectances.csv",
@@ -135,14 +143,15 @@ def write_sensitivity_meta(
     fills it (``source``, ``spd_shift_nm``).
     """
     path = sensitivity_meta_path(sensitivity_csv)
+    wl = sensitivity.wavelength_nm
     doc: dict[str, Any] = {
         "estimated_by": sensitivity.meta.get("source", ""),
+        "grid": f"{wl[0]:g}:{wl[-1]:g}:{sensitivity.step_nm:g}",
         "spd_shift_nm": float(sensitivity.meta.get("spd_shift_nm", 0.0)),
     }
     if "led_correction" in sensitivity.meta:
         doc["led_correction"] = json.loads(sensitivity.meta["led_correction"])
     if covariance is not None:
-        wl = sensitivity.wavelength_nm
         doc["covariance"] = {
             "parameters": "s_R, s_G, s_B at wavelength_nm, then log gain and "
             "shift_nm of each LED in led_correction order",
@@ -729,6 +738,13 @@ def export_measurement(
             comments="estimated with TuneSpec from a chart under a tunable LED source",
             created=created,
         )
+        # the JSON carries the curves; the calibration's LED corrections and
+        # covariance go beside it too, so 'estimate --sensitivities X.json' applies
+        # them as it does for the CSV
+        write_sensitivity_meta(
+            paths["sensitivities_json"], sensitivity, sensitivity_covariance
+        )
+        target("sensitivities_json_meta")
     ti3_rgb = responses
     if responses is not None and ti3_illuminant is None:
         ti3_rgb = responses if len(responses.illuminants) == 1 else None
@@ -758,4 +774,174 @@ def export_measurement(
         write_prediction_stats_csv(table1, target("table1_csv"))
     if table2 is not None:
         write_reflectance_stats_csv(table2, target("table2_csv"))
+    return paths
+
+
+#: Files of :func:`export_camera_characterisation`.
+CAMERA_EXPORT_NAMES: dict[str, str] = {
+    "chart_camera_ti3": "chart_camera.ti3",
+    "camera_transforms_json": "camera_transforms.json",
+    "camera_transforms_csv": "camera_transforms.csv",
+}
+
+
+def camera_ti3(
+    chart: Spectra,
+    responses: Responses,
+    illuminants: Spectra,
+    *,
+    under: str = "D50",
+    created: datetime | str | None = None,
+) -> CgatsTable:
+    """The chart's camera ``.ti3`` for ArgyllCMS ``colprof`` (an input profile).
+
+    Every patch of ``responses`` with its reference spectrum, XYZ and L*a*b* (D50)
+    and the camera's linear RGB ``under`` one illuminant: the name of one of the
+    responses' illuminants (that LED's responses as measured), or a standard
+    illuminant (``"D50"``, ``"D65"``, ``"A"``), for which the responses under all
+    LEDs are summed with the non-negative weights whose mix best matches its SPD
+    (:func:`~tunespec.core.characterisation.illuminant_mix`; Eq. 1 is linear in the
+    light). The RGB is scaled so that its largest value is 95 % (Argyll's device
+    values are percent); patches clipped under a light used are left out
+    (``TUNESPEC_LEFT_OUT``).
+
+    Raises
+    ------
+    InputError
+        Patches without reference spectra, an unknown ``under``.
+    """
+    from tunespec.core.characterisation import illuminant_mix, standard_illuminant
+
+    keywords = {"TUNESPEC_CAMERA_RGB": ""}
+    if under in responses.illuminants:
+        weights = np.array([float(n == under) for n in responses.illuminants])
+        keywords["TUNESPEC_CAMERA_RGB"] = f"measured under {under}"
+    else:
+        target = standard_illuminant(under, Grid(300.0, 830.0, 1.0))
+        used = illuminants.select(responses.illuminants, source="illuminants")
+        weights, mismatch = illuminant_mix(used, target)
+        keywords["TUNESPEC_CAMERA_RGB"] = (
+            f"sum of the responses under the LEDs weighted to match {under} "
+            f"(relative RMS mismatch of the mix {mismatch:.3f})"
+        )
+    rgb = np.einsum("pic,i->pc", responses.rgb, weights)
+    keep = np.ones(len(responses.patches), dtype=bool)
+    if responses.saturated is not None:
+        keep &= ~np.any((responses.saturated > 0) & (weights > 0), axis=1)
+    names = [p for p, k in zip(responses.patches, keep, strict=True) if k]
+    if len(names) < len(responses.patches):
+        keywords["TUNESPEC_LEFT_OUT"] = " ".join(
+            p for p, k in zip(responses.patches, keep, strict=True) if not k
+        )
+    scale = 0.95 / float(rgb[keep].max())
+    keywords["TUNESPEC_RGB_SCALE"] = f"{scale!r} (RGB = responses x scale)"
+    mixed = Responses(tuple(names), (under,), (rgb[keep] * scale)[:, None, :])
+    refl = chart.select(names, source=chart.meta.get("source"))
+    return reflectance_ti3(
+        refl,
+        responses=mixed,
+        illuminant=under,
+        descriptor=f"Camera RGB of the chart under {under} (TuneSpec)",
+        created=created,
+        keywords=keywords,
+    )
+
+
+def camera_transforms(
+    sensitivity: Spectra,
+    training: Spectra,
+    *,
+    illuminants: Mapping[str, Spectra] | None = None,
+    idt_illuminant: str = "D55",
+) -> list[Any]:
+    """The ACES IDT and a 3x3 CCM per illuminant, with training and test errors.
+
+    CCMs are trained on ``training`` (the chart) and tested on colour-science's 190
+    rawtoaces reflectances; the IDT is trained on those 190 (*RAW to ACES* v1) and
+    tested on ``training``. ``illuminants``: name -> SPD (default D50, D65, A).
+    """
+    from tunespec.core.characterisation import (
+        STANDARD_ILLUMINANTS,
+        aces_idt,
+        colour_correction_matrix,
+        standard_illuminant,
+    )
+    from tunespec.core.datasets import load_training_reflectances_190
+
+    full = Grid(300.0, 830.0, 5.0)
+    if illuminants is None:
+        illuminants = {n: standard_illuminant(n, full) for n in STANDARD_ILLUMINANTS}
+    wl = training.wavelength_nm
+    test = load_training_reflectances_190(Grid(wl[0], wl[-1], training.step_nm))
+    test = Spectra(
+        test.wavelength_nm, test.values, test.names, {"set": "rawtoaces 190"}
+    )
+    chart = Spectra(
+        training.wavelength_nm, training.values, training.names, {"set": "chart"}
+    )
+    out = [aces_idt(sensitivity, standard_illuminant(idt_illuminant, full), chart)]
+    for spd in illuminants.values():
+        out.append(colour_correction_matrix(sensitivity, spd, chart, test))
+    return out
+
+
+def write_camera_transforms(
+    transforms: list[Any], json_path: str | PathLike[str], csv_path: str | PathLike[str]
+) -> tuple[Path, Path]:
+    """The transforms as JSON (full) and CSV (one row per transform).
+
+    CSV columns: ``kind,illuminant,m11,...,m33,wb_r,wb_g,wb_b,train_set,train_n,
+    train_mean_de00,train_max_de00,test_set,test_n,test_mean_de00,test_max_de00``.
+    """
+    doc = {
+        "applies_as": "out = matrix @ (camera_rgb * white_balance); ccm: out is CIE "
+        "XYZ with Y(white) = 1 under the illuminant; aces_idt: out is ACES2065-1",
+        "transforms": [t.as_dict() for t in transforms],
+    }
+    json_path, csv_path = Path(json_path), Path(csv_path)
+    json_path.write_text(dumps_json(doc), encoding="utf-8")
+    header = ["kind", "illuminant"]
+    header += [f"m{i}{j}" for i in (1, 2, 3) for j in (1, 2, 3)]
+    header += ["wb_r", "wb_g", "wb_b"]
+    for part in ("train", "test"):
+        header += [f"{part}_set", f"{part}_n", f"{part}_mean_de00", f"{part}_max_de00"]
+    rows = []
+    for t in transforms:
+        row = [t.kind, t.illuminant, *(repr(float(v)) for v in t.matrix.ravel())]
+        row += [repr(float(v)) for v in t.white_balance]
+        for errs in (t.training, t.test):
+            row += [errs["set"], str(errs["n"])]
+            row += [repr(errs["mean_de00"]), repr(errs["max_de00"])]
+        rows.append(row)
+    _write_rows(csv_path, header, rows)
+    return json_path, csv_path
+
+
+def export_camera_characterisation(
+    out_dir: str | PathLike[str],
+    *,
+    sensitivity: Spectra,
+    chart: Spectra,
+    responses: Responses,
+    illuminants: Spectra,
+    under: str = "D50",
+    created: datetime | str | None = None,
+) -> dict[str, Path]:
+    """``chart_camera.ti3`` (:func:`camera_ti3`) and ``camera_transforms.json/.csv``.
+
+    ArgyllCMS ``colprof -a m -O camera.icc chart_camera`` builds an ICC input profile
+    from the ``.ti3``, ``profcheck chart_camera.ti3 camera.icc`` reports its errors.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {k: out / v for k, v in CAMERA_EXPORT_NAMES.items()}
+    write_cgats(
+        camera_ti3(chart, responses, illuminants, under=under, created=created),
+        paths["chart_camera_ti3"],
+    )
+    write_camera_transforms(
+        camera_transforms(sensitivity, chart),
+        paths["camera_transforms_json"],
+        paths["camera_transforms_csv"],
+    )
     return paths

@@ -123,9 +123,7 @@ def test_uncertainty_intervals_cover_the_truth(bench) -> None:
     assert est.covariance.shape == (3 * 71 + 44, 3 * 71 + 44)
     assert est.std.shape == (3, 71) and np.all(est.std >= 0)
     w, _ = _de00(bench, est, bench["metered"])
-    unc = reflectance_uncertainty(
-        w, bench["test"], bench["metered"], est, bench["sg_est"]
-    )
+    unc = reflectance_uncertainty(w, bench["test"], bench["metered"], est)
     truth = bench["test_ref"].values
     inside = np.abs(w.reflectance.values - truth) <= 1.96 * unc.reflectance_std
     assert 0.90 <= inside.mean() <= 0.995, inside.mean()

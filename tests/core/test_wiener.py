@@ -17,7 +17,7 @@ from tunespec.core.datasets import (
 from tunespec.core.errors import InputError, SingularSystemError
 from tunespec.core.forward_model import lighting_matrix, render_rgb
 from tunespec.core.responses import Responses
-from tunespec.core.spectra import DEFAULT_GRID, Spectra
+from tunespec.core.spectra import DEFAULT_GRID, Grid, Spectra
 from tunespec.core.wiener import WienerEstimate, wiener_reflectance
 
 
@@ -252,11 +252,13 @@ def test_input_errors_name_the_source(bench) -> None:
         )
     with pytest.raises(InputError, match=r"Mark_III.*camera sensitivity: 1 name.*: B"):
         wiener_reflectance(resp, illum, cam.select(["R", "G"]), prior, noise_std=0.01)
-    coarse = prior.resample(DEFAULT_GRID.__class__(380.0, 730.0, 10.0))
+    narrow = Grid(400.0, 700.0, 5.0)
     with pytest.raises(
-        InputError, match=r"colorchecker_sg.csv: prior .* 380-730 nm \(36"
+        InputError, match=r"colorchecker_sg.csv: prior .* 380-730 nm .* beyond"
     ):
-        wiener_reflectance(resp, illum, cam, coarse, noise_std=0.01)
+        wiener_reflectance(
+            resp, illum.resample(narrow), cam.resample(narrow), prior, noise_std=0.01
+        )
     nan_illum = illum.with_values(
         np.where(np.arange(22)[:, None] == 3, np.nan, illum.values)
     )
@@ -336,3 +338,33 @@ def test_saturated_responses_are_ignored() -> None:
     err_ign = np.sqrt(np.mean((est_ign - ref) ** 2))
     err_raw = np.sqrt(np.mean((est_raw - ref) ** 2))
     assert err_ign < 0.01 < err_raw
+
+
+def test_integration_on_the_fine_grid_resolves_a_steep_edge() -> None:
+    """Eq. 1 integrated at 1 nm with the reflectance on a 10 nm grid (hat basis)
+    against everything sampled at 10 nm: an IR-cut edge inside LED bands."""
+    fine, coarse = Grid(380.0, 730.0, 1.0), Grid(400.0, 700.0, 10.0)
+    led = load_led_set(fine)
+    cam = load_camera("Canon EOS 5D Mark III", fine)
+    wl = fine.wavelength_nm
+    cam = cam.with_values(cam.values / (1.0 + np.exp((wl - 652.0) / 2.0)))
+    white = render_rgb(np.ones((1, fine.n)), led.values, cam.values, 1.0)
+    illum = led.with_values(0.9 * led.values / white[0].max(axis=1)[:, None])
+    test = load_training_reflectances_190(fine)
+    rgb = render_rgb(test.values, illum.values, cam.values, 1.0)
+    resp = Responses(test.names, illum.names, rgb)
+    prior = load_colorchecker_sg(coarse)
+    truth = test.resample(coarse)
+    integrated = wiener_reflectance(resp, illum, cam, prior, noise_std=1e-4)
+    sampled = wiener_reflectance(
+        resp,
+        illum.resample(coarse, average=True),
+        cam.resample(coarse),
+        prior,
+        noise_std=1e-4,
+    )
+    assert integrated.reflectance.wavelength_nm.size == coarse.n
+    assert integrated.lighting.shape == (66, coarse.n)
+    good = reflectance_stats(integrated.reflectance, truth).mean_delta_e00
+    bad = reflectance_stats(sampled.reflectance, truth).mean_delta_e00
+    assert good < 0.25 * bad, (good, bad)

@@ -1,0 +1,118 @@
+"""Outputs of a gonio session: a labelled NetCDF data set, CSV per geometry, plots.
+
+``gonio.nc`` (xarray, NetCDF 3 through scipy): ``reflectance`` and ``u_reflectance``
+(patch x geometry x wavelength), ``XYZ``, ``u_XYZ`` and ``Lab`` (patch x geometry x
+component), with the geometry's angles, its ``spectral`` flag and the goniometer's
+read-back as coordinates. Per geometry, ``<folder>/reflectance.csv`` (spectral CSV)
+and ``<folder>/colorimetry.csv`` (``patch,X,Y,Z,L,a,b,u_X,u_Y,u_Z``). ``angles.png``:
+L*, a*, b* and the reflectance factor at 550 nm against the viewing angle.
+
+xarray is used for the data set (labelled arrays written as self-describing NetCDF,
+read back by any NetCDF tool); its scipy engine needs no HDF5 library.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from pathlib import Path
+
+import numpy as np
+
+from tunespec.app.pipeline.gonio_process import GonioResult
+from tunespec.core.io.session import atomic_write_bytes, atomic_write_text
+from tunespec.core.spectra import Spectra, write_spectra_csv
+from tunespec.devices.goniometer import ANGLE_AXES
+
+__all__ = ["write_gonio_outputs"]
+
+
+def _dataset(result: GonioResult):
+    import xarray as xr
+
+    geoms = [s.geometry for s in result.plan.steps]
+    coords = {
+        "patch": list(result.patches),
+        "geometry": np.arange(len(geoms)),
+        "wavelength": result.wavelength_nm,
+        "component": ["X", "Y", "Z"],
+        "lab_component": ["L", "a", "b"],
+        "spectral": ("geometry", result.spectral.astype(np.int8)),
+    }
+    for a in ANGLE_AXES:
+        coords[a] = ("geometry", np.array([getattr(g, a) for g in geoms]))
+        coords[f"{a}_readback"] = (
+            "geometry", np.array([float(p[a]) for p in result.positions])
+        )  # fmt: skip
+    pg = ("patch", "geometry")
+    ds = xr.Dataset(
+        {
+            "reflectance": ((*pg, "wavelength"), result.reflectance),
+            "u_reflectance": ((*pg, "wavelength"), result.u_reflectance),
+            "XYZ": ((*pg, "component"), result.xyz),
+            "u_XYZ": ((*pg, "component"), result.u_xyz),
+            "Lab": ((*pg, "lab_component"), result.lab),
+        },
+        coords=coords,
+        attrs={
+            "title": "TuneSpec gonio session",
+            "illuminant": "CIE D50, CIE 1931 2 deg, ASTM E308, white Y = 100",
+            "reflectance_units": "reflectance factor (perfect diffuser = 1)",
+            "angles_units": "degree",
+            "u_reflectance_note": "Wiener posterior std at spectral geometries; NaN where fused",
+        },
+    )
+    ds["wavelength"].attrs["units"] = "nm"
+    return ds
+
+
+def write_gonio_outputs(result: GonioResult, folder: str | Path) -> list[Path]:
+    """Write ``gonio.nc``, per-geometry CSVs and ``angles.png``; return the files."""
+    root = Path(folder)
+    out = [root / "gonio.nc"]
+    data = _dataset(result).to_netcdf(engine="scipy")
+    atomic_write_bytes(out[0], bytes(data))
+    for i in range(len(result.plan.steps)):
+        gdir = root / result.plan.folder(i)
+        spectra = Spectra(
+            result.wavelength_nm, result.reflectance[:, i], result.patches
+        )
+        write_spectra_csv(spectra, gdir / "reflectance.csv")
+        buf = io.StringIO()
+        w = csv.writer(buf, lineterminator="\n")
+        w.writerow(["patch", "X", "Y", "Z", "L", "a", "b", "u_X", "u_Y", "u_Z"])
+        for p, name in enumerate(result.patches):
+            vals = [*result.xyz[p, i], *result.lab[p, i], *result.u_xyz[p, i]]
+            w.writerow([name, *(f"{v:.6g}" for v in vals)])
+        atomic_write_text(gdir / "colorimetry.csv", buf.getvalue())
+        out += [gdir / "reflectance.csv", gdir / "colorimetry.csv"]
+    out.append(_plot(result, root / "angles.png"))
+    return out
+
+
+def _plot(result: GonioResult, path: Path) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    steps = result.plan.steps
+    in_plane = [i for i, s in enumerate(steps) if s.geometry.phi_r == 180.0]
+    order = sorted(in_plane, key=lambda i: steps[i].geometry.theta_r)
+    theta = [steps[i].geometry.theta_r for i in order]
+    j550 = int(np.argmin(np.abs(result.wavelength_nm - 550.0)))
+    fig, axes = plt.subplots(1, 4, figsize=(14, 3.4))
+    labels = ("L*", "a*", "b*", "reflectance factor at 550 nm")
+    for k, ax in enumerate(axes):
+        for p, name in enumerate(result.patches):
+            y = result.lab[p, order, k] if k < 3 else result.reflectance[p, order, j550]
+            ax.plot(theta, y, marker="o", ms=3, label=name)
+        ax.set_xlabel("theta_r (deg), plane of incidence")
+        ax.set_title(labels[k])
+    axes[-1].legend(fontsize=6)
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90)
+    plt.close(fig)
+    atomic_write_bytes(path, buf.getvalue())
+    return path
