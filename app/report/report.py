@@ -401,6 +401,7 @@ EXPORT_LABELS: dict[str, str] = {
     "sensitivities_csv": "Camera sensitivities",
     "sensitivities_meta": "Sensitivities: covariance and LED corrections",
     "sensitivities_json": "Camera sensitivities (rawtoaces JSON)",
+    "sensitivities_json_meta": "Sensitivities (rawtoaces JSON): covariance, LED fit",
     "reflectances_csv": "Estimated reflectances",
     "reflectances_ti3": "Estimated reflectances (ArgyllCMS .ti3)",
     "reflectances_uncertainty_csv": "Standard uncertainty of the reflectances",

@@ -346,3 +346,21 @@ def test_summary_verdict_per_patch_errors_and_provenance(
     pdf = pdf_path.read_bytes()
     boxes = re.findall(rb"/MediaBox \[ ?0 0 ([\d.]+) ([\d.]+) ?\]", pdf)
     assert {(round(float(w)), round(float(h))) for w, h in boxes} == {(595, 842)}
+
+
+def test_every_export_kind_has_a_name_for_the_reader() -> None:
+    from tunespec.app.report.report import EXPORT_LABELS
+    from tunespec.core.io.export import CAMERA_EXPORT_NAMES, EXPORT_NAMES
+
+    kinds = {
+        *EXPORT_NAMES,
+        *CAMERA_EXPORT_NAMES,
+        "chart_responses_csv",
+        "chart_illuminants_csv",
+        "reflectances_uncertainty_csv",
+        "colorimetry_csv",
+        "report_html",
+        "report_pdf",
+        "summary_json",
+    }
+    assert kinds <= set(EXPORT_LABELS), kinds - set(EXPORT_LABELS)
