@@ -25,7 +25,7 @@ from PySide6.QtWidgets import (
 )
 
 from tunespec.app.panels.device_panel import format_error
-from tunespec.app.workers import DeviceJob, ProgressClock, Worker
+from tunespec.app.workers import DeviceJob, ProgressClock, Throttle, Worker
 from tunespec.core.progress import Cancelled
 
 __all__ = ["StepPage", "StepState"]
@@ -67,9 +67,14 @@ class StepPage(QWidget):
     step_finished = Signal(object)
     #: The step's warnings changed: the list of them.
     warnings_changed = Signal(list)
+    #: What the running job does now ("metering LED495, 7 of 22").
+    stage_changed = Signal(str)
 
     #: Update the remaining-time text at most this often (ms).
     ETA_PERIOD_MS = 500
+    #: Redraw the progress bar at most this often (ms): a simulated capture reports
+    #: a step every few ms, and each redraw is a paint the event loop waits for.
+    PROGRESS_PERIOD_MS = 100
     #: This step's name for :attr:`inputs` of later steps.
     key = ""
     #: Keys of the steps whose results this one uses: retaking one of them makes
@@ -167,6 +172,7 @@ class StepPage(QWidget):
         metrics = self.start_button.fontMetrics()
         widest = max(metrics.horizontalAdvance(t) for t in (start_text, retake_text))
         self.start_button.setMinimumWidth(widest + 32)
+        self._progress_display = Throttle(self._show_progress, self.PROGRESS_PERIOD_MS)
         self.eta_timer = QTimer(self)
         self.eta_timer.setInterval(self.ETA_PERIOD_MS)
         self.eta_timer.timeout.connect(self._on_eta_timer_timeout)
@@ -314,6 +320,12 @@ class StepPage(QWidget):
         self.stage = text
         self.progress_bar.setFormat(f"{text} \u2014 %p %" if text else "%p %")
 
+    def _show_progress(self) -> None:
+        """The newest fraction and stage on the bar (throttled while running)."""
+        if self.running:
+            self._set_stage(self.stage)
+            self.progress_bar.setValue(round(1000 * self.clock.fraction))
+
     def _reset_progress(self) -> None:
         self._set_stage("")
         self.progress_bar.setValue(0)
@@ -346,12 +358,14 @@ class StepPage(QWidget):
         # never backwards, whatever a job reports
         fraction = max(self.clock.fraction, min(1.0, float(fraction)))
         self.clock.update(fraction)
-        self.progress_bar.setValue(round(1000 * fraction))
+        self._progress_display()
 
     @Slot(str)
     def _on_job_stage_changed(self, text: str) -> None:
         if self.running:
-            self._set_stage(text)
+            self.stage = text
+            self.stage_changed.emit(text)
+            self._progress_display()
 
     @Slot(str)
     def _on_job_warned(self, text: str) -> None:
