@@ -378,15 +378,6 @@ class MainWindow(QMainWindow):
 
     @Slot()
     def _on_preload_finished(self) -> None:
-        # the modules' objects (hundreds of thousands, with colour-science and
-        # matplotlib) live as long as the program: a full collection walking them
-        # holds the GIL for about 100 ms, wherever it is triggered, and the GUI
-        # waits. Frozen, the collector leaves them out (gc.freeze, Python >= 3.7);
-        # once per process (a second window would freeze the first for good)
-        global _GC_FROZEN
-        if not _GC_FROZEN:
-            gc.freeze()
-            _GC_FROZEN = True
         self.preloaded = True
 
     # -- closing ----------------------------------------------------------------------
@@ -433,16 +424,32 @@ PIPELINE_MODULES = (
 
 def _preload_pipeline() -> None:
     """Import :data:`PIPELINE_MODULES` (pool thread); one that is not installed
-    (``rawpy`` is optional) is imported when needed, with its error then."""
+    (``rawpy`` is optional) is imported when needed, with its error then.
+
+    The modules' objects (hundreds of thousands, with colour-science and
+    matplotlib) live as long as the program, and a full collection walking them
+    holds the GIL for 120-190 ms, wherever it is triggered, while the GUI waits.
+    So the collector is off while they are imported, and then they are frozen: it
+    leaves them out from then on (``gc.freeze``). Once per process (a second window
+    would freeze the first for good).
+    """
     import importlib
 
-    for name in PIPELINE_MODULES:
-        try:
-            importlib.import_module(name)
-        except ImportError as exc:
-            log.debug("not preloaded: %s", exc)
-    if not _GC_FROZEN:
-        gc.collect()  # what importing left behind, before the rest is frozen
+    global _GC_FROZEN
+    freeze = not _GC_FROZEN
+    _GC_FROZEN = True
+    if freeze:
+        gc.disable()
+    try:
+        for name in PIPELINE_MODULES:
+            try:
+                importlib.import_module(name)
+            except ImportError as exc:
+                log.debug("not preloaded: %s", exc)
+    finally:
+        if freeze:
+            gc.freeze()
+            gc.enable()
 
 
 def _reference_sensitivity() -> Any:
