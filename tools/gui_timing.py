@@ -9,8 +9,9 @@ same for the background imports the window starts with, which it waits for)::
     python tools/gui_timing.py --all --repeat 3      # every step, 3 runs
     python tools/gui_timing.py --realtime --exposure 0.5
 
-With ``--repeat N`` every step's stall is given as the median and the largest of the
-N runs (on a machine shared with other work a single run is noisy).
+With ``--repeat N`` every step's stall is given as the median and the largest of N
+runs, each in a fresh process as the GUI starts (on a machine shared with other
+work a single run is noisy).
 
 ``--realtime`` waits the exposures as the real camera would (``--exposure`` fixes
 them; the default metering picks up to 30 s per LED).
@@ -19,8 +20,10 @@ them; the default metering picks up to 30 s per LED).
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
@@ -98,6 +101,19 @@ def _timed_run(app: Any, args: argparse.Namespace, tmp: Path) -> tuple[list, Any
     return rows, window
 
 
+def _run_in_child(argv: list[str]) -> list[list[Any]]:
+    """One run in a fresh interpreter, as the GUI starts: its rows (JSON)."""
+    child = subprocess.run(
+        [sys.executable, __file__, *argv, "--rows-json"],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    line = next(x for x in child.stdout.splitlines() if x.startswith("ROWS "))
+    rows: list[list[Any]] = json.loads(line[5:])
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--resolution", default="1536x1024")
@@ -108,28 +124,53 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--all", action="store_true", help="run every step, not only to Table 1"
     )
-    parser.add_argument("--repeat", type=int, default=1, help="runs (default 1)")
+    parser.add_argument(
+        "--repeat", type=int, default=1, help="runs, each in a fresh process (1)"
+    )
+    parser.add_argument("--rows-json", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    if args.repeat > 1:
+        one = list(argv if argv is not None else sys.argv[1:])
+        k = one.index("--repeat")
+        del one[k : k + 2]
+        runs = []
+        for n in range(args.repeat):
+            runs.append(_run_in_child(one))
+            rows = runs[-1]
+            print(f"run {n + 1}: " + ", ".join(f"{r[0]} {r[3]:.0f} ms" for r in rows))
+        _print_table(runs)
+        return 0
 
     from PySide6.QtWidgets import QApplication
 
     app = QApplication.instance() or QApplication(sys.argv[:1])
-    runs = []
-    window = None
-    for k in range(max(1, args.repeat)):
-        if window is not None:
-            window.close()
-        tmp = Path(tempfile.mkdtemp(prefix="tunespec-timing-"))
-        rows, window = _timed_run(app, args, tmp)
-        runs.append(rows)
-        print(f"run {k + 1}: " + ", ".join(f"{r[0]} {r[3]:.0f} ms" for r in rows))
-    first = runs[0]
+    tmp = Path(tempfile.mkdtemp(prefix="tunespec-timing-"))
+    rows, window = _timed_run(app, args, tmp)
+    if args.rows_json:
+        print("ROWS " + json.dumps(rows))
+        window.close()
+        return 0
+    _print_table([rows])
+    times = {t: e for t, _, e, _ in rows}
+    if "Calibrate" in times:
+        chart = times["Chart under all LEDs"]
+        print(f"start of chart capture to Table 1: {chart + times['Calibrate']:.2f} s")
+    session = window.measurement.session("chart")
+    if session is not None:
+        exposure = sum(f.exposure_s for f in session.frames if f.kind == "target")
+        print(f"sum of the chart frames' exposures: {exposure:.1f} s")
+    window.close()
+    return 0
+
+
+def _print_table(runs: list[list[Any]]) -> None:
+    """Per step: median wall time, median and largest longest stall of the runs."""
     print(
         f"\n{'step':<24}{'state':<8}{'wall s':>9}{'longest stall ms':>18}"
         f"{'max of runs':>13}"
     )
     worst = 0.0
-    for i, (title, state, _, _) in enumerate(first):
+    for i, (title, state, _, _) in enumerate(runs[0]):
         walls = [r[i][2] for r in runs if i < len(r)]
         stalls = [r[i][3] for r in runs if i < len(r)]
         if i > 0:
@@ -139,17 +180,6 @@ def main(argv: list[str] | None = None) -> int:
             f"{statistics.median(stalls):18.1f}{max(stalls):13.1f}"
         )
     print(f"longest stall of any step (median of runs): {worst:.1f} ms (goal <= 50 ms)")
-    times = {t: e for t, _, e, _ in first}
-    if "Calibrate" in times:
-        chart = times["Chart under all LEDs"]
-        print(f"start of chart capture to Table 1: {chart + times['Calibrate']:.2f} s")
-    assert window is not None
-    session = window.measurement.session("chart")
-    if session is not None:
-        exposure = sum(f.exposure_s for f in session.frames if f.kind == "target")
-        print(f"sum of the chart frames' exposures: {exposure:.1f} s")
-    window.close()
-    return 0
 
 
 if __name__ == "__main__":
