@@ -48,17 +48,23 @@ def run_wizard(
     wizard.new_measurement(folder)
     outcomes = []
     shot = [running_shot]
+    armed = [False]
 
     def on_stage(text: str) -> None:
-        if shot[0] is not None and text.startswith("metering LED495"):
+        armed[0] = armed[0] or text.startswith("metering LED495")
+
+    def on_value(_value: int) -> None:
+        # the bar is redrawn at most every 100 ms: the first redraw after the
+        # metering of LED495 started, while it still meters
+        page = wizard.dark_page
+        if shot[0] is not None and armed[0] and page.stage.startswith("metering"):
             for _ in range(3):
                 app.processEvents()
             window.grab().save(str(shot[0]))
             shot[0] = None
 
-    wizard.dark_page.progress_bar.valueChanged.connect(
-        lambda _v: on_stage(wizard.dark_page.stage)
-    )
+    wizard.dark_page.stage_changed.connect(on_stage)
+    wizard.dark_page.progress_bar.valueChanged.connect(on_value)
     for page in wizard.pages:
         wizard.go_to(wizard.pages.index(page))
         page.start()
