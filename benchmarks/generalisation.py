@@ -10,7 +10,8 @@ model and a held-out LED set):
    residual) and the spectroradiometer reports every LED with its *own* error:
    a wavelength offset drawn from U(-1, +1) nm and a gain from N(1, 1 %)
    (``--no-metering-error`` turns both off);
-2. each estimator calibrates on the 380-730 nm / 5 nm grid from the reported SPDs,
+2. each estimator calibrates on the 380-730 nm / 2 nm grid (the product's
+   ``CALIBRATION_GRID``) from the reported SPDs,
    with the camera's whole measuring source removed from the database;
 3. 318 test reflectances (:func:`generalisation_data.test_reflectances`: not the
    chart, not the Wiener prior) are captured the same way and estimated by Wiener
@@ -70,12 +71,12 @@ from tunespec.core.sensitivity_bayes import (
     _smoothness_penalty,
 )
 from tunespec.core.simulate import NoiseModel, scale_to_exposure, simulate_responses
-from tunespec.core.spectra import DEFAULT_GRID, Grid, Spectra
+from tunespec.core.spectra import CALIBRATION_GRID, Grid, Spectra
 from tunespec.core.stats import calibration_report, sensitivity_rms
 from tunespec.core.uncertainty import reflectance_uncertainty
 from tunespec.core.wiener import integration_grid, wiener_reflectance
 
-WORK = DEFAULT_GRID
+WORK = CALIBRATION_GRID
 EST = Grid(400.0, 700.0, 5.0)
 VARIANTS = ("bayes", "bayes-noselfcal", "smooth", "pca", "nnls", "truth")
 #: Smoothness weight of the ``nnls`` reference (relative to the data's mean diagonal).

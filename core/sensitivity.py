@@ -71,7 +71,7 @@ from tunespec.core.sensitivity_bayes import (
 )
 from tunespec.core.sensitivity_bayes import _subspace_penalty as _basis_penalty
 from tunespec.core.simulate import check_rgb_sensitivity, check_same_grid
-from tunespec.core.spectra import Grid, Spectra
+from tunespec.core.spectra import Grid, Spectra, resampling_matrix
 
 __all__ = [
     "SENSITIVITY_METHODS",
@@ -661,18 +661,28 @@ def calibration_from_files(
     cov = meta.get("covariance")
     if cov is not None:
         n_led = len(corr.names) if corr is not None else 0
-        expected = 3 * sens.wavelength_nm.size + 2 * n_led
         wl = np.asarray(meta.get("covariance_wavelength_nm", sens.wavelength_nm))
-        if (
-            cov.shape != (expected, expected)
-            or wl.shape != sens.wavelength_nm.shape
-            or not np.allclose(wl, sens.wavelength_nm)
-        ):
+        expected = 3 * wl.size + 2 * n_led
+        if cov.shape != (expected, expected):
             raise InputError(
-                f"covariance is {cov.shape[0]} x {cov.shape[1]}; the sensitivities and "
-                f"LED corrections need {expected} x {expected} on their grid",
+                f"covariance is {cov.shape[0]} x {cov.shape[1]}; {wl.size} samples "
+                f"per channel and {n_led} LED corrections need {expected} x {expected}",
                 path=source,
             )
+        if wl.shape != sens.wavelength_nm.shape or not np.allclose(
+            wl, sens.wavelength_nm
+        ):
+            # sensitivities written on another grid (rawtoaces' 5 nm): the covariance
+            # follows the same linear resampling, T Sigma T'
+            T1 = resampling_matrix(wl, sens.wavelength_nm)
+            T = np.zeros((3 * T1.shape[0] + 2 * n_led, expected))
+            for k in range(3):
+                T[
+                    k * T1.shape[0] : (k + 1) * T1.shape[0],
+                    k * wl.size : (k + 1) * wl.size,
+                ] = T1
+            T[3 * T1.shape[0] :, 3 * wl.size :] = np.eye(2 * n_led)
+            cov = T @ cov @ T.T
     return SensitivityEstimate(
         sens,
         "bayes" if corr is not None else "unknown",
@@ -1007,8 +1017,9 @@ def estimate_camera_sensitivity(
     reflectances : Spectra, (>= n_p, n_wl)
         Patch reflectances on the same grid; must contain every patch name.
     method
-        ``"smooth"`` (default) or ``"pca"`` (the paper's Eq. 4), see the module
-        docstring and :data:`SENSITIVITY_METHODS`.
+        ``"bayes"`` (default: empirical Bayes with per-LED self-calibration,
+        :mod:`.sensitivity_bayes`), ``"smooth"`` or ``"pca"`` (the paper's Eq. 4), see
+        the module docstring and :data:`SENSITIVITY_METHODS`.
     database
         Camera name -> sensitivities (R, G, B) on the inputs' grid, the a priori
         knowledge. Default: the shipped database (:func:`load_camera_database` on the
@@ -1030,9 +1041,13 @@ def estimate_camera_sensitivity(
         later readings of the same instrument) meet the sensitivity, e.g. in Wiener
         estimation. A 1 nm shift, uncorrected, costs about 0.3 CIEDE2000 on average
         (``benchmarks/loo_cameras.py``); sensitivities cannot absorb it. ``None``
-        (default): on for ``"smooth"``, off for ``"pca"`` (the paper's method as
-        published). The fitted shift is also kept in
+        (default): on for ``"bayes"`` and ``"smooth"``, off for ``"pca"`` (the
+        paper's method as published). The fitted shift is also kept in
         ``sensitivity.meta["spd_shift_nm"]``.
+    self_calibrate
+        ``"bayes"``: fit every LED's gain and wavelength offset too (default: with
+        ``fit_spd_shift``); the corrections are in ``.led_correction`` and applied
+        by :meth:`SensitivityEstimate.correct_illuminants`.
     progress, should_stop
         Progress callback (fraction 0..1) and cancellation check.
 

@@ -626,6 +626,57 @@ def _apply_step(state: _State, x: NDArray, B: NDArray, Z: NDArray) -> _State:
     )
 
 
+def _check_positive(ok: list[Any]) -> None:
+    for k in range(3):
+        if not ok[k]:
+            raise SingularSystemError(
+                f"channel {'RGB'[k]}: no positive sensitivity fits the responses "
+                "(are they all zero or negative?)"
+            )
+
+
+def _gauss_newton(
+    data: _Data,
+    normal: Any,
+    wl: NDArray,
+    L_rep: NDArray,
+    state: _State,
+    system: tuple[NDArray, NDArray, list],
+    widths: tuple[float, float],
+    B: NDArray,
+    priors: tuple[NDArray, list, list],
+    should_stop: StopFn | None,
+) -> tuple[_State, NDArray, NDArray, list, int]:
+    """Gauss-Newton on the corrections at fixed hyper-parameters, to convergence.
+
+    ``system`` is ``(G, b, Lams)`` at ``state``; ``priors`` ``(Omega, Q_k, hyper)``.
+    Returns the new state, its system and the number of iterations.
+    """
+    G, b, Lams = system
+    sg, sd = widths
+    Om, Qs, hyper = priors
+    n = wl.size
+    iterations = 0
+    for _ in range(_MAX_ITER):
+        check_stop(should_stop)
+        iterations += 1
+        S = _solve_s(G, b, Lams, nonneg=False)
+        phi = _phi(data, G, b, S, Lams)
+        H, grad, Z = _hessian(data, wl, L_rep, state, S, G, Lams, phi, sg, sd, B)
+        x = _correction_step(H, grad, 3 * n)
+        new, G, b, Lams = _line_search(
+            data, normal, state, x, B, Z, G, b, Lams, phi, sg, sd, Om, Qs, hyper
+        )
+        change = max(
+            float(np.max(np.abs(new.shift - state.shift))) / _TOL_SHIFT_NM,
+            float(np.max(np.abs(new.gamma - state.gamma))) / _TOL_GAIN,
+        )
+        state = new
+        if change < 1.0:
+            break
+    return state, G, b, Lams, iterations
+
+
 def fit_bayes(
     wavelength_nm: NDArray[np.float64],
     L_rep: NDArray[np.float64],
@@ -697,12 +748,7 @@ def fit_bayes(
 
     state = _State(np.zeros(n_i), np.zeros(n_i), 0.0)
     G, b = normal(state)
-    for k in range(3):
-        if not (data.cc[k] > 0 and np.any(b[k] > 0)):
-            raise SingularSystemError(
-                f"channel {'RGB'[k]}: no positive sensitivity fits the responses "
-                "(are they all zero or negative?)"
-            )
+    _check_positive([data.cc[k] > 0 and np.any(b[k] > 0) for k in range(3)])
     iterations = 0
     if not B.shape[1]:
         hyper, evid = choose(G, b)
@@ -717,39 +763,11 @@ def fit_bayes(
         evid = [float("nan")] * 3
         Lams = _channel_precisions(G, Om, Qs, hyper)
         for rounds in range(3):
-            for _ in range(_MAX_ITER):
-                check_stop(should_stop)
-                iterations += 1
-                S = _solve_s(G, b, Lams, nonneg=False)
-                phi = _phi(data, G, b, S, Lams)
-                H, grad, Z = _hessian(
-                    data, wavelength_nm, L_rep, state, S, G, Lams, phi, sg, sd, B
-                )
-                x = _correction_step(H, grad, 3 * n)
-                new, G, b, Lams = _line_search(
-                    data,
-                    normal,
-                    state,
-                    x,
-                    B,
-                    Z,
-                    G,
-                    b,
-                    Lams,
-                    phi,
-                    sg,
-                    sd,
-                    Om,
-                    Qs,
-                    hyper,
-                )
-                change = max(
-                    float(np.max(np.abs(new.shift - state.shift))) / _TOL_SHIFT_NM,
-                    float(np.max(np.abs(new.gamma - state.gamma))) / _TOL_GAIN,
-                )
-                state = new
-                if change < 1.0:
-                    break
+            state, G, b, Lams, its = _gauss_newton(
+                data, normal, wavelength_nm, L_rep, state, (G, b, Lams),
+                (sg, sd), B, (Om, Qs, hyper), should_stop,
+            )  # fmt: skip
+            iterations += its
             if rounds < 2:
                 # Hierarchical step: the prior widths of the per-LED corrections
                 # from the corrections themselves (an EM update, bounded), then the
@@ -761,12 +779,7 @@ def fit_bayes(
                 hyper, evid = choose(G, b)
                 Lams = _channel_precisions(G, Om, Qs, hyper)
     S = _solve_s(G, b, Lams, nonneg=True)
-    for k in range(3):
-        if not np.any(S[k] > 0):
-            raise SingularSystemError(
-                f"channel {'RGB'[k]}: no positive sensitivity fits the responses "
-                "(are they all zero or negative?)"
-            )
+    _check_positive([np.any(S[k] > 0) for k in range(3)])
     phi = _phi(data, G, b, S, Lams)
     H, _, Z = _hessian(data, wavelength_nm, L_rep, state, S, G, Lams, phi, sg, sd, B)
     cov = _covariance(H, S, B, Z, n, n_i)

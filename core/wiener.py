@@ -143,9 +143,11 @@ def wiener_reflectance(
         Camera sensitivities named ``R``, ``G``, ``B`` on the illuminants' grid, in
         response per (power unit x nm) so that
         :func:`~tunespec.core.forward_model.render_rgb` predicts ``responses``.
-    prior : Spectra, (n_train, n_wl), optional
+    prior : Spectra, (n_train, n_est), optional
         Training reflectances for the prior; default the ColorChecker SG (140 patches,
-        as the paper), resampled onto the illuminants' grid.
+        as the paper) on the illuminants' grid. Its grid is the estimation grid: it
+        may be coarser than the illuminants' (within their range), Eq. 1 is then
+        integrated on theirs (:func:`integrated_lighting_matrix`).
     noise_std : float, optional
         One noise standard deviation (full-scale units) for every response of every
         patch. Given, it overrides ``responses.rgb_std`` (a single global ``K_e``);

@@ -15,7 +15,7 @@ from tunespec.core.datasets import (
     resource_path,
 )
 from tunespec.core.io.export import COLORIMETRY_COLUMNS
-from tunespec.core.spectra import read_spectra_csv, write_spectra_csv
+from tunespec.core.spectra import Grid, read_spectra_csv, write_spectra_csv
 
 
 @pytest.fixture(scope="module")
@@ -90,7 +90,8 @@ def test_simulate_calibrate_estimate_evaluate(files, capsys) -> None:
     assert abs(meta["spd_shift_nm"]) < 0.3
     assert stats["params"]["spd_shift_fitted"] is True
     sens = read_spectra_csv(d / "S.csv")
-    true = load_camera().values
+    assert stats["grid"] == "380:730:2"  # calibration at CALIBRATION_MAX_STEP_NM
+    true = load_camera(grid=Grid(380.0, 730.0, 2.0)).values
     est = sens.values / sens.values.max(axis=1, keepdims=True)
     true = true / true.max(axis=1, keepdims=True)
     assert np.sqrt(np.mean((est - true) ** 2)) < 0.03

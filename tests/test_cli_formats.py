@@ -32,7 +32,7 @@ def calibrated(tmp_path_factory):
                           "-o", d / "R.csv", "-q"])) == 0  # fmt: skip
     assert main(map(str, ["calibrate", "--responses", d / "R.csv", "--illuminants",
                           d / "L.csv", "--reflectances", d / "sg.csv", "-o",
-                          d / "S.csv", "-q"])) == 0  # fmt: skip
+                          d / "S.csv", "--grid", "380:730:5", "-q"])) == 0  # fmt: skip
     return d
 
 

@@ -52,7 +52,7 @@ def chain(demo, tmp_path_factory) -> Path:
         "--illuminants-out", d / "illuminants.csv")  # fmt: skip
     _ok("calibrate", "--responses", d / "chart_responses.csv",
         "--illuminants", d / "chart_illuminants.csv",
-        "--reflectances", demo / "chart_camera.ti3", "--grid", "380:730:5",
+        "--reflectances", demo / "chart_camera.ti3",
         "-o", d / "sensitivities.csv", "--stats", d / "table1.json")  # fmt: skip
     _ok("estimate", "--responses", d / "responses.csv",
         "--illuminants", d / "illuminants.csv",
@@ -69,11 +69,13 @@ def test_readme_chain_reproduces_the_demo_exactly(demo, chain) -> None:
     table1 = json.loads((chain / "table1.json").read_text())
     table2 = json.loads((chain / "table2.json").read_text())
     assert table1["training"] == summary["table1"]
+    assert table1["grid"] == "380:730:2"  # CALIBRATION_MAX_STEP_NM, from the data
     assert table2["grid"] == "400:700:5"
     assert {k: table2[k] for k in summary["table2"]} == summary["table2"]
     for name in ("sensitivities.csv", "reflectances.csv", "responses.csv"):
         assert (chain / name).read_bytes() == (demo / name).read_bytes(), name
-    # the demo's rawtoaces JSON gives the same estimate as its CSV
+    # the demo's rawtoaces JSON gives nearly the estimate of its CSV: rawtoaces' schema
+    # holds 380-780 nm at 5 nm, the calibration 2 nm (CALIBRATION_MAX_STEP_NM)
     _ok("estimate", "--responses", chain / "responses.csv",
         "--illuminants", chain / "illuminants.csv",
         "--sensitivities", demo / "sensitivities.json", "--grid", "400:700:5",
@@ -82,7 +84,9 @@ def test_readme_chain_reproduces_the_demo_exactly(demo, chain) -> None:
         "--reference", demo / "reference_reflectances.csv",
         "--stats", chain / "table2_json.json")  # fmt: skip
     from_json = json.loads((chain / "table2_json.json").read_text())
-    assert from_json["average"] == pytest.approx(summary["table2"]["average"])
+    got, want = from_json["average"], summary["table2"]["average"]
+    assert abs(got["delta_e00"] - want["delta_e00"]) < 0.05, (got, want)
+    assert abs(got["spectral_rms"] - want["spectral_rms"]) < 0.001, (got, want)
 
 
 #: Files the commands write, by kind (relative to the demo or the chain folder).

@@ -151,19 +151,26 @@ def resolve_grid(
     args: argparse.Namespace,
     inputs: Sequence[tuple[Spectra, bool]],
     out: Console,
+    *,
+    max_step_nm: float | None = None,
 ) -> Grid:
     """The working grid: ``--grid``, else from the data (printed).
 
     ``inputs``: each spectral input with whether its step counts
     (:func:`~tunespec.core.spectra.grid_from_data`; light spectra are band-averaged
-    and pass ``False``).
+    and pass ``False``); ``max_step_nm`` caps the step (calibration:
+    :data:`~tunespec.core.spectra.CALIBRATION_MAX_STEP_NM`).
     """
-    from tunespec.core.spectra import grid_from_data
+    from tunespec.core.spectra import MAX_DATA_GRID_STEP_NM, grid_from_data
 
     if args.grid is not None:
         out.say(f"working grid {args.grid} nm (--grid)")
         return args.grid
-    grid = grid_from_data([s for s, _ in inputs], sets_step=[k for _, k in inputs])
+    grid = grid_from_data(
+        [s for s, _ in inputs],
+        sets_step=[k for _, k in inputs],
+        max_step_nm=max_step_nm or MAX_DATA_GRID_STEP_NM,
+    )
     out.say(
         f"working grid {grid} nm (from the data: the range every input covers; "
         "--grid overrides)"

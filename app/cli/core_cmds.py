@@ -23,7 +23,7 @@ from tunespec.core.io.spectral import read_spectral
 from tunespec.core.io.spectral_csv import write_spectra_csv
 from tunespec.core.limits import dumps_json
 from tunespec.core.responses import Responses
-from tunespec.core.spectra import Grid, Spectra
+from tunespec.core.spectra import CALIBRATION_MAX_STEP_NM, Grid, Spectra
 
 #: What the spectral options accept (any of these, found from the content).
 SPECTRAL_FORMATS = (
@@ -252,7 +252,12 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     illum_in = read_spectral(args.illuminants, kind="illuminant")
     refl_in = read_spectral(args.reflectances, kind="reflectance")
     out.inputs(illum_in, refl_in)
-    grid = resolve_grid(args, [(illum_in, False), (refl_in, True)], out)
+    grid = resolve_grid(
+        args,
+        [(illum_in, False), (refl_in, True)],
+        out,
+        max_step_nm=CALIBRATION_MAX_STEP_NM,
+    )
     illuminants = _resampled(illum_in, grid, average=True)
     reflectances = _resampled(refl_in, grid)
     # The estimator checks the names of the patches it fits; checking all of them

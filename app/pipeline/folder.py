@@ -519,7 +519,7 @@ def restore_calibration_steps(
 
     from tunespec.app.pipeline.steps import Calibration
     from tunespec.core.sensitivity import calibration_from_files
-    from tunespec.core.spectra import DEFAULT_GRID
+    from tunespec.core.spectra import CALIBRATION_GRID
     from tunespec.core.stats import calibration_report
     from tunespec.devices.registry import layout_reflectances
 
@@ -536,7 +536,7 @@ def restore_calibration_steps(
         method=result.method,
         excluded_patches=result.excluded_patches,
     )
-    work = grid or DEFAULT_GRID
+    work = grid or CALIBRATION_GRID
     refl = layout_reflectances(result.layout, grid=work).resample(work)
     from tunespec.app.pipeline.steps import table1_by_patch
 

@@ -28,7 +28,13 @@ from tunespec.core.limits import (
     valid_number,
     valid_seed,
 )
-from tunespec.core.spectra import DEFAULT_GRID, Grid, Spectra, read_spectra_csv
+from tunespec.core.spectra import (
+    CALIBRATION_GRID,
+    DEFAULT_GRID,
+    Grid,
+    Spectra,
+    read_spectra_csv,
+)
 from tunespec.devices.registry import (
     DEFAULT_SIM_RESOLUTION,
     layout_reflectances,
@@ -131,7 +137,7 @@ class Plan:
     iso: int = 100
     method: str | None = None
     prior: Spectra | None = None
-    grid: Grid = DEFAULT_GRID
+    grid: Grid = CALIBRATION_GRID
     estimation_grid: Grid = ESTIMATION_GRID
     report: bool = True
     input_files: tuple[Path, ...] = ()
@@ -252,7 +258,7 @@ def plan_from_config(config: Mapping[str, Any] | str | PathLike[str]) -> Plan:
     bench_cfg = cfg.get("bench", {})
     cap = cfg.get("capture", {})
     cal_cfg = cfg.get("calibrate", {})
-    grid = Grid.parse(cal_cfg["grid"]) if "grid" in cal_cfg else DEFAULT_GRID
+    grid = Grid.parse(cal_cfg["grid"]) if "grid" in cal_cfg else CALIBRATION_GRID
     est_cfg = cfg.get("estimate", {})
     est_grid = Grid.parse(est_cfg["grid"]) if "grid" in est_cfg else ESTIMATION_GRID
     chart_cfg, sample_cfg = cfg.get("chart", {}), cfg.get("sample", {})

@@ -40,7 +40,12 @@ from tunespec.core.io.session import Session
 from tunespec.core.layout import TargetLayout
 from tunespec.core.processing import ProcessedSession, process_session, write_processed
 from tunespec.core.progress import ProgressFn, StopFn
-from tunespec.core.spectra import DEFAULT_GRID, Grid, Spectra, write_spectra_csv
+from tunespec.core.spectra import (
+    CALIBRATION_GRID,
+    Grid,
+    Spectra,
+    write_spectra_csv,
+)
 from tunespec.devices.capture import FrameCallback, capture, new_session
 from tunespec.devices.registry import Bench, sim_scene
 
@@ -254,7 +259,7 @@ def calibrate(
     reflectances: Spectra | None = None,
     *,
     method: str | None = None,
-    grid: Grid = DEFAULT_GRID,
+    grid: Grid = CALIBRATION_GRID,
     progress: ProgressFn | None = None,
     should_stop: StopFn | None = None,
     **options: Any,
@@ -412,6 +417,11 @@ def estimate(
     return Estimation(est, table2, unc)
 
 
+def _grid_of(spectra: Spectra) -> Grid:
+    wl = spectra.wavelength_nm
+    return Grid(float(wl[0]), float(wl[-1]), spectra.step_nm)
+
+
 def evaluate(estimated: Spectra, reference: Spectra) -> ReflectanceStats:
     """Table 2 (:func:`tunespec.core.colorimetry.reflectance_stats`)."""
     return reflectance_stats(estimated, reference)
@@ -483,7 +493,7 @@ def export(
             sensitivity=calibration.sensitivity,
             chart=chart_reflectances
             if chart_reflectances is not None
-            else load_colorchecker_sg(),
+            else load_colorchecker_sg(_grid_of(calibration.sensitivity)),
             responses=chart.responses,
             illuminants=chart.illuminants,
         )

@@ -67,7 +67,7 @@ from tunespec.core.progress import (
     sub_progress,
 )
 from tunespec.core.spectra import (
-    DEFAULT_GRID,
+    CALIBRATION_GRID,
     Spectra,
     read_spectra_csv,
 )
@@ -687,7 +687,7 @@ def calibrate_job(
     check_stop(should_stop)
     cal = calibrate(
         chart,
-        layout_reflectances(chart_layout, grid=DEFAULT_GRID),
+        layout_reflectances(chart_layout, grid=CALIBRATION_GRID),
         method=method,
         progress=sub_progress(progress, 0.6, 1.0),
         should_stop=should_stop,
@@ -798,7 +798,7 @@ def export_job(
         )
         cal = calibrate(
             chart,
-            layout_reflectances(calibration.layout, grid=DEFAULT_GRID),
+            layout_reflectances(calibration.layout, grid=CALIBRATION_GRID),
             method=calibration.method,
             should_stop=should_stop,
         )

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import re
 import time
-from types import TracebackType
 from typing import Any
 
 import numpy as np
@@ -50,6 +49,7 @@ from tunespec.devices.cal1.commands import (
 from tunespec.devices.cal1.transport import SerialTransport, Transport
 from tunespec.devices.protocols import (
     Channel,
+    ClosesOnExit,
     DeviceBusyError,
     DeviceConnectionError,
     DeviceError,
@@ -119,7 +119,7 @@ def _check_host_port(spec: str, rest: str) -> None:
         )
 
 
-class Cal1LightSource:
+class Cal1LightSource(ClosesOnExit):
     """The CAL1 as a :class:`~tunespec.devices.protocols.LightSource`.
 
     Blocking and not thread-safe: one owner thread. Identity and channel list are
@@ -316,17 +316,6 @@ class Cal1LightSource:
         finally:
             self._closed = True
             self._transport.close()
-
-    def __enter__(self) -> Cal1LightSource:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
     def __repr__(self) -> str:
         return f"Cal1LightSource({self._transport!r}, closed={self._closed})"

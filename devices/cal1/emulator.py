@@ -24,7 +24,6 @@ import socket
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
-from types import TracebackType
 from typing import Literal
 
 import numpy as np
@@ -44,6 +43,7 @@ from tunespec.devices.cal1.commands import (
     encode_reply,
 )
 from tunespec.devices.clock import Clock, RealClock
+from tunespec.devices.protocols import ClosesOnExit
 from tunespec.devices.sim.led_physics import LedPhysics
 
 __all__ = ["GARBAGE", "Cal1Emulator", "FaultKind"]
@@ -69,7 +69,7 @@ class _Fault:
     text: str
 
 
-class Cal1Emulator:
+class Cal1Emulator(ClosesOnExit):
     """Serve the CAL1 protocol for one simulated unit on ``host:port`` (TCP).
 
     Starts listening at once (so :attr:`port` is known); use it as a context manager
@@ -208,17 +208,6 @@ class Cal1Emulator:
         for t in list(self._threads):
             t.join(timeout=5.0)
         self._threads.clear()
-
-    def __enter__(self) -> Cal1Emulator:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
     def __repr__(self) -> str:
         return f"Cal1Emulator({self.spec!r}, seed={self.physics.seed})"

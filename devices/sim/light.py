@@ -19,7 +19,6 @@ shipped model); the camera resamples to its working grid.
 from __future__ import annotations
 
 from pathlib import Path
-from types import TracebackType
 from urllib.parse import parse_qs
 
 import numpy as np
@@ -30,6 +29,7 @@ from tunespec.core.spectra import Spectra, read_spectra_csv
 from tunespec.devices.clock import Clock, VirtualClock
 from tunespec.devices.protocols import (
     Channel,
+    ClosesOnExit,
     DeviceConnectionError,
     DeviceIdentity,
     LightStatus,
@@ -42,7 +42,7 @@ __all__ = ["SimLightSource", "open_sim_light"]
 WARM_POWER_ON_AGO_S = 3600.0
 
 
-class SimLightSource:
+class SimLightSource(ClosesOnExit):
     """A :class:`~tunespec.devices.protocols.LightSource` backed by LED physics.
 
     Parameters
@@ -158,17 +158,6 @@ class SimLightSource:
         Named ``"emitted"``; multiply by ``t1_s - t0_s`` for radiant exposure.
         """
         return self._physics.emitted_spd_over(t0_s, t1_s)
-
-    def __enter__(self) -> SimLightSource:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
     def __repr__(self) -> str:
         return f"SimLightSource(seed={self._physics.seed}, closed={self._closed})"

@@ -32,13 +32,13 @@ import contextlib
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from types import TracebackType
 from urllib.parse import parse_qs
 
 from tunespec.core.errors import InputError
 from tunespec.devices.cal1.transport import SerialTransport, Transport
 from tunespec.devices.goniometer import ANGLE_AXES, AxisInfo, check_target
 from tunespec.devices.protocols import (
+    ClosesOnExit,
     DeviceCommandError,
     DeviceError,
     DeviceIdentity,
@@ -89,7 +89,7 @@ class ZaberAxis:
         return steps * self.deg_per_step + self.offset_deg
 
 
-class ZaberGoniometer:
+class ZaberGoniometer(ClosesOnExit):
     """Zaber stages as a :class:`~tunespec.devices.goniometer.Goniometer`.
 
     Parameters
@@ -255,17 +255,6 @@ class ZaberGoniometer:
     def close(self) -> None:
         """Release the transport; idempotent (the stages hold their position)."""
         self._t.close()
-
-    def __enter__(self) -> ZaberGoniometer:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
     # --- helpers -------------------------------------------------------------------
 

@@ -23,9 +23,9 @@ import socket
 import threading
 import time
 from dataclasses import dataclass
-from types import TracebackType
 from typing import Literal
 
+from tunespec.devices.protocols import ClosesOnExit
 from tunespec.devices.zaber.protocol import MAX_LINE_BYTES, checksum
 
 __all__ = ["StageAxis", "ZaberEmulator"]
@@ -68,7 +68,7 @@ class StageAxis:
         self.start, self.target, self.t0 = self.now_pos(t), float(target), t
 
 
-class ZaberEmulator:
+class ZaberEmulator(ClosesOnExit):
     """Serve Zaber ASCII for ``n_devices`` single-axis stages on ``host:port``.
 
     Parameters
@@ -128,17 +128,6 @@ class ZaberEmulator:
         self._stop.set()
         self._thread.join(timeout=5.0)
         self._listener.close()
-
-    def __enter__(self) -> ZaberEmulator:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
     # --- serving -------------------------------------------------------------------
 
