@@ -21,6 +21,7 @@ from tunespec.app.cli import (
     device_cmds,
     export_cmds,
     gonio_cmds,
+    image_cmds,
     session_cmds,
 )
 from tunespec.app.cli.common import (
@@ -55,7 +56,14 @@ __all__ = [
 
 #: The command modules, in the order ``--help`` lists them. Imported statically: each
 #: imports only what its commands need when they run (``tunespec --help`` stays light).
-COMMAND_MODULES = (core_cmds, device_cmds, session_cmds, export_cmds, gonio_cmds)
+COMMAND_MODULES = (
+    core_cmds,
+    device_cmds,
+    session_cmds,
+    export_cmds,
+    gonio_cmds,
+    image_cmds,
+)
 
 
 class _VersionAction(argparse.Action):

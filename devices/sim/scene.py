@@ -24,12 +24,27 @@ Geometry (resolution independent, so the same scene serves any camera resolution
 
 Materials are numbered for the renderer: 0 the background board, 1 the chart's frame
 (the black card around and between the patches), ``2 + k`` the k-th patch of the
-layout (row-major, as ``layout.patch_names``).
+layout (row-major, as ``layout.patch_names``), then the palettes of the scene's
+:class:`MixedRegion` s in order.
+
+Spatial structure with known per-pixel reflectance: a :class:`MixedRegion` covers a
+rectangle of the board beside the chart with a reflectance that changes from
+superpixel to superpixel: a printed CMY halftone below the camera's resolution
+(:meth:`MixedRegion.halftone`: smooth, painting-like ink-coverage fields; each
+superpixel's reflectance is the Murray-Davies area average of the eight Neugebauer
+primaries with Demichel's coverage weights), or juxtaposed strokes of measured
+reflectances (:meth:`MixedRegion.strokes`: the 24 ColorChecker spectra N. Ohta
+measured, mixed by smooth weights and overlaid by strokes). A superpixel's 2 x 2
+photosites see the same material, so its reflectance is exactly known
+(:meth:`SimScene.plane_materials`); the weights are quantised to a palette so the
+renderer's per-material sums (Eq. 1) stay few.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+from itertools import product
 from typing import Literal
 
 import numpy as np
@@ -43,7 +58,9 @@ __all__ = [
     "BACKGROUND",
     "FALLOFF_RADIUS_MM",
     "FRAME",
+    "MixedRegion",
     "SimScene",
+    "default_regions",
     "white_board_reflectance",
 ]
 
@@ -109,6 +126,9 @@ class SimScene:
         The brightest point, as fractions of image width and height.
     presented
         What is shown at first.
+    regions
+        Areas of the board beside the chart with per-pixel reflectance
+        (:class:`MixedRegion`, e.g. :func:`default_regions`).
     """
 
     def __init__(
@@ -126,6 +146,7 @@ class SimScene:
         falloff_radius_mm: float | None = None,
         falloff_centre_frac: tuple[float, float] = (0.53, 0.47),
         presented: Literal["white", "target"] = "target",
+        regions: tuple[MixedRegion, ...] = (),
     ) -> None:
         if not field_width_mm > 0:
             raise ValueError("field_width_mm must be > 0")
@@ -142,10 +163,23 @@ class SimScene:
             else _as_spectrum(background, wl, "background")
         )
         fr = _as_spectrum(frame, wl, "frame")
+        self.regions = tuple(regions)
+        self._region_first: list[int] = []
+        values = [bg[None], fr[None], patches.values]
+        names = ["background", "frame", *patches.names]
+        first = 2 + len(patches)
+        for k, region in enumerate(self.regions):
+            pal = region.palette(wl)
+            self._region_first.append(first)
+            values.append(pal)
+            names += [f"region{k}_{i}" for i in range(len(pal))]
+            first += len(pal)
+        if first > np.iinfo(np.int16).max:
+            raise ValueError(f"{first} materials: more than the label maps can hold")
         self.materials = Spectra(
             wl,
-            np.vstack([bg, fr, patches.values]),
-            ("background", "frame", *patches.names),
+            np.vstack(values),
+            tuple(names),
             {"source": reflectances.meta.get("source", "")},
         )
         self.field_width_mm = float(field_width_mm)
@@ -350,6 +384,26 @@ class SimScene:
             block[inside] = FRAME
             idx = (row * lay.cols + col)[in_patch].astype(np.int16)
             block[in_patch] = idx + 2
+        for region, first in zip(self.regions, self._region_first, strict=True):
+            region.paint(out, x, y, width_px, height_px, first)
+        return out
+
+    def plane_materials(self, width_px: int, height_px: int) -> NDArray[np.int16]:
+        """Material of each 2 x 2 superpixel (plane pixel), -1 where its photosites
+        see different materials (edges), shape (height / 2, width / 2).
+
+        With :attr:`materials` this is the per-pixel truth of the reflectance.
+        """
+        sites = [
+            self.labels(
+                np.arange(dx, width_px, 2), np.arange(dy, height_px, 2),
+                width_px, height_px,
+            )
+            for dy, dx in ((0, 0), (0, 1), (1, 0), (1, 1))
+        ]  # fmt: skip
+        out = sites[0].copy()
+        for other in sites[1:]:
+            out[other != sites[0]] = -1
         return out
 
     def describe(self) -> dict[str, object]:
@@ -365,6 +419,7 @@ class SimScene:
             "falloff_radius_mm": self.falloff_radius_mm,
             "falloff_centre_frac": list(self.falloff_centre_frac),
             "materials": [*self.materials.names[:2], "<patches>"],
+            "regions": [r.describe() for r in self.regions],
         }
 
 
@@ -390,3 +445,198 @@ def _as_spectrum(
     if not 0 <= v <= 1.5:
         raise ValueError(f"{what}: reflectance {v} out of range")
     return np.full(wavelength_nm.shape, v)
+
+
+@dataclass(frozen=True, eq=False)
+class MixedRegion:
+    """A rectangle of the board whose reflectance varies per superpixel.
+
+    Every superpixel takes one palette entry: a mixture ``sum_i w_i r_i`` of the
+    ``primaries`` with weights from smooth, seeded fields (see :meth:`halftone` and
+    :meth:`strokes`), quantised to ``levels`` steps. Linear mixing is exact for
+    areas finer than a pixel (a halftone's dots, juxtaposed strokes: the Murray-
+    Davies average), which is what a superpixel integrates.
+
+    Parameters
+    ----------
+    box_frac
+        ``(x0, y0, x1, y1)`` of the rectangle, fractions of image width and height.
+    primaries
+        The reflectances mixed.
+    kind
+        ``"halftone"``: ``primaries`` are the 8 Neugebauer primaries of CMY (as
+        ``charts/neugebauer_cmy_model.csv``, ``CcMmYy`` names) mixed by Demichel
+        weights of three coverage fields; ``"strokes"``: any spectra mixed by
+        normalised weight fields.
+    levels
+        Quantisation steps per coverage (halftone) or of the weights (strokes).
+    seed
+        Seeds the fields.
+    """
+
+    box_frac: tuple[float, float, float, float]
+    primaries: Spectra
+    kind: Literal["halftone", "strokes"] = "halftone"
+    levels: int = 8
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        x0, y0, x1, y1 = self.box_frac
+        if not (0 <= x0 < x1 <= 1 and 0 <= y0 < y1 <= 1):
+            raise ValueError(f"box_frac {self.box_frac}: expected 0 <= x0 < x1 <= 1")
+        if self.kind not in ("halftone", "strokes") or not 2 <= self.levels <= 32:
+            raise ValueError("kind 'halftone' or 'strokes', levels 2..32")
+        if self.kind == "halftone" and len(self.primaries) != 8:
+            raise ValueError("a halftone mixes the 8 Neugebauer primaries of CMY")
+
+    # -- factories ---------------------------------------------------------------
+    @classmethod
+    def halftone(
+        cls, box_frac: tuple[float, float, float, float], grid: Grid, seed: int = 0
+    ) -> MixedRegion:
+        """A CMY halftone print (the shipped Neugebauer primaries)."""
+        refl = read_spectra_csv(
+            resource_path("charts", "neugebauer_cmy_model.csv"), grid
+        )
+        order = ("C0M0Y0", "C1M0Y0", "C0M1Y0", "C1M1Y0",
+                 "C0M0Y1", "C1M0Y1", "C0M1Y1", "C1M1Y1")  # fmt: skip
+        return cls(box_frac, refl.select(order), "halftone", 8, seed)
+
+    @classmethod
+    def strokes(
+        cls, box_frac: tuple[float, float, float, float], grid: Grid, seed: int = 1
+    ) -> MixedRegion:
+        """Strokes of six measured reflectances (ColorChecker, N. Ohta's data in
+        colour-science): dark skin, blue, green, red, yellow, white."""
+        import colour
+
+        data = colour.SDS_COLOURCHECKERS["ColorChecker N Ohta"]
+        names = ("dark skin", "blue", "green", "red", "yellow", "white 9.5 (.05 D)")
+        wl = grid.wavelength_nm
+        vals = np.stack(
+            [np.interp(wl, data[n].wavelengths, data[n].values) for n in names]
+        )
+        spectra = Spectra(wl, vals, names, {"source": "colour-science, N. Ohta"})
+        return cls(box_frac, spectra, "strokes", 5, seed)
+
+    # -- palette -------------------------------------------------------------------
+    def _weights(self) -> NDArray[np.float64]:
+        """(n_palette, n_primaries) mixing weights of every palette entry."""
+        q = self.levels
+        if self.kind == "halftone":
+            cov = np.array(list(product(range(q), repeat=3)), dtype=float) / (q - 1)
+            c, m, y = cov.T
+            cols = []
+            for bits in product((0, 1), repeat=3):  # Demichel: (y, m, c) bits
+                by, bm, bc = bits
+                cols.append(
+                    (c if bc else 1 - c) * (m if bm else 1 - m) * (y if by else 1 - y)
+                )
+            # columns c fastest, then m, then y: the primaries' order (CcMmYy)
+            return np.stack(cols, axis=1)
+        k = len(self.primaries)
+        comps = [p for p in product(range(q + 1), repeat=k) if sum(p) == q]
+        return np.array(comps, dtype=float) / q
+
+    def palette(self, wavelength_nm: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Reflectance of every palette entry on ``wavelength_nm``, (n, n_wl)."""
+        prim = np.stack(
+            [np.interp(wavelength_nm, self.primaries.wavelength_nm, v)
+             for v in self.primaries.values]
+        )  # fmt: skip
+        return self._weights() @ prim
+
+    def _fields(self, u: NDArray[np.float64], v: NDArray[np.float64], n: int):
+        """``n`` smooth fields in [0, 1] at region coordinates ``u, v`` in [0, 1]:
+        two seeded waves each plus seeded elliptic strokes of constant value."""
+        rng = np.random.default_rng(self.seed)
+        out = []
+        for _ in range(n):
+            f = np.full(np.broadcast(u, v).shape, 0.5)
+            for _ in range(2):
+                kx, ky = rng.uniform(-3.0, 3.0, 2)
+                ph = rng.uniform(0, 2 * np.pi)
+                f = f + 0.25 * np.sin(2 * np.pi * (kx * u + ky * v) + ph)
+            for _ in range(3):
+                cx, cy = rng.uniform(0.1, 0.9, 2)
+                ax, ay = rng.uniform(0.05, 0.2, 2)
+                val = rng.uniform(0, 1)
+                inside = ((u - cx) / ax) ** 2 + ((v - cy) / ay) ** 2 <= 1
+                f = np.where(inside, val, f)
+            out.append(np.clip(f, 0.0, 1.0))
+        return out
+
+    def index(
+        self, u: NDArray[np.float64], v: NDArray[np.float64]
+    ) -> NDArray[np.int64]:
+        """Palette entry at region coordinates ``u, v`` (each in [0, 1])."""
+        q = self.levels
+        if self.kind == "halftone":
+            c, m, y = self._fields(u, v, 3)
+            ic, im, iy = (np.rint(f * (q - 1)).astype(np.int64) for f in (c, m, y))
+            return (ic * q + im) * q + iy
+        k = len(self.primaries)
+        w = np.stack(self._fields(u, v, k)) ** 3  # sharpen: few pigments dominate
+        w /= np.maximum(w.sum(axis=0), 1e-12)
+        # largest remainder: integer parts that sum to q
+        scaled = w * q
+        base = np.floor(scaled).astype(np.int64)
+        rem = scaled - base
+        short = q - base.sum(axis=0)
+        rank = np.argsort(np.argsort(-rem, axis=0), axis=0)
+        base += rank < short
+        # palette index through a mixed-radix code of the composition
+        radix = (q + 1) ** np.arange(k)[::-1]
+        lut = np.full((q + 1) ** k, -1, dtype=np.int64)
+        comps = np.array([p for p in product(range(q + 1), repeat=k) if sum(p) == q])
+        lut[comps @ radix] = np.arange(len(comps))
+        code = np.tensordot(radix, base, axes=(0, 0))
+        return lut[code]
+
+    def paint(
+        self,
+        out: NDArray[np.int16],
+        x_px: NDArray[np.float64],
+        y_px: NDArray[np.float64],
+        width_px: int,
+        height_px: int,
+        first: int,
+    ) -> None:
+        """Label the board's pixels inside the rectangle with palette materials.
+
+        Uses each pixel's superpixel centre, so the four photosites of a 2 x 2 cell
+        get the same material; the chart (frame and patches) is left as it is.
+        """
+        x0, y0, x1, y1 = self.box_frac
+        xs = (np.floor(x_px / 2) * 2 + 0.5) / width_px
+        ys = (np.floor(y_px / 2) * 2 + 0.5) / height_px
+        cols = np.flatnonzero((xs >= x0) & (xs < x1))
+        rows = np.flatnonzero((ys >= y0) & (ys < y1))
+        if cols.size == 0 or rows.size == 0:
+            return
+        u = (xs[cols] - x0) / (x1 - x0)
+        v = (ys[rows] - y0) / (y1 - y0)
+        idx = self.index(u[None, :], v[:, None]) + first
+        sub = out[np.ix_(rows, cols)]
+        board = sub == BACKGROUND
+        sub[board] = idx[board].astype(np.int16)
+        out[np.ix_(rows, cols)] = sub
+
+    def describe(self) -> dict[str, object]:
+        """Parameters for the truth file."""
+        return {
+            "kind": self.kind,
+            "box_frac": list(self.box_frac),
+            "primaries": list(self.primaries.names),
+            "levels": self.levels,
+            "seed": self.seed,
+        }
+
+
+def default_regions(grid: Grid = DEFAULT_GRID) -> tuple[MixedRegion, MixedRegion]:
+    """A CMY halftone left of the chart and measured-reflectance strokes right of it
+    (for the default scene geometry, where the SG spans x = 0.23-0.78)."""
+    return (
+        MixedRegion.halftone((0.02, 0.1, 0.2, 0.9), grid),
+        MixedRegion.strokes((0.8, 0.1, 0.98, 0.9), grid),
+    )

@@ -1,0 +1,125 @@
+"""``tunespec estimate-image | batch``: per-pixel reflectance images of sessions."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from tunespec.app.cli.common import Console, add_grid_option, add_output_options
+from tunespec.core.errors import InputError
+from tunespec.core.spectra import Grid
+
+
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Add the image subcommands."""
+    p = sub.add_parser(
+        "estimate-image",
+        help="per-pixel reflectance cube, XYZ/L*a*b* and uncertainty images",
+        description="Per 2x2 Bayer superpixel: dark, flat field (Eq. 2), Wiener "
+        "estimation (Eq. 5) with a photon + read noise model. Writes an ENVI and a "
+        "Zarr cube, XYZ, L*a*b* (D50) and uncertainty TIFFs, an sRGB PNG and "
+        "provenance.json into OUT.",
+    )
+    p.add_argument("session", type=Path, help="a captured session folder")
+    _common(p)
+    p.set_defaults(func=cmd_estimate_image, output_dirs=("out",))
+
+    b = sub.add_parser(
+        "batch",
+        help="estimate-image for every session in a folder (resumable)",
+        description="Images of every session (a folder with manifest.json, one or "
+        "two levels down) with one calibration; OUT/<session path>/ per session. A "
+        "session already finished (its provenance.json matches the session and "
+        "the calibration) is skipped, so an interrupted batch resumes.",
+    )
+    b.add_argument("folder", type=Path, help="folder of sessions")
+    _common(b)
+    b.add_argument(
+        "--sessions-at-once",
+        type=int,
+        default=2,
+        metavar="N",
+        help="sessions in one Dask graph (default 2)",
+    )
+    b.set_defaults(func=cmd_batch, output_dirs=("out",))
+
+
+def _common(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--sensitivities",
+        required=True,
+        type=Path,
+        help="calibrate's sensitivities CSV (its .meta.json: LED corrections)",
+    )
+    p.add_argument("--out", required=True, type=Path, help="output folder")
+    p.add_argument(
+        "--rectify",
+        action="store_true",
+        help="resample to the target's plane through the session's homography",
+    )
+    p.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="a dask.distributed scheduler (tcp://host:8786); default: local threads",
+    )
+    p.add_argument("--no-clip", action="store_true", help="do not clip to [0, 1]")
+    add_grid_option(p)
+    add_output_options(p)
+    p.set_defaults(grid=None)  # None: the pipeline's estimation grid, 400:700:5
+
+
+def _settings(args: argparse.Namespace) -> object:
+    from tunespec.app.pipeline.image import ImageSettings
+
+    grid: Grid | None = args.grid
+    return ImageSettings(grid=grid, rectify=args.rectify, clip=not args.no_clip)
+
+
+def cmd_estimate_image(args: argparse.Namespace) -> int:
+    from tunespec.app.pipeline.image import estimate_images
+
+    if not (args.session / "manifest.json").is_file():
+        raise InputError("not a session folder (no manifest.json)", path=args.session)
+    out = Console(args)
+    prov = estimate_images(
+        args.session,
+        args.sensitivities,
+        args.out,
+        settings=_settings(args),  # type: ignore[arg-type]
+        scheduler=args.scheduler,
+        progress=out.progress("estimating images"),
+    )
+    rows, cols = prov["shape"]
+    out.say(
+        f"{cols}x{rows} px x {len(prov['channels'])} LEDs -> {args.out} "
+        "(cube.hdr/.img, cube.zarr, xyz.tif, lab.tif, uncertainty.tif, srgb.png)"
+    )
+    out.summary({"out": str(args.out), **prov})
+    return 0
+
+
+def cmd_batch(args: argparse.Namespace) -> int:
+    from tunespec.app.pipeline.image import batch_images
+
+    if args.sessions_at_once < 1:
+        raise InputError(f"--sessions-at-once {args.sessions_at_once}: must be >= 1")
+    out = Console(args)
+    result = batch_images(
+        args.folder,
+        args.sensitivities,
+        args.out,
+        settings=_settings(args),  # type: ignore[arg-type]
+        scheduler=args.scheduler,
+        sessions_at_once=args.sessions_at_once,
+        progress=out.progress("batch"),
+    )
+    for s in result["skipped"]:
+        out.say(f"skipped (already done): {s}")
+    for s in result["done"]:
+        out.say(f"done: {s}")
+    out.say(
+        f"{len(result['done'])} session(s) estimated, {len(result['skipped'])} skipped"
+    )
+    out.summary(result)
+    return 0

@@ -1,0 +1,305 @@
+"""The per-pixel images of a session: layers, a pixel's spectrum, regions compared.
+
+:class:`ImageView` shows a finished image folder
+(:func:`tunespec.core.io.image_formats.open_image_outputs`, memory-mapped, so a full
+5D Mark III cube is not loaded): the sRGB preview or one layer (L*, a*, b*, u(L*),
+u(reflectance), the reflectance at one wavelength). Hovering or clicking a pixel
+plots its spectrum with its 95 % band (+-1.96 u); two rectangles (A and B) give
+their mean L*a*b* and spread and the CIEDE2000 between their means. It can also run
+``estimate-image`` for a session on the worker pool (:class:`~tunespec.app.workers.
+Worker`) with a progress bar and Cancel, and shows the result when it is done.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyqtgraph as pg
+from PySide6.QtCore import Signal, Slot
+from PySide6.QtWidgets import (
+    QComboBox,
+    QHBoxLayout,
+    QLabel,
+    QLineEdit,
+    QProgressBar,
+    QPushButton,
+    QSpinBox,
+    QVBoxLayout,
+    QWidget,
+)
+
+__all__ = ["LAYERS", "ImageView"]
+
+#: The layers the view shows, in the combo box's order.
+LAYERS = ("sRGB", "L*", "a*", "b*", "u(L*)", "u(reflectance)", "wavelength")
+
+
+class ImageView(QWidget):
+    """Images of a session, a pixel's spectrum and two regions compared.
+
+    ``pixel_selected(row, col)`` is emitted when a pixel is clicked;
+    ``estimate_finished(folder)`` when an estimate started here is shown.
+    """
+
+    pixel_selected = Signal(int, int)
+    estimate_finished = Signal(str)
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.image: Any = None
+        self.worker: Any = None
+        self.layer_combo = QComboBox()
+        self.layer_combo.addItems(LAYERS)
+        self.band_spin = QSpinBox()
+        self.band_spin.setSuffix(" nm")
+        self.band_spin.setEnabled(False)
+        self.progress = QProgressBar()
+        self.progress.setRange(0, 1000)
+        self.progress.hide()
+        self.cancel_button = QPushButton("Cancel")
+        self.cancel_button.hide()
+        self.scheduler_edit = QLineEdit()
+        self.scheduler_edit.setPlaceholderText("local threads")
+        self.scheduler_edit.setToolTip(
+            "a dask.distributed scheduler (tcp://host:8786) to estimate on; "
+            "empty: Dask's local threads"
+        )
+        self.status = QLabel("Estimate images or open an image folder.")
+        self.region_label = QLabel("")
+        self.region_label.setWordWrap(True)
+        top = QHBoxLayout()
+        top.addWidget(QLabel("Layer"))
+        top.addWidget(self.layer_combo)
+        top.addWidget(self.band_spin)
+        top.addStretch(1)
+        top.addWidget(QLabel("Scheduler"))
+        top.addWidget(self.scheduler_edit)
+        top.addWidget(self.progress)
+        top.addWidget(self.cancel_button)
+
+        self.graphics = pg.GraphicsLayoutWidget()
+        self.view_box = self.graphics.addViewBox(lockAspect=True, invertY=True)
+        self.image_item = pg.ImageItem(axisOrder="row-major")
+        self.view_box.addItem(self.image_item)
+        self.roi_a = pg.RectROI((0, 0), (10, 10), pen=pg.mkPen("c", width=2))
+        self.roi_b = pg.RectROI((20, 0), (10, 10), pen=pg.mkPen("m", width=2))
+        for roi in (self.roi_a, self.roi_b):
+            roi.hide()
+            self.view_box.addItem(roi)
+        self.spectrum_plot = pg.PlotWidget()
+        self.spectrum_plot.setLabel("bottom", "wavelength", units="nm")
+        self.spectrum_plot.setLabel("left", "reflectance factor")
+        self.spectrum_plot.setYRange(0.0, 1.0, padding=0.02)
+        self.curve = self.spectrum_plot.plot(pen=pg.mkPen("k", width=2))
+        self.upper = self.spectrum_plot.plot(pen=pg.mkPen(None))
+        self.lower = self.spectrum_plot.plot(pen=pg.mkPen(None))
+        self.band = pg.FillBetweenItem(
+            self.lower, self.upper, brush=(100, 100, 255, 70)
+        )
+        self.spectrum_plot.addItem(self.band)
+        self.pixel: tuple[int, int] | None = None
+
+        layout = QVBoxLayout(self)
+        layout.addLayout(top)
+        layout.addWidget(self.graphics, 3)
+        layout.addWidget(self.spectrum_plot, 2)
+        layout.addWidget(self.region_label)
+        layout.addWidget(self.status)
+
+        self.layer_combo.currentTextChanged.connect(self._on_layer_combo_changed)
+        self.band_spin.valueChanged.connect(self._on_band_spin_changed)
+        self.cancel_button.clicked.connect(self._on_cancel_button_clicked)
+        self._hover = pg.SignalProxy(
+            self.graphics.scene().sigMouseMoved, rateLimit=20, slot=self._on_mouse_moved
+        )
+        self.graphics.scene().sigMouseClicked.connect(self._on_mouse_clicked)
+        self.roi_a.sigRegionChangeFinished.connect(self._on_roi_changed)
+        self.roi_b.sigRegionChangeFinished.connect(self._on_roi_changed)
+
+    # -- data ----------------------------------------------------------------------
+    def open_folder(self, folder: str | Path) -> None:
+        """Show a finished image folder (see ``tunespec estimate-image``)."""
+        from tunespec.core.io.image_formats import open_image_outputs
+
+        self.set_image(open_image_outputs(folder))
+
+    def set_image(self, image: Any) -> None:
+        """Show a :class:`~tunespec.core.io.image_formats.SpectralImage`."""
+        self.image = image
+        wl = image.wavelength_nm
+        self.band_spin.blockSignals(True)
+        self.band_spin.setRange(int(wl[0]), int(wl[-1]))
+        self.band_spin.setSingleStep(round(wl[1] - wl[0]) if wl.size > 1 else 1)
+        self.band_spin.setValue(int(wl[wl.size // 2]))
+        self.band_spin.blockSignals(False)
+        rows, cols = image.shape
+        self.roi_a.setPos((cols * 0.1, rows * 0.1))
+        self.roi_a.setSize((max(2, cols // 8), max(2, rows // 8)))
+        self.roi_b.setPos((cols * 0.6, rows * 0.6))
+        self.roi_b.setSize((max(2, cols // 8), max(2, rows // 8)))
+        self.roi_a.show()
+        self.roi_b.show()
+        self.show_layer(self.layer_combo.currentText())
+        self.view_box.autoRange()
+        self.status.setText(
+            f"{cols} x {rows} px, {wl.size} bands "
+            f"({wl[0]:g}-{wl[-1]:g} nm): {image.folder}"
+        )
+        self._on_roi_changed()
+
+    def layer_data(self, name: str) -> np.ndarray:
+        """The array the view shows for layer ``name``."""
+        img = self.image
+        if name == "sRGB":
+            return img.srgb()
+        if name in ("L*", "a*", "b*"):
+            return np.asarray(img.lab[:, :, ("L*", "a*", "b*").index(name)])
+        if name == "u(L*)":
+            return np.asarray(img.uncertainty[:, :, 0])
+        if name == "u(reflectance)":
+            return np.asarray(img.uncertainty[:, :, 1])
+        if name == "wavelength":
+            k = int(np.argmin(np.abs(img.wavelength_nm - self.band_spin.value())))
+            return np.asarray(img.cube[:, :, k])
+        raise ValueError(f"unknown layer {name!r}")
+
+    def show_layer(self, name: str) -> None:
+        """Switch the image to layer ``name`` (one of :data:`LAYERS`)."""
+        if self.image is None:
+            return
+        data = self.layer_data(name)
+        self.band_spin.setEnabled(name == "wavelength")
+        if data.ndim == 3:
+            self.image_item.setImage(data, autoLevels=False, levels=(0, 255))
+        else:
+            finite = data[np.isfinite(data)]
+            lo, hi = np.percentile(finite, [1, 99]) if finite.size else (0.0, 1.0)
+            self.image_item.setImage(
+                data, autoLevels=False, levels=(lo, max(hi, lo + 1e-6))
+            )
+
+    def show_pixel(self, row: int, col: int) -> None:
+        """Plot the spectrum of pixel (row, col) with its 95 % band."""
+        img = self.image
+        if img is None or not (0 <= row < img.shape[0] and 0 <= col < img.shape[1]):
+            return
+        r = np.asarray(img.cube[row, col], dtype=np.float64)
+        u = float(img.uncertainty[row, col, 1])
+        wl = img.wavelength_nm
+        self.pixel = (row, col)
+        self.curve.setData(wl, r)
+        self.upper.setData(wl, r + 1.96 * u)
+        self.lower.setData(wl, r - 1.96 * u)
+        L, a, b = (float(v) for v in img.lab[row, col])
+        self.status.setText(
+            f"pixel ({col}, {row}): L*a*b* {L:.2f} {a:.2f} {b:.2f}, "
+            f"u(L*) {float(img.uncertainty[row, col, 0]):.3f}, "
+            f"RMS u(reflectance) {u:.4f}"
+        )
+
+    def region_text(self) -> str:
+        """Mean +- spread of regions A and B and the CIEDE2000 between them."""
+        from tunespec.core.colorimetry import delta_e_2000
+
+        stats = [self.image.region(*_rect(roi)) for roi in (self.roi_a, self.roi_b)]
+        parts = []
+        for name, s in zip("AB", stats, strict=True):
+            m, sd = s["lab_mean"], s["lab_std"]
+            parts.append(
+                f"{name}: {s['n_pixels']} px, L*a*b* {m[0]:.2f} {m[1]:.2f} {m[2]:.2f} "
+                f"(sd {sd[0]:.2f} {sd[1]:.2f} {sd[2]:.2f})"
+            )
+        de = float(delta_e_2000(stats[0]["lab_mean"], stats[1]["lab_mean"]))
+        return "; ".join(parts) + f"; dE00(A, B) = {de:.2f}"
+
+    # -- estimating ------------------------------------------------------------------
+    def estimate(
+        self, session: str | Path, sensitivities: str | Path, out: str | Path
+    ) -> Any:
+        """Run ``estimate-image`` on the worker pool (on the Dask scheduler named in
+        :attr:`scheduler_edit`, else locally); the result is shown when done."""
+        from tunespec.app.pipeline import image as pipeline
+        from tunespec.app.workers import Worker
+
+        scheduler = self.scheduler_edit.text().strip() or None
+        self.worker = Worker(
+            pipeline.estimate_images, str(session), str(sensitivities), str(out),
+            scheduler=scheduler,
+        )  # fmt: skip
+        self.worker.signals.progressed.connect(self._on_worker_progressed)
+        self.worker.signals.returned.connect(self._on_worker_returned)
+        self.worker.signals.errored.connect(self._on_worker_errored)
+        self.worker.signals.finished.connect(self._on_worker_finished)
+        self._out = str(out)
+        self.progress.setValue(0)
+        self.progress.show()
+        self.cancel_button.show()
+        self.status.setText(f"estimating images of {session} ...")
+        return self.worker.start()
+
+    # -- slots -------------------------------------------------------------------------
+    @Slot(str)
+    def _on_layer_combo_changed(self, name: str) -> None:
+        self.show_layer(name)
+
+    @Slot(int)
+    def _on_band_spin_changed(self, _value: int) -> None:
+        if self.layer_combo.currentText() == "wavelength":
+            self.show_layer("wavelength")
+
+    def _on_mouse_moved(self, event: Any) -> None:
+        pos = event[0]
+        if self.image is None or not self.view_box.sceneBoundingRect().contains(pos):
+            return
+        p = self.view_box.mapSceneToView(pos)
+        self.show_pixel(int(p.y()), int(p.x()))
+
+    def _on_mouse_clicked(self, event: Any) -> None:
+        if self.image is None:
+            return
+        p = self.view_box.mapSceneToView(event.scenePos())
+        row, col = int(p.y()), int(p.x())
+        self.show_pixel(row, col)
+        self.pixel_selected.emit(row, col)
+
+    def _on_roi_changed(self, *_args: Any) -> None:
+        if self.image is not None:
+            self.region_label.setText(self.region_text())
+
+    @Slot()
+    def _on_cancel_button_clicked(self) -> None:
+        if self.worker is not None:
+            self.worker.abort()
+            self.status.setText("cancelling ...")
+
+    @Slot(float)
+    def _on_worker_progressed(self, fraction: float) -> None:
+        self.progress.setValue(round(1000 * fraction))
+
+    @Slot(object)
+    def _on_worker_returned(self, _provenance: object) -> None:
+        self.open_folder(self._out)
+        self.estimate_finished.emit(self._out)
+
+    @Slot(object)
+    def _on_worker_errored(self, exc: object) -> None:
+        from tunespec.core.progress import Cancelled
+
+        self.status.setText(
+            "cancelled" if isinstance(exc, Cancelled) else f"estimate failed: {exc}"
+        )
+
+    @Slot()
+    def _on_worker_finished(self) -> None:
+        self.progress.hide()
+        self.cancel_button.hide()
+        self.worker = None
+
+
+def _rect(roi: Any) -> tuple[int, int, int, int]:
+    """(row0, row1, col0, col1) of a rectangle ROI in image pixels."""
+    x, y = roi.pos()
+    w, h = roi.size()
+    return round(y), round(y + h), round(x), round(x + w)

@@ -1,0 +1,848 @@
+"""From a captured session to per-pixel reflectance images, in stages that stream.
+
+The stages (each a plain function of picklable arguments, so that
+:mod:`tunespec.app.pipeline.image` can run them as a Dask graph, in threads or on a
+``dask.distributed`` cluster):
+
+1. :func:`prepare_darks` - per (exposure, ISO) the mean dark planes;
+2. :func:`prepare_channel` - per LED: white and target frames read once
+   (:func:`tunespec.core.io.raw.load_raw`, 2 x 2 Bayer superpixels, no
+   demosaicing), dark subtracted, exposure brackets merged, flat-fielded with Eq. 2
+   and written as three planes of the response stack ``responses.f32``
+   (``3 n_i`` planes, illuminant-major as Eq. 5's ``c``); clipped cells become NaN.
+   The white board ``A_B`` is smoothed (block means, interpolated back
+   bilinearly; :func:`flat_block_px`): the light field is smooth at that scale,
+   and dividing by the raw white pixels would add the white frame's noise to every
+   pixel. Blocks of :data:`PTC_BLOCK_PX` also give photon-transfer points (noise
+   variance vs. level);
+3. :func:`setup_estimation` - the noise model (photon-transfer fit of the white
+   frames, or the camera's), the illuminants (measured SPD x exposure, with the
+   calibration's per-LED corrections applied exactly as ``tunespec estimate`` does),
+   the lighting matrix and the bank of Wiener matrices
+   (:func:`tunespec.core.image.build_wiener_bank`); the per-pixel flat-field factor
+   ``phi`` is written as ``phi.f32``;
+   :func:`systematic_table` then takes what a pixel's own noise does not cover (the
+   calibration's covariance, a target unlike the prior) from
+   :func:`tunespec.core.uncertainty.reflectance_uncertainty` on sampled regions,
+   tabulated by CIELAB cell;
+4. :func:`estimate_block` - per block of rows: the responses are read from disk,
+   each pixel gets Eq. 5 from its bin (:func:`tunespec.core.image.estimate_pixels`),
+   and the cube, XYZ, L*a*b* and uncertainty rows are written
+   (:class:`tunespec.core.io.image_formats.ImageOutputs`). With a rectification
+   (:class:`Rectification`) the block's rows are those of the target plane and the
+   responses are resampled through the target's homography first (bilinear; Eq. 5
+   is linear, so this equals resampling the unclipped estimates).
+
+Memory is that of one frame (stage 2) or one block (stage 4), whatever the image
+size: the response stack lives on disk (``3 n_i x 4`` bytes per pixel, 1.5 GB for
+a 22-LED 5760 x 3840 session) and is read and written with positioned I/O, never
+mapped, so the page cache holds it and not the process.
+
+References
+----------
+Trichromatic Reflectance Capture Using a Tunable Light Source (``shared/reference``),
+section "Capturing and Processing", Eq. 1, 2, 5 and 6.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from os import PathLike
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tunespec.core.errors import InputError
+from tunespec.core.image import (
+    DEFAULT_LEVEL_BINS,
+    DEFAULT_PHI_BINS,
+    NoiseModel,
+    WienerBank,
+    block_noise_stats,
+    build_wiener_bank,
+    estimate_pixels,
+    photon_transfer_fit,
+    srgb8_from_xyz_d50,
+)
+from tunespec.core.io.image_formats import ImageOutputs, pwrite_all
+from tunespec.core.io.raw import load_raw
+from tunespec.core.io.session import Session, find_darks, frames_by_channel
+from tunespec.core.spectra import Grid, Spectra
+
+__all__ = [
+    "FLAT_BLOCK_PX",
+    "PTC_BLOCK_PX",
+    "ChannelResult",
+    "ImageJob",
+    "Rectification",
+    "SystematicTable",
+    "block_rows_for",
+    "estimate_block",
+    "flat_block_px",
+    "illuminants_of",
+    "lighting_for",
+    "plan_image_job",
+    "prepare_channel",
+    "prepare_darks",
+    "read_response_rows",
+    "rectification_for",
+    "setup_estimation",
+    "systematic_table",
+]
+
+#: Largest side of the blocks (plane pixels) the white board is smoothed over
+#: (Eq. 2's ``A_B``), see :func:`flat_block_px`.
+FLAT_BLOCK_PX = 16
+#: Side of the photon-transfer blocks, plane pixels.
+PTC_BLOCK_PX = 16
+#: Side of the centre window whose mean normalises Eq. 2 (as processing's).
+FLAT_WINDOW_PX = 100
+#: A channel needs its smoothed white board to this relative precision, else it
+#: borrows the flat field of the LED's strongest channel (as processing does).
+FLAT_MIN_PRECISION = 0.002
+#: Pixels per block of rows in stage 4 (bounds its memory: about 1 kB per pixel).
+BLOCK_PIXELS = 1 << 18
+RESPONSES = "responses.f32"
+PHI = "phi.f32"
+
+
+@dataclass(frozen=True)
+class _Frame:
+    path: str
+    exposure_s: float
+    iso: int
+
+
+@dataclass(frozen=True)
+class Rectification:
+    """Output pixels in the target's plane: a homography from output to plane pixels.
+
+    Parameters
+    ----------
+    H_out_to_plane : (3, 3)
+        Maps output pixel ``(x, y, 1)`` to plane pixel coordinates of the frames.
+    shape
+        ``(rows, cols)`` of the rectified images.
+    """
+
+    H_out_to_plane: tuple[tuple[float, ...], ...]
+    shape: tuple[int, int]
+
+    def source_rows(self, row0: int, row1: int, plane_rows: int) -> tuple[int, int]:
+        """The plane rows the output rows ``row0:row1`` read from (with margin)."""
+        H = np.asarray(self.H_out_to_plane)
+        cols = self.shape[1]
+        x = np.array([0, cols - 1, 0, cols - 1, (cols - 1) / 2], dtype=np.float64)
+        y = np.array([row0, row0, row1 - 1, row1 - 1, (row0 + row1) / 2])
+        p = H @ np.stack([x, y, np.ones_like(x)])
+        v = p[1] / p[2]
+        lo = max(math.floor(v.min()) - 2, 0)
+        hi = min(math.ceil(v.max()) + 3, plane_rows)
+        return lo, max(hi, lo + 1)
+
+    def maps(self, row0: int, row1: int) -> tuple[NDArray[np.float32], ...]:
+        """Plane coordinates (x, y) of every output pixel of rows ``row0:row1``."""
+        H = np.asarray(self.H_out_to_plane)
+        yy, xx = np.mgrid[row0:row1, 0 : self.shape[1]].astype(np.float64)
+        w = H[2, 0] * xx + H[2, 1] * yy + H[2, 2]
+        u = (H[0, 0] * xx + H[0, 1] * yy + H[0, 2]) / w
+        v = (H[1, 0] * xx + H[1, 1] * yy + H[1, 2]) / w
+        return u.astype(np.float32), v.astype(np.float32)
+
+
+@dataclass(frozen=True)
+class ImageJob:
+    """What the stages need of a session (picklable: travels to Dask workers).
+
+    Build it with :func:`plan_image_job`.
+    """
+
+    session_root: str
+    fingerprint: str
+    channels: tuple[str, ...]
+    whites: tuple[tuple[_Frame, ...], ...]
+    targets: tuple[tuple[_Frame, ...], ...]
+    darks: tuple[tuple[_Frame, ...], ...]
+    dark_keys: tuple[tuple[float, int], ...]
+    plane_shape: tuple[int, int]
+    work: str
+    spd_files: tuple[str, ...]
+    spd_exposures_s: tuple[float, ...]
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def n_responses(self) -> int:
+        return 3 * len(self.channels)
+
+    def dark_index(self, frame: _Frame) -> int:
+        for i, (t, iso) in enumerate(self.dark_keys):
+            if iso == frame.iso and math.isclose(t, frame.exposure_s, rel_tol=1e-6):
+                return i
+        raise InputError(f"no dark frame at {frame.exposure_s:g} s, ISO {frame.iso}")
+
+    def work_path(self, name: str) -> Path:
+        return Path(self.work) / name
+
+
+def plan_image_job(
+    session: Session,
+    work: str | PathLike[str],
+    *,
+    channels: Sequence[str] | None = None,
+) -> ImageJob:
+    """Check that a session is complete and list what the stages read.
+
+    Creates ``work`` and the (sparse) response stack in it.
+
+    Raises
+    ------
+    InputError
+        A channel without its white, target or dark frames, or frames of
+        different sizes.
+    """
+    import rawpy
+
+    frames = session.frames
+    whites = frames_by_channel(frames, "white")
+    targets = frames_by_channel(frames, "target")
+    wanted = list(channels) if channels is not None else list(session.settings.channels)
+    missing = {s.channel for s in session.missing(verify=False) if s.channel}
+    keys: list[tuple[float, int]] = []
+    dark_frames: list[tuple[_Frame, ...]] = []
+    w_out, t_out, spd_files, spd_t = [], [], [], []
+    for c in wanted:
+        if c not in whites or c not in targets or c in missing:
+            raise InputError(
+                f"channel {c}: frames missing or marked bad; resume the capture "
+                "(tunespec capture ... --resume)",
+                path=session.manifest_path,
+            )
+        for rec in (*whites[c], *targets[c]):
+            key = (rec.exposure_s, rec.iso)
+            if not any(k[1] == key[1] and math.isclose(k[0], key[0], rel_tol=1e-6)
+                       for k in keys):  # fmt: skip
+                darks = find_darks(frames, rec.exposure_s, rec.iso)
+                if not darks:
+                    raise InputError(
+                        f"no dark frame at {rec.exposure_s:g} s, ISO {rec.iso} for "
+                        f"frame {rec.id}; resume the capture",
+                        path=session.manifest_path,
+                    )
+                keys.append(key)
+                dark_frames.append(tuple(_frame(session, d) for d in darks))
+        w_out.append(tuple(_frame(session, r) for r in whites[c]))
+        t_out.append(tuple(_frame(session, r) for r in targets[c]))
+        ref = targets[c][0]
+        if ref.spd_file is None:
+            raise InputError(f"frame {ref.id} has no measured SPD", path=session.root)
+        spd_files.append(str(session.root / ref.spd_file))
+        spd_t.append(ref.exposure_s)
+    if not wanted:
+        raise InputError("no channel to estimate", path=session.manifest_path)
+    raw = rawpy.RawPy()
+    first = w_out[0][0].path
+    try:
+        raw.open_file(first)
+        h, w = raw.sizes.height, raw.sizes.width
+    except rawpy.LibRawError as exc:
+        raise InputError(f"cannot read as a raw file: {exc}", path=first) from None
+    finally:
+        raw.close()
+    shape = (h // 2, w // 2)
+    work = Path(work)
+    work.mkdir(parents=True, exist_ok=True)
+    job = ImageJob(
+        str(session.root), session.fingerprint(), tuple(wanted), tuple(w_out),
+        tuple(t_out), tuple(dark_frames), tuple(keys), shape, str(work),
+        tuple(spd_files), tuple(spd_t),
+        {"n_darks": max(len(d) for d in dark_frames)},
+    )  # fmt: skip
+    _allocate(job.work_path(RESPONSES), job.n_responses * shape[0] * shape[1] * 4)
+    return job
+
+
+def _frame(session: Session, rec: Any) -> _Frame:
+    return _Frame(str(session.path_of(rec)), float(rec.exposure_s), int(rec.iso))
+
+
+def _allocate(path: Path, n_bytes: int) -> None:
+    with open(path, "wb") as fh:
+        fh.truncate(n_bytes)
+
+
+def _planes(
+    job: ImageJob, frame: _Frame
+) -> tuple[NDArray[np.float32], NDArray[np.bool_]]:
+    raw = load_raw(frame.path)
+    if raw.shape != job.plane_shape:
+        raise InputError(
+            f"a {raw.shape[1] * 2}x{raw.shape[0] * 2} frame in a session of "
+            f"{job.plane_shape[1] * 2}x{job.plane_shape[0] * 2} frames",
+            path=frame.path,
+        )
+    return raw.planes, raw.saturated
+
+
+def prepare_darks(job: ImageJob, index: int) -> str:
+    """Stage 1: the mean dark planes of ``job.dark_keys[index]``; returns the file."""
+    acc: NDArray[np.float32] | None = None
+    frames = job.darks[index]
+    for f in frames:
+        planes, _ = _planes(job, f)
+        acc = planes if acc is None else acc + planes
+    assert acc is not None
+    acc *= np.float32(1.0 / len(frames))
+    path = job.work_path(f"dark_{index}.f32")
+    acc.tofile(path)
+    return str(path)
+
+
+def _dark(job: ImageJob, frame: _Frame) -> NDArray[np.float32]:
+    path = job.work_path(f"dark_{job.dark_index(frame)}.f32")
+    return np.fromfile(path, dtype=np.float32).reshape(3, *job.plane_shape)
+
+
+#: Bracket merging treats a cell above this fraction of full scale as clipped: the
+#: sensor's full well clips the charge before the read noise is added, so a clipped
+#: photosite can read a little under the white level without being flagged.
+BRACKET_CLIP_LEVEL = 0.95
+
+
+def _merged(
+    job: ImageJob, frames: Sequence[_Frame]
+) -> tuple[NDArray[np.float32], NDArray[np.bool_]]:
+    """Dark-subtracted planes of a bracket series (longest first), merged: a clipped
+    cell takes the next shorter exposure, scaled (as processing's brackets); with
+    brackets, cells above :data:`BRACKET_CLIP_LEVEL` count as clipped."""
+    values, clipped = _planes(job, frames[0])
+    if len(frames) > 1:
+        clipped |= values.max(axis=0) > BRACKET_CLIP_LEVEL
+    values -= _dark(job, frames[0])
+    for f in frames[1:]:
+        if not clipped.any():
+            break
+        planes, sat = _planes(job, f)
+        sat |= planes.max(axis=0) > BRACKET_CLIP_LEVEL
+        use = clipped & ~sat
+        planes -= _dark(job, f)
+        values[:, use] = planes[:, use] * np.float32(
+            frames[0].exposure_s / f.exposure_s
+        )
+        clipped &= ~use
+    return values, clipped
+
+
+@dataclass(frozen=True)
+class ChannelResult:
+    """What :func:`prepare_channel` returns (small: travels back from workers).
+
+    Parameters
+    ----------
+    white_mean : (3,)
+        Eq. 2's normaliser: the white board's mean over the centre window.
+    ptc_level, ptc_var : (3, n_blocks)
+        Photon-transfer points of the white frame.
+    flat_grid : (hb, wb) float32
+        The G flat-field factor ``mean(A_B) / A_B`` on the smoothing blocks.
+    borrowed : tuple of int
+        Channels (0-2) that used the strongest channel's flat field.
+    n_saturated : int
+        Pixels with a clipped target or white cell.
+    """
+
+    white_mean: NDArray[np.float64]
+    ptc_level: NDArray[np.float64]
+    ptc_var: NDArray[np.float64]
+    flat_grid: NDArray[np.float32]
+    borrowed: tuple[int, ...]
+    n_saturated: int
+
+
+def prepare_channel(job: ImageJob, j: int) -> ChannelResult:
+    """Stage 2: channel ``j``'s responses, flat-fielded (Eq. 2), into the stack.
+
+    Raises
+    ------
+    InputError
+        A clipped centre window of the white frame, unreadable frames.
+    """
+    import cv2
+
+    h, w = job.plane_shape
+    white, w_sat = _merged(job, job.whites[j])
+    r0, r1, c0, c1 = _window((h, w))
+    ok = ~w_sat[r0:r1, c0:c1]
+    if ok.sum() < 0.5 * ok.size:
+        raise InputError(
+            f"channel {job.channels[j]}: the white frame's centre window is clipped; "
+            "lower the exposure",
+            path=job.whites[j][0].path,
+        )
+    mean_b = white[:, r0:r1, c0:c1][:, ok].astype(np.float64).mean(axis=1)
+    level, var = block_noise_stats(white, w_sat, PTC_BLOCK_PX)
+    block = flat_block_px(w)
+    hb, wb = max(1, round(h / block)), max(1, round(w / block))
+    grids = np.stack(
+        [cv2.resize(white[k], (wb, hb), interpolation=cv2.INTER_AREA) for k in range(3)]
+    )
+    # relative standard error of a block mean of the white board, per channel
+    n_block = block**2
+    rel_se = np.sqrt(np.median(var, axis=1) / n_block) / np.maximum(mean_b, 1e-30)
+    usable = (mean_b > 0) & (grids.min(axis=(1, 2)) > 0)
+    if not usable.any():
+        raise InputError(
+            f"channel {job.channels[j]}: the white frame has no usable signal",
+            path=job.whites[j][0].path,
+        )
+    best = int(np.argmin(np.where(usable, rel_se, np.inf)))
+    own = usable & (rel_se < FLAT_MIN_PRECISION)
+    own[best] = True
+    factor_grid = np.empty_like(grids)
+    for k in range(3):
+        src = k if own[k] else best
+        factor_grid[k] = np.float32(mean_b[src]) / grids[src]
+    del white
+    target, t_sat = _merged(job, job.targets[j])
+    sat = t_sat | w_sat
+    for k in range(3):
+        factor = cv2.resize(factor_grid[k], (w, h), interpolation=cv2.INTER_LINEAR)
+        target[k] *= factor  # Eq. 2: A' = mean(A_B) A / A_B
+        target[k][sat] = np.nan
+    offset = 3 * j * h * w * 4
+    pwrite_all(job.work_path(RESPONSES), offset, target)
+    return ChannelResult(
+        mean_b, level, var, factor_grid[1].astype(np.float32),
+        tuple(int(k) for k in np.flatnonzero(~own)), int(sat.sum()),
+    )  # fmt: skip
+
+
+def flat_block_px(width_px: int) -> int:
+    """Smoothing block for planes ``width_px`` wide: at most :data:`FLAT_BLOCK_PX`,
+    and at most 1/96 of the width (at least 4).
+
+    Block means interpolated bilinearly miss the light field's curvature by about
+    ``f'' B^2 / 6`` (relative); the curvature per plane pixel grows as the image
+    shrinks (0.4 % at 192 px wide with 16 px blocks on the simulated bench), so small
+    images take small blocks. At full resolution (2880 px) it is 16.
+
+    Examples
+    --------
+    >>> flat_block_px(2880), flat_block_px(192)
+    (16, 4)
+    """
+    return int(max(4, min(FLAT_BLOCK_PX, width_px // 96)))
+
+
+def _window(shape: tuple[int, int]) -> tuple[int, int, int, int]:
+    from tunespec.core.processing import flat_window
+
+    return flat_window(shape, FLAT_WINDOW_PX)
+
+
+def read_response_rows(
+    job: ImageJob, row0: int, row1: int, col0: int = 0, col1: int | None = None
+) -> NDArray[np.float32]:
+    """Responses of plane rows ``row0:row1`` (and columns), (m, rows, cols) float32."""
+    h, w = job.plane_shape
+    col1 = w if col1 is None else col1
+    m = job.n_responses
+    out = np.empty((m, row1 - row0, w), dtype=np.float32)
+    with open(job.work_path(RESPONSES), "rb") as fh:
+        for k in range(m):
+            fh.seek((k * h + row0) * w * 4)
+            fh.readinto(memoryview(out[k]).cast("B"))
+    return out[:, :, col0:col1] if (col0, col1) != (0, w) else out
+
+
+def _read_phi(job: ImageJob, row0: int, row1: int) -> NDArray[np.float32]:
+    w = job.plane_shape[1]
+    return np.fromfile(
+        job.work_path(PHI),
+        dtype=np.float32,
+        count=(row1 - row0) * w,
+        offset=row0 * w * 4,
+    ).reshape(row1 - row0, w)
+
+
+def illuminants_of(job: ImageJob) -> Spectra:
+    """Each channel's measured SPD x its target exposure (as processing's), on the
+    first SPD's wavelengths."""
+    from tunespec.core.processing import ILLUMINANT_UNIT
+    from tunespec.core.spectra import read_spectra_csv
+
+    wl: NDArray[np.float64] | None = None
+    rows = []
+    for path, t in zip(job.spd_files, job.spd_exposures_s, strict=True):
+        spd = read_spectra_csv(path)
+        if wl is None:
+            wl = spd.wavelength_nm
+        rows.append(np.interp(wl, spd.wavelength_nm, spd.values[0]) * t)
+    assert wl is not None
+    return Spectra(
+        wl, np.stack(rows), job.channels,
+        {"unit": ILLUMINANT_UNIT, "source": job.session_root},
+    )  # fmt: skip
+
+
+def setup_estimation(
+    job: ImageJob,
+    results: Sequence[ChannelResult],
+    sensitivity: Spectra,
+    meta: dict[str, Any],
+    prior: Spectra,
+    grid: Grid,
+    *,
+    noise: NoiseModel | None = None,
+    n_levels: int = DEFAULT_LEVEL_BINS,
+    n_phi: int = DEFAULT_PHI_BINS,
+) -> WienerBank:
+    """Stage 3: noise model, corrected illuminants, lighting matrix, Wiener bank.
+
+    Parameters
+    ----------
+    results
+        :func:`prepare_channel`'s, in ``job.channels`` order.
+    sensitivity : Spectra (R, G, B)
+        The calibration's sensitivities on their own grid.
+    meta
+        The calibration's side file (:func:`tunespec.core.io.export.read_sensitivity_meta`):
+        its per-LED corrections (or common shift) are applied to the measured SPDs
+        as ``tunespec estimate`` does (:func:`lighting_for`).
+    prior
+        Prior reflectances on ``grid``, the estimation grid.
+    noise
+        The sensor's noise model; default: fitted to the white frames
+        (:func:`tunespec.core.image.photon_transfer_fit`).
+
+    Returns
+    -------
+    WienerBank
+        Its ``params`` also hold the noise model's source.
+    """
+    import cv2
+
+    if noise is None:
+        noise = photon_transfer_fit(
+            np.concatenate([r.ptc_level for r in results], axis=1),
+            np.concatenate([r.ptc_var for r in results], axis=1),
+        )
+    F = lighting_for(job, sensitivity, meta, grid)
+    white = np.concatenate([r.white_mean for r in results])
+    # phi: the flat-field factor of the brightest LED's G plane
+    brightest = int(np.argmax([r.white_mean[1] for r in results]))
+    h, w = job.plane_shape
+    phi = cv2.resize(
+        results[brightest].flat_grid, (w, h), interpolation=cv2.INTER_LINEAR
+    ).astype(np.float32)
+    phi.tofile(job.work_path(PHI))
+    bank = build_wiener_bank(
+        F, prior.values, white, noise, grid.wavelength_nm,
+        phi_range=(float(phi.min()), float(phi.max())),
+        n_levels=n_levels, n_phi=n_phi,
+    )  # fmt: skip
+    bank.params["noise_source"] = noise.source
+    return bank
+
+
+def _corrected_for(
+    job: ImageJob, sensitivity: Spectra, meta: dict[str, Any], grid: Grid
+) -> tuple[Spectra, Spectra, Grid]:
+    """The illuminants corrected as ``tunespec estimate`` corrects them (per-LED
+    corrections on the SPDs' own grid), and both illuminants and sensitivities on
+    the integration grid (:func:`tunespec.core.wiener.integration_grid`)."""
+    from tunespec.core.sensitivity import correct_illuminants_from_meta
+    from tunespec.core.wiener import integration_grid
+
+    corrected = correct_illuminants_from_meta(illuminants_of(job), meta)
+    fine = integration_grid(sensitivity, grid, corrected)
+    return (
+        corrected.resample(fine, average=True),
+        sensitivity.resample(fine, source=sensitivity.meta.get("source")),
+        fine,
+    )
+
+
+def lighting_for(
+    job: ImageJob, sensitivity: Spectra, meta: dict[str, Any], grid: Grid
+) -> NDArray[np.float64]:
+    """``F`` of Eq. 5 for the session, exactly as ``tunespec estimate`` builds it:
+    the calibration's corrections applied to the measured SPDs, Eq. 1 integrated on
+    the finer of the calibration's and the estimation grid, reflectance on ``grid``
+    (:func:`tunespec.core.wiener.integrated_lighting_matrix`)."""
+    from tunespec.core.wiener import integrated_lighting_matrix
+
+    L, S, fine = _corrected_for(job, sensitivity, meta, grid)
+    return integrated_lighting_matrix(
+        L.select(job.channels).values,
+        S.select(("R", "G", "B")).values,
+        fine.wavelength_nm,
+        grid.wavelength_nm,
+    )
+
+
+def estimate_block(
+    job: ImageJob,
+    bank: WienerBank,
+    outputs: ImageOutputs,
+    row0: int,
+    row1: int,
+    *,
+    clip: bool = True,
+    rectification: Rectification | None = None,
+    systematic: SystematicTable | None = None,
+) -> NDArray[np.uint8]:
+    """Stage 4: output rows ``row0:row1`` estimated and written; returns their sRGB.
+
+    Returns
+    -------
+    (rows, cols, 3) uint8
+        The sRGB preview of the block.
+    """
+    if rectification is None:
+        planes = read_response_rows(job, row0, row1)
+        phi = _read_phi(job, row0, row1)
+    else:
+        planes, phi = _rectified(job, rectification, row0, row1)
+    m, r, cols = planes.shape
+    # pixels as rows (band-interleaved by pixel, as the outputs)
+    c = np.ascontiguousarray(planes.reshape(m, r * cols).T)
+    del planes
+    est = estimate_pixels(bank, c, phi.reshape(-1), clip=clip)
+    del c
+    unc = np.stack([est.u_lab_l, est.u_rms], axis=1)
+    if systematic is not None:
+        add_l, add_rms = systematic.lookup(est.lab.T)
+        unc = np.sqrt(unc.astype(np.float64) ** 2 + np.stack([add_l, add_rms], axis=1))
+        unc = unc.astype(np.float32)
+    outputs.write_rows(
+        row0,
+        est.reflectance.reshape(r, cols, -1),
+        est.xyz.reshape(r, cols, 3),
+        est.lab.reshape(r, cols, 3),
+        unc.reshape(r, cols, 2),
+    )
+    return srgb8_from_xyz_d50(est.xyz.T).reshape(r, cols, 3)
+
+
+def _rectified(
+    job: ImageJob, rect: Rectification, row0: int, row1: int
+) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+    """Responses and phi at the output rows, resampled bilinearly from the planes."""
+    import cv2
+
+    h, _w = job.plane_shape
+    s0, s1 = rect.source_rows(row0, row1, h)
+    u, v = rect.maps(row0, row1)
+    v = v - np.float32(s0)
+    src = read_response_rows(job, s0, s1)
+    out = np.empty((src.shape[0], *u.shape), dtype=np.float32)
+    for k in range(src.shape[0]):
+        out[k] = cv2.remap(
+            src[k], u, v, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+            borderValue=float("nan"),
+        )  # fmt: skip
+    phi_src = _read_phi(job, s0, s1)
+    phi = cv2.remap(phi_src, u, v, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    return out, phi
+
+
+def block_rows_for(cols: int) -> int:
+    """Rows per block so that a block holds about :data:`BLOCK_PIXELS` pixels."""
+    return max(1, BLOCK_PIXELS // max(cols, 1))
+
+
+def rectification_for(
+    corners_px: Any, width_mm: float, height_mm: float
+) -> Rectification:
+    """The rectification of a target whose outer corners are at ``corners_px``.
+
+    Parameters
+    ----------
+    corners_px : (4, 2)
+        TL, TR, BR, BL of the target in mosaic pixels (a layout's ``corners_px``).
+    width_mm, height_mm
+        The target's size.
+
+    Returns
+    -------
+    Rectification
+        Output pixels square on the target, at the scale the planes have along
+        the target's top and bottom edges.
+
+    Examples
+    --------
+    >>> r = rectification_for([[0.5, 0.5], [200.5, 0.5], [200.5, 100.5], [0.5, 100.5]],
+    ...                       100.0, 50.0)
+    >>> r.shape
+    (50, 100)
+    """
+    from tunespec.core.io.raw import full_to_plane_px
+    from tunespec.core.layout import homography_from_corners
+
+    plane = full_to_plane_px(np.asarray(corners_px, dtype=np.float64).reshape(4, 2))
+    if not (width_mm > 0 and height_mm > 0):
+        raise InputError(f"target size {width_mm} x {height_mm} mm must be positive")
+    top = np.linalg.norm(plane[1] - plane[0])
+    bottom = np.linalg.norm(plane[2] - plane[3])
+    s = 0.5 * (top + bottom) / width_mm  # output px per mm
+    shape = (max(1, round(height_mm * s)), max(1, round(width_mm * s)))
+    mm = np.array(
+        [[0.0, 0.0], [width_mm, 0.0], [width_mm, height_mm], [0.0, height_mm]]
+    )
+    H_mm = homography_from_corners(mm, plane)
+    # output pixel centres at (x + 0.5) / s mm
+    to_mm = np.array([[1 / s, 0, 0.5 / s], [0, 1 / s, 0.5 / s], [0, 0, 1.0]])
+    H = H_mm @ to_mm
+    return Rectification(tuple(tuple(float(v) for v in row) for row in H), shape)
+
+
+#: Region samples (8 x 8 superpixel means) whose full uncertainty
+#: (:func:`tunespec.core.uncertainty.reflectance_uncertainty`) is computed.
+N_SYSTEMATIC_SAMPLES = 128
+#: Side of a sample region, plane pixels.
+SAMPLE_PX = 8
+#: CIELAB cells of the systematic-uncertainty table: L* 0-100, a*, b* -100-100.
+_LAB_CELLS = (10, 10, 10)
+
+
+@dataclass(frozen=True)
+class SystematicTable:
+    """What a pixel's own noise does not cover, by CIELAB cell (see
+    :func:`systematic_table`).
+
+    Parameters
+    ----------
+    var_l, var_rms : (n_L, n_a, n_b)
+        Added variance of L* and of the RMS spectral uncertainty.
+    n_samples : int
+        Regions the table was computed from.
+    """
+
+    var_l: NDArray[np.float64]
+    var_rms: NDArray[np.float64]
+    n_samples: int = 0
+
+    def lookup(self, lab: NDArray[np.floating]) -> tuple[NDArray[np.float64], ...]:
+        """The added variances at CIELAB values (3, n)."""
+        idx = _lab_cell(np.asarray(lab, dtype=np.float64))
+        return self.var_l[idx], self.var_rms[idx]
+
+
+def _lab_cell(lab: NDArray[np.float64]) -> tuple[NDArray[np.int64], ...]:
+    nl, na, nb = _LAB_CELLS
+    il = np.clip((lab[0] / (100.0 / nl)).astype(np.int64), 0, nl - 1)
+    ia = np.clip(((lab[1] + 100.0) / (200.0 / na)).astype(np.int64), 0, na - 1)
+    ib = np.clip(((lab[2] + 100.0) / (200.0 / nb)).astype(np.int64), 0, nb - 1)
+    return il, ia, ib
+
+
+def _samples(
+    job: ImageJob, n_samples: int
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Responses (n, m) and phi (n,) of unclipped 8 x 8 regions spread over the
+    image (row bands read from the stack; a few percent of it)."""
+    h, w = job.plane_shape
+    s = SAMPLE_PX
+    n_bands = max(1, min(h // s, 24))
+    starts = np.linspace(0, h - s, n_bands).astype(int) if h >= s else np.array([0])
+    out_c, out_phi = [], []
+    for r0 in starts:
+        r1 = min(r0 + s, h)
+        c = read_response_rows(job, r0, r1)
+        phi = _read_phi(job, r0, r1)
+        nb = w // s
+        if nb < 1:
+            continue
+        cc = c[:, :, : nb * s].reshape(c.shape[0], r1 - r0, nb, s)
+        means = cc.mean(axis=(1, 3))  # NaN where a region holds a clipped pixel
+        pm = phi[:, : nb * s].reshape(r1 - r0, nb, s).mean(axis=(0, 2))
+        ok = ~np.isnan(means).any(axis=0)
+        out_c.append(means[:, ok].T)
+        out_phi.append(pm[ok])
+    if not out_c:
+        return np.empty((0, job.n_responses)), np.empty(0)
+    c_all = np.concatenate(out_c).astype(np.float64)
+    phi_all = np.concatenate(out_phi).astype(np.float64)
+    if c_all.shape[0] > n_samples:
+        # spread over brightness: every k-th region in order of level
+        order = np.argsort(c_all.mean(axis=1))
+        pick = order[np.linspace(0, order.size - 1, n_samples).astype(int)]
+        c_all, phi_all = c_all[pick], phi_all[pick]
+    return c_all, phi_all
+
+
+def systematic_table(
+    job: ImageJob,
+    bank: WienerBank,
+    sensitivity_csv: str,
+    meta: dict[str, Any],
+    prior: Spectra,
+    grid: Grid,
+    *,
+    n_samples: int = N_SYSTEMATIC_SAMPLES,
+) -> SystematicTable:
+    """The uncertainty a pixel's own noise and the prior leave out, by colour.
+
+    A pixel's bin posterior (:class:`~tunespec.core.image.WienerBank`) covers its
+    noise and what the LEDs cannot resolve under the prior. What it leaves out is
+    the calibration's uncertainty (sensitivities and LED corrections, propagated
+    through Eq. 1) and a target unlike the prior set; both depend on the spectrum,
+    not on the pixel. So for regions sampled over the image (``n_samples`` 8 x 8
+    means) the full per-pixel uncertainty is computed by
+    :func:`tunespec.core.uncertainty.reflectance_uncertainty` (as ``tunespec
+    estimate`` does for a patch, with one pixel's noise: ``n_pixels = 1``), its
+    excess over the region's bin posterior is kept and tabulated by CIELAB cell
+    (cells without a sample take the nearest sample's). Every pixel adds its cell's
+    excess to its own variance.
+
+    Returns
+    -------
+    SystematicTable
+        Zeros when no region is free of clipping.
+    """
+    from tunespec.core.datasets import read_sensitivities
+    from tunespec.core.image import _u_lightness
+    from tunespec.core.responses import Responses
+    from tunespec.core.sensitivity import calibration_from_files
+    from tunespec.core.uncertainty import reflectance_uncertainty
+    from tunespec.core.wiener import wiener_reflectance
+
+    c, phi = _samples(job, n_samples)
+    zeros = np.zeros(_LAB_CELLS)
+    if c.shape[0] == 0:
+        return SystematicTable(zeros, zeros.copy(), 0)
+    n, m = c.shape
+    n_i = m // 3
+    std = np.sqrt(bank.noise.variance(c, phi[:, None], bank.channel_index))
+    names = tuple(f"region{i}" for i in range(n))
+    resp = Responses(
+        names, job.channels, c.reshape(n, n_i, 3), std.reshape(n, n_i, 3),
+        np.ones((n, n_i)),
+    )  # fmt: skip
+    sensitivity = read_sensitivities(sensitivity_csv)
+    L, S, _ = _corrected_for(job, sensitivity, meta, grid)
+    est = wiener_reflectance(resp, L, S, prior)
+    calibration = calibration_from_files(sensitivity_csv, meta)
+    unc = reflectance_uncertainty(est, resp, illuminants_of(job), calibration)
+    bins = bank.bins_of(c.astype(np.float32), phi)
+    y = unc.xyz[:, 1]
+    u_l_bin = _u_lightness(y, bank.xyz_cov[bins, 1, 1]).astype(np.float64)
+    ex_l = np.maximum(unc.lab_std[:, 0] ** 2 - u_l_bin**2, 0.0)
+    ex_rms = np.maximum(
+        np.mean(unc.reflectance_std**2, axis=1) - bank.var_rms[bins], 0.0
+    )
+    # nearest sample (in CIELAB) of every cell centre
+    nl, na, nb = _LAB_CELLS
+    gl = (np.arange(nl) + 0.5) * 100.0 / nl
+    ga = (np.arange(na) + 0.5) * 200.0 / na - 100.0
+    gb = (np.arange(nb) + 0.5) * 200.0 / nb - 100.0
+    cells = np.stack(np.meshgrid(gl, ga, gb, indexing="ij"), axis=-1).reshape(-1, 3)
+    d = ((cells[:, None, :] - unc.lab[None, :, :]) ** 2).sum(axis=2)
+    near = np.argmin(d, axis=1)
+    return SystematicTable(
+        ex_l[near].reshape(_LAB_CELLS), ex_rms[near].reshape(_LAB_CELLS), n
+    )
