@@ -12,7 +12,7 @@ from PySide6.QtCore import QSettings
 from tunespec.app.main_window import MainWindow
 from tunespec.app.settings import AppSettings
 from tunespec.app.wizard.step_page import StepState
-from tunespec.core.spectra import DEFAULT_GRID
+from tunespec.core.spectra import CALIBRATION_GRID
 
 #: Small enough to be quick, large enough for 140 ROIs of a few dozen pixels.
 SIM = {"realtime": False, "resolution": (768, 512), "seed": 3}
@@ -115,7 +115,7 @@ def test_wizard_runs_to_the_end_on_the_simulated_bench(window, qtbot, tmp_path):
     chart = process(m.session("chart"), layout=cal.layout, corners="layout")
     core1 = calibrate(
         chart,
-        layout_reflectances(m.chart_layout, grid=DEFAULT_GRID),
+        layout_reflectances(m.chart_layout, grid=CALIBRATION_GRID),  # as the wizard
         method=cal.method,
     ).table1
     expected1 = np.column_stack([core1.mean, core1.max, core1.p95])
