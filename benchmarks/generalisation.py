@@ -73,7 +73,7 @@ from tunespec.core.sensitivity_bayes import (
 from tunespec.core.simulate import NoiseModel, scale_to_exposure, simulate_responses
 from tunespec.core.spectra import CALIBRATION_GRID, Grid, Spectra
 from tunespec.core.stats import calibration_report, sensitivity_rms
-from tunespec.core.uncertainty import reflectance_uncertainty
+from tunespec.core.uncertainty import PRIOR_MISMATCH_SCALE, reflectance_uncertainty
 from tunespec.core.wiener import integration_grid, wiener_reflectance
 
 WORK = CALIBRATION_GRID
@@ -96,6 +96,9 @@ class Score:
     de00_max: float
     spec_rms_mean: float
     coverage: dict[str, float] = field(default_factory=dict)
+    # per reflectance collection, per KAPPAS: [inside, total] of reflectance samples
+    # and of L*, a*, b* values (for --tune-prior-scale)
+    coverage_counts: dict[str, list[list[float]]] = field(default_factory=dict)
     fitted_shift_nm: list[float] = field(default_factory=list)
     fitted_gain: list[float] = field(default_factory=list)
     true_shift_nm: list[float] = field(default_factory=list)
@@ -140,6 +143,84 @@ def calibrate(
     return estimate_camera_sensitivity(
         responses, reported, chart, method=method, database=db, **kw
     )
+
+
+#: Candidate prior-mismatch scales (``core.uncertainty.PRIOR_MISMATCH_SCALE``).
+KAPPAS = np.round(np.arange(0.8, 3.01, 0.05), 2)
+
+
+def collection(name: str) -> str:
+    """Which reflectance collection a test reflectance comes from."""
+    for prefix, label in (("CES", "CIE 2017"), ("TCS", "CIE 1995"), ("VS", "NIST CQS")):
+        if name.startswith(prefix):
+            return label
+    return "rawtoaces 190"
+
+
+def coverage_counts(w, unc, truth_r, lab_true, names) -> dict[str, list[list[float]]]:
+    """Inside-the-95 %-interval counts per collection at every ``KAPPAS`` value.
+
+    The prior-mismatch share of each variance scales with ``kappa^2`` (the rest does
+    not), so one uncertainty computation gives them all.
+    """
+    k0 = PRIOR_MISMATCH_SCALE**2
+    var_r = unc.covariance.diagonal(axis1=1, axis2=2)
+    rest_r, prior_r = var_r - unc.prior_part_variance, unc.prior_part_variance / k0
+    lab_var = unc.lab_std**2
+    rest_l, prior_l = (
+        lab_var - unc.lab_prior_part_variance,
+        unc.lab_prior_part_variance / k0,
+    )
+    err_r = np.abs(w.reflectance.values - truth_r)
+    err_l = np.abs(unc.lab - lab_true)
+    groups = np.array([collection(n) for n in names])
+    out: dict[str, list[list[float]]] = {}
+    for g in sorted(set(groups)):
+        m = groups == g
+        rows = []
+        for kappa in KAPPAS:
+            std_r = np.minimum(
+                np.sqrt(np.maximum(rest_r[m] + kappa**2 * prior_r[m], 0)), 0.5
+            )
+            std_l = np.sqrt(np.maximum(rest_l[m] + kappa**2 * prior_l[m], 0))
+            rows.append(
+                [float(np.sum(err_r[m] <= Z95 * std_r)), float(err_r[m].size)]
+                + [float(np.sum(err_l[m, j] <= Z95 * std_l[:, j])) for j in range(3)]
+                + [float(m.sum())]
+            )
+        out[g] = rows
+    return out
+
+
+def tune_prior_scale(scores: list[Score]) -> None:
+    """Leave-one-collection-out: ``kappa`` chosen on the other collections (the mean
+    of the reflectance, L*, a* and b* coverages closest to 95 %), scored on the one
+    left out."""
+    ss = [s for s in scores if s.coverage_counts]
+    if not ss:
+        return
+    groups = sorted(ss[0].coverage_counts)
+    tot = {g: np.sum([s.coverage_counts[g] for s in ss], axis=0) for g in groups}
+
+    def mean_cov(counts):  # mean of the four coverages, per kappa
+        return (
+            counts[:, 0] / counts[:, 1] + np.sum(counts[:, 2:5], axis=1) / counts[:, 5]
+        ) / 4
+
+    print(
+        "\nprior-mismatch scale kappa, chosen without the collection it is scored on:"
+    )
+    for g in groups:
+        train = np.sum([tot[h] for h in groups if h != g], axis=0)
+        i = int(np.argmin(np.abs(mean_cov(train) - 0.95)))
+        c = tot[g][i]
+        print(
+            f"  {g:<15} kappa {KAPPAS[i]:.2f}: coverage reflectance {c[0] / c[1]:.3f}, "
+            f"L* {c[2] / c[5]:.3f}, a* {c[3] / c[5]:.3f}, b* {c[4] / c[5]:.3f}"
+        )
+    allc = np.sum([tot[g] for g in groups], axis=0)
+    i = int(np.argmin(np.abs(mean_cov(allc) - 0.95)))
+    print(f"  all collections: kappa {KAPPAS[i]:.2f}")
 
 
 def coverage(est_r, std_r, lab_est, lab_std, truth_r, lab_true) -> dict[str, float]:
@@ -196,6 +277,9 @@ def run_camera(
         )
         if est.covariance is not None:
             unc = reflectance_uncertainty(w, resp_t, reported, est)
+            sc.coverage_counts = coverage_counts(
+                w, unc, test_est.values, lab_true, test_est.names
+            )
             sc.coverage = coverage(
                 w.reflectance.values,
                 unc.reflectance_std,
@@ -339,6 +423,7 @@ def main(argv: list[str] | None = None) -> int:
             )
     summary = summarise(scores)
     print_summary(summary, variants)
+    tune_prior_scale([s for s in scores if s.variant == "bayes"])
     corr = shift_correlation([s for s in scores if s.variant == "bayes"])
     if corr is not None:
         print(

@@ -13,7 +13,7 @@ from tunespec.core.errors import InputError
 from tunespec.core.io.cht import read_cht
 from tunespec.core.io.spectral import read_spectral
 from tunespec.core.layout import TargetLayout
-from tunespec.core.spectra import DEFAULT_GRID
+from tunespec.core.spectra import CALIBRATION_GRID, DEFAULT_GRID
 
 ARGYLL_REF = Path("/usr/share/color/argyll/ref")
 requires_ref = pytest.mark.skipif(
@@ -120,7 +120,7 @@ def test_cht_drives_extraction_and_cc24_calibrates(tmp_path) -> None:
     np.testing.assert_allclose(theirs.responses.rgb, ours.responses.rgb, rtol=1e-12)
     cal = calibrate(ours, refl)
     assert cal.table1.mean[3] < 0.001
-    true = truth["absolute_sensitivity"].resample(DEFAULT_GRID).values
+    true = truth["absolute_sensitivity"].resample(CALIBRATION_GRID).values
     est = cal.sensitivity.values
     scale = float(np.sum(est * true) / np.sum(true * true))  # flat-field shading
     assert np.sqrt(np.mean((est - scale * true) ** 2)) / (scale * true.max()) < 0.08

@@ -115,7 +115,7 @@ def test_wizard_runs_to_the_end_on_the_simulated_bench(window, qtbot, tmp_path):
     chart = process(m.session("chart"), layout=cal.layout, corners="layout")
     core1 = calibrate(
         chart,
-        layout_reflectances(m.chart_layout, grid=CALIBRATION_GRID),  # as the wizard
+        layout_reflectances(m.chart_layout, grid=CALIBRATION_GRID),
         method=cal.method,
     ).table1
     expected1 = np.column_stack([core1.mean, core1.max, core1.p95])
