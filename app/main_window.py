@@ -7,6 +7,7 @@ window holds no measurement logic of its own.
 
 from __future__ import annotations
 
+import gc
 import logging
 import math
 from typing import Any
@@ -15,7 +16,6 @@ from PySide6.QtCore import QSettings, Qt, Slot
 from PySide6.QtGui import QAction, QCloseEvent, QKeySequence
 from PySide6.QtWidgets import (
     QDockWidget,
-    QFileDialog,
     QGridLayout,
     QMainWindow,
     QMessageBox,
@@ -161,6 +161,7 @@ class MainWindow(QMainWindow):
         # the first capture would otherwise import (and, without .pyc files, compile)
         # the pipeline on the device thread while the GUI waits for the GIL
         self.preloaded = False
+        _one_blas_thread()
         self._preload = Worker(_preload_pipeline, hooks=False)
         self._preload.signals.finished.connect(self._on_preload_finished)
         self._preload.start()
@@ -180,6 +181,7 @@ class MainWindow(QMainWindow):
         )
         file_menu.addAction(self.new_action)
         file_menu.addAction(self.open_action)
+        file_menu.addMenu(self.wizard_panel.recent_menu)
         file_menu.addSeparator()
         file_menu.addAction(self.quit_action)
         edit_menu = self.menuBar().addMenu("&Edit")
@@ -231,21 +233,12 @@ class MainWindow(QMainWindow):
     # -- slots: menus -----------------------------------------------------------------
     @Slot()
     def _on_new_action_triggered(self) -> None:
-        folder = QFileDialog.getExistingDirectory(
-            self,
-            "Folder for the new measurement",
-            self.settings.get("session/root_dir"),
-        )
-        if folder:
-            self.wizard_panel.new_measurement(folder)
+        if self.wizard_panel.ask_new_measurement():
+            self.tabs.setCurrentIndex(TAB_MEASUREMENT)
 
     @Slot()
     def _on_open_action_triggered(self) -> None:
-        folder = QFileDialog.getExistingDirectory(
-            self, "Open a measurement to resume", self.settings.get("session/last_dir")
-        )
-        if folder:
-            self.wizard_panel.open_measurement(folder)
+        if self.wizard_panel.ask_open_measurement():
             self.tabs.setCurrentIndex(TAB_MEASUREMENT)
 
     @Slot()
@@ -403,6 +396,9 @@ class MainWindow(QMainWindow):
         super().closeEvent(event)
 
 
+#: Whether the start-up objects were moved out of the collector's reach.
+_GC_FROZEN = False
+
 #: Modules the measurement steps need, imported in the background at start-up.
 PIPELINE_MODULES = (
     "tunespec.app.pipeline.run",
@@ -416,15 +412,60 @@ PIPELINE_MODULES = (
     "tunespec.core.wiener",
     "tunespec.core.colorimetry",
     "tunespec.core.io.export",
+    # imported lazily by colorimetry and the export: a big module imported by a
+    # step holds the GIL for tens of ms at a time (unmarshalling its code)
+    "colour",
+    "tunespec.app.report.report",
+    "tunespec.app.plots.frame_plot",
+    "cv2",
+    "rawpy",
+    "scipy.ndimage",
 )
 
 
+def _one_blas_thread() -> None:
+    """One BLAS thread for the numerics of the GUI's pool workers.
+
+    They run beside the GUI and device threads; OpenBLAS's own threads wait by
+    spinning, and on two cores the 2 nm calibration took 139 s instead of 4 s with
+    the event loop stalled up to 228 ms (``tools/gui_timing.py``). The same limit
+    the pipeline's Dask tasks use (threadpoolctl); it applies to the BLAS libraries
+    loaded when it is called.
+    """
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(limits=1, user_api="blas")
+
+
 def _preload_pipeline() -> None:
-    """Import :data:`PIPELINE_MODULES` (pool thread)."""
+    """Import :data:`PIPELINE_MODULES` (pool thread); one that is not installed
+    (``rawpy`` is optional) is imported when needed, with its error then.
+
+    The modules' objects (hundreds of thousands, with colour-science and
+    matplotlib) live as long as the program, and a full collection walking them
+    holds the GIL for 120-190 ms, wherever it is triggered, while the GUI waits.
+    So the collector is off while they are imported, and then they are frozen: it
+    leaves them out from then on (``gc.freeze``). Once per process (a second window
+    would freeze the first for good).
+    """
     import importlib
 
-    for name in PIPELINE_MODULES:
-        importlib.import_module(name)
+    global _GC_FROZEN
+    freeze = not _GC_FROZEN
+    _GC_FROZEN = True
+    if freeze:
+        gc.disable()
+    try:
+        for name in PIPELINE_MODULES:
+            try:
+                importlib.import_module(name)
+            except ImportError as exc:
+                log.debug("not preloaded: %s", exc)
+    finally:
+        if freeze:
+            gc.freeze()
+            gc.enable()
+    _one_blas_thread()  # again: scipy brings its own OpenBLAS
 
 
 def _reference_sensitivity() -> Any:

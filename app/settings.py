@@ -8,16 +8,20 @@ malformed value falls back instead of breaking start-up. Tests pass a
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from PySide6.QtCore import QByteArray, QSettings
 
 import tunespec.app.qt_compat  # noqa: F401 (before any signal)
 
-__all__ = ["DEFAULTS", "AppSettings"]
+__all__ = ["DEFAULTS", "MAX_RECENT", "AppSettings"]
 
 ORGANIZATION = "TuneSpec"
 APPLICATION = "TuneSpec"
+
+#: Recent measurements remembered.
+MAX_RECENT = 8
 
 #: key -> default; the default's type is the stored type.
 DEFAULTS: dict[str, Any] = {
@@ -27,8 +31,9 @@ DEFAULTS: dict[str, Any] = {
     "sim/width_px": 1536,
     "sim/height_px": 1024,
     "sim/seed": 0,
-    "session/last_dir": "",
-    "session/root_dir": "",
+    "session/last_dir": "",  # the last measurement opened or started
+    "session/root_dir": "",  # where new measurements go (asked once)
+    "session/recent": "",  # recent measurements, one folder a line, newest first
     "layout/chart_path": "",
     "layout/sample_path": "",
     "capture/exposure": "auto",
@@ -98,6 +103,38 @@ class AppSettings:
     def sync(self) -> None:
         """Write to disk now."""
         self.qsettings.sync()
+
+    def remember_measurement(self, folder: str | Path) -> None:
+        """``folder`` is the measurement in use: the last one, first of the recent."""
+        path = str(Path(folder).resolve())
+        rest = [p for p in self.get("session/recent").splitlines() if p and p != path]
+        self.set("session/recent", "\n".join([path, *rest][:MAX_RECENT]))
+        self.set("session/last_dir", path)
+
+    def recent_measurements(self) -> list[Path]:
+        """The recent measurements that still exist, newest first."""
+        from tunespec.app.pipeline.folder import MEASUREMENT_FILE
+
+        paths = [Path(p) for p in self.get("session/recent").splitlines() if p]
+        return [p for p in paths if (p / MEASUREMENT_FILE).is_file()]
+
+    def last_measurement(self) -> Path | None:
+        """The last measurement used, if it still exists."""
+        from tunespec.app.pipeline.folder import MEASUREMENT_FILE
+
+        last = self.get("session/last_dir")
+        return (
+            Path(last) if last and (Path(last) / MEASUREMENT_FILE).is_file() else None
+        )
+
+    def measurements_dir(self) -> str:
+        """Where the folder dialogs start: the folder holding the last measurement,
+        else where new measurements go, else the home folder."""
+        last = self.get("session/last_dir")
+        if last and Path(last).parent.is_dir():
+            return str(Path(last).parent)
+        root = self.get("session/root_dir")
+        return root if root and Path(root).is_dir() else str(Path.home())
 
     def sim_options(self) -> dict[str, Any]:
         """Keyword options for opening the simulated bench."""

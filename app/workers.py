@@ -73,6 +73,10 @@ class WorkerSignals(QObject):
 
     started = Signal()
     progressed = Signal(float)
+    #: What the job is doing now, in the operator's words ("metering LED495, 7 of 22").
+    stage_changed = Signal(str)
+    #: Something the operator must know about the result (e.g. a weak LED).
+    warned = Signal(str)
     returned = Signal(object)
     errored = Signal(object)
     finished = Signal()
@@ -304,9 +308,25 @@ class DeviceContext:
     #: Live frames during a sequence are shown at most this often (s).
     FRAME_PERIOD_S = 0.5
 
-    def __init__(self, controller: DeviceController) -> None:
+    def __init__(
+        self, controller: DeviceController, job: DeviceJob | None = None
+    ) -> None:
         self._controller = controller
-        self._last_frame_s = -1e9
+        self._job = job
+        self._last_frame_s = self._last_spd_s = -1e9
+
+    def set_stage(self, text: str) -> None:
+        """Say what the job does now (progress text and the log)."""
+        log.info("%s", text)
+        if self._job is not None:
+            self._job.signals.stage_changed.emit(text)
+
+    def warn(self, text: str) -> None:
+        """Pass a warning on to the GUI at once (the page logs and shows it)."""
+        if self._job is not None:
+            self._job.signals.warned.emit(text)
+        else:
+            log.warning("%s", text)
 
     @property
     def bench(self) -> Any:
@@ -350,9 +370,18 @@ class DeviceContext:
             return
         self._controller.frame_acquired.emit(preview)
 
-    def show_spd(self, spd: Any, levels: Any) -> None:
-        """Show an SPD the light source reported (with the levels it was set to)."""
-        self._controller.spd_measured.emit(spd, levels)
+    def show_spd(self, read_spd: Callable[[], Any], levels: Any) -> None:
+        """Show an SPD the light source reported (with the levels it was set to).
+
+        ``read_spd()`` gives it; it is called only when the last one shown is
+        :attr:`FRAME_PERIOD_S` old (reading and drawing one per frame would keep
+        the device thread busy in Python, and the GUI waiting for the GIL).
+        """
+        now = time.monotonic()
+        if now - self._last_spd_s < self.FRAME_PERIOD_S:
+            return
+        self._last_spd_s = now
+        self._controller.spd_measured.emit(read_spd(), levels)
 
 
 class DeviceController(QObject):
@@ -649,7 +678,7 @@ class DeviceController(QObject):
         self._current_job = job
         self.busy_changed.emit(True)
         try:
-            job.execute(DeviceContext(self))
+            job.execute(DeviceContext(self, job))
         finally:
             self._current_job = None
             self.busy_changed.emit(False)

@@ -333,6 +333,7 @@ def _resolve_exposures(
     max_exposure_s: float,
     warnings: list[str],
     step: Callable[[], None],
+    on_stage: Callable[[str], None] | None = None,
 ) -> tuple[str, ...]:
     """Meter (auto) or confirm (fixed) every channel's bracketed exposures."""
     settings = session.settings
@@ -343,8 +344,10 @@ def _resolve_exposures(
     if settings.exposure_mode == "auto":
         stage.present("white")
     start_s = 1.0
-    for c in todo:
+    for i, c in enumerate(todo, 1):
         if settings.exposure_mode == "auto":
+            if on_stage is not None:
+                on_stage(f"metering {c}, {i} of {len(todo)}")
             light.set_levels(_levels_for(light, settings, c))
             t0, level = meter_exposure(
                 camera,
@@ -402,6 +405,7 @@ def capture(
     should_stop: StopFn | None = None,
     on_frame: FrameCallback | None = None,
     on_warning: Callable[[str], None] | None = None,
+    on_stage: Callable[[str], None] | None = None,
 ) -> CaptureResult:
     """Run (or resume) the capture sequence of a session.
 
@@ -428,6 +432,9 @@ def capture(
         Called with each warning as it arises (all are also in the result): a
         lock taken over, too little free disk space for the frames to take, an LED
         too weak.
+    on_stage
+        Called with what starts now, for an operator watching a long sequence:
+        ``"metering LED495, 7 of 22"``, ``"white frame LED410, 1 of 22"``.
 
     Returns
     -------
@@ -472,6 +479,7 @@ def capture(
                 should_stop=should_stop,
                 on_frame=on_frame,
                 warnings=warnings,
+                on_stage=on_stage,
             )
         except OSError as exc:
             if exc.errno != errno.ENOSPC:
@@ -570,6 +578,7 @@ def _capture_locked(
     should_stop: StopFn | None,
     on_frame: FrameCallback | None,
     warnings: list[str],
+    on_stage: Callable[[str], None] | None = None,
 ) -> CaptureResult:
     if session.frames and not (resume or retake):
         raise InputError(
@@ -617,6 +626,7 @@ def _capture_locked(
             max_exposure_s=max_exposure_s,
             warnings=warnings,
             step=step,
+            on_stage=on_stage,
         )
         settings = session.settings
         todo = session.missing(verify=resume or bool(retake))
@@ -625,7 +635,8 @@ def _capture_locked(
         darks = [s for s in todo if s.kind == "dark"]
         if darks:
             light.all_off()
-        for spec in darks:
+        for i, spec in enumerate(darks, 1):
+            _stage(on_stage, spec, i, len(darks))
             captured.append(_take(session, camera, spec, None, on_frame).id)
             step()
         for kind in ("white", "target"):
@@ -634,8 +645,9 @@ def _capture_locked(
                 continue
             stage.present(kind)  # type: ignore[arg-type]
             current: str | None = None
-            for spec in specs:
+            for i, spec in enumerate(specs, 1):
                 assert spec.channel is not None
+                _stage(on_stage, spec, i, len(specs))
                 if spec.channel != current:
                     light.set_levels(_levels_for(light, settings, spec.channel))
                     current = spec.channel
@@ -652,6 +664,15 @@ def _capture_locked(
         session.clean_temp()
     report(progress, 1.0)
     return CaptureResult(session, tuple(captured), skipped, metered, tuple(warnings))
+
+
+def _stage(
+    on_stage: Callable[[str], None] | None, spec: FrameSpec, i: int, n: int
+) -> None:
+    """``"dark frame 1 of 3"``, ``"white frame LED410, 1 of 22"``."""
+    if on_stage is not None:
+        what = f"{spec.kind} frame" + (f" {spec.channel}," if spec.channel else "")
+        on_stage(f"{what} {i} of {n}")
 
 
 def _take(

@@ -1,7 +1,11 @@
-"""Render screenshots of the workstation's main views for the README.
+"""Render screenshots of the workstation's main views and of the report's pages.
 
 Runs the measurement wizard on the simulated bench in virtual time (offscreen, no
-display needed), then grabs each view into ``docs/screenshots/*.png``::
+display needed), then grabs each view into ``docs/screenshots/*.png``: every
+wizard step (``wizard_<n>_<step>.png``, and the dark frame while it meters,
+``wizard_dark_running.png``), the layout editor, the plots, the tables, the device
+panel, and every page of the report the export step wrote (``report_page_<n>.png``,
+rendered with poppler's ``pdftoppm`` when it is installed)::
 
     python tools/screenshots.py [--out docs/screenshots] [--resolution 1536x1024]
 
@@ -33,11 +37,34 @@ def _wait(app: object, done: object, limit_s: float = STEP_LIMIT_S) -> None:
             raise TimeoutError("step did not finish in time")
 
 
-def run_wizard(window: object, app: object, folder: Path) -> list[str]:
-    """Drive the wizard to the end (as far as it goes); returns the step outcomes."""
+def run_wizard(
+    window: object, app: object, folder: Path, running_shot: Path | None = None
+) -> list[str]:
+    """Drive the wizard to the end (as far as it goes); returns the step outcomes.
+
+    ``running_shot``: where to save the window while the dark frame step meters.
+    """
     wizard = window.wizard_panel
     wizard.new_measurement(folder)
     outcomes = []
+    shot = [running_shot]
+    armed = [False]
+
+    def on_stage(text: str) -> None:
+        armed[0] = armed[0] or text.startswith("metering LED495")
+
+    def on_value(_value: int) -> None:
+        # the bar is redrawn at most every 100 ms: the first redraw after the
+        # metering of LED495 started, while it still meters
+        page = wizard.dark_page
+        if shot[0] is not None and armed[0] and page.stage.startswith("metering"):
+            for _ in range(3):
+                app.processEvents()
+            window.grab().save(str(shot[0]))
+            shot[0] = None
+
+    wizard.dark_page.stage_changed.connect(on_stage)
+    wizard.dark_page.progress_bar.valueChanged.connect(on_value)
     for page in wizard.pages:
         wizard.go_to(wizard.pages.index(page))
         page.start()
@@ -85,10 +112,20 @@ def main(argv: list[str] | None = None) -> int:
     window.resize(w, h)
     window.show()
     app.processEvents()
-    for line in run_wizard(window, app, tmp / "measurement"):
-        print(line)
     args.out.mkdir(parents=True, exist_ok=True)
+    running = args.out / "wizard_dark_running.png"
+    for line in run_wizard(window, app, tmp / "measurement", running):
+        print(line)
+    print(f"wrote {running}")
     wizard = window.wizard_panel
+    window.tabs.setCurrentIndex(TAB_MEASUREMENT)
+    for i, page in enumerate(wizard.pages, 1):
+        wizard.go_to(i - 1)
+        for _ in range(10):
+            app.processEvents()
+        path = args.out / f"wizard_{i}_{page.key or 'connect'}.png"
+        window.grab().save(str(path))
+        print(f"wrote {path}")
     shots = {
         "wizard_calibrate": (TAB_MEASUREMENT, wizard.calibrate_page),
         "wizard_estimate": (TAB_MEASUREMENT, wizard.estimate_page),
@@ -114,8 +151,33 @@ def main(argv: list[str] | None = None) -> int:
     device = args.out / "device_panel.png"
     window.device_panel.grab().save(str(device))
     print(f"wrote {device}")
+    export = window.measurement.export
     window.close()
+    if export is not None and "report_pdf" in export.paths:
+        _report_pages(export.paths["report_pdf"], args.out)
     return 0
+
+
+def _report_pages(pdf: Path, out: Path) -> None:
+    """Every page of the report as ``report_page_<n>.png`` (poppler's pdftoppm)."""
+    import shutil
+    import subprocess
+
+    if shutil.which("pdftoppm") is None:
+        print("pdftoppm not found: the report's pages are not rendered")
+        return
+    for old in out.glob("report_page_*.png"):
+        old.unlink()
+    subprocess.run(
+        ["pdftoppm", "-r", "72", "-png", str(pdf), str(out / "report_page")],
+        check=True,
+    )
+    for path in sorted(out.glob("report_page*.png")):
+        # pdftoppm numbers with as many digits as the page count needs
+        number = int(path.stem.rsplit("-", 1)[1])
+        final = out / f"report_page_{number}.png"
+        path.rename(final)
+        print(f"wrote {final}")
 
 
 if __name__ == "__main__":

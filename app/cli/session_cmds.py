@@ -201,7 +201,15 @@ def _add_run(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         description="Run the whole measurement from a JSON or TOML configuration "
         "(see tunespec.app.pipeline.plan.load_config); existing sessions are resumed.",
     )
-    p.add_argument("config", type=Path, help="configuration (.json or .toml)")
+    p.add_argument(
+        "config", type=Path, nargs="?", help="configuration (.json or .toml)"
+    )
+    p.add_argument(
+        "--print-example",
+        action="store_true",
+        help="print an example configuration with every key and its default "
+        "(it runs on the simulated bench as it is) and exit",
+    )
     add_output_options(p)
     p.set_defaults(func=cmd_run)
 
@@ -376,6 +384,15 @@ def cmd_process(args: argparse.Namespace) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
+    if args.print_example:
+        from tunespec.app.pipeline.plan import example_config
+
+        print(example_config(), end="")
+        return 0
+    if args.config is None:
+        raise InputError(
+            "give a configuration file (tunespec run --print-example > run.toml)"
+        )
     from tunespec.app.pipeline.run import run_config
 
     out = Console(args)

@@ -226,6 +226,16 @@ class TargetLayoutEditor(QWidget):
         self.selected_patch: str | None = None
         self.last_dir = ""
 
+        self._build_plot()
+        self._build_fields()
+        self._build_undo()
+        self._build_side_panel()
+        self._connect_fields()
+        self.set_corner_finder(corner_finder)
+        self.set_target_layout(target_layout)
+
+    def _build_plot(self) -> None:
+        """The frame with the grid, ROIs, outline and the four corner handles."""
         self.frame_plot = FramePlot()
         vb = self.frame_plot.view_box
         self.grid_item = pg.PlotCurveItem(pen=_GRID_PEN, connect="finite")
@@ -258,6 +268,7 @@ class TargetLayoutEditor(QWidget):
         self.name_items: list[pg.TextItem] = []
         vb.scene().sigMouseClicked.connect(self._on_scene_mouse_clicked)
 
+    def _build_fields(self) -> None:
         self.name_label = QLabel()
         self.rows_spin = QSpinBox(minimum=1, maximum=100)
         self.cols_spin = QSpinBox(minimum=1, maximum=26)
@@ -281,6 +292,12 @@ class TargetLayoutEditor(QWidget):
             "Find the target's corners automatically, then drag to correct"
         )
         self.reset_button = QPushButton("Reset corners")
+        self.status_label = QLabel()
+        self.status_label.setWordWrap(True)
+        self.corners_label = QLabel()
+        self.corners_label.setWordWrap(True)
+
+    def _build_undo(self) -> None:
         self.undo_action = self.undo_stack.createUndoAction(self, "Undo")
         self.undo_action.setShortcut(QKeySequence.StandardKey.Undo)
         self.redo_action = self.undo_stack.createRedoAction(self, "Redo")
@@ -298,11 +315,8 @@ class TargetLayoutEditor(QWidget):
         self.undo_button.setDefaultAction(self.undo_action)
         self.redo_button = QToolButton()
         self.redo_button.setDefaultAction(self.redo_action)
-        self.status_label = QLabel()
-        self.status_label.setWordWrap(True)
-        self.corners_label = QLabel()
-        self.corners_label.setWordWrap(True)
 
+    def _build_side_panel(self) -> None:
         form = QFormLayout()
         form.addRow("Target", self.name_label)
         form.addRow("Rows", self.rows_spin)
@@ -342,6 +356,7 @@ class TargetLayoutEditor(QWidget):
         main.addWidget(self.frame_plot, 1)
         main.addWidget(side_widget)
 
+    def _connect_fields(self) -> None:
         edits = [
             (self.rows_spin, _MERGE_KEYS["rows"], "Change rows"),
             (self.cols_spin, _MERGE_KEYS["cols"], "Change columns"),
@@ -361,8 +376,6 @@ class TargetLayoutEditor(QWidget):
         self.save_button.clicked.connect(self._on_save_button_clicked)
         self.find_button.clicked.connect(self._on_find_button_clicked)
         self.reset_button.clicked.connect(self._on_reset_button_clicked)
-        self.set_corner_finder(corner_finder)
-        self.set_target_layout(target_layout)
 
     # -- public API -------------------------------------------------------------------
     @property

@@ -93,11 +93,28 @@ class DevicePanel(QWidget):
         self._updating = False
         self._live_pending = False
 
-        # -- connection
+        self._build_layout(
+            self._build_connection(light_specs or ["sim"], camera_specs or ["sim"]),
+            self._build_light(),
+            self._build_camera(),
+        )
+        self.status_timer = QTimer(self)
+        self.status_timer.setInterval(STATUS_PERIOD_MS)
+        self.live_timer = QTimer(self)
+        self.live_timer.setSingleShot(True)
+        self.live_timer.setInterval(LIVE_PERIOD_MS)
+
+        self._connect_signals(controller)
+        self._update_enabled()
+
+    def _build_connection(
+        self, light_specs: list[str], camera_specs: list[str]
+    ) -> QGroupBox:
+        """Spec boxes, Connect/Disconnect, the state and the devices' names."""
         self.light_spec_combo = QComboBox(editable=True)
-        self.light_spec_combo.addItems(light_specs or ["sim"])
+        self.light_spec_combo.addItems(light_specs)
         self.camera_spec_combo = QComboBox(editable=True)
-        self.camera_spec_combo.addItems(camera_specs or ["sim"])
+        self.camera_spec_combo.addItems(camera_specs)
         self.connect_button = QPushButton("Connect")
         self.disconnect_button = QPushButton("Disconnect")
         self.state_label = QLabel("Not connected")
@@ -123,8 +140,10 @@ class DevicePanel(QWidget):
         conn_form.addRow(self.error_label)
         conn_box = QGroupBox("Devices")
         conn_box.setLayout(conn_form)
+        return conn_box
 
-        # -- light source
+    def _build_light(self) -> QGroupBox:
+        """The channel table and the light source's buttons."""
         self.channel_table = QTableWidget(0, 3)
         self.channel_table.setHorizontalHeaderLabels(
             ["Channel", "Peak (nm)", "Level (%)"]
@@ -160,8 +179,10 @@ class DevicePanel(QWidget):
         light_layout.addWidget(self.status_label)
         light_box = QGroupBox("Light source")
         light_box.setLayout(light_layout)
+        return light_box
 
-        # -- camera
+    def _build_camera(self) -> QGroupBox:
+        """Exposure, ISO, Take frame and Live."""
         self.exposure_spin = QDoubleSpinBox(
             decimals=4, minimum=0.0001, maximum=60.0, singleStep=0.1, suffix=" s"
         )
@@ -180,7 +201,11 @@ class DevicePanel(QWidget):
         cam_form.addRow(cam_buttons)
         cam_box = QGroupBox("Camera")
         cam_box.setLayout(cam_form)
+        return cam_box
 
+    def _build_layout(
+        self, conn_box: QGroupBox, light_box: QGroupBox, cam_box: QGroupBox
+    ) -> None:
         self.frame_plot = FramePlot()
         self.frame_plot.setMinimumHeight(120)
         top = QWidget()
@@ -198,12 +223,7 @@ class DevicePanel(QWidget):
         layout.setContentsMargins(2, 2, 2, 2)
         layout.addWidget(splitter)
 
-        self.status_timer = QTimer(self)
-        self.status_timer.setInterval(STATUS_PERIOD_MS)
-        self.live_timer = QTimer(self)
-        self.live_timer.setSingleShot(True)
-        self.live_timer.setInterval(LIVE_PERIOD_MS)
-
+    def _connect_signals(self, controller: DeviceController) -> None:
         self.connect_button.clicked.connect(self._on_connect_button_clicked)
         self.disconnect_button.clicked.connect(self._on_disconnect_button_clicked)
         self.solo_button.clicked.connect(self._on_solo_button_clicked)
@@ -226,7 +246,6 @@ class DevicePanel(QWidget):
         controller.frame_acquired.connect(self._on_controller_frame_acquired)
         controller.errored.connect(self._on_controller_errored)
         controller.busy_changed.connect(self._on_controller_busy_changed)
-        self._update_enabled()
 
     # -- public ---------------------------------------------------------------------
     @property

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import json
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from os import PathLike
 from pathlib import Path
@@ -52,10 +53,14 @@ __all__ = [
     "EstimateResult",
     "ExportResult",
     "MeasurementFolder",
+    "add_capture_warnings",
+    "clear_capture_warnings",
     "read_calibration",
+    "read_capture_warnings",
     "read_estimate",
     "read_measurement_doc",
     "session_fingerprint",
+    "step_warnings",
     "write_calibration",
     "write_estimate",
     "write_measurement_doc",
@@ -67,6 +72,9 @@ MEASUREMENT_FILE = "measurement.json"
 MEASUREMENT_FORMAT = "tunespec-measurement"
 CHART_DIR, SAMPLE_DIR = "chart", "sample"
 CALIBRATION_DIR, ESTIMATE_DIR, EXPORT_DIR = "calibration", "estimate", "export"
+#: The warnings of a session's capture, beside its manifest: a capture that is
+#: resumed does not meter again, so a weak LED would otherwise be forgotten.
+CAPTURE_WARNINGS_FILE = "capture_warnings.json"
 #: Pass/fail limit on Table 1's RGB mean (full scale) when none is chosen.
 DEFAULT_THRESHOLD_RGB_MEAN = 0.005
 
@@ -271,6 +279,57 @@ def read_measurement_doc(folder: MeasurementFolder) -> dict[str, Any]:
             f"not a measurement file (format != {MEASUREMENT_FORMAT!r})", path=path
         )
     return doc
+
+
+# -- warnings ----------------------------------------------------------------------------
+def read_capture_warnings(session_dir: str | PathLike[str]) -> tuple[str, ...]:
+    """Every warning the captures of the session at ``session_dir`` raised so far."""
+    path = Path(session_dir) / CAPTURE_WARNINGS_FILE
+    if not path.is_file():
+        return ()
+    try:
+        doc = read_json(path)
+    except InputError as exc:
+        log.warning("cannot read the capture warnings: %s", exc)
+        return ()
+    items = doc.get("warnings", []) if isinstance(doc, dict) else []
+    return tuple(str(w) for w in items if isinstance(w, str))
+
+
+def add_capture_warnings(
+    session_dir: str | PathLike[str], warnings: Sequence[str]
+) -> tuple[str, ...]:
+    """Add ``warnings`` (each once) to the session's store; returns them all."""
+    known = read_capture_warnings(session_dir)
+    new = [w for w in dict.fromkeys(warnings) if w not in known]
+    if not new:
+        return known
+    out = (*known, *new)
+    path = Path(session_dir) / CAPTURE_WARNINGS_FILE
+    atomic_write_text(path, dumps_json({"warnings": list(out)}, indent=1))
+    return out
+
+
+def clear_capture_warnings(session_dir: str | PathLike[str]) -> None:
+    """Forget the warnings of an earlier capture (a new session starts here)."""
+    (Path(session_dir) / CAPTURE_WARNINGS_FILE).unlink(missing_ok=True)
+
+
+def step_warnings(
+    session_dir: str | PathLike[str],
+    processed: Any,
+    excluded_patches: Sequence[str] = (),
+) -> tuple[str, ...]:
+    """What a calibrate or estimate step reports: its session's capture warnings,
+    the processing's and the patches the calibration left out, each once."""
+    capture = (f"capture: {w}" for w in read_capture_warnings(session_dir))
+    found = getattr(processed, "warnings", ())
+    excluded = (
+        [f"calibration left out {len(excluded_patches)} saturated patch(es)"]
+        if excluded_patches
+        else []
+    )
+    return tuple(dict.fromkeys((*capture, *found, *excluded)))
 
 
 # -- one writer and one reader per result ----------------------------------------------
@@ -479,7 +538,9 @@ def restore_calibration_steps(
     )
     work = grid or CALIBRATION_GRID
     refl = layout_reflectances(result.layout, grid=work).resample(work)
-    report = calibration_report(
-        est, chart.responses, chart.illuminants.resample(work, average=True), refl
-    )
-    return chart, Calibration(est, report)
+    from tunespec.app.pipeline.steps import table1_by_patch
+
+    illum = chart.illuminants.resample(work, average=True)
+    report = calibration_report(est, chart.responses, illum, refl)
+    per_patch = table1_by_patch(est, chart.responses, illum, refl)
+    return chart, Calibration(est, report, per_patch)

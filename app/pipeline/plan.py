@@ -49,6 +49,7 @@ __all__ = [
     "chart_layout",
     "check_config",
     "demo_plan",
+    "example_config",
     "load_config",
     "plan_from_config",
     "sample_layout",
@@ -116,6 +117,9 @@ class Plan:
         Calibration grid and estimation/Table-2 grid.
     report
         Also write the HTML/PDF report.
+    input_files
+        The files the plan was read from (configuration, layouts, spectra): the
+        report lists them with their SHA-256.
     """
 
     out_dir: Path
@@ -136,6 +140,7 @@ class Plan:
     grid: Grid = CALIBRATION_GRID
     estimation_grid: Grid = ESTIMATION_GRID
     report: bool = True
+    input_files: tuple[Path, ...] = ()
 
 
 def demo_plan(
@@ -160,17 +165,33 @@ def demo_plan(
 def load_config(path: str | PathLike[str]) -> dict[str, Any]:
     """Read a run configuration (``.json`` or ``.toml``).
 
-    Keys (all optional)::
+    Every key is optional; the example with all of them and their defaults is
+    :func:`example_config` (``tunespec run --print-example``). A short one::
 
-        out = "run"                          # output folder, relative to the file
-        [bench]    light = "sim", camera = "sim", resolution = "1536x1024", seed = 0
-        [capture]  exposure = "auto" | seconds, brackets = [1.0], iso = 100
-        [chart]    layout = FILE (default the SG), reflectances = FILE
-        [sample]   layout = FILE (default the CMY target), reflectances = FILE,
-                   reference = FILE (for Table 2)
-        [calibrate] method = "smooth", grid = "380:730:5"
-        [estimate] prior = FILE (default the SG), grid = "400:700:5"
-        [export]   report = true
+        out = "run"                  # the measurement folder, relative to the file
+
+        [bench]
+        light = "sim"                # or "cal1:///dev/ttyUSB0"
+        camera = "sim"               # or "gphoto2"
+        resolution = "1536x1024"     # simulated camera only
+        seed = 0
+
+        [capture]
+        exposure = "auto"            # or seconds
+        brackets = [1.0]
+        iso = 100
+
+        [sample]
+        reference = "reference.csv"  # reflectances for Table 2
+
+        [calibrate]
+        method = "bayes"             # or "smooth", "pca"
+        grid = "380:730:5"
+
+    Sections: ``bench``, ``capture``, ``chart`` (``layout``, ``reflectances``),
+    ``sample`` (``layout``, ``reflectances``, ``reference``), ``calibrate``
+    (``method``, ``grid``), ``estimate`` (``prior``, ``grid``), ``export``
+    (``report``).
 
     Raises
     ------
@@ -213,6 +234,12 @@ def load_config(path: str | PathLike[str]) -> dict[str, Any]:
                 )
     cfg["_path"] = str(path)
     return cfg
+
+
+def example_config() -> str:
+    """The shipped example configuration (``resources/examples/run.toml``): every key
+    with its default, measuring on the simulated bench as it is."""
+    return read_text(resource_path("examples", "run.toml"))
 
 
 def plan_from_config(config: Mapping[str, Any] | str | PathLike[str]) -> Plan:
@@ -289,6 +316,19 @@ def plan_from_config(config: Mapping[str, Any] | str | PathLike[str]) -> Plan:
         grid=grid,
         estimation_grid=est_grid,
         report=cfg.get("export", {}).get("report", True),
+        input_files=tuple(
+            p
+            for p in (
+                Path(src) if src else None,
+                chart_path,
+                sample_path,
+                rel(chart_cfg.get("reflectances")),
+                rel(sample_cfg.get("reflectances")),
+                rel(sample_cfg.get("reference")),
+                rel(est_cfg.get("prior")),
+            )
+            if p is not None
+        ),
     )
 
 

@@ -25,6 +25,7 @@ from tunespec.app.pipeline.folder import (
     EstimateResult,
     MeasurementFolder,
     session_fingerprint,
+    step_warnings,
     write_calibration,
     write_estimate,
     write_measurement_doc,
@@ -264,8 +265,13 @@ def _write_results(
     chart: ProcessedSession,
     est: Estimation,
     sample: ProcessedSession,
-) -> None:
-    """The calibration and the estimate, by the writers the GUI wizard uses."""
+) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """The calibration and the estimate, by the writers the GUI wizard uses.
+
+    Returns the warnings written with each (:func:`step_warnings`).
+    """
+    excluded = tuple(cal.estimate.excluded_patches)
+    cal_warnings = step_warnings(folder.chart_dir, chart, excluded)
     write_calibration(
         folder.calibration_dir,
         CalibrationResult(
@@ -274,8 +280,8 @@ def _write_results(
             threshold=DEFAULT_THRESHOLD_RGB_MEAN,
             method=str(cal.estimate.method),
             layout=chart.layout,
-            excluded_patches=tuple(cal.estimate.excluded_patches),
-            warnings=tuple(chart.warnings),
+            excluded_patches=excluded,
+            warnings=cal_warnings,
             calibration=cal,
             chart=chart,
         ),
@@ -285,6 +291,7 @@ def _write_results(
     if plan.reference is not None:
         names = [n for n in est.reflectance.names if n in plan.reference.names]
         reference = plan.reference.select(names) if names else None
+    est_warnings = step_warnings(folder.sample_dir, sample)
     write_estimate(
         folder.estimate_dir,
         EstimateResult(
@@ -293,12 +300,27 @@ def _write_results(
             reference=reference,
             layout=sample.layout,
             clipped=tuple(est.wiener.clipped),
-            warnings=tuple(sample.warnings),
+            warnings=est_warnings,
             estimation=est,
             sample=sample,
         ),
         session_fingerprint(folder.sample_dir),
     )
+    return cal_warnings, est_warnings
+
+
+def _provenance(folder: MeasurementFolder, plan: Plan, bench: Bench) -> dict[str, str]:
+    """The plan's choices the report's provenance lists."""
+    out = {
+        "measurement folder": str(folder.root.resolve()),
+        "light source": plan.light,
+        "camera": plan.camera or "default for the light source",
+    }
+    if bench.simulated:
+        width, height = bench.sim_camera.resolution
+        out["seed"] = str(plan.seed)
+        out["resolution"] = f"{width}x{height}"
+    return out
 
 
 @dataclass
@@ -308,7 +330,6 @@ class _Hooks:
     stages: _Stages
     should_stop: StopFn | None
     on_frame: FrameCallback | None
-    warnings: list[str] = field(default_factory=list)
 
 
 def _capture_and_process(
@@ -323,7 +344,7 @@ def _capture_and_process(
     """Capture (or resume) and process one session of the measurement."""
 
     def capturing(p: ProgressFn | None) -> Session:
-        session, warned = capture_target(
+        session, _ = capture_target(
             bench,
             folder.session_dir(which),
             layout,
@@ -334,7 +355,6 @@ def _capture_and_process(
             should_stop=hooks.should_stop,
             on_frame=hooks.on_frame,
         )
-        hooks.warnings.extend(f"{which} capture: {x}" for x in warned)
         return session
 
     session: Session = hooks.stages.timed(f"capture_{which}", capturing)
@@ -342,7 +362,6 @@ def _capture_and_process(
         f"process_{which}",
         lambda p: process(session, progress=p, should_stop=hooks.should_stop),
     )
-    hooks.warnings.extend(f"{which}: {w}" for w in processed.warnings)
     return session, processed
 
 
@@ -374,11 +393,6 @@ def _run_on(
             should_stop=should_stop,
         ),
     )
-    if cal.estimate.excluded_patches:
-        hooks.warnings.append(
-            f"calibration left out {len(cal.estimate.excluded_patches)} saturated "
-            "patch(es)"
-        )
     sample_bench = bench_for_target(
         bench, plan.sample_layout, plan.sample_reflectances, seed=plan.seed + 1
     )
@@ -399,7 +413,11 @@ def _run_on(
             calibration=cal.estimate,
         ),
     )
-    _write_results(folder, plan, cal, chart, est, sample)
+    cal_warnings, est_warnings = _write_results(folder, plan, cal, chart, est, sample)
+    warnings = (
+        *(f"chart: {w}" for w in cal_warnings),
+        *(f"sample: {w}" for w in est_warnings),
+    )
     truth, truth_sens = _score_truth(
         folder, plan, (bench, sample_bench), (chart, sample), cal
     )
@@ -423,8 +441,12 @@ def _run_on(
             truth_sensitivity=truth_sens,
             devices=chart_session.devices,
             settings=settings,
-            warnings=hooks.warnings,
+            warnings=warnings,
             report=plan.report,
+            provenance=_provenance(folder, plan, bench),
+            sessions={"chart": folder.chart_dir, "sample": folder.sample_dir},
+            input_files=plan.input_files,
+            threshold_rgb_mean=DEFAULT_THRESHOLD_RGB_MEAN,
             chart_reflectances=plan.chart_reflectances,
         ),
     )
@@ -438,7 +460,7 @@ def _run_on(
         sample=sample,
         files=files,
         timings_s=dict(hooks.stages.timings_s),
-        warnings=tuple(hooks.warnings),
+        warnings=warnings,
         truth=truth,
     )
     files["summary_json"] = folder.write_summary(result.summary())

@@ -18,12 +18,15 @@ time accept ``progress`` and ``should_stop`` (``core.progress``):
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from os import PathLike
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
+from tunespec.app.pipeline.folder import add_capture_warnings, clear_capture_warnings
 from tunespec.app.pipeline.plan import ESTIMATION_GRID, chart_layout, sample_layout
 from tunespec.core.colorimetry import ReflectanceStats, reflectance_stats
 from tunespec.core.datasets import load_colorchecker_sg
@@ -66,6 +69,8 @@ __all__ = [
     "evaluate",
     "export",
     "process",
+    "session_provenance",
+    "table1_by_patch",
 ]
 
 
@@ -84,6 +89,9 @@ class Calibration:
 
     estimate: SensitivityEstimate
     report: CalibrationReport
+    #: Table 1 per patch: the mean over the LEDs of the RGB error (RMS over R, G, B,
+    #: full scale); their mean is Table 1's RGB mean.
+    patch_rgb_error: Mapping[str, float] | None = None
 
     @property
     def sensitivity(self) -> Spectra:
@@ -149,14 +157,34 @@ def capture_target(
     progress: ProgressFn | None = None,
     should_stop: StopFn | None = None,
     on_frame: FrameCallback | None = None,
+    on_warning: Callable[[str], None] | None = None,
+    on_stage: Callable[[str], None] | None = None,
 ) -> tuple[Session, tuple[str, ...]]:
     """Capture (or resume) one session of ``layout`` on ``bench``.
+
+    Every warning is kept beside the session the moment it arises
+    (:func:`~tunespec.app.pipeline.folder.add_capture_warnings`), so the calibrate
+    and estimate steps report it even when the capture was resumed, by another
+    front end, or interrupted.
+
+    Parameters
+    ----------
+    on_warning, on_stage
+        ``devices.capture.capture``'s hooks: each warning as it arises, and the
+        stage that starts (``"metering LED495, 7 of 22"``).
 
     Returns
     -------
     (session, warnings)
+        ``warnings``: those of this run.
     """
     root = Path(session_dir)
+
+    def warned(text: str) -> None:
+        add_capture_warnings(root, [text])
+        if on_warning is not None:
+            on_warning(text)
+
     if (root / "manifest.json").is_file():
         if not resume:
             raise InputError("a session already exists here", path=root)
@@ -164,6 +192,7 @@ def capture_target(
         if session.layout is None:
             session.set_layout(layout.with_corners(None))
     else:
+        clear_capture_warnings(root)  # of an earlier session in this folder
         session = new_session(
             root,
             bench.light,
@@ -183,6 +212,8 @@ def capture_target(
         progress=progress,
         should_stop=should_stop,
         on_frame=on_frame,
+        on_warning=warned,
+        on_stage=on_stage,
     )
     return session, result.warnings
 
@@ -265,7 +296,81 @@ def calibrate(
         **options,
     )
     rep = calibration_report(est, chart.responses, illum, refl)
-    return Calibration(est, rep)
+    return Calibration(est, rep, table1_by_patch(est, chart.responses, illum, refl))
+
+
+def table1_by_patch(
+    estimate: SensitivityEstimate,
+    responses: Any,
+    illuminants: Spectra,
+    reflectances: Spectra,
+) -> dict[str, float]:
+    """Table 1's RGB error per fitted patch (the report's map and worst patches).
+
+    For each patch the mean over its LEDs of the per-stimulus error
+    ``sqrt(mean_c (c - c_hat)^2)`` (the paper's Table 1, "RGB" row), with Eq. 1
+    predicting ``c_hat`` from the estimated sensitivities
+    (:func:`tunespec.core.sensitivity.predict_responses`), the illuminants corrected
+    as the calibration found. Patches the fit left out are not listed.
+    """
+    from tunespec.core.sensitivity import predict_responses
+
+    skip = set(estimate.excluded_patches)
+    patches = [p for p in responses.patches if p not in skip]
+    measured = responses.subset(patches)
+    predicted = predict_responses(
+        estimate.sensitivity,
+        estimate.correct_illuminants(illuminants),
+        reflectances,
+        patches=patches,
+        illuminant_names=measured.illuminants,
+    )
+    err = np.sqrt(np.mean((measured.rgb - predicted.rgb) ** 2, axis=2))
+    return {p: float(e) for p, e in zip(patches, np.mean(err, axis=1), strict=True)}
+
+
+def session_provenance(
+    sessions: Mapping[str, str | PathLike[str]],
+) -> tuple[dict[str, str], dict[str, float], list[tuple[str, str]]]:
+    """What the report's provenance says about the capture sessions.
+
+    Parameters
+    ----------
+    sessions
+        Role (``"chart"``, ``"sample"``) -> session folder.
+
+    Returns
+    -------
+    (items, exposures_s, input_files)
+        Session folders, their creation time, frame counts and fingerprints; the
+        chart's exposure per LED (s, first bracket); every manifest with its
+        SHA-256 (a manifest lists the SHA-256 of each of its frames).
+    """
+    from tunespec.core.io.session import MANIFEST_NAME, sha256_file
+
+    items: dict[str, str] = {}
+    exposures: dict[str, float] = {}
+    files: list[tuple[str, str]] = []
+    for role, folder in sessions.items():
+        root = Path(folder)
+        if not (root / MANIFEST_NAME).is_file():
+            continue
+        session = Session.open(root)
+        settings = session.settings
+        ok = session.ok_frames()
+        items[f"{role} session"] = str(root.resolve())
+        items[f"{role} captured (UTC)"] = str(session.manifest.get("created_utc", ""))
+        items[f"{role} frames"] = (
+            f"{len(ok)} ({sum(f.kind == 'dark' for f in ok)} dark), ISO "
+            f"{settings.iso}, exposure {settings.exposure_mode}"
+        )
+        items[f"{role} frames fingerprint (SHA-256)"] = session.fingerprint()
+        files.append(
+            (str(root.resolve() / MANIFEST_NAME), sha256_file(root / MANIFEST_NAME))
+        )
+        if not exposures:
+            exposures = {c: float(t[0]) for c, t in settings.exposures_s.items()}
+    return items, exposures, files
 
 
 def estimate(
@@ -335,6 +440,10 @@ def export(
     settings: Mapping[str, str] | None = None,
     warnings: Sequence[str] = (),
     report: bool = True,
+    provenance: Mapping[str, str] | None = None,
+    sessions: Mapping[str, str | PathLike[str]] | None = None,
+    input_files: Sequence[str | PathLike[str]] = (),
+    threshold_rgb_mean: float | None = None,
     chart_reflectances: Spectra | None = None,
 ) -> dict[str, Path]:
     """Write every export (``core.io.export``) and, if asked, the HTML/PDF report.
@@ -347,6 +456,11 @@ def export(
     Files: the chart's ``chart_responses.csv`` / ``chart_illuminants.csv``, the
     ``core.io.export`` set (sensitivities, reflectances, the sample's responses and
     illuminants, Tables 1-2, ``.ti3``) and ``report.html`` / ``report.pdf``.
+
+    The report's provenance: ``provenance`` (seed, resolution, configuration...),
+    the ``sessions`` (:func:`session_provenance`) and the SHA-256 of every file of
+    ``input_files`` (layouts, references, the configuration). Its verdict compares
+    Table 1's RGB mean with ``threshold_rgb_mean``.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -396,32 +510,79 @@ def export(
             out / "colorimetry.csv", names, unc
         )
     if report:
-        from tunespec.app.report.report import ReportData, write_report
-
-        data = ReportData(
-            title="TuneSpec measurement report",
-            devices={k: dict(v) for k, v in (devices or {}).items()},
-            settings=dict(settings or {}),
-            illuminants=sample.illuminants,
-            sensitivity=calibration.sensitivity,
-            sensitivity_reference=truth_sensitivity,
-            sensitivity_reference_label="simulation truth",
-            sensitivity_method=str(calibration.estimate.method),
-            reflectance=estimation.reflectance,
-            reflectance_reference=reference,
-            table1=calibration.table1,
-            table2=estimation.table2,
-            responses=chart.responses,
-            excluded_patches=tuple(calibration.estimate.excluded_patches),
-            clipped_patches=tuple(estimation.wiener.clipped),
-            sensitivity_std=calibration.estimate.std,
-            reflectance_std=None if unc is None else unc.reflectance_std,
-            lab=None if unc is None else unc.lab,
-            lab_std=None if unc is None else unc.lab_std,
-            led_correction=calibration.estimate.led_correction,
-            flags=tuple(warnings),
-            exports={k: p.name for k, p in files.items()},
+        files["report_html"], files["report_pdf"] = _write_report(
+            out,
+            files,
+            calibration=calibration,
+            estimation=estimation,
+            chart=chart,
+            sample=sample,
+            reference=reference,
+            truth_sensitivity=truth_sensitivity,
+            devices=devices or {},
+            settings=settings or {},
+            warnings=warnings,
+            provenance=provenance or {},
+            sessions=sessions or {},
+            input_files=input_files,
+            threshold_rgb_mean=threshold_rgb_mean,
         )
-        html, pdf = write_report(out, data)
-        files["report_html"], files["report_pdf"] = html, pdf
     return files
+
+
+def _write_report(
+    out: Path,
+    files: Mapping[str, Path],
+    *,
+    calibration: Calibration,
+    estimation: Estimation,
+    chart: ProcessedSession,
+    sample: ProcessedSession,
+    reference: Spectra | None,
+    truth_sensitivity: Spectra | None,
+    devices: Mapping[str, Mapping[str, str]],
+    settings: Mapping[str, str],
+    warnings: Sequence[str],
+    provenance: Mapping[str, str],
+    sessions: Mapping[str, str | PathLike[str]],
+    input_files: Sequence[str | PathLike[str]],
+    threshold_rgb_mean: float | None,
+) -> tuple[Path, Path]:
+    """``report.html`` and ``report.pdf`` of :func:`export` (``app.report``)."""
+    from tunespec.app.report.report import ReportData, write_report
+    from tunespec.core.io.session import sha256_file
+
+    unc = estimation.uncertainty
+    items, exposures, inputs = session_provenance(sessions)
+    inputs += [(str(Path(f).resolve()), sha256_file(f)) for f in input_files]
+    data = ReportData(
+        title="TuneSpec measurement report",
+        devices={k: dict(v) for k, v in devices.items()},
+        settings=dict(settings),
+        illuminants=sample.illuminants,
+        sensitivity=calibration.sensitivity,
+        sensitivity_reference=truth_sensitivity,
+        sensitivity_reference_label="simulation truth",
+        sensitivity_method=str(calibration.estimate.method),
+        reflectance=estimation.reflectance,
+        reflectance_reference=reference,
+        table1=calibration.table1,
+        table2=estimation.table2,
+        responses=chart.responses,
+        excluded_patches=tuple(calibration.estimate.excluded_patches),
+        clipped_patches=tuple(estimation.wiener.clipped),
+        sensitivity_std=calibration.estimate.std,
+        reflectance_std=None if unc is None else unc.reflectance_std,
+        lab=None if unc is None else unc.lab,
+        lab_std=None if unc is None else unc.lab_std,
+        led_correction=calibration.estimate.led_correction,
+        flags=tuple(warnings),
+        exports={k: p.name for k, p in files.items()},
+        threshold_rgb_mean=threshold_rgb_mean,
+        table1_patches=calibration.patch_rgb_error,
+        chart_layout=chart.layout,
+        provenance={**dict(provenance), **items},
+        exposures_s=exposures,
+        input_files=tuple(inputs),
+    )
+    return write_report(out, data)

@@ -2,15 +2,19 @@
 
 :func:`write_report` renders a :class:`ReportData` (every field optional, so a caller
 fills what it has) into ``report.html`` (CSS inline, plots embedded as base64 PNG, no
-external assets, opens offline in any browser) and ``report.pdf`` (a multi-page PDF of
-the same content made with matplotlib's ``PdfPages``, no extra packages).
+external assets, opens offline in any browser) and ``report.pdf`` (the same content
+made with matplotlib's ``PdfPages``, every page A4 portrait, TrueType fonts embedded).
 
 Contents, each shown when its data are given:
 
-- summary and provenance: TuneSpec version, creation time, session id, devices and
-  serial numbers, settings, software versions, the data sets used and their licences
-  (by default the shipped ones, from ``resources/SOURCE.md``, and colour-science's CIE
-  data);
+- a summary first: the verdict (Table 1's RGB mean against the threshold), the key
+  numbers beside the paper's, every warning;
+- provenance: TuneSpec version, creation time, session id, the measurement and
+  session folders, the frames' fingerprints, seed and resolution of a simulated
+  bench, the exposure per LED, every input file with its SHA-256, devices and serial
+  numbers, settings, software versions, the exports (named for the reader), the data
+  sets used and their licences (by default the shipped ones, from
+  ``resources/SOURCE.md``, and colour-science's CIE data);
 - quality flags: saturated stimuli (from :class:`~tunespec.core.responses.Responses`
   ``saturated``), patches excluded from the sensitivity fit, clipped Wiener estimates,
   reflectances outside 0..1, and the caller's own flags;
@@ -18,6 +22,8 @@ Contents, each shown when its data are given:
 - the estimated camera sensitivities, with the reference (the truth in a simulation)
   when known, both normalised to peak 1;
 - a response map (peak channel per patch and LED, saturated cells marked);
+- Table 1 per patch: a map of the chart, a histogram, the worst patches and a table;
+  Table 2's CIEDE2000 histogram;
 - estimated against reference reflectance per patch, a grid of small plots like the
   paper's Figure 6, each titled with its CIEDE2000;
 - Table 1 (response prediction) and Table 2 (reflectance accuracy), next to the
@@ -89,8 +95,9 @@ PAPER_TABLE1: dict[str, tuple[float, float, float]] = {
 #: spectral RMS).
 PAPER_TABLE2_AVERAGE: tuple[float, float] = (0.67, 0.0286)
 
-#: Patches per page of the Figure 6 grid.
-PATCHES_PER_FIGURE = 70
+#: Patches per page of the Figure 6 grid (4 columns x 6 rows on A4 portrait).
+PATCHES_PER_FIGURE = 24
+_GRID_COLS = 4
 #: Saturated stimuli listed one by one in the flags (the rest are counted).
 MAX_LISTED = 12
 
@@ -196,6 +203,19 @@ class ReportData:
     led_correction
         :class:`tunespec.core.sensitivity_bayes.LedCorrection`: the light source's
         per-LED corrections found by the calibration (a table).
+    threshold_rgb_mean
+        Pass/fail limit on Table 1's RGB mean (full scale): the summary's verdict.
+    table1_patches
+        Table 1's RGB error per fitted patch (mean over the LEDs): the map of the
+        chart, the histogram, the worst patches and the per-patch table.
+    chart_layout
+        The chart's :class:`~tunespec.core.layout.TargetLayout` (for the map).
+    provenance
+        More provenance, label -> text (seed, resolution, folders, sessions).
+    exposures_s
+        Exposure per LED (s).
+    input_files
+        (file, SHA-256) of every file the measurement read.
     """
 
     title: str = "TuneSpec measurement report"
@@ -225,6 +245,12 @@ class ReportData:
     datasets: Sequence[DatasetInfo] | None = None
     exports: Mapping[str, str | PathLike[str]] = field(default_factory=dict)
     notes: str = ""
+    threshold_rgb_mean: float | None = None
+    table1_patches: Mapping[str, float] | None = None
+    chart_layout: Any = None
+    provenance: Mapping[str, str] = field(default_factory=dict)
+    exposures_s: Mapping[str, float] = field(default_factory=dict)
+    input_files: Sequence[tuple[str, str]] = ()
 
 
 def shipped_datasets() -> list[DatasetInfo]:
@@ -368,6 +394,157 @@ def _as_dict(stats: Any) -> dict[str, Any]:
     return dict(stats) if isinstance(stats, Mapping) else stats.as_dict()
 
 
+#: What each export is, in the reader's words (the report shows no internal keys).
+EXPORT_LABELS: dict[str, str] = {
+    "chart_responses_csv": "Chart: camera responses under every LED",
+    "chart_illuminants_csv": "Chart: LED spectra x exposure",
+    "sensitivities_csv": "Camera sensitivities",
+    "sensitivities_meta": "Sensitivities: covariance and LED corrections",
+    "sensitivities_json": "Camera sensitivities (rawtoaces JSON)",
+    "sensitivities_json_meta": "Sensitivities (rawtoaces JSON): covariance, LED fit",
+    "reflectances_csv": "Estimated reflectances",
+    "reflectances_ti3": "Estimated reflectances (ArgyllCMS .ti3)",
+    "reflectances_uncertainty_csv": "Standard uncertainty of the reflectances",
+    "colorimetry_csv": "CIE XYZ and CIELAB (D50) with uncertainties",
+    "reference_csv": "Reference reflectances",
+    "reference_ti3": "Reference reflectances (ArgyllCMS .ti3)",
+    "responses_csv": "Sample: camera responses",
+    "illuminants_csv": "Sample: LED spectra x exposure",
+    "table1_csv": "Table 1: response prediction",
+    "table2_csv": "Table 2: reflectance accuracy",
+    "chart_camera_ti3": "Chart: camera RGB and XYZ for ArgyllCMS colprof (.ti3)",
+    "camera_transforms_json": "Camera transforms: ACES IDT and CCMs (JSON)",
+    "camera_transforms_csv": "Camera transforms: ACES IDT and CCMs (CSV)",
+    "summary_json": "Summary of the numbers (JSON)",
+    "report_html": "This report (HTML)",
+    "report_pdf": "This report (PDF)",
+}
+
+
+def export_label(key: str) -> str:
+    """The reader's name of an export kind (a key the table does not know is
+    turned into words)."""
+    if key in EXPORT_LABELS:
+        return EXPORT_LABELS[key]
+    words = key.replace("_", " ").strip()
+    for ext in ("csv", "json", "ti3", "pdf", "html"):
+        if words.endswith(f" {ext}"):
+            words = f"{words[: -len(ext) - 1]} ({ext.upper()})"
+    return words[:1].upper() + words[1:]
+
+
+def verdict(report: ReportData) -> tuple[str, str] | None:
+    """``("PASS" | "FAIL", why)`` from Table 1's RGB mean and the threshold, or
+    ``None`` without either."""
+    fitted, _ = _table1_parts(report)
+    if fitted is None or report.threshold_rgb_mean is None:
+        return None
+    mean = float(_as_dict(fitted)["RGB"]["mean"])
+    ok = mean <= report.threshold_rgb_mean
+    why = (
+        f"Table 1 RGB mean error {mean:.4f} of full scale is "
+        f"{'within' if ok else 'over'} the threshold {report.threshold_rgb_mean:.4f}"
+    )
+    return ("PASS" if ok else "FAIL"), why
+
+
+def _key_numbers(report: ReportData) -> _Table:
+    """The summary's numbers beside the paper's."""
+    rows: list[tuple[str, str, str]] = []
+    fitted, held = _table1_parts(report)
+    if fitted is not None:
+        d = _as_dict(fitted)
+        rows.append(
+            (
+                "Table 1 RGB mean error (full scale)",
+                f"{d['RGB']['mean']:.4f}",
+                f"{PAPER_TABLE1['RGB'][0]:.4f}",
+            )
+        )
+        rows.append(
+            (
+                "Table 1 RGB max. error (full scale)",
+                f"{d['RGB']['max']:.4f}",
+                f"{PAPER_TABLE1['RGB'][1]:.4f}",
+            )
+        )
+        rows.append(("Stimuli (patch x LED)", str(d["n_stimuli"]), "3080"))
+    if held is not None:
+        d = _as_dict(held)
+        rows.append(("Held-aside RGB mean error", f"{d['RGB']['mean']:.4f}", "-"))
+    if report.table2 is not None:
+        d = _as_dict(report.table2)
+        de, rms = PAPER_TABLE2_AVERAGE
+        rows.append(
+            (
+                "Table 2 mean CIEDE2000 (D50)",
+                f"{d['average']['delta_e00']:.2f}",
+                f"{de:.2f}",
+            )
+        )
+        rows.append(("Table 2 max. CIEDE2000", f"{d['max']['delta_e00']:.2f}", "-"))
+        rows.append(
+            (
+                "Table 2 mean spectral RMS",
+                f"{d['average']['spectral_rms']:.4f}",
+                f"{rms:.4f}",
+            )
+        )
+        rows.append(("Patches compared", str(len(d["patches"])), "8"))
+    n_warn = sum(f.level == "warning" for f in quality_flags(report))
+    rows.append(("Warnings", str(n_warn), "-"))
+    return _Table(
+        "Key numbers",
+        ("Quantity", "This measurement", "Paper"),
+        tuple(rows),
+        "Paper: Trichromatic Reflectance Capture Using a Tunable Light Source, "
+        "Table 1 (ColorChecker SG, 22 LEDs) and Table 2 (eight Neugebauer primaries).",
+    )
+
+
+def _worst_patches_table(report: ReportData, n: int = 10) -> _Table | None:
+    errors = report.table1_patches
+    if not errors:
+        return None
+    paper = PAPER_TABLE1["RGB"][0]
+    worst = sorted(errors.items(), key=lambda kv: -kv[1])[:n]
+    rows = tuple((name, f"{e:.4f}", f"{e / paper:.1f}") for name, e in worst)
+    return _Table(
+        f"Table 1: the {len(worst)} worst patches",
+        ("Patch", "RGB error (mean over LEDs)", "x paper mean"),
+        rows,
+        "Per patch: the mean over its LEDs of the RMS over R, G, B of measured minus "
+        "predicted (Eq. 1); full-scale units.",
+    )
+
+
+def _table1_patch_table(report: ReportData) -> _Table | None:
+    """Every fitted patch's Table 1 error, three patches a row."""
+    errors = report.table1_patches
+    if not errors:
+        return None
+    return _Table(
+        "Table 1 per patch (RGB error, mean over the LEDs, full scale)",
+        ("Patch", "Error") * 3,
+        _side_by_side([(k, f"{v:.4f}") for k, v in errors.items()]),
+    )
+
+
+def _side_by_side(
+    pairs: Sequence[tuple[str, str]], per_row: int = 3
+) -> tuple[tuple[str, ...], ...]:
+    """(name, value) pairs in ``per_row`` column pairs, read down, then across."""
+    n_rows = math.ceil(len(pairs) / per_row)
+    rows = []
+    for r in range(n_rows):
+        cells: list[str] = []
+        for c in range(per_row):
+            k = c * n_rows + r
+            cells += list(pairs[k]) if k < len(pairs) else ["", ""]
+        rows.append(tuple(cells))
+    return tuple(rows)
+
+
 # --------------------------------------------------------------------------- plots
 
 
@@ -401,9 +578,20 @@ def _wavelength_colour(wavelength_nm: float) -> tuple[float, float, float]:
     return (r, g, b)
 
 
-def _spd_figure(illuminants: Spectra) -> Figure:
-    fig = _new_figure((_A4_LANDSCAPE_IN[0], 5.0), margins_in=(0.8, 2.2, 0.6, 0.4))
-    ax = fig.add_subplot()
+def _page(title: str) -> Figure:
+    """An A4 portrait page with its title: every page of the report has this size."""
+    fig = _new_figure(_A4_PORTRAIT_IN, margins_in=None)
+    fig.text(0.08, 0.965, title, fontsize=13, weight="bold", va="top")
+    return fig
+
+
+def _axes_in(fig: Figure, left: float, bottom: float, width: float, height: float):
+    """Axes at a rectangle given in inches from the page's lower left corner."""
+    w, h = fig.get_size_inches()
+    return fig.add_axes((left / w, bottom / h, width / w, height / h))
+
+
+def _draw_spd(ax: Any, illuminants: Spectra) -> None:
     wl = illuminants.wavelength_nm
     n_broad = 0
     for name, v in zip(illuminants.names, illuminants.values, strict=True):
@@ -418,21 +606,21 @@ def _spd_figure(illuminants: Spectra) -> Figure:
         else:
             colour, style = "0.35", ("-", "--", ":", "-.")[n_broad % 4]
             n_broad += 1
-        ax.plot(wl, v, color=colour, ls=style, lw=1.2, label=name)
+        ax.plot(wl, v, color=colour, ls=style, lw=1.0, label=name)
     ax.set_xlabel("wavelength (nm)")
     ax.set_ylabel("relative spectral power")
     ax.set_title(f"LED spectral power distributions ({len(illuminants)} channels)")
     ax.set_xlim(wl[0], wl[-1])
     ax.set_ylim(bottom=0)
     ax.grid(alpha=0.3)
+    # under the plot, inside the page: no curve is covered
     ax.legend(
-        ncol=2 if len(illuminants) > 12 else 1,
-        fontsize=7,
-        loc="upper left",
-        bbox_to_anchor=(1.01, 1.0),
+        ncol=6,
+        fontsize=6.5,
+        loc="upper center",
+        bbox_to_anchor=(0.5, -0.13),
         frameon=False,
     )
-    return fig
 
 
 def _peak_normalised(s: Spectra) -> NDArray[np.float64]:
@@ -440,16 +628,14 @@ def _peak_normalised(s: Spectra) -> NDArray[np.float64]:
     return s.values / peak if peak > 0 else s.values
 
 
-def _sensitivity_figure(report: ReportData) -> Figure:
+def _draw_sensitivity(ax: Any, report: ReportData) -> None:
     est = report.sensitivity
     assert est is not None
-    fig = _new_figure((_A4_LANDSCAPE_IN[0], 5.0), margins_in=(0.8, 1.7, 0.6, 0.4))
-    ax = fig.add_subplot()
     ref = report.sensitivity_reference
     peak = float(np.max(est.values)) or 1.0
     for k, (name, v) in enumerate(zip(est.names, _peak_normalised(est), strict=True)):
         c = _CHANNEL_COLOURS.get(name)
-        ax.plot(est.wavelength_nm, v, color=c, lw=1.8, label=f"{name} estimated")
+        ax.plot(est.wavelength_nm, v, color=c, lw=1.6, label=f"{name} estimated")
         if report.sensitivity_std is not None:
             u = 1.96 * report.sensitivity_std[k] / peak
             ax.fill_between(est.wavelength_nm, v - u, v + u, color=c, alpha=0.25, lw=0)
@@ -457,26 +643,39 @@ def _sensitivity_figure(report: ReportData) -> Figure:
         for name, v in zip(ref.names, _peak_normalised(ref), strict=True):
             c = _CHANNEL_COLOURS.get(name)
             label = f"{name} {report.sensitivity_reference_label}"
-            ax.plot(ref.wavelength_nm, v, color=c, lw=1.2, ls="--", label=label)
+            ax.plot(ref.wavelength_nm, v, color=c, lw=1.0, ls="--", label=label)
     method = f" ({report.sensitivity_method})" if report.sensitivity_method else ""
     band = ", 95 % bands" if report.sensitivity_std is not None else ""
-    ax.set_title(f"Estimated camera sensitivities{method}, normalised to peak 1{band}")
+    ax.set_title(f"Camera sensitivities{method}, normalised to peak 1{band}")
     ax.set_xlabel("wavelength (nm)")
     ax.set_ylabel("relative sensitivity")
     ax.set_xlim(est.wavelength_nm[0], est.wavelength_nm[-1])
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
+    ax.legend(
+        ncol=3,
+        fontsize=7,
+        loc="upper center",
+        bbox_to_anchor=(0.5, -0.13),
+        frameon=False,
+    )
+
+
+def _light_camera_figure(report: ReportData) -> Figure:
+    """Page: the LED spectra above the camera sensitivities."""
+    fig = _page("Light source and camera")
+    if report.illuminants is not None:
+        _draw_spd(_axes_in(fig, 0.9, 7.1, 6.9, 3.6), report.illuminants)
+    if report.sensitivity is not None:
+        _draw_sensitivity(_axes_in(fig, 0.9, 1.3, 6.9, 4.0), report)
     return fig
 
 
 def _response_map_figure(responses: Responses) -> Figure:
     n_p, n_i = len(responses.patches), len(responses.illuminants)
     longest = max(len(n) for n in responses.illuminants)
-    fig = _new_figure(
-        (_A4_LANDSCAPE_IN[0], min(8.0, 2.5 + 0.06 * n_p)),
-        margins_in=(0.9, 0.9, 0.6 + 0.07 * longest, 0.4),
-    )
-    ax = fig.add_subplot()
+    fig = _page("Camera responses")
+    bottom = 0.8 + 0.07 * longest
+    ax = _axes_in(fig, 0.9, bottom, 6.0, 10.3 - bottom)
     peak = responses.rgb.max(axis=2)
     title = "Largest channel response per patch and LED (full scale = 1)"
     vmax = max(1.0, float(peak.max()))
@@ -487,13 +686,97 @@ def _response_map_figure(responses: Responses) -> Figure:
             ax.scatter(pi[:, 1], pi[:, 0], marker="x", color="red", s=18)
             title += "; x = saturated pixels"
     ax.set_xticks(range(n_i), responses.illuminants, rotation=90, fontsize=7)
-    step = max(1, math.ceil(n_p / 40))
-    ax.set_yticks(range(0, n_p, step), responses.patches[::step], fontsize=7)
-    ax.set_title(title)
+    step = max(1, math.ceil(n_p / 70))
+    ax.set_yticks(range(0, n_p, step), responses.patches[::step], fontsize=6)
+    ax.set_title(title, fontsize=10)
     ax.set_xlabel("LED")
     ax.set_ylabel("patch")
-    bar = fig.colorbar(im, ax=ax, shrink=0.8, pad=0.01)
+    bar = fig.colorbar(im, cax=_axes_in(fig, 7.05, bottom, 0.18, 10.3 - bottom))
     bar.set_label("response (full scale = 1)")
+    return fig
+
+
+def _chart_map(
+    ax: Any, fig: Figure, report: ReportData, errors: Mapping[str, float]
+) -> bool:
+    """Table 1's error of every patch where it sits on the chart; False if the
+    layout does not name the patches."""
+    layout = report.chart_layout
+    names = tuple(getattr(layout, "patch_names", ()))
+    if not names or not set(errors) & set(names):
+        return False
+    rows, cols = int(layout.rows), int(layout.cols)
+    grid = np.full((rows, cols), np.nan)
+    for k, name in enumerate(names):
+        if name in errors:
+            grid[k // cols, k % cols] = errors[name]
+    top = float(np.nanmax(grid)) or 1.0
+    im = ax.imshow(grid, cmap="magma_r", vmin=0.0, vmax=top, aspect="equal")
+    for k, name in enumerate(names):
+        r, c = divmod(k, cols)
+        dark = name in errors and errors[name] > 0.55 * top
+        text = name if name in errors else f"{name}\nleft out"
+        ax.text(
+            c,
+            r,
+            text,
+            ha="center",
+            va="center",
+            fontsize=5,
+            color="white" if dark else "0.15",
+        )
+    ax.set_xticks([])  # the patches are named in their cells
+    ax.set_yticks([])
+    ax.set_title("Table 1 RGB error per patch, on the chart", fontsize=10)
+    bar = fig.colorbar(im, ax=ax, shrink=0.85, pad=0.02)
+    bar.set_label("RGB error (full scale)", fontsize=8)
+    return True
+
+
+def _histogram(
+    ax: Any, values: Any, *, mean_label: str, paper: float, xlabel: str
+) -> None:
+    values = np.asarray(values, dtype=np.float64)
+    bins = max(5, min(30, int(math.sqrt(values.size) * 2)))
+    ax.hist(values, bins=bins, color="0.6", edgecolor="0.3", lw=0.5)
+    ax.axvline(float(np.mean(values)), color="tab:blue", lw=1.5, label=mean_label)
+    ax.axvline(paper, color="tab:red", lw=1.2, ls="--", label=f"paper mean {paper:g}")
+    from matplotlib.ticker import MaxNLocator
+
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("patches")
+    ax.yaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, loc="upper right")
+
+
+def _patch_errors_figure(report: ReportData) -> Figure | None:
+    """Page: Table 1 per patch (map of the chart, histogram), Table 2's CIEDE2000
+    histogram."""
+    errors = report.table1_patches or {}
+    t2 = None if report.table2 is None else _as_dict(report.table2)
+    if not errors and t2 is None:
+        return None
+    fig = _page("Errors per patch")
+    if errors:
+        _chart_map(_axes_in(fig, 0.8, 6.9, 6.6, 3.9), fig, report, errors)
+        values = list(errors.values())
+        _histogram(
+            _axes_in(fig, 0.9, 4.0, 6.6, 2.2),
+            values,
+            mean_label=f"mean {np.mean(values):.4f}",
+            paper=PAPER_TABLE1["RGB"][0],
+            xlabel="Table 1 RGB error per patch (full scale)",
+        )
+    if t2 is not None:
+        de = [v["delta_e00"] for v in t2["patches"].values()]
+        _histogram(
+            _axes_in(fig, 0.9, 0.8, 6.6, 2.2),
+            de,
+            mean_label=f"mean {np.mean(de):.2f}",
+            paper=PAPER_TABLE2_AVERAGE[0],
+            xlabel="Table 2 CIEDE2000 (D50) per patch",
+        )
     return fig
 
 
@@ -520,147 +803,192 @@ def _display_colours(report: ReportData) -> dict[str, NDArray[np.float64]]:
     return out
 
 
+@dataclass
+class _Grid:
+    """What the cells of the reflectance pages share, and what they collect."""
+
+    report: ReportData
+    de: dict[str, float]
+    swatches: dict[str, NDArray[np.float64]]
+    y_top: float
+    est_lines: list[Any] = field(default_factory=list)
+    ref_lines: list[Any] = field(default_factory=list)
+    bands: list[Any] = field(default_factory=list)
+    frames: list[Any] = field(default_factory=list)
+    grid: list[Any] = field(default_factory=list)
+
+    @property
+    def wl(self) -> NDArray[np.float64]:
+        assert self.report.reflectance is not None
+        return self.report.reflectance.wavelength_nm
+
+    @property
+    def span(self) -> float:
+        return float(self.wl[-1] - self.wl[0]) or 1.0
+
+
+#: Cell gaps of the reflectance pages, in cell units (room for tick labels, titles).
+_GAP_X, _GAP_Y = 0.30, 0.62
+
+
+def _grid_cell(ax: Any, g: _Grid, i: int, x0: float, y0: float) -> None:
+    """One patch: estimate, band, reference, frame, tick labels, title, swatch."""
+    from matplotlib.patches import Rectangle
+
+    est, ref, report = g.report.reflectance, g.report.reflectance_reference, g.report
+    assert est is not None
+    wl, span, y_top = g.wl, g.span, g.y_top
+    name = est.names[i]
+    x = x0 + (wl - wl[0]) / span
+    g.est_lines.append(np.column_stack([x, y0 + est.values[i] / y_top]))
+    if report.reflectance_std is not None:
+        u = 1.96 * report.reflectance_std[i]
+        lo = np.clip(est.values[i] - u, 0.0, y_top) / y_top
+        hi = np.clip(est.values[i] + u, 0.0, y_top) / y_top
+        g.bands.append(
+            np.concatenate(
+                [np.column_stack([x, y0 + lo]), np.column_stack([x, y0 + hi])[::-1]]
+            )
+        )
+    if ref is not None and name in ref.names:
+        xr = x0 + (ref.wavelength_nm - wl[0]) / span
+        keep = (xr >= x0 - 1e-9) & (xr <= x0 + 1 + 1e-9)
+        g.ref_lines.append(np.column_stack([xr[keep], y0 + ref[name][keep] / y_top]))
+    g.frames.append([(x0, y0), (x0 + 1, y0), (x0 + 1, y0 + 1), (x0, y0 + 1), (x0, y0)])
+    ticks_nm = [t for t in (400.0, 500.0, 600.0, 700.0) if wl[0] <= t <= wl[-1]]
+    for t in ticks_nm:
+        gx = x0 + (t - wl[0]) / span
+        g.grid.append([(gx, y0), (gx, y0 + 1)])
+        ax.text(gx, y0 - 0.03, f"{t:g}", fontsize=5, ha="center", va="top", color="0.3")
+    for v in (0.0, 0.5, 1.0):
+        if v <= y_top:
+            g.grid.append([(x0, y0 + v / y_top), (x0 + 1, y0 + v / y_top)])
+            ax.text(
+                x0 - 0.03,
+                y0 + v / y_top,
+                f"{v:g}",
+                fontsize=5,
+                ha="right",
+                va="center",
+                color="0.3",
+            )
+    if name in g.swatches:
+        ax.add_patch(
+            Rectangle(
+                (x0 + 0.82, y0 + 1.04),
+                0.18,
+                0.2,
+                facecolor=tuple(g.swatches[name]),
+                edgecolor="0.3",
+                lw=0.4,
+            )
+        )
+    title = name if name not in g.de else f"{name}   ΔE00 {g.de[name]:.2f}"
+    ax.text(x0, y0 + 1.04, title, fontsize=6.5, va="bottom", ha="left")
+
+
+def _grid_draw(ax: Any, g: _Grid) -> list[Any]:
+    """The collected lines as collections; returns the legend's handles."""
+    from matplotlib.collections import LineCollection, PolyCollection
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Rectangle
+
+    ax.add_collection(LineCollection(g.grid, colors="0.88", linewidths=0.5))
+    ax.add_collection(LineCollection(g.frames, colors="0.55", linewidths=0.6))
+    handles: list[Any] = [Line2D([], [], color="black", lw=1.1, label="estimated")]
+    if g.bands:
+        ax.add_collection(
+            PolyCollection(g.bands, facecolors="0.55", edgecolors="none", alpha=0.35)
+        )
+        handles.append(
+            Rectangle((0, 0), 1, 1, facecolor="0.55", alpha=0.35, label="95 % interval")
+        )
+    ax.add_collection(LineCollection(g.est_lines, colors="black", linewidths=1.1))
+    if g.ref_lines:
+        ax.add_collection(
+            LineCollection(
+                g.ref_lines, colors="tab:red", linewidths=0.9, linestyles="--"
+            )
+        )
+        handles.append(
+            Line2D([], [], color="tab:red", lw=0.9, ls="--", label="reference")
+        )
+    return handles
+
+
 def _patch_grid_figures(report: ReportData) -> Iterator[tuple[str, Figure]]:
-    """Small multiples of estimated vs. reference reflectance (paper's Figure 6).
+    """Estimated vs. reference reflectance of every patch (paper's Figure 6), on A4
+    portrait pages of :data:`PATCHES_PER_FIGURE`, each cell with its tick labels.
 
     All cells of a page are drawn on one axes in cell units with line collections:
     matplotlib needs about 25 ms per axes, so a 140-patch chart drawn as subplots
     took seconds per page; this takes a fraction of a second.
     """
-    from matplotlib.collections import LineCollection
-    from matplotlib.lines import Line2D
-    from matplotlib.patches import Rectangle
-
     est = report.reflectance
     assert est is not None
     ref = report.reflectance_reference
     t2 = None if report.table2 is None else _as_dict(report.table2)
-    de = {} if t2 is None else {k: v["delta_e00"] for k, v in t2["patches"].items()}
-    swatches = _display_colours(report)
-    names = est.names
     y_top = max(1.0, float(np.max(est.values)))
     if ref is not None:
         y_top = max(y_top, float(np.max(ref.values)))
-    wl = est.wavelength_nm
-    span = float(wl[-1] - wl[0]) or 1.0
-    gap_x, gap_y = 0.10, 0.32
+    g0 = _Grid(
+        report,
+        {} if t2 is None else {k: v["delta_e00"] for k, v in t2["patches"].items()},
+        _display_colours(report),
+        y_top,
+    )
+    names = est.names
+    cols, rows = _GRID_COLS, PATCHES_PER_FIGURE // _GRID_COLS
     n_fig = math.ceil(len(names) / PATCHES_PER_FIGURE)
+    what = (
+        "Estimated vs. reference reflectance"
+        if ref is not None
+        else "Estimated reflectance"
+    )
     for k in range(n_fig):
-        chunk = list(
-            range(k * PATCHES_PER_FIGURE, min(len(names), (k + 1) * PATCHES_PER_FIGURE))
-        )
-        n = len(chunk)
-        cols = min(10, max(2, math.ceil(math.sqrt(n * 1.6))))
-        rows = math.ceil(n / cols)
-        # Cells about 1.4 times as wide as high, the page at most A4 landscape.
-        cell_w_in = 0.955 * _A4_LANDSCAPE_IN[0] / (cols * (1 + gap_x))
-        height = min(_A4_LANDSCAPE_IN[1], 1.3 + rows * (1 + gap_y) * cell_w_in / 1.4)
-        fig = _new_figure((_A4_LANDSCAPE_IN[0], height), margins_in=None)
-        ax = fig.add_axes((0.035, 0.55 / height, 0.955, 1 - 1.15 / height))
-        ax.set_axis_off()
-        est_lines, ref_lines, frames, grid, bands = [], [], [], [], []
-        for pos, i in enumerate(chunk):
-            r, c = divmod(pos, cols)
-            x0, y0 = c * (1 + gap_x), (rows - 1 - r) * (1 + gap_y)
-            x = x0 + (wl - wl[0]) / span
-            name = names[i]
-            est_lines.append(np.column_stack([x, y0 + est.values[i] / y_top]))
-            if report.reflectance_std is not None:
-                u = 1.96 * report.reflectance_std[i]
-                lo = np.clip(est.values[i] - u, 0.0, y_top) / y_top
-                hi = np.clip(est.values[i] + u, 0.0, y_top) / y_top
-                bands.append(
-                    np.concatenate(
-                        [
-                            np.column_stack([x, y0 + lo]),
-                            np.column_stack([x, y0 + hi])[::-1],
-                        ]
-                    )
-                )
-            if ref is not None and name in ref.names:
-                xr = x0 + (ref.wavelength_nm - wl[0]) / span
-                keep = (xr >= x0 - 1e-9) & (xr <= x0 + 1 + 1e-9)
-                ref_lines.append(
-                    np.column_stack([xr[keep], y0 + ref[name][keep] / y_top])
-                )
-            frames.append(
-                [(x0, y0), (x0 + 1, y0), (x0 + 1, y0 + 1), (x0, y0 + 1), (x0, y0)]
-            )
-            grid.append([(x0, y0 + 0.5 / y_top), (x0 + 1, y0 + 0.5 / y_top)])
-            for g in (500.0, 600.0):
-                if wl[0] < g < wl[-1]:
-                    gx = x0 + (g - wl[0]) / span
-                    grid.append([(gx, y0), (gx, y0 + 1)])
-            if name in swatches:
-                ax.add_patch(
-                    Rectangle(
-                        (x0 + 0.86, y0 + 1.03),
-                        0.14,
-                        0.22,
-                        facecolor=tuple(swatches[name]),
-                        edgecolor="0.3",
-                        lw=0.4,
-                    )
-                )
-            title = name if name not in de else f"{name}  ΔE00 {de[name]:.2f}"
-            ax.text(x0, y0 + 1.03, title, fontsize=6.5, va="bottom", ha="left")
-        ax.add_collection(LineCollection(grid, colors="0.88", linewidths=0.5))
-        ax.add_collection(LineCollection(frames, colors="0.55", linewidths=0.6))
-        if bands:
-            from matplotlib.collections import PolyCollection
-
-            ax.add_collection(
-                PolyCollection(bands, facecolors="0.55", edgecolors="none", alpha=0.35)
-            )
-        ax.add_collection(LineCollection(est_lines, colors="black", linewidths=1.1))
-        if ref_lines:
-            ax.add_collection(
-                LineCollection(
-                    ref_lines, colors="tab:red", linewidths=0.9, linestyles="--"
-                )
-            )
-        ax.set_xlim(-0.02, cols * (1 + gap_x) - gap_x + 0.02)
-        ax.set_ylim(-0.04, rows * (1 + gap_y) - gap_y + 0.22)
-        handles = [Line2D([], [], color="black", lw=1.1, label="estimated")]
-        if bands:
-            handles.append(
-                Rectangle(
-                    (0, 0), 1, 1, facecolor="0.55", alpha=0.35, label="95 % interval"
-                )
-            )
-        if ref_lines:
-            handles.append(
-                Line2D([], [], color="tab:red", lw=0.9, ls="--", label="reference")
-            )
-        fig.legend(
-            handles=handles, loc="upper right", fontsize=7, frameon=False, ncol=2
-        )
+        g = replace(g0, est_lines=[], ref_lines=[], bands=[], frames=[], grid=[])
         part = f" ({k + 1}/{n_fig})" if n_fig > 1 else ""
-        what = (
-            "Estimated vs. reference reflectance"
-            if ref_lines
-            else "Estimated reflectance"
+        fig = _page(f"{what}{part}")
+        ax = _axes_in(fig, 0.55, 0.85, 7.35, 9.85)
+        ax.set_axis_off()
+        first = k * PATCHES_PER_FIGURE
+        for pos, i in enumerate(
+            range(first, min(len(names), first + PATCHES_PER_FIGURE))
+        ):
+            r, c = divmod(pos, cols)
+            _grid_cell(ax, g, i, c * (1 + _GAP_X), (rows - 1 - r) * (1 + _GAP_Y))
+        handles = _grid_draw(ax, g)
+        ax.set_xlim(-_GAP_X + 0.05, cols * (1 + _GAP_X) - _GAP_X + 0.02)
+        ax.set_ylim(-0.25, rows * (1 + _GAP_Y) - _GAP_Y + 0.3)
+        fig.legend(
+            handles=handles,
+            loc="upper right",
+            bbox_to_anchor=(0.95, 0.975),
+            fontsize=8,
+            frameon=False,
+            ncol=3,
         )
-        fig.text(0.035, 1 - 0.12 / height, f"{what}{part}", fontsize=10, va="top")
+        wl = g.wl
         fig.text(
+            0.08,
             0.035,
-            0.12 / height,
-            f"Each cell: {wl[0]:g}-{wl[-1]:g} nm across, reflectance factor 0-{y_top:.2g} "
-            "up; grey lines at 500 and 600 nm and at 0.5. Swatch: sRGB under D50.",
+            f"Each cell: wavelength {wl[0]:g}-{wl[-1]:g} nm across, reflectance factor "
+            f"0-{y_top:.2g} up. Swatch: sRGB of the estimate under D50. "
+            "Compare the paper's Figure 6.",
             fontsize=7,
             color="0.3",
-            va="bottom",
         )
         yield f"reflectance_grid_{k + 1}", fig
 
 
 def report_figures(report: ReportData) -> list[tuple[str, Figure]]:
-    """The report's figures (name, Agg-backed Figure), in report order."""
+    """The report's figures (name, Agg-backed A4 portrait Figure), in report order."""
     figs: list[tuple[str, Figure]] = []
-    if report.illuminants is not None:
-        figs.append(("led_spd", _spd_figure(report.illuminants)))
-    if report.sensitivity is not None:
-        figs.append(("sensitivities", _sensitivity_figure(report)))
+    if report.illuminants is not None or report.sensitivity is not None:
+        figs.append(("light_camera", _light_camera_figure(report)))
+    errors = _patch_errors_figure(report)
+    if errors is not None:
+        figs.append(("patch_errors", errors))
     if report.responses is not None:
         figs.append(("response_map", _response_map_figure(report.responses)))
     if report.reflectance is not None:
@@ -748,6 +1076,11 @@ def _result_tables(report: ReportData) -> list[_Table]:
     if held is not None:
         title = "Response prediction (held-aside patches)"
         tables.append(_table1(held, title, paper=False))
+    tables += [
+        t
+        for t in (_worst_patches_table(report), _table1_patch_table(report))
+        if t is not None
+    ]
     if report.table2 is not None:
         tables.append(_table2(report.table2))
     if (
@@ -832,7 +1165,26 @@ def _provenance_tables(report: ReportData) -> list[_Table]:
     if report.session_id:
         summary.append(("Session", report.session_id))
     summary.append(("TuneSpec", tunespec_version()))
+    summary += [(str(k), str(v)) for k, v in report.provenance.items()]
     tables.append(_Table("Measurement", ("Item", "Value"), tuple(summary)))
+    if report.exposures_s:
+        tables.append(
+            _Table(
+                "Exposure per LED (s)",
+                ("LED", "Exposure") * 3,
+                _side_by_side([(k, f"{v:.2f}") for k, v in report.exposures_s.items()]),
+                "Metered on the white board (or as set); the sample reuses the chart's.",
+            )
+        )
+    if report.input_files:
+        tables.append(
+            _Table(
+                "Input files",
+                ("File", "SHA-256"),
+                tuple((str(f), str(h)) for f, h in report.input_files),
+                "A session manifest lists the SHA-256 of each of its raw frames.",
+            )
+        )
     if report.devices:
         rows = tuple(
             (role, key, str(value))
@@ -854,7 +1206,7 @@ def _provenance_tables(report: ReportData) -> list[_Table]:
             _Table("Data sets and licences", ("Data set", "What", "Licence"), rows)
         )
     if report.exports:
-        rows = tuple((str(k), str(v)) for k, v in report.exports.items())
+        rows = tuple((export_label(str(k)), str(v)) for k, v in report.exports.items())
         tables.append(_Table("Exported files", ("Export", "File"), rows))
     return tables
 
@@ -913,6 +1265,35 @@ def _html_table(t: _Table, *, summary_rows: Sequence[str] = ()) -> str:
     return "\n".join(out)
 
 
+def _html_summary(report: ReportData, flags: Sequence[Flag]) -> list[str]:
+    """Verdict, key numbers against the paper's, the warnings and notes."""
+    e = html.escape
+    parts = ["<h2>Summary</h2>"]
+    v = verdict(report)
+    if v is not None:
+        ok = v[0] == "PASS"
+        colour = (
+            "#e8f4ea; border-left: 6px solid #3c9a4f"
+            if ok
+            else ("#fde8e8; border-left: 6px solid #c00000")
+        )
+        parts.append(
+            f'<p class="verdict" style="background: {colour}; padding: 0.6em 1em; '
+            f'font-size: 1.15em"><b>{e(v[0])}</b>: {e(v[1])}.</p>'
+        )
+    parts.append(_html_table(_key_numbers(report)))
+    if report.notes:
+        parts.append(f"<p>{e(report.notes)}</p>")
+    parts.append("<h3>Warnings and checks</h3>")
+    if flags:
+        parts.append('<ul class="flags">')
+        parts += [f'<li class="{e(f.level)}">{e(f.text)}</li>' for f in flags]
+        parts.append("</ul>")
+    else:
+        parts.append('<p class="note">No data to check (no responses given).</p>')
+    return parts
+
+
 def _html_link(path: str) -> str:
     e = html.escape
     if Path(path).is_absolute():
@@ -949,32 +1330,26 @@ def render_html(
         + (f" · session {e(report.session_id)}" if report.session_id else "")
         + f" · TuneSpec {e(tunespec_version())}</p>",
     ]
-    if report.notes:
-        parts.append(f"<p>{e(report.notes)}</p>")
-    parts.append("<h2>Quality flags</h2>")
-    if flags:
-        parts.append('<ul class="flags">')
-        parts += [f'<li class="{e(f.level)}">{e(f.text)}</li>' for f in flags]
-        parts.append("</ul>")
-    else:
-        parts.append('<p class="note">No data to check (no responses given).</p>')
+    parts += _html_summary(report, flags)
     captions = {
-        "led_spd": "LED spectral power distributions (the light source's internal "
-        "spectroradiometer).",
-        "sensitivities": "Estimated camera sensitivities"
+        "light_camera": "LED spectral power distributions (the light source's "
+        "spectroradiometer) and the estimated camera sensitivities"
         + (
-            f" (solid) and {report.sensitivity_reference_label} (dashed)"
+            f" (solid) with {report.sensitivity_reference_label} (dashed)"
             if report.sensitivity_reference is not None
             else ""
         )
         + ", each set normalised to its peak.",
+        "patch_errors": "Table 1's RGB error of every fitted patch where it sits on "
+        "the chart, its histogram, and Table 2's CIEDE2000 per patch.",
         "response_map": "Largest of the R, G, B responses per patch (rows) and LED "
         "(columns); crosses mark stimuli with saturated pixels.",
     }
     tables = _result_tables(report)
     sections = [
-        ("Light source", ["led_spd"]),
-        ("Camera", ["sensitivities", "response_map"]),
+        ("Light source and camera", ["light_camera"]),
+        ("Errors per patch", ["patch_errors"]),
+        ("Camera responses", ["response_map"]),
     ]
     by_name = dict(figs)
     for heading, names in sections:
@@ -1003,8 +1378,9 @@ def render_html(
                 f'{_png_base64(f)}"></figure>'
             )
         parts.append(
-            '<p class="note">Solid: estimated (Wiener); dashed: reference. Swatches: '
-            "sRGB rendering under D50. Compare the paper's Figure 6.</p>"
+            '<p class="note">Solid: estimated (Wiener) with its 95 % interval; dashed: '
+            "reference. Swatches: sRGB rendering under D50. Compare the paper's "
+            "Figure 6.</p>"
         )
     parts.append("<h2>Provenance</h2>")
     for t in _provenance_tables(report):
@@ -1028,7 +1404,9 @@ def render_html(
 
 # ----------------------------------------------------------------------------- PDF
 
-_LINES_PER_PAGE = 80
+_LINES_PER_PAGE = 84
+#: Marks a table's title among the lines of a flowed page.
+_TITLE_MARK = "\x00"
 _WRAP = 110
 
 
@@ -1063,59 +1441,155 @@ def _text_table(t: _Table) -> list[str]:
     return [*lines, ""]
 
 
-def _text_pages(title: str, lines: Sequence[str]) -> Iterator[Figure]:
-    chunks = [
-        lines[i : i + _LINES_PER_PAGE] for i in range(0, len(lines), _LINES_PER_PAGE)
-    ]
-    for k, chunk in enumerate(chunks or [[]]):
-        fig = _new_figure(_A4_PORTRAIT_IN, margins_in=None)
-        head = title if len(chunks) <= 1 else f"{title} ({k + 1}/{len(chunks)})"
-        fig.text(0.06, 0.965, head, fontsize=13, weight="bold", va="top")
-        fig.text(
-            0.06, 0.93, "\n".join(chunk), fontsize=7.2, family="monospace", va="top"
+def _summary_page(report: ReportData) -> Figure:
+    """Page 1: what was measured, the verdict, the key numbers, the warnings."""
+    fig = _page(report.title)
+    meta = f"Created {_created_text(report.created)} · TuneSpec {tunespec_version()}"
+    if report.session_id:
+        meta += f" · session {report.session_id}"
+    fig.text(0.08, 0.935, meta, fontsize=8.5, color="0.3", va="top")
+    y = 0.90
+    v = verdict(report)
+    if v is not None:
+        from matplotlib.patches import FancyBboxPatch
+
+        ok = v[0] == "PASS"
+        fig.patches.append(
+            FancyBboxPatch(
+                (0.08, y - 0.045),
+                0.84,
+                0.045,
+                boxstyle="round,pad=0.004",
+                transform=fig.transFigure,
+                facecolor="#e8f4ea" if ok else "#fde8e8",
+                edgecolor="#3c9a4f" if ok else "#c00000",
+                lw=1.2,
+            )
         )
-        yield fig
-
-
-def _summary_lines(report: ReportData) -> list[str]:
-    lines = [
-        f"Created: {_created_text(report.created)}",
-        f"TuneSpec {tunespec_version()}"
-        + (f", session {report.session_id}" if report.session_id else ""),
-        "",
-    ]
+        fig.text(
+            0.1,
+            y - 0.0225,
+            v[0],
+            fontsize=16,
+            weight="bold",
+            va="center",
+            color="#2d7a3d" if ok else "#c00000",
+        )
+        fig.text(
+            0.22,
+            y - 0.0225,
+            "\n".join(textwrap.wrap(v[1] + ".", 80)),
+            fontsize=9,
+            va="center",
+        )
+        y -= 0.07
+    y = _draw_key_numbers(fig, y, _key_numbers(report))
     if report.notes:
-        lines += [*textwrap.wrap(report.notes, _WRAP), ""]
-    lines.append("Quality flags")
-    lines.append("")
+        notes = textwrap.wrap(report.notes, 100)
+        fig.text(0.08, y, "\n".join(notes), fontsize=8.5, va="top")
+        y -= 0.014 * len(notes) + 0.01
+    fig.text(0.08, y, "Warnings and checks", fontsize=11, weight="bold", va="top")
+    y -= 0.025
     for f in quality_flags(report):
-        wrapped = textwrap.wrap(f.text, _WRAP - 4)
-        lines.append(f"[{f.level.upper()}] " + (wrapped[0] if wrapped else ""))
-        lines += ["    " + w for w in wrapped[1:]]
-    lines.append("")
-    for t in _result_tables(report):
-        lines += _text_table(t)
-    return lines
+        wrapped = textwrap.wrap(f.text, 105)
+        if y - 0.0135 * len(wrapped) < 0.04:
+            fig.text(0.08, y, "… (all in the HTML report)", fontsize=8, va="top")
+            break
+        mark = "⚠" if f.level == "warning" else "✓"
+        colour = "#8a5a00" if f.level == "warning" else "#2d7a3d"
+        fig.text(0.08, y, mark, fontsize=9, va="top", color=colour)
+        fig.text(0.105, y, "\n".join(wrapped), fontsize=8, va="top")
+        y -= 0.0135 * len(wrapped) + 0.006
+    return fig
+
+
+def _draw_key_numbers(fig: Figure, y: float, t: _Table) -> float:
+    """The key numbers as a table in the page's font; returns the y below it."""
+    from matplotlib.lines import Line2D
+
+    fig.text(0.08, y, t.title, fontsize=11, weight="bold", va="top")
+    y -= 0.028
+    xs = (0.08, 0.62, 0.80)
+    step = 0.019
+    for j, h in enumerate(t.header):
+        fig.text(xs[j], y, h, fontsize=9, weight="bold", va="top", ha="left")
+    y -= step
+    fig.add_artist(Line2D([0.08, 0.92], [y + 0.004, y + 0.004], color="0.6", lw=0.6))
+    for row in t.rows:
+        for j, cell in enumerate(row):
+            fig.text(xs[j], y - 0.003, cell, fontsize=9, va="top")
+        y -= step
+    note = textwrap.wrap(t.note, 110)
+    fig.text(0.08, y - 0.006, "\n".join(note), fontsize=7.5, color="0.35", va="top")
+    return y - 0.013 * len(note) - 0.03
+
+
+def _flow_pages(title: str, tables: Sequence[_Table]) -> Iterator[Figure]:
+    """Tables flowed onto A4 pages: a table that fits on a page is not split, a
+    longer one is split between rows, its header repeated."""
+    pages: list[list[str]] = [[]]
+    for t in tables:
+        lines = _text_table(t)
+        lines[0] = _TITLE_MARK + lines[0]  # drawn as a heading
+        room = _LINES_PER_PAGE - len(pages[-1])
+        if len(lines) > room and len(lines) <= _LINES_PER_PAGE:
+            pages.append([])
+        elif len(lines) > _LINES_PER_PAGE:
+            head, body = lines[:4], lines[4:]
+            while body:
+                room = _LINES_PER_PAGE - len(pages[-1]) - len(head)
+                if room < 8:
+                    pages.append([])
+                    continue
+                pages[-1] += head + body[:room]
+                body = body[room:]
+                if body:
+                    pages.append([])
+            continue
+        pages[-1] += lines
+    pages = [p for p in pages if p]
+    line_h = 7.2 * 1.18 / 72 / _A4_PORTRAIT_IN[1]  # figure units per line
+    for k, lines in enumerate(pages):
+        head = title if len(pages) <= 1 else f"{title} ({k + 1}/{len(pages)})"
+        fig = _page(head)
+        y, run = 0.93, []
+        for line in [*lines, _TITLE_MARK]:  # the sentinel flushes the last run
+            if not line.startswith(_TITLE_MARK):
+                run.append(line)
+                continue
+            if run:
+                fig.text(
+                    0.08, y, "\n".join(run), fontsize=7.2, family="monospace", va="top"
+                )
+                y -= line_h * len(run)
+                run = []
+            if line != _TITLE_MARK:
+                y -= 0.3 * line_h  # a little air above a heading
+                fig.text(0.08, y, line[1:], fontsize=9, weight="bold", va="top")
+                y -= line_h
+        yield fig
 
 
 def _write_pdf(
     path: Path, report: ReportData, figures: Sequence[tuple[str, Figure]]
 ) -> None:
+    """Every page A4 portrait: summary, figures, results, provenance."""
     meta: dict[str, Any] = {
         "Title": report.title,
         "Creator": f"TuneSpec {tunespec_version()}",
     }
     if isinstance(report.created, datetime):
         meta["CreationDate"] = report.created
-    with PdfPages(path, metadata=meta) as pdf:
-        for fig in _text_pages(report.title, _summary_lines(report)):
-            pdf.savefig(fig)
+    from matplotlib import rc_context
+
+    # TrueType fonts embedded (not Type 3): sharp in print, text searchable
+    with rc_context({"pdf.fonttype": 42}), PdfPages(path, metadata=meta) as pdf:
+        pdf.savefig(_summary_page(report))
         for _, fig in figures:
             pdf.savefig(fig)
-        lines: list[str] = []
-        for t in _provenance_tables(report):
-            lines += _text_table(t)
-        for fig in _text_pages("Provenance", lines):
+        for fig in _flow_pages("Results", _result_tables(report)):
+            pdf.savefig(fig)
+        for fig in _flow_pages("Provenance", _provenance_tables(report)):
             pdf.savefig(fig)
 
 

@@ -132,9 +132,7 @@ class CalibratePage(StepPage):
         )
         if not result.passed:
             text += " Check the corners and the saturation, then recalibrate."
-        if result.warnings:
-            text += " Note: " + "; ".join(result.warnings[:3])
-        return text
+        return text  # the warnings are in the page's badge
 
     def restore(self) -> bool:
         """Done if the measurement folder holds a calibration."""
@@ -143,7 +141,8 @@ class CalibratePage(StepPage):
             return False
         self.mark_done(
             f"Calibration restored: RGB mean error {result.rgb_mean:.4f} "
-            f"({'PASS' if result.passed else 'FAIL'})."
+            f"({'PASS' if result.passed else 'FAIL'}).",
+            result,
         )
         return True
 

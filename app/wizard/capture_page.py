@@ -155,12 +155,21 @@ class CapturePage(StepPage):
         )
 
     def accept_result(self, result: PhaseResult) -> str:
-        """Summary line for the operator."""
+        """Summary line for the operator; the dark frame step, where the exposures
+        are metered, shows every warning of the chart's capture (a retake does not
+        meter again, but a weak LED stays weak)."""
+        if self.kind == "dark":
+            self.add_warnings(self.measurement.capture_warnings("chart"))
         return result.summary(_NOUN[self.kind])
 
     def restore(self) -> bool:
         """Done if the chart session already holds every frame of this kind."""
         if self.measurement.phase_complete("chart", self.kind):
-            self.mark_done(f"All {_NOUN[self.kind]} are in the session (resumed).")
+            # the exposures are metered in the first phase: its warnings show there
+            warnings = self.measurement.capture_warnings("chart")
+            self.mark_done(
+                f"All {_NOUN[self.kind]} are in the session (resumed).",
+                warnings=warnings if self.kind == "dark" else (),
+            )
             return True
         return False

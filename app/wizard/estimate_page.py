@@ -130,7 +130,9 @@ class EstimatePage(StepPage):
         result = self.measurement.restore_estimate()
         if result is None:
             return False
-        self.mark_done(f"Estimate restored: {len(result.reflectance.names)} patches.")
+        self.mark_done(
+            f"Estimate restored: {len(result.reflectance.names)} patches.", result
+        )
         return True
 
     @Slot()

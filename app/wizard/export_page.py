@@ -57,6 +57,13 @@ class ExportPage(StepPage):
         m = self.measurement
         session = m.session("sample") or m.session("chart")
         devices = session.devices if session is not None else {}
+        simulated = devices.get("light", {}).get("vendor") == "TuneSpec"
+        sim = m.sim_options if simulated else {}
+        provenance = {
+            k: str(v) if k != "resolution" else "x".join(map(str, v))
+            for k, v in sim.items()
+            if k in ("seed", "resolution")
+        }
         return Worker(
             export_job,
             m.path(EXPORT_DIR),
@@ -64,6 +71,8 @@ class ExportPage(StepPage):
             m.calibration,
             m.estimate,
             devices,
+            provenance=provenance,
+            input_files=[p for p in (m.reference_path,) if p is not None],
         )
 
     def accept_result(self, result: ExportResult) -> str:

@@ -23,6 +23,7 @@ import logging
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -41,11 +42,13 @@ from tunespec.app.pipeline.folder import (
     ExportResult,
     MeasurementFolder,
     read_calibration,
+    read_capture_warnings,
     read_estimate,
     read_measurement_doc,
     read_processed,
     restore_calibration_steps,
     session_fingerprint,
+    step_warnings,
     write_calibration,
     write_estimate,
     write_measurement_doc,
@@ -151,9 +154,7 @@ class PhaseResult:
             f"{len(self.captured)} frame(s) taken in {self.elapsed_s:.1f} s; the "
             f"{session} holds {self.n_frames} {noun}."
         )
-        if self.warnings:
-            text += " Note: " + "; ".join(self.warnings)
-        return text
+        return text  # the warnings are in the page's badge
 
 
 # -- the model --------------------------------------------------------------------------
@@ -211,17 +212,41 @@ class Measurement(QObject):
         #: Opens the devices when the connect step runs (the main window sets it to
         #: its device panel's connect, so the specs chosen there are used).
         self.connector: Callable[[], None] = self._default_connect
+        #: Asks the operator where measurements go (the wizard sets it to a folder
+        #: dialog); ``None``: not chosen.
+        self.folder_chooser: Callable[[], Path | None] = lambda: None
         self.sim_options: dict[str, Any] = {}
 
     # -- folder ---------------------------------------------------------------------
     def require_folder(self) -> Path:
-        """The measurement folder; a fresh one is made in the settings' root if none."""
+        """The measurement folder; a fresh one if none is open.
+
+        It goes into the folder where measurements go (``session/root_dir``); the
+        first time, :attr:`folder_chooser` asks the operator for it, and it is
+        remembered.
+
+        Raises
+        ------
+        InputError
+            The operator did not choose a folder.
+        """
         if self.folder is None:
-            root = self.settings.get("session/root_dir") or str(
-                Path.home() / "TuneSpec"
-            )
-            stamp = time.strftime("%Y%m%d-%H%M%S")
-            self.new(Path(root) / f"measurement-{stamp}")
+            root = self.settings.get("session/root_dir")
+            if not root or not Path(root).is_dir():
+                chosen = self.folder_chooser()
+                if chosen is None:
+                    raise InputError(
+                        "no measurement folder: choose where measurements go "
+                        "(New… or Open / resume…)"
+                    )
+                root = str(chosen)
+                self.settings.set("session/root_dir", root)
+            folder = Path(root) / f"measurement-{time.strftime('%Y%m%d-%H%M%S')}"
+            n = 1
+            while folder.exists():  # two within a second
+                n += 1
+                folder = folder.with_name(f"{folder.name.split('_')[0]}_{n}")
+            self.new(folder)
         assert self.folder is not None
         return self.folder
 
@@ -240,7 +265,7 @@ class Measurement(QObject):
         self.folder = folder
         self.forget_all()
         self.save()
-        self.settings.set("session/last_dir", str(folder))
+        self.settings.remember_measurement(folder)
         log.info("new measurement in %s", folder)
         self.folder_changed.emit(folder)
 
@@ -262,7 +287,7 @@ class Measurement(QObject):
         ref = doc.get("reference_path")
         self.reference_path = Path(ref) if ref else None
         self.forget_all()
-        self.settings.set("session/last_dir", str(folder))
+        self.settings.remember_measurement(folder)
         self.folder_changed.emit(folder)
         self.layout_needed.emit(self.current_layout)
 
@@ -340,6 +365,12 @@ class Measurement(QObject):
             return None
         root = self.folder / (CHART_DIR if which == "chart" else SAMPLE_DIR)
         return Session.open(root) if (root / MANIFEST_NAME).exists() else None
+
+    def capture_warnings(self, which: str) -> tuple[str, ...]:
+        """The warnings the captures of the chart or sample session raised."""
+        if self.folder is None:
+            return ()
+        return read_capture_warnings(MeasurementFolder(self.folder).session_dir(which))
 
     def phase_complete(self, which: str, kind: str | None) -> bool:
         """Whether the session holds every frame of ``kind`` (None: every frame)."""
@@ -448,6 +479,69 @@ def _bench_showing(context: DeviceContext, target_layout: TargetLayout) -> Any:
     return context.replace_bench(bench_for_target(bench, target_layout, seed=seed))
 
 
+def _frames_of(kind: str | None, n_channels: int, n_brackets: int, n_darks: int) -> int:
+    """Frames of ``kind`` a session will hold before its exposures are known (an
+    upper bound for the darks: one per LED exposure)."""
+    lit = n_channels * n_brackets
+    per_kind = {"dark": lit * n_darks, "white": lit, "target": lit}
+    return per_kind[kind] if kind is not None else sum(per_kind.values())
+
+
+class _PhaseProgress:
+    """The progress of one capture phase: metering (while exposures are unknown) and
+    the frames of the phase.
+
+    ``capture()`` reports one step per metered channel, then one per frame; the
+    fraction is the steps done over the steps done plus those left, and never goes
+    back (before metering, the frames left are an upper bound, replaced by the real
+    count from the session when the first frame is in).
+    """
+
+    def __init__(
+        self,
+        kind: str | None,
+        session: Any,
+        n_channels: int,
+        options: CaptureOptions,
+        progress: ProgressFn | None,
+    ) -> None:
+        self._kind = kind
+        self._progress = progress
+        self.done = 0
+        self._last = 0.0
+        if session is None:
+            self._n_meter = n_channels
+            self.frames_left = _frames_of(kind, n_channels, 1, options.n_darks)
+        elif not session.settings.resolved:
+            settings = session.settings
+            n = len(settings.channels)
+            self._n_meter = n - sum(
+                c in settings.exposures_s for c in settings.channels
+            )
+            self.frames_left = _frames_of(
+                kind, n, len(settings.bracket_factors), settings.n_darks
+            )
+        else:
+            self._n_meter = 0
+            self.frame_taken(session)
+
+    def frame_taken(self, session: Any) -> None:
+        """Count the frames of the phase still missing in ``session`` (resolved)."""
+        if session is not None and session.settings.resolved:
+            self._n_meter = 0
+            missing = session.missing(verify=False)
+            self.frames_left = sum(self._kind in (None, s.kind) for s in missing)
+
+    def step(self) -> None:
+        """One step done; report the fraction."""
+        self.done += 1
+        left = max(0, self._n_meter - self.done) + self.frames_left
+        fraction = self.done / max(1, self.done + left)
+        self._last = max(self._last, min(fraction, 1.0))
+        if self._progress is not None:
+            self._progress(self._last)
+
+
 def capture_job(
     context: DeviceContext,
     root: Path,
@@ -464,7 +558,9 @@ def capture_job(
     ``pipeline.capture_target`` runs the capture sequence (resuming the session) and
     is stopped as soon as every frame of ``kind`` is in: a cancelled capture keeps
     its frames and the next phase resumes from there. A phase that is already
-    complete is taken again (its frames are marked bad first). Device thread.
+    complete is taken again (its frames are marked bad first). What it does now
+    (``"metering LED495, 7 of 22"``) and its warnings go to the page as they
+    happen (``context.set_stage``, ``context.warn``). Device thread.
 
     Parameters
     ----------
@@ -482,42 +578,32 @@ def capture_job(
     def session_now() -> Session | None:
         return Session.open(root) if (root / MANIFEST_NAME).exists() else None
 
-    def missing_of_kind(session: Session | None) -> int:
-        if session is None or not session.settings.resolved:
-            return -1  # unknown until created and metered: not complete
-        return sum(kind in (None, s.kind) for s in session.missing(verify=False))
-
     session = session_now()
-    if session is not None and missing_of_kind(session) == 0:
+    meter = _PhaseProgress(kind, session, len(light.channels()), options, progress)
+    if session is not None and session.settings.resolved and meter.frames_left == 0:
         retake = [f.id for f in session.frames if kind in (None, f.kind)]
         session.mark_bad(retake, "retaken by the operator")
         log.info("retaking %d %s frame(s)", len(retake), kind or "")
-    todo = [max(0, missing_of_kind(session))]
-    steps = [0]
     phase_done = [False]
     captured: list[str] = []
-
-    def on_step(_fraction: float) -> None:
-        # capture() reports one step per metered channel and per frame
-        steps[0] += 1
-        if progress is not None:
-            progress(min(1.0, steps[0] / max(1, steps[0] + todo[0])))
 
     def on_frame(record: Any, path: Path) -> None:
         captured.append(record.id)
         context.show_frame(path)
         now = session_now()
-        if record.spd_file is not None and now is not None:
-            context.show_spd(now.read_spd(record), _levels_of(light, record.channel))
-        todo[0] = max(0, missing_of_kind(now))
-        if kind is not None and todo[0] == 0:
+        if now is None:
+            return
+        if record.spd_file is not None:
+            context.show_spd(
+                partial(now.read_spd, record), _levels_of(light, record.channel)
+            )
+        meter.frame_taken(now)
+        if kind is not None and now.settings.resolved and meter.frames_left == 0:
             phase_done[0] = True
 
     def stop() -> bool:
         return phase_done[0] or bool(should_stop and should_stop())
 
-    if todo[0] == 0 and session is not None:
-        todo[0] = len(session.plan())
     warnings: tuple[str, ...] = ()
     try:
         session, warnings = capture_target(
@@ -528,9 +614,11 @@ def capture_job(
             iso=options.iso,
             n_darks=options.n_darks,
             resume=True,
-            progress=on_step,
+            progress=lambda _f: meter.step(),
             should_stop=stop,
             on_frame=on_frame,
+            on_warning=context.warn,
+            on_stage=context.set_stage,
         )
     except Cancelled:
         if not phase_done[0] or (should_stop and should_stop()):
@@ -611,7 +699,7 @@ def calibrate_job(
         method=str(cal.estimate.method),
         layout=chart.layout,
         excluded_patches=tuple(cal.estimate.excluded_patches),
-        warnings=tuple(chart.warnings),
+        warnings=step_warnings(chart_root, chart, cal.estimate.excluded_patches),
         elapsed_s=time.monotonic() - t0,
         calibration=cal,
         chart=chart,
@@ -667,7 +755,7 @@ def estimate_job(
         reference=ref,
         layout=sample.layout,
         clipped=tuple(est.wiener.clipped),
-        warnings=tuple(sample.warnings),
+        warnings=step_warnings(sample_root, sample),
         elapsed_s=time.monotonic() - t0,
         estimation=type(est)(est.wiener, table2, est.uncertainty),
         sample=sample,
@@ -683,10 +771,15 @@ def export_job(
     estimated: EstimateResult,
     devices: dict[str, dict[str, str]],
     *,
+    provenance: dict[str, str] | None = None,
+    input_files: list[Path] | tuple[Path, ...] = (),
     progress: ProgressFn | None = None,
     should_stop: StopFn | None = None,
 ) -> ExportResult:
     """Write every export and the report (``pipeline.export``). Pool.
+
+    ``provenance`` (the simulated bench's seed and resolution...) and the files
+    read (``input_files``, with ``measurement.json``) go into the report.
 
     Results restored from disk lack the processed sessions; they are recomputed
     from the sessions with the corners used then.
@@ -746,7 +839,17 @@ def export_job(
             "chart corners": chart.corners_source,
             "sample corners": sample.corners_source,
         },
-        warnings=(*calibration.warnings, *estimated.warnings),
+        warnings=(
+            *(f"chart: {w}" for w in calibration.warnings),
+            *(f"sample: {w}" for w in estimated.warnings),
+        ),
+        provenance={
+            "measurement folder": str(Path(folder).resolve()),
+            **(provenance or {}),
+        },
+        sessions={"chart": folder / CHART_DIR, "sample": folder / SAMPLE_DIR},
+        input_files=[folder / MEASUREMENT_FILE, *input_files],
+        threshold_rgb_mean=calibration.threshold,
     )
     (Path(out_dir) / "exports.json").write_text(
         dumps_json({k: Path(p).name for k, p in files.items()}, indent=1)

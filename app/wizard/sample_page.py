@@ -65,12 +65,16 @@ class SamplePage(StepPage):
         )
 
     def accept_result(self, result: PhaseResult) -> str:
-        """Summary line for the operator."""
+        """Summary line for the operator (and every warning of the sample's capture)."""
+        self.add_warnings(self.measurement.capture_warnings("sample"))
         return result.summary("frames", "sample session")
 
     def restore(self) -> bool:
         """Done if the sample session is complete."""
         if self.measurement.phase_complete("sample", None):
-            self.mark_done("The sample session is complete (resumed).")
+            self.mark_done(
+                "The sample session is complete (resumed).",
+                warnings=self.measurement.capture_warnings("sample"),
+            )
             return True
         return False

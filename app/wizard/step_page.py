@@ -11,6 +11,7 @@ switched off) and taken again. Subclasses say what job to make
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from typing import Any
 
 from PySide6.QtCore import Qt, QTimer, Signal, Slot
@@ -24,7 +25,7 @@ from PySide6.QtWidgets import (
 )
 
 from tunespec.app.panels.device_panel import format_error
-from tunespec.app.workers import DeviceJob, ProgressClock, Worker
+from tunespec.app.workers import DeviceJob, ProgressClock, Throttle, Worker
 from tunespec.core.progress import Cancelled
 
 __all__ = ["StepPage", "StepState"]
@@ -64,9 +65,16 @@ class StepPage(QWidget):
     state_changed = Signal(str)
     #: The step finished successfully: its result.
     step_finished = Signal(object)
+    #: The step's warnings changed: the list of them.
+    warnings_changed = Signal(list)
+    #: What the running job does now ("metering LED495, 7 of 22").
+    stage_changed = Signal(str)
 
     #: Update the remaining-time text at most this often (ms).
     ETA_PERIOD_MS = 500
+    #: Redraw the progress bar at most this often (ms): a simulated capture reports
+    #: a step every few ms, and each redraw is a paint the event loop waits for.
+    PROGRESS_PERIOD_MS = 100
     #: This step's name for :attr:`inputs` of later steps.
     key = ""
     #: Keys of the steps whose results this one uses: retaking one of them makes
@@ -104,6 +112,9 @@ class StepPage(QWidget):
         self.result: Any = None
         self.clock = ProgressClock()
         self._finish_state = StepState.FAILED
+        #: What the pipeline warned about in this step's last run (or its result).
+        self.warnings: list[str] = []
+        self.stage = ""
 
         self.title_label = QLabel(title)
         self.title_label.setStyleSheet("font-size: 15pt; font-weight: bold")
@@ -125,6 +136,18 @@ class StepPage(QWidget):
         self.result_label.setTextInteractionFlags(
             Qt.TextInteractionFlag.TextSelectableByMouse
         )
+        # the badge: every warning of the step, visible until the step is retaken
+        self.warning_label = QLabel("")
+        self.warning_label.setObjectName("warning_badge")
+        self.warning_label.setWordWrap(True)
+        self.warning_label.setTextInteractionFlags(
+            Qt.TextInteractionFlag.TextSelectableByMouse
+        )
+        self.warning_label.setStyleSheet(
+            "#warning_badge { background: #fff3cd; border: 1px solid #e0a800; "
+            "border-radius: 4px; padding: 4px; color: #5c3c00; }"
+        )
+        self.warning_label.hide()
         buttons = QHBoxLayout()
         buttons.addWidget(self.start_button)
         buttons.addWidget(self.abort_button)
@@ -140,6 +163,7 @@ class StepPage(QWidget):
         layout.addWidget(self.title_label)
         layout.addWidget(self.description_label)
         layout.addLayout(self.body, 1)
+        layout.addWidget(self.warning_label)
         layout.addWidget(self.result_label)
         layout.addLayout(progress)
         layout.addLayout(buttons)
@@ -148,6 +172,7 @@ class StepPage(QWidget):
         metrics = self.start_button.fontMetrics()
         widest = max(metrics.horizontalAdvance(t) for t in (start_text, retake_text))
         self.start_button.setMinimumWidth(widest + 32)
+        self._progress_display = Throttle(self._show_progress, self.PROGRESS_PERIOD_MS)
         self.eta_timer = QTimer(self)
         self.eta_timer.setInterval(self.ETA_PERIOD_MS)
         self.eta_timer.timeout.connect(self._on_eta_timer_timeout)
@@ -200,7 +225,11 @@ class StepPage(QWidget):
             self.result_label.setText(why)
             return None
         self.job = job
+        self.set_warnings(())
+        self._set_stage("")
         job.signals.progressed.connect(self._on_job_progressed)
+        job.signals.stage_changed.connect(self._on_job_stage_changed)
+        job.signals.warned.connect(self._on_job_warned)
         job.signals.returned.connect(self._on_job_returned)
         job.signals.errored.connect(self._on_job_errored)
         job.signals.finished.connect(self._on_job_finished)
@@ -228,9 +257,15 @@ class StepPage(QWidget):
         if controller is not None and controller.is_open:
             controller.all_off()
 
-    def mark_done(self, text: str, result: Any = None) -> None:
-        """Mark the step done without running it (e.g. restored on resume)."""
+    def mark_done(
+        self, text: str, result: Any = None, warnings: Sequence[str] | None = None
+    ) -> None:
+        """Mark the step done without running it (e.g. restored on resume); its
+        warnings are ``warnings``, else those of ``result``."""
         self.result = result
+        self.set_warnings(
+            getattr(result, "warnings", ()) if warnings is None else warnings
+        )
         self.progress_bar.setValue(1000)
         self.remaining_label.setText("")
         self.result_label.setStyleSheet("")
@@ -244,11 +279,56 @@ class StepPage(QWidget):
         self.result = None
         if self.produces is not None:
             self.measurement.forget(self.produces)
-        self.progress_bar.setValue(0)
+        self.set_warnings(())
+        self._reset_progress()
         self.remaining_label.setText("")
         self.result_label.setStyleSheet("")
         self.result_label.setText("")
         self._set_state(StepState.PENDING)
+
+    # -- warnings and progress ------------------------------------------------------
+    def add_warnings(self, warnings: Sequence[str]) -> None:
+        """Show (and log) the warnings not shown yet."""
+        new = [w for w in dict.fromkeys(warnings) if w not in self.warnings]
+        if not new:
+            return
+        for w in new:
+            log.warning("%s: %s", self.title, w)
+        self.warnings.extend(new)
+        self._show_warnings()
+
+    def set_warnings(self, warnings: Sequence[str]) -> None:
+        """Replace the warnings shown (a restored step shows its result's)."""
+        self.warnings = []
+        self._show_warnings()
+        self.add_warnings(warnings)
+
+    def _show_warnings(self) -> None:
+        n = len(self.warnings)
+        if n:
+            from html import escape
+
+            head = f"⚠ {n} warning{'s' if n > 1 else ''}"
+            items = "".join(f"<li>{escape(w)}</li>" for w in self.warnings)
+            self.warning_label.setText(
+                f"<b>{head}</b><ul style='margin:0'>{items}</ul>"
+            )
+        self.warning_label.setVisible(bool(n))
+        self.warnings_changed.emit(list(self.warnings))
+
+    def _set_stage(self, text: str) -> None:
+        self.stage = text
+        self.progress_bar.setFormat(f"{text} \u2014 %p %" if text else "%p %")
+
+    def _show_progress(self) -> None:
+        """The newest fraction and stage on the bar (throttled while running)."""
+        if self.running:
+            self._set_stage(self.stage)
+            self.progress_bar.setValue(round(1000 * self.clock.fraction))
+
+    def _reset_progress(self) -> None:
+        self._set_stage("")
+        self.progress_bar.setValue(0)
 
     def _set_state(self, state: str) -> None:
         self.state = state
@@ -273,8 +353,23 @@ class StepPage(QWidget):
 
     @Slot(float)
     def _on_job_progressed(self, fraction: float) -> None:
+        if not self.running:
+            return  # queued from a job that was already aborted
+        # never backwards, whatever a job reports
+        fraction = max(self.clock.fraction, min(1.0, float(fraction)))
         self.clock.update(fraction)
-        self.progress_bar.setValue(round(1000 * fraction))
+        self._progress_display()
+
+    @Slot(str)
+    def _on_job_stage_changed(self, text: str) -> None:
+        if self.running:
+            self.stage = text
+            self.stage_changed.emit(text)
+            self._progress_display()
+
+    @Slot(str)
+    def _on_job_warned(self, text: str) -> None:
+        self.add_warnings([text])
 
     @Slot()
     def _on_eta_timer_timeout(self) -> None:
@@ -294,6 +389,7 @@ class StepPage(QWidget):
             self._fail(format_error(exc))
             return
         self.result = result
+        self.add_warnings(getattr(result, "warnings", ()))
         self.progress_bar.setValue(1000)
         self.result_label.setStyleSheet("")
         self.result_label.setText(text)
@@ -322,6 +418,11 @@ class StepPage(QWidget):
         self._finish_state = StepState.FAILED
         elapsed = ProgressClock.format_s(self.clock.elapsed_s)
         self.remaining_label.setText(f"{elapsed} elapsed")
+        self._set_stage("")
+        if state != StepState.DONE:
+            # an aborted or failed step has not done any fraction of its work
+            self._reset_progress()
+            self.remaining_label.setText(f"stopped after {elapsed}")
         self.job = None
         self._set_state(state)
         if state == StepState.DONE:

@@ -24,8 +24,10 @@ from PySide6.QtWidgets import (
     QLabel,
     QListWidget,
     QListWidgetItem,
+    QMenu,
     QPushButton,
     QStackedWidget,
+    QToolButton,
     QVBoxLayout,
     QWidget,
 )
@@ -66,7 +68,39 @@ class WizardPanel(QWidget):
     def __init__(self, measurement: Any, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self.measurement = measurement
-        m = measurement
+        self.pages: list[StepPage] = self._build_pages(measurement)
+        self._build_folder_row()
+        self._build_steps_and_prompt()
+        self._build_navigation()
+        top = QHBoxLayout()
+        top.addWidget(QLabel("Measurement:"))
+        top.addWidget(self.folder_label, 1)
+        top.addWidget(self.resume_button)
+        top.addWidget(self.recent_button)
+        top.addWidget(self.new_button)
+        top.addWidget(self.open_button)
+        nav = QHBoxLayout()
+        nav.addStretch(1)
+        nav.addWidget(self.back_button)
+        nav.addWidget(self.next_button)
+        right = QVBoxLayout()
+        right.addWidget(self.prompt_frame)
+        right.addWidget(self.stack, 1)
+        right.addLayout(nav)
+        middle = QHBoxLayout()
+        middle.addWidget(self.step_list)
+        middle.addLayout(right, 1)
+        layout = QVBoxLayout(self)
+        layout.addLayout(top)
+        layout.addLayout(middle, 1)
+        self._connect_signals()
+        measurement.folder_chooser = self.ask_measurements_dir
+        for i in range(len(self.pages)):
+            self._show_state(i)
+        self._show_no_folder()
+        self.go_to(0)
+
+    def _build_pages(self, m: Any) -> list[StepPage]:
         self.connect_page = ConnectPage(m)
         self.dark_page = CapturePage(
             m,
@@ -96,7 +130,7 @@ class WizardPanel(QWidget):
         self.sample_page = SamplePage(m)
         self.estimate_page = EstimatePage(m)
         self.export_page = ExportPage(m)
-        self.pages: list[StepPage] = [
+        return [
             self.connect_page,
             self.dark_page,
             self.white_page,
@@ -107,10 +141,21 @@ class WizardPanel(QWidget):
             self.export_page,
         ]
 
+    def _build_folder_row(self) -> None:
+        """The measurement in use, the last one to resume, recent ones, New, Open."""
         self.folder_label = QLabel("No measurement folder yet.")
         self.folder_label.setWordWrap(True)
+        self.resume_button = QPushButton("Resume last")
+        self.resume_button.setToolTip("Open the last measurement again")
+        self.recent_menu = QMenu("Open &recent", self)
+        self.recent_button = QToolButton()
+        self.recent_button.setText("Recent")
+        self.recent_button.setMenu(self.recent_menu)
+        self.recent_button.setPopupMode(QToolButton.ToolButtonPopupMode.InstantPopup)
         self.new_button = QPushButton("New…")
         self.open_button = QPushButton("Open / resume…")
+
+    def _build_steps_and_prompt(self) -> None:
         self.step_list = QListWidget()
         self.step_list.setMaximumWidth(230)
         self.stack = QStackedWidget()
@@ -130,6 +175,8 @@ class WizardPanel(QWidget):
         prompt_row.addWidget(self.prompt_label, 1)
         prompt_row.addWidget(self.prompt_button)
         self.prompt_frame.hide()
+
+    def _build_navigation(self) -> None:
         self.back_button = QPushButton("◀ Back")
         self.next_button = QPushButton("Next ▶")
         # keyboard: Back/Next as a browser's, start (Take frames, Calibrate...) and
@@ -142,31 +189,20 @@ class WizardPanel(QWidget):
         self.abort_action = self._action("Abort", ("Escape",))
         self.back_button.setToolTip("Previous step (Alt+←)")
         self.next_button.setToolTip("Next step (Alt+→)")
-        top = QHBoxLayout()
-        top.addWidget(QLabel("Measurement:"))
-        top.addWidget(self.folder_label, 1)
-        top.addWidget(self.new_button)
-        top.addWidget(self.open_button)
-        nav = QHBoxLayout()
-        nav.addStretch(1)
-        nav.addWidget(self.back_button)
-        nav.addWidget(self.next_button)
-        right = QVBoxLayout()
-        right.addWidget(self.prompt_frame)
-        right.addWidget(self.stack, 1)
-        right.addLayout(nav)
-        middle = QHBoxLayout()
-        middle.addWidget(self.step_list)
-        middle.addLayout(right, 1)
-        layout = QVBoxLayout(self)
-        layout.addLayout(top)
-        layout.addLayout(middle, 1)
+        for page in self.pages:
+            page.start_button.setToolTip(
+                f"{page.start_button.toolTip() or 'Start this step'} (Ctrl+Enter)"
+            )
+            page.abort_button.setToolTip(f"{page.abort_button.toolTip()} (Esc)")
 
+    def _connect_signals(self) -> None:
+        m = self.measurement
         for i, page in enumerate(self.pages):
             page.state_changed.connect(
                 lambda state, i=i: self._on_page_state_changed(i, state)
             )
             page.step_finished.connect(lambda _r, i=i: self._on_page_step_finished(i))
+            page.warnings_changed.connect(lambda _w, i=i: self._show_state(i))
         self.step_list.currentRowChanged.connect(self._on_step_list_row_changed)
         self.back_button.clicked.connect(self._on_back_button_clicked)
         self.next_button.clicked.connect(self._on_next_button_clicked)
@@ -174,19 +210,13 @@ class WizardPanel(QWidget):
         self.next_action.triggered.connect(self._on_next_action_triggered)
         self.start_action.triggered.connect(self._on_start_action_triggered)
         self.abort_action.triggered.connect(self.abort)
-        for page in self.pages:
-            page.start_button.setToolTip(
-                f"{page.start_button.toolTip() or 'Start this step'} (Ctrl+Enter)"
-            )
-            page.abort_button.setToolTip(f"{page.abort_button.toolTip()} (Esc)")
-        self.new_button.clicked.connect(self._on_new_button_clicked)
-        self.open_button.clicked.connect(self._on_open_button_clicked)
+        self.new_button.clicked.connect(self.ask_new_measurement)
+        self.open_button.clicked.connect(self.ask_open_measurement)
+        self.resume_button.clicked.connect(self._on_resume_button_clicked)
+        self.recent_menu.aboutToShow.connect(self._fill_recent_menu)
         m.folder_changed.connect(self._on_measurement_folder_changed)
         m.controller.prompt_requested.connect(self._on_controller_prompt_requested)
         self.prompt_button.clicked.connect(self._on_prompt_button_clicked)
-        for i in range(len(self.pages)):
-            self._show_state(i)
-        self.go_to(0)
 
     def _action(self, text: str, keys: tuple[str, ...]) -> QAction:
         action = QAction(text, self)
@@ -235,13 +265,17 @@ class WizardPanel(QWidget):
         )
         self.new_button.setEnabled(not running)
         self.open_button.setEnabled(not running)
+        self.resume_button.setEnabled(not running)
+        self.recent_button.setEnabled(not running)
 
     def _show_state(self, index: int) -> None:
         page = self.pages[index]
         mark, colour = _STATE_MARK[page.state]
         item = self.step_list.item(index)
-        item.setText(f"{mark}  {index + 1}. {page.title}")
+        badge = f"  ⚠ {len(page.warnings)}" if page.warnings else ""
+        item.setText(f"{mark}  {index + 1}. {page.title}{badge}")
         item.setForeground(QBrush(colour))
+        item.setToolTip("\n".join(page.warnings))
 
     # -- measurement folder ---------------------------------------------------------
     @property
@@ -374,22 +408,64 @@ class WizardPanel(QWidget):
         if button.isEnabled() and button.isVisible():
             button.click()
 
-    @Slot()
-    def _on_new_button_clicked(self) -> None:
-        folder = QFileDialog.getExistingDirectory(
-            self, "Folder for the new measurement"
+    # -- asking for folders (the File menu uses the same) ---------------------------
+    def _ask_folder(self, caption: str) -> str:
+        """A folder dialog starting where the measurements are ("" if cancelled)."""
+        return QFileDialog.getExistingDirectory(
+            self, caption, self.measurement.settings.measurements_dir()
         )
-        if folder:
-            self.new_measurement(folder)
+
+    def ask_new_measurement(self) -> bool:
+        """Ask for the folder of a new measurement and start it there."""
+        folder = self._ask_folder("Folder for the new measurement (an empty one)")
+        return bool(folder) and self.new_measurement(folder)
+
+    def ask_open_measurement(self) -> bool:
+        """Ask for a measurement folder and open it (resume)."""
+        folder = self._ask_folder("Open a measurement to resume")
+        return bool(folder) and self.open_measurement(folder)
+
+    def ask_measurements_dir(self) -> Path | None:
+        """Where measurements go: asked once, when a step needs a folder and none was
+        chosen (the measurement remembers the answer)."""
+        folder = self._ask_folder(
+            "Where should measurements be saved? (asked once; each measurement "
+            "gets its own folder there)"
+        )
+        return Path(folder) if folder else None
+
+    def _fill_recent_menu(self) -> None:
+        self.recent_menu.clear()
+        recent = self.measurement.settings.recent_measurements()
+        for folder in recent:
+            action = self.recent_menu.addAction(str(folder))
+            action.triggered.connect(
+                lambda _checked=False, f=folder: self.open_measurement(f)
+            )
+        if not recent:
+            self.recent_menu.addAction("(no recent measurements)").setEnabled(False)
+
+    def _show_no_folder(self) -> None:
+        """Before a measurement is open: offer the last one."""
+        last = self.measurement.settings.last_measurement()
+        self.resume_button.setVisible(last is not None)
+        if last is not None:
+            self.resume_button.setToolTip(f"Open {last} again")
+            self.folder_label.setText(f"None open. Last: {last}")
+        self.recent_button.setEnabled(
+            bool(self.measurement.settings.recent_measurements())
+        )
 
     @Slot()
-    def _on_open_button_clicked(self) -> None:
-        folder = QFileDialog.getExistingDirectory(self, "Open a measurement to resume")
-        if folder:
-            self.open_measurement(folder)
+    def _on_resume_button_clicked(self) -> None:
+        last = self.measurement.settings.last_measurement()
+        if last is not None:
+            self.open_measurement(last)
 
     @Slot(object)
     def _on_measurement_folder_changed(self, folder: Any) -> None:
+        self.resume_button.hide()
+        self.recent_button.setEnabled(True)
         self.folder_label.setText(str(folder))
         self.folder_label.setTextInteractionFlags(
             Qt.TextInteractionFlag.TextSelectableByMouse

@@ -125,7 +125,12 @@ def test_html_is_self_contained_and_complete(
     assert not re.search(r"<link|<script|@import|url\(|https?://", text)
     images = re.findall(r'src="data:image/png;base64,([^"]+)"', text)
     names = [n for n, _ in report_figures(report)]
-    assert names == ["led_spd", "sensitivities", "response_map", "reflectance_grid_1"]
+    assert names == [
+        "light_camera",
+        "patch_errors",
+        "response_map",
+        "reflectance_grid_1",
+    ]
     assert len(images) == len(names)
     assert all(base64.b64decode(b)[:8] == b"\x89PNG\r\n\x1a\n" for b in images)
     checker = _TagBalance()
@@ -157,8 +162,12 @@ def test_pdf_has_a_page_per_part(written: tuple[Path, Path]) -> None:
     data = written[1].read_bytes()
     assert data.startswith(b"%PDF-") and data.rstrip().endswith(b"%%EOF")
     pages = len(re.findall(rb"/Type /Page\b(?!s)", data))
-    # summary + 4 figures + provenance
-    assert pages == 1 + 4 + 1
+    # summary + 4 figures + results + provenance
+    assert pages == 1 + 4 + 1 + 1
+    # one page format: every page A4 portrait
+    boxes = re.findall(rb"/MediaBox \[ ?0 0 ([\d.]+) ([\d.]+) ?\]", data)
+    assert len(boxes) == pages
+    assert {(round(float(w)), round(float(h))) for w, h in boxes} == {(595, 842)}
     assert b"Neugebauer <test> & report" in data or b"(Neugebauer" in data
 
 
@@ -210,8 +219,8 @@ def test_empty_report(tmp_path: Path) -> None:
 def test_many_patches_split_into_pages() -> None:
     sg = load_colorchecker_sg(GRID)
     names = [n for n, _ in report_figures(ReportData(reflectance=sg))]
-    assert PATCHES_PER_FIGURE == 70
-    assert names == ["reflectance_grid_1", "reflectance_grid_2"]
+    assert PATCHES_PER_FIGURE == 24
+    assert names == [f"reflectance_grid_{k}" for k in range(1, 7)]  # 140 patches
 
 
 def test_table1_from_prediction_stats(report: ReportData) -> None:
@@ -285,3 +294,73 @@ def test_a_bayes_report_states_the_validated_accuracy_and_the_led_corrections() 
     )
     assert "Validated accuracy of the calibration method" in html
     assert "LED410" in html and "1.0200 ± 0.0030" in html and "+0.40 ± 0.05" in html
+
+
+def test_summary_verdict_per_patch_errors_and_provenance(
+    report: ReportData, tmp_path: Path
+) -> None:
+    """The summary's verdict and key numbers against the paper's, Table 1 per patch
+    (worst first), full provenance, and no internal key shown to the reader."""
+    from dataclasses import replace
+
+    from tunespec.app.report.report import verdict
+    from tunespec.core.layout import TargetLayout
+
+    layout = TargetLayout.load(resource_path("layouts", "colorchecker_sg.json"))
+    errors = {"A1": 0.0010, "B3": 0.0090, "N10": 0.0031}
+    full = replace(
+        report,
+        threshold_rgb_mean=0.002,
+        table1_patches=errors,
+        chart_layout=layout,
+        provenance={"seed": "7", "resolution": "768x512"},
+        exposures_s={"LED450": 1.25, "LED540": 0.5},
+        input_files=(("/m/chart/manifest.json", "ab" * 32),),
+        exports={"chart_responses_csv": "chart_responses.csv"},
+    )
+    # Table 1 RGB mean 0.0021 of the fixture: over the threshold 0.002
+    assert verdict(full) == (
+        "FAIL",
+        "Table 1 RGB mean error 0.0021 of full scale is over the threshold 0.0020",
+    )
+    assert verdict(replace(full, threshold_rgb_mean=0.005))[0] == "PASS"
+    html_path, pdf_path = write_report(tmp_path, full)
+    text = html_path.read_text(encoding="utf-8")
+    assert "<b>FAIL</b>" in text
+    for needle in (
+        "Table 1 RGB mean error (full scale)",
+        '<td class="num">0.0024</td>',  # the paper's Table 1 RGB mean
+        '<td class="num">0.0286</td>',  # the paper's Table 2 spectral RMS
+        "Table 1: the 3 worst patches",
+        '<td class="num">0.0090</td>',
+        "<td>seed</td><td>7</td>",
+        "<td>resolution</td><td>768x512</td>",
+        "Exposure per LED (s)",
+        "ab" * 32,
+        "Chart: camera responses under every LED",
+    ):
+        assert needle in text, needle
+    # worst patch first
+    assert text.index(">B3<") < text.index(">N10<") < text.index(">A1<")
+    assert "chart_responses_csv" not in text
+    pdf = pdf_path.read_bytes()
+    boxes = re.findall(rb"/MediaBox \[ ?0 0 ([\d.]+) ([\d.]+) ?\]", pdf)
+    assert {(round(float(w)), round(float(h))) for w, h in boxes} == {(595, 842)}
+
+
+def test_every_export_kind_has_a_name_for_the_reader() -> None:
+    from tunespec.app.report.report import EXPORT_LABELS
+    from tunespec.core.io.export import CAMERA_EXPORT_NAMES, EXPORT_NAMES
+
+    kinds = {
+        *EXPORT_NAMES,
+        *CAMERA_EXPORT_NAMES,
+        "chart_responses_csv",
+        "chart_illuminants_csv",
+        "reflectances_uncertainty_csv",
+        "colorimetry_csv",
+        "report_html",
+        "report_pdf",
+        "summary_json",
+    }
+    assert kinds <= set(EXPORT_LABELS), kinds - set(EXPORT_LABELS)
