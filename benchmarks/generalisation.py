@@ -31,10 +31,14 @@ true sensitivities and the true spectra, the floor that no calibration can beat.
 
 Usage::
 
-    python benchmarks/generalisation.py                  # everything (~15 min, 2 cores)
+    python benchmarks/generalisation.py                  # everything (~20 min, 2 cores)
     python benchmarks/generalisation.py --quick          # 2 cameras per family, one light
     python benchmarks/generalisation.py --no-metering-error --variants bayes,bayes-noselfcal
     python benchmarks/generalisation.py --json out.json
+    python benchmarks/generalisation.py --grid 380:730:5  # calibrate on another grid
+
+After the table it prints the leave-one-reflectance-collection-out check of
+``core.uncertainty.PRIOR_MISMATCH_SCALE`` (:func:`tune_prior_scale`).
 """
 
 from __future__ import annotations
