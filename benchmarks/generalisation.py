@@ -78,7 +78,7 @@ from tunespec.core.simulate import NoiseModel, scale_to_exposure, simulate_respo
 from tunespec.core.spectra import CALIBRATION_GRID, Grid, Spectra
 from tunespec.core.stats import calibration_report, sensitivity_rms
 from tunespec.core.uncertainty import PRIOR_MISMATCH_SCALE, reflectance_uncertainty
-from tunespec.core.wiener import integration_grid, wiener_reflectance
+from tunespec.core.wiener import on_integration_grid, wiener_reflectance
 
 WORK = CALIBRATION_GRID
 EST = Grid(400.0, 700.0, 5.0)
@@ -262,9 +262,9 @@ def run_camera(
         t1 = calibration_report(est, resp, used, chart_work).training
         # Eq. 1 integrated on the calibration's grid, reflectance on EST (as
         # `tunespec estimate` does)
-        fine = integration_grid(est.sensitivity, EST, used)
-        illum = est.correct_illuminants(used).resample(fine, average=True)
-        sens = est.sensitivity.resample(fine)
+        illum, sens, _ = on_integration_grid(
+            est.correct_illuminants(used), est.sensitivity, EST
+        )
         w = wiener_reflectance(resp_t, illum, sens, prior_est)
         st = reflectance_stats(w.reflectance, test_est)
         sc = Score(

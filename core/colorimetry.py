@@ -40,7 +40,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tunespec.core.errors import InputError, check_names
-from tunespec.core.spectra import Grid, Spectra
+from tunespec.core.spectra import Spectra
 
 __all__ = [
     "ARGYLL_TABLE_STEPS_NM",
@@ -535,7 +535,7 @@ def reflectance_stats(estimated: Spectra, reference: Spectra) -> ReflectanceStat
         limit=20,
     )
     wl = estimated.wavelength_nm
-    grid = Grid(float(wl[0]), float(wl[-1]), estimated.step_nm)
+    grid = estimated.grid
     ref = reference.select(estimated.names, source=src_r).resample(grid, source=src_r)
     for spectra, src, role in (
         (estimated, src_e, "estimated"),

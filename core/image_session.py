@@ -555,15 +555,10 @@ def _corrected_for(
     corrections on the SPDs' own grid), and both illuminants and sensitivities on
     the integration grid (:func:`tunespec.core.wiener.integration_grid`)."""
     from tunespec.core.sensitivity import correct_illuminants_from_meta
-    from tunespec.core.wiener import integration_grid
+    from tunespec.core.wiener import on_integration_grid
 
     corrected = correct_illuminants_from_meta(illuminants_of(job), meta)
-    fine = integration_grid(sensitivity, grid, corrected)
-    return (
-        corrected.resample(fine, average=True),
-        sensitivity.resample(fine, source=sensitivity.meta.get("source")),
-        fine,
-    )
+    return on_integration_grid(corrected, sensitivity, grid)
 
 
 def lighting_for(

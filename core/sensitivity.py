@@ -82,6 +82,7 @@ __all__ = [
     "SPD_SHIFT_RANGE_NM",
     "SensitivityEstimate",
     "calibration_from_files",
+    "calibration_from_meta",
     "correct_illuminants_from_meta",
     "correct_spd_shift",
     "database_basis",
@@ -638,19 +639,27 @@ def correct_illuminants_from_meta(
 def calibration_from_files(
     sensitivity_csv: str | os.PathLike[str], meta: Mapping[str, Any]
 ) -> SensitivityEstimate:
-    """A calibration back from ``calibrate``'s CSV and the side file's ``meta``.
+    """A calibration back from ``calibrate``'s CSV and the side file's ``meta``
+    (:func:`calibration_from_meta` of the file's sensitivities)."""
+    from tunespec.core.datasets import read_sensitivities
+
+    return calibration_from_meta(read_sensitivities(sensitivity_csv), meta)
+
+
+def calibration_from_meta(
+    sens: Spectra, meta: Mapping[str, Any]
+) -> SensitivityEstimate:
+    """A calibration back from its sensitivities (as read, on their own grid) and the
+    side file's ``meta``.
 
     ``meta`` as :func:`tunespec.core.io.export.read_sensitivity_meta` returns it; the
-    sensitivities stay on their own grid (the covariance's).
+    sensitivities stay on their own grid, the covariance follows them there.
 
     Raises
     ------
     InputError
         The covariance does not fit the sensitivities and LED corrections.
     """
-    from tunespec.core.datasets import read_sensitivities
-
-    sens = read_sensitivities(sensitivity_csv)
     source = meta.get("meta_path")
     corr = None
     if "led_correction" in meta:

@@ -190,6 +190,12 @@ class Spectra:
             raise InputError("spectra are not on an equidistant grid")
         return float(d[0])
 
+    @property
+    def grid(self) -> Grid:
+        """The equidistant :class:`Grid` the spectra are sampled on."""
+        wl = self.wavelength_nm
+        return Grid(float(wl[0]), float(wl[-1]), self.step_nm)
+
     def select(self, names: Iterable[str], *, source: str | None = None) -> Spectra:
         """The spectra called ``names``, in that order.
 

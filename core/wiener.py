@@ -39,6 +39,7 @@ __all__ = [
     "WienerEstimate",
     "integrated_lighting_matrix",
     "integration_grid",
+    "on_integration_grid",
     "wiener_reflectance",
 ]
 
@@ -334,6 +335,23 @@ def integration_grid(
     step = min(sensitivity.step_nm, estimate.step_nm)
     n = max(int(np.floor((hi - lo) / step + 1e-6)), 1)
     return Grid(lo, lo + n * step, step)
+
+
+def on_integration_grid(
+    illuminants: Spectra, sensitivity: Spectra, estimate: Grid
+) -> tuple[Spectra, Spectra, Grid]:
+    """Illuminants (band-averaged) and sensitivities on :func:`integration_grid`,
+    ready for :func:`wiener_reflectance` with a prior on ``estimate``; and that grid.
+
+    Pass the illuminants already corrected with the calibration's light-source
+    corrections (on their own grid), as ``tunespec estimate`` does.
+    """
+    fine = integration_grid(sensitivity, estimate, illuminants)
+    return (
+        illuminants.resample(fine, source=illuminants.meta.get("source"), average=True),
+        sensitivity.resample(fine, source=sensitivity.meta.get("source")),
+        fine,
+    )
 
 
 def integrated_lighting_matrix(

@@ -156,17 +156,16 @@ def _patchwise(bench_session) -> tuple[np.ndarray, np.ndarray]:
         correct_illuminants_from_meta,
     )
     from tunespec.core.uncertainty import reflectance_uncertainty
-    from tunespec.core.wiener import integration_grid, wiener_reflectance
+    from tunespec.core.wiener import on_integration_grid, wiener_reflectance
 
     p = bench_session["processed"]
     meta = read_sensitivity_meta(bench_session["sens"])
     sens = read_sensitivities(bench_session["sens"])
     corrected = correct_illuminants_from_meta(p.illuminants, meta)
-    fine = integration_grid(sens, GRID, corrected)
+    illum_fine, sens_fine, _ = on_integration_grid(corrected, sens, GRID)
     est = wiener_reflectance(
-        p.responses, corrected.resample(fine, average=True), sens.resample(fine),
-        load_colorchecker_sg(GRID),
-    )  # fmt: skip
+        p.responses, illum_fine, sens_fine, load_colorchecker_sg(GRID)
+    )
     cal = calibration_from_files(bench_session["sens"], meta)
     unc = reflectance_uncertainty(est, p.responses, p.illuminants, cal)
     return est.reflectance.values, unc.reflectance_std

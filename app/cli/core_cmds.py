@@ -352,17 +352,17 @@ def cmd_estimate(args: argparse.Namespace) -> int:
     )
     # imported after the inputs are read (scipy): an error in them is reported at once
     from tunespec.core.sensitivity import correct_illuminants_from_meta
-    from tunespec.core.wiener import integration_grid, wiener_reflectance
+    from tunespec.core.wiener import on_integration_grid, wiener_reflectance
 
     meta = read_sensitivity_meta(args.sensitivities)
     # corrected on the spectra's own grid, then resampled: as the main job does;
     # Eq. 1 integrated on the sensitivities' (finer) grid, reflectance on `grid`
     corrected = correct_illuminants_from_meta(reported, meta, args.spd_shift_nm)
-    fine = integration_grid(sensitivity, grid, corrected)
+    illum_fine, sens_fine, _ = on_integration_grid(corrected, sensitivity, grid)
     est = wiener_reflectance(
         responses,
-        _resampled(corrected, fine, average=True),
-        _resampled(sensitivity, fine),
+        illum_fine,
+        sens_fine,
         _resampled(prior, grid),
         noise_std=args.noise_std,
         center_prior=not args.uncentred_prior,
@@ -371,7 +371,9 @@ def cmd_estimate(args: argparse.Namespace) -> int:
     write_spectra_csv(est.reflectance, args.output)
     files = {"reflectances": str(args.output)}
     if "covariance" in meta and args.spd_shift_nm is None and args.noise_std is None:
-        files.update(_write_uncertainty(args, meta, est, responses, reported))
+        files.update(
+            _write_uncertainty(args, meta, est, responses, reported, sensitivity)
+        )
     _write_json(
         _meta_path(args.output),
         {"grid": str(grid), "sensitivities": str(args.sensitivities), **files},
@@ -405,13 +407,15 @@ def _write_uncertainty(
     est: Any,
     responses: Responses,
     reported: Spectra,
+    sensitivity: Spectra,
 ) -> dict[str, str]:
-    """Standard uncertainties beside the reflectances (see the README's formats)."""
+    """Standard uncertainties beside the reflectances (see the README's formats);
+    ``sensitivity`` as read, on its own grid (its covariance's)."""
     from tunespec.core.io.export import write_colorimetry_csv
-    from tunespec.core.sensitivity import calibration_from_files
+    from tunespec.core.sensitivity import calibration_from_meta
     from tunespec.core.uncertainty import reflectance_uncertainty
 
-    calibration = calibration_from_files(args.sensitivities, meta)
+    calibration = calibration_from_meta(sensitivity, meta)
     unc = reflectance_uncertainty(est, responses, reported, calibration)
     u_path = args.output.with_name(args.output.stem + "_uncertainty.csv")
     write_spectra_csv(est.reflectance.with_values(unc.reflectance_std), u_path)

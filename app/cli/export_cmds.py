@@ -174,13 +174,7 @@ def _add_export_camera(
 
 
 def cmd_export_camera(args: argparse.Namespace) -> int:
-    from tunespec.core.io.cgats import write_cgats
-    from tunespec.core.io.export import (
-        CAMERA_EXPORT_NAMES,
-        camera_ti3,
-        camera_transforms,
-        write_camera_transforms,
-    )
+    from tunespec.core.io.export import export_camera_characterisation
     from tunespec.core.responses import read_responses_csv
 
     out = Console(args)
@@ -189,14 +183,15 @@ def cmd_export_camera(args: argparse.Namespace) -> int:
     chart = read_spectral(args.reflectances, kind="reflectance")
     sens = absolute_sensitivities(args.sensitivities)
     out.inputs(illuminants, chart, sens)
-    args.out.mkdir(parents=True, exist_ok=True)
-    paths = {k: args.out / v for k, v in CAMERA_EXPORT_NAMES.items()}
-    table = camera_ti3(chart, responses, illuminants, under=args.under)
-    write_cgats(table, paths["chart_camera_ti3"])
-    transforms = camera_transforms(sens, chart)
-    write_camera_transforms(
-        transforms, paths["camera_transforms_json"], paths["camera_transforms_csv"]
+    done = export_camera_characterisation(
+        args.out,
+        sensitivity=sens,
+        chart=chart,
+        responses=responses,
+        illuminants=illuminants,
+        under=args.under,
     )
+    table, transforms, paths = done.table, done.transforms, done.paths
     ti3 = paths["chart_camera_ti3"]
     out.say(f"{len(table)} patches with camera RGB under {args.under}: {ti3}")
     for t in transforms:
@@ -370,8 +365,7 @@ def _table1_from_files(
         raise InputError(f"--chart needs {', '.join(opts[n] for n in need)}")
     responses = data["responses"]
     sens: Spectra = data["sensitivity"]
-    wl = sens.wavelength_nm
-    work = Grid(float(wl[0]), float(wl[-1]), sens.step_nm) if grid is None else grid
+    work = sens.grid if grid is None else grid
     chart = read_spectral(args.chart, work, kind="reflectance").select(
         responses.patches, source=str(args.chart)
     )

@@ -395,18 +395,15 @@ def estimate(
     """
     from tunespec.core.sensitivity import correct_illuminants_from_meta
     from tunespec.core.uncertainty import reflectance_uncertainty
-    from tunespec.core.wiener import integration_grid, wiener_reflectance
+    from tunespec.core.wiener import on_integration_grid, wiener_reflectance
 
     prior = prior if prior is not None else load_colorchecker_sg(grid)
     illuminants = correct_illuminants_from_meta(
         sample.illuminants, sensitivity.meta, spd_shift_nm
     )
-    fine = integration_grid(sensitivity, grid, illuminants)
+    illum_fine, sens_fine, _ = on_integration_grid(illuminants, sensitivity, grid)
     est = wiener_reflectance(
-        sample.responses,
-        illuminants.resample(fine, average=True),
-        sensitivity.resample(fine),
-        prior.resample(grid),
+        sample.responses, illum_fine, sens_fine, prior.resample(grid)
     )
     table2 = None if reference is None else evaluate(est.reflectance, reference)
     unc = None
@@ -415,11 +412,6 @@ def estimate(
             est, sample.responses, sample.illuminants, calibration
         )
     return Estimation(est, table2, unc)
-
-
-def _grid_of(spectra: Spectra) -> Grid:
-    wl = spectra.wavelength_nm
-    return Grid(float(wl[0]), float(wl[-1]), spectra.step_nm)
 
 
 def evaluate(estimated: Spectra, reference: Spectra) -> ReflectanceStats:
@@ -493,10 +485,10 @@ def export(
             sensitivity=calibration.sensitivity,
             chart=chart_reflectances
             if chart_reflectances is not None
-            else load_colorchecker_sg(_grid_of(calibration.sensitivity)),
+            else load_colorchecker_sg(calibration.sensitivity.grid),
             responses=chart.responses,
             illuminants=chart.illuminants,
-        )
+        ).paths
     )
     unc = estimation.uncertainty
     if unc is not None:

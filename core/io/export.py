@@ -44,6 +44,7 @@ import csv
 import json
 import uuid
 from collections.abc import Mapping
+from dataclasses import dataclass
 from datetime import UTC, datetime
 from os import PathLike
 from pathlib import Path
@@ -67,6 +68,7 @@ __all__ = [
     "CAMERA_EXPORT_NAMES",
     "EXPORT_NAMES",
     "RAWTOACES_GRID",
+    "CameraExport",
     "camera_ti3",
     "camera_transforms",
     "export_camera_characterisation",
@@ -637,9 +639,8 @@ def _reference_ti3(
     """
     keywords = {}
     if estimated is not None:
-        wl = estimated.wavelength_nm
         try:
-            grid = Grid(float(wl[0]), float(wl[-1]), estimated.step_nm)
+            grid = estimated.grid
             resampled = reference.resample(grid)
         except InputError:  # not equidistant, or not covered: keep it as it is
             pass
@@ -917,6 +918,16 @@ def write_camera_transforms(
     return json_path, csv_path
 
 
+@dataclass(frozen=True)
+class CameraExport:
+    """What :func:`export_camera_characterisation` wrote: the files (by
+    :data:`CAMERA_EXPORT_NAMES` key), the chart's ``.ti3`` table and the transforms."""
+
+    paths: dict[str, Path]
+    table: CgatsTable
+    transforms: list[Any]
+
+
 def export_camera_characterisation(
     out_dir: str | PathLike[str],
     *,
@@ -926,7 +937,7 @@ def export_camera_characterisation(
     illuminants: Spectra,
     under: str = "D50",
     created: datetime | str | None = None,
-) -> dict[str, Path]:
+) -> CameraExport:
     """``chart_camera.ti3`` (:func:`camera_ti3`) and ``camera_transforms.json/.csv``.
 
     ArgyllCMS ``colprof -a m -O camera.icc chart_camera`` builds an ICC input profile
@@ -935,13 +946,10 @@ def export_camera_characterisation(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {k: out / v for k, v in CAMERA_EXPORT_NAMES.items()}
-    write_cgats(
-        camera_ti3(chart, responses, illuminants, under=under, created=created),
-        paths["chart_camera_ti3"],
-    )
+    table = camera_ti3(chart, responses, illuminants, under=under, created=created)
+    write_cgats(table, paths["chart_camera_ti3"])
+    transforms = camera_transforms(sensitivity, chart)
     write_camera_transforms(
-        camera_transforms(sensitivity, chart),
-        paths["camera_transforms_json"],
-        paths["camera_transforms_csv"],
+        transforms, paths["camera_transforms_json"], paths["camera_transforms_csv"]
     )
-    return paths
+    return CameraExport(paths, table, transforms)

@@ -150,7 +150,7 @@ def camera_constant_for(
         Electrons per (radiance unit x sensitivity unit x nm x s), at irradiance and
         vignetting 1 (the image centre).
     """
-    grid = _grid_of(sensitivity)
+    grid = sensitivity.grid
     light = spd.resample(grid).values[:1]
     rgb = render_rgb(
         np.full((1, grid.n), reflectance), light, sensitivity.values, grid.step_nm
@@ -245,7 +245,7 @@ class SimCamera:
         if sensitivity is None:
             sensitivity = load_camera(DEFAULT_CAMERA)
         self._sensitivity = sensitivity
-        self._grid = render_grid or _grid_of(sensitivity)
+        self._grid = render_grid or sensitivity.grid
         # linear interpolation between the given samples is the "true" curve
         self._render_sens = sensitivity.resample(
             self._grid, source="sensitivity"
@@ -673,9 +673,3 @@ class SimCamera:
         }
         paths[4].write_text(dumps_json(doc), encoding="utf-8")
         return paths
-
-
-def _grid_of(spectra: Spectra) -> Grid:
-    """The equidistant grid the spectra are sampled on."""
-    wl = spectra.wavelength_nm
-    return Grid(float(wl[0]), float(wl[-1]), spectra.step_nm)
