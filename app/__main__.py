@@ -71,8 +71,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     from PySide6.QtCore import QTimer
     from PySide6.QtWidgets import QApplication
 
-    from tunespec.app.main_window import MainWindow
-    from tunespec.app.settings import APPLICATION, ORGANIZATION
+    from tunespec.app.gui.main_window import MainWindow
+    from tunespec.app.gui.settings import APPLICATION, ORGANIZATION
 
     logging.basicConfig(
         level=logging.DEBUG if args.verbose else logging.INFO,

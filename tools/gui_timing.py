@@ -37,9 +37,9 @@ def _timed_run(app: Any, args: argparse.Namespace, tmp: Path) -> tuple[list, Any
     """One run through the wizard: (rows of (step, state, wall s, stall ms), window)."""
     from PySide6.QtCore import QSettings, QTimer
 
-    from tunespec.app.main_window import MainWindow
-    from tunespec.app.settings import AppSettings
-    from tunespec.app.wizard.measurement import CaptureOptions
+    from tunespec.app.gui.main_window import MainWindow
+    from tunespec.app.gui.settings import AppSettings
+    from tunespec.app.gui.wizard.measurement import CaptureOptions
     from tunespec.devices.registry import parse_resolution
 
     settings = AppSettings(QSettings(str(tmp / "s.ini"), QSettings.Format.IniFormat))

@@ -87,14 +87,14 @@ def main(argv: list[str] | None = None) -> int:
     from PySide6.QtCore import QSettings
     from PySide6.QtWidgets import QApplication
 
-    from tunespec.app.main_window import (
+    from tunespec.app.gui.main_window import (
         TAB_LAYOUT,
         TAB_MEASUREMENT,
         TAB_SPECTRA,
         TAB_TABLES,
         MainWindow,
     )
-    from tunespec.app.settings import AppSettings
+    from tunespec.app.gui.settings import AppSettings
     from tunespec.devices.registry import parse_resolution
 
     app = QApplication.instance() or QApplication(sys.argv[:1])

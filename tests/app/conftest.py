@@ -16,7 +16,7 @@ pytest.importorskip("pyqtgraph")
 
 from PySide6.QtCore import QSettings, QThreadPool
 
-from tunespec.app import workers
+from tunespec.app.gui import workers
 
 
 @pytest.fixture(autouse=True)

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from tests.app.helpers import caught
-from tunespec.app.panels.device_panel import DevicePanel
-from tunespec.app.workers import DeviceController
+from tunespec.app.gui.panels.device_panel import DevicePanel
+from tunespec.app.gui.workers import DeviceController
 
 SIM = {"realtime": False, "resolution": (256, 192), "seed": 1}
 

@@ -13,10 +13,10 @@ import pytest
 from PySide6.QtCore import QSettings
 
 from tests.app.test_wizard import SIM, capture_chart
-from tunespec.app.main_window import MainWindow
+from tunespec.app.gui.main_window import MainWindow
+from tunespec.app.gui.settings import AppSettings
+from tunespec.app.gui.wizard.measurement import Measurement
 from tunespec.app.pipeline.run import run_config, run_demo
-from tunespec.app.settings import AppSettings
-from tunespec.app.wizard.measurement import Measurement
 from tunespec.core.io.session import Session
 
 pytestmark = pytest.mark.slow
@@ -58,8 +58,8 @@ def test_a_cli_measurement_opens_in_the_wizard_with_its_results(
     )
     # the wizard exports the restored results without processing a raw frame or
     # estimating the sensitivities again
+    from tunespec.app.gui.wizard import measurement
     from tunespec.app.pipeline.folder import restore_calibration_steps
-    from tunespec.app.wizard import measurement
 
     restored = restore_calibration_steps(folder / "calibration", cal)
     assert restored is not None
@@ -109,8 +109,8 @@ def test_the_cli_and_the_wizard_jobs_write_identical_results(tmp_path):
     on the CLI's sessions) give the same files, byte for byte."""
     import filecmp
 
+    from tunespec.app.gui.wizard import measurement
     from tunespec.app.pipeline.plan import chart_layout, sample_layout
-    from tunespec.app.wizard import measurement
     from tunespec.devices.registry import layout_reflectances
 
     cli = tmp_path / "cli"

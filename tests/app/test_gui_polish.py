@@ -9,10 +9,10 @@ import pytest
 from PySide6.QtCore import QPoint, QSettings
 
 from tests.app.test_wizard import SIM, run_step
-from tunespec.app.main_window import MainWindow
-from tunespec.app.plots.sensitivity_plot import SensitivityPlot
-from tunespec.app.plots.spd_plot import SpdPlot
-from tunespec.app.settings import AppSettings
+from tunespec.app.gui.main_window import MainWindow
+from tunespec.app.gui.plots.sensitivity_plot import SensitivityPlot
+from tunespec.app.gui.plots.spd_plot import SpdPlot
+from tunespec.app.gui.settings import AppSettings
 from tunespec.core.spectra import Spectra
 
 

@@ -7,7 +7,7 @@ import time
 import numpy as np
 import pytest
 
-from tunespec.app.plots.image_view import LAYERS, ImageView
+from tunespec.app.gui.plots.image_view import LAYERS, ImageView
 from tunespec.core.colorimetry import delta_e_2000
 from tunespec.core.io.image_formats import ImageOutputs
 from tunespec.core.progress import Cancelled, check_stop

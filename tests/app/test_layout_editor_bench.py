@@ -12,8 +12,8 @@ import pytest
 from PySide6.QtCore import QSettings
 
 from tests.app.test_wizard import SIM, capture_chart, run_step
-from tunespec.app.main_window import TAB_LAYOUT, MainWindow
-from tunespec.app.settings import AppSettings
+from tunespec.app.gui.main_window import TAB_LAYOUT, MainWindow
+from tunespec.app.gui.settings import AppSettings
 from tunespec.core.processing import find_session_corners
 
 #: Automatic corners against the simulation's truth, mosaic pixels (as the demo's).

@@ -7,10 +7,10 @@ import logging
 import numpy as np
 from PySide6.QtCore import QSettings
 
-from tunespec.app.main_window import TAB_LAYOUT, MainWindow
-from tunespec.app.plots.reflectance_plot import ReflectancePlot
-from tunespec.app.plots.spd_plot import SpdPlot
-from tunespec.app.settings import AppSettings
+from tunespec.app.gui.main_window import TAB_LAYOUT, MainWindow
+from tunespec.app.gui.plots.reflectance_plot import ReflectancePlot
+from tunespec.app.gui.plots.spd_plot import SpdPlot
+from tunespec.app.gui.settings import AppSettings
 from tunespec.core.spectra import Spectra
 
 

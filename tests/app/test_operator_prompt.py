@@ -6,10 +6,10 @@ from types import SimpleNamespace
 
 from tests.app.helpers import caught
 from tests.app.test_workers import _FakeCamera, _FakeLight
-from tunespec.app.settings import AppSettings
-from tunespec.app.wizard.measurement import Measurement
-from tunespec.app.wizard.wizard_panel import WizardPanel
-from tunespec.app.workers import DeviceController, DeviceJob
+from tunespec.app.gui.settings import AppSettings
+from tunespec.app.gui.wizard.measurement import Measurement
+from tunespec.app.gui.wizard.wizard_panel import WizardPanel
+from tunespec.app.gui.workers import DeviceController, DeviceJob
 from tunespec.core.progress import Cancelled
 from tunespec.devices.registry import OperatorStage
 

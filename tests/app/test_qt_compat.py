@@ -6,7 +6,7 @@ import sys
 
 from PySide6.QtCore import QObject, Signal
 
-from tunespec.app import qt_compat
+from tunespec.app.gui import qt_compat
 
 
 class _Emitter(QObject):

@@ -15,8 +15,8 @@ from PySide6.QtCore import QSettings, QTimer
 
 from tests.app.helpers import caught
 from tests.app.test_wizard import SIM, STEP_TIMEOUT_MS
-from tunespec.app.main_window import MainWindow
-from tunespec.app.settings import AppSettings
+from tunespec.app.gui.main_window import MainWindow
+from tunespec.app.gui.settings import AppSettings
 
 #: A frozen window would stall for the whole capture (seconds): the capture on the GUI
 #: thread is what this guards against. Measured on a shared 2-core machine: p99 gap

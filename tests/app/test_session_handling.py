@@ -11,8 +11,8 @@ from PySide6.QtCore import QSettings
 from PySide6.QtWidgets import QFileDialog
 
 from tests.app.test_wizard import SIM, run_step
-from tunespec.app.main_window import MainWindow
-from tunespec.app.settings import AppSettings
+from tunespec.app.gui.main_window import MainWindow
+from tunespec.app.gui.settings import AppSettings
 
 
 class FakeDialog:

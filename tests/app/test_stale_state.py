@@ -7,19 +7,19 @@ import pytest
 from PySide6.QtCore import QSettings
 
 from tests.app.helpers import caught
-from tunespec.app import workers
-from tunespec.app.editors.target_layout_editor import TargetLayoutEditor
-from tunespec.app.main_window import MainWindow
-from tunespec.app.panels.device_panel import DevicePanel
-from tunespec.app.plots.frame_plot import build_preview
-from tunespec.app.settings import AppSettings
-from tunespec.app.wizard.measurement import (
+from tunespec.app.gui import workers
+from tunespec.app.gui.editors.target_layout_editor import TargetLayoutEditor
+from tunespec.app.gui.main_window import MainWindow
+from tunespec.app.gui.panels.device_panel import DevicePanel
+from tunespec.app.gui.plots.frame_plot import build_preview
+from tunespec.app.gui.settings import AppSettings
+from tunespec.app.gui.wizard.measurement import (
     CalibrationResult,
     CaptureOptions,
     EstimateResult,
     Measurement,
 )
-from tunespec.app.wizard.step_page import StepState
+from tunespec.app.gui.wizard.step_page import StepState
 from tunespec.core.datasets import resource_path
 from tunespec.core.layout import TargetLayout
 from tunespec.core.spectra import DEFAULT_GRID, Spectra
@@ -218,7 +218,7 @@ def test_status_says_ready_once(panel):
 
 
 def test_spd_peak_is_written_with_the_axis_prefix(qtbot):
-    from tunespec.app.plots.spd_plot import SpdPlot
+    from tunespec.app.gui.plots.spd_plot import SpdPlot
 
     plot = SpdPlot()
     qtbot.addWidget(plot)

@@ -7,8 +7,8 @@ import pyqtgraph as pg
 import pytest
 
 from tests.app.helpers import mouse_drag
-from tunespec.app.editors.target_layout_editor import TargetLayoutEditor
-from tunespec.app.plots.frame_plot import build_preview
+from tunespec.app.gui.editors.target_layout_editor import TargetLayoutEditor
+from tunespec.app.gui.plots.frame_plot import build_preview
 from tunespec.core.datasets import resource_path
 from tunespec.core.layout import TargetLayout
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from tunespec.app.plots.reflectance_plot import ReflectancePlot
-from tunespec.app.plots.sensitivity_plot import SensitivityPlot
+from tunespec.app.gui.plots.reflectance_plot import ReflectancePlot
+from tunespec.app.gui.plots.sensitivity_plot import SensitivityPlot
 from tunespec.core.spectra import Spectra
 
 WL = np.arange(400.0, 701.0, 10.0)

@@ -16,7 +16,7 @@ import pytest
 
 from tests.app.test_wizard import STEP_TIMEOUT_MS, run_step
 from tests.app.test_wizard import window as window  # the fixture
-from tunespec.app.wizard.step_page import StepState
+from tunespec.app.gui.wizard.step_page import StepState
 from tunespec.core.datasets import resource_path
 from tunespec.core.spectra import read_spectra_csv, write_spectra_csv
 

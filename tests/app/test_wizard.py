@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from PySide6.QtCore import QSettings
 
-from tunespec.app.main_window import MainWindow
-from tunespec.app.settings import AppSettings
-from tunespec.app.wizard.step_page import StepState
+from tunespec.app.gui.main_window import MainWindow
+from tunespec.app.gui.settings import AppSettings
+from tunespec.app.gui.wizard.step_page import StepState
 from tunespec.core.spectra import CALIBRATION_GRID
 
 #: Small enough to be quick, large enough for 140 ROIs of a few dozen pixels.

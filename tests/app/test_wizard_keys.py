@@ -6,10 +6,10 @@ from PySide6.QtCore import QSettings, Qt
 
 from tests.app.test_wizard import STEP_TIMEOUT_MS
 from tests.app.test_wizard_resume import EXPOSURE_S, SIM_REALTIME
-from tunespec.app.main_window import TAB_LAYOUT, MainWindow
-from tunespec.app.settings import AppSettings
-from tunespec.app.wizard.measurement import CaptureOptions
-from tunespec.app.wizard.step_page import StepState
+from tunespec.app.gui.main_window import TAB_LAYOUT, MainWindow
+from tunespec.app.gui.settings import AppSettings
+from tunespec.app.gui.wizard.measurement import CaptureOptions
+from tunespec.app.gui.wizard.step_page import StepState
 
 ALT, CTRL = Qt.KeyboardModifier.AltModifier, Qt.KeyboardModifier.ControlModifier
 

@@ -7,10 +7,10 @@ import pytest
 from PySide6.QtCore import QSettings
 
 from tests.app.test_wizard import STEP_TIMEOUT_MS, run_step
-from tunespec.app.main_window import MainWindow
-from tunespec.app.settings import AppSettings
-from tunespec.app.wizard.measurement import CaptureOptions
-from tunespec.app.wizard.step_page import StepState
+from tunespec.app.gui.main_window import MainWindow
+from tunespec.app.gui.settings import AppSettings
+from tunespec.app.gui.wizard.measurement import CaptureOptions
+from tunespec.app.gui.wizard.step_page import StepState
 
 #: Real time with short fixed exposures, so that a step can be caught half-way.
 SIM_REALTIME = {"realtime": True, "resolution": (256, 192), "seed": 5}

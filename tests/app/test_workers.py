@@ -10,7 +10,7 @@ import pytest
 from PySide6.QtCore import QThread
 
 from tests.app.helpers import caught
-from tunespec.app.workers import DeviceController, DeviceJob, ProgressClock, Worker
+from tunespec.app.gui.workers import DeviceController, DeviceJob, ProgressClock, Worker
 from tunespec.core.progress import Cancelled, check_stop
 from tunespec.devices.protocols import (
     Channel,

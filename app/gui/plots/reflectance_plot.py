@@ -8,7 +8,7 @@ import numpy as np
 from PySide6.QtCore import Signal, Slot
 from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QWidget
 
-from tunespec.app.plots.spectra_plot import SpectraPlot
+from tunespec.app.gui.plots.spectra_plot import SpectraPlot
 
 __all__ = ["ReflectancePlot"]
 

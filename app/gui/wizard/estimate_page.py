@@ -16,16 +16,16 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from tunespec.app.panels.stats_table_panel import show_table2, table2_panel
-from tunespec.app.wizard.calibrate_page import CORNER_CHOICES
-from tunespec.app.wizard.measurement import (
+from tunespec.app.gui.panels.stats_table_panel import show_table2, table2_panel
+from tunespec.app.gui.wizard.calibrate_page import CORNER_CHOICES
+from tunespec.app.gui.wizard.measurement import (
     ESTIMATE_DIR,
     SAMPLE_DIR,
     EstimateResult,
     estimate_job,
 )
-from tunespec.app.wizard.step_page import StepPage
-from tunespec.app.workers import Worker
+from tunespec.app.gui.wizard.step_page import StepPage
+from tunespec.app.gui.workers import Worker
 
 __all__ = ["EstimatePage"]
 

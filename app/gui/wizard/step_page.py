@@ -1,7 +1,7 @@
 """The base of every measurement-wizard page: run, show progress, abort, retake.
 
-A page runs one job (a :class:`~tunespec.app.workers.DeviceJob` on the device thread
-for captures, a :class:`~tunespec.app.workers.Worker` on the pool for numerics),
+A page runs one job (a :class:`~tunespec.app.gui.workers.DeviceJob` on the device thread
+for captures, a :class:`~tunespec.app.gui.workers.Worker` on the pool for numerics),
 shows its progress with the time remaining, and can be aborted (the light is
 switched off) and taken again. Subclasses say what job to make
 (:meth:`StepPage.make_job`) and what to do with its result
@@ -24,8 +24,8 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from tunespec.app.panels.device_panel import format_error
-from tunespec.app.workers import DeviceJob, ProgressClock, Throttle, Worker
+from tunespec.app.gui.panels.device_panel import format_error
+from tunespec.app.gui.workers import DeviceJob, ProgressClock, Throttle, Worker
 from tunespec.core.progress import Cancelled
 
 __all__ = ["StepPage", "StepState"]
@@ -49,7 +49,7 @@ class StepPage(QWidget):
     Parameters
     ----------
     measurement
-        The :class:`~tunespec.app.wizard.measurement.Measurement` shared by all pages.
+        The :class:`~tunespec.app.gui.wizard.measurement.Measurement` shared by all pages.
     title
         Short name in the step list ("Dark frame").
     description

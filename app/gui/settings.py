@@ -13,7 +13,7 @@ from typing import Any
 
 from PySide6.QtCore import QByteArray, QSettings
 
-import tunespec.app.qt_compat  # noqa: F401 (before any signal)
+import tunespec.app.gui.qt_compat  # noqa: F401 (before any signal)
 
 __all__ = ["DEFAULTS", "MAX_RECENT", "AppSettings"]
 

@@ -13,14 +13,14 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from tunespec.app.wizard.measurement import (
+from tunespec.app.gui.wizard.measurement import (
     CHART_DIR,
     CaptureOptions,
     PhaseResult,
     capture_job,
 )
-from tunespec.app.wizard.step_page import StepPage
-from tunespec.app.workers import DeviceJob
+from tunespec.app.gui.wizard.step_page import StepPage
+from tunespec.app.gui.workers import DeviceJob
 
 __all__ = ["CapturePage"]
 

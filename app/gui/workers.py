@@ -40,7 +40,7 @@ from PySide6.QtCore import (
     Slot,
 )
 
-import tunespec.app.qt_compat  # noqa: F401 (before any signal)
+import tunespec.app.gui.qt_compat  # noqa: F401 (before any signal)
 
 __all__ = [
     "BenchInfo",
@@ -360,7 +360,7 @@ class DeviceContext:
         if not force and now - self._last_frame_s < self.FRAME_PERIOD_S:
             return
         self._last_frame_s = now
-        from tunespec.app.plots.frame_plot import build_preview
+        from tunespec.app.gui.plots.frame_plot import build_preview
         from tunespec.core.io.raw import load_raw
 
         try:
@@ -404,7 +404,7 @@ class DeviceController(QObject):
     devices_closed = Signal()
     #: Channel levels now set, (n_channels,) in [0, 1].
     levels_changed = Signal(object)
-    #: A preview frame: a :class:`~tunespec.app.plots.frame_plot.FramePreview`.
+    #: A preview frame: a :class:`~tunespec.app.gui.plots.frame_plot.FramePreview`.
     frame_acquired = Signal(object)
     #: The light source's reported SPD (``Spectra``) and the levels it was taken at.
     spd_measured = Signal(object, object)
@@ -641,7 +641,7 @@ class DeviceController(QObject):
             return
 
         def snap() -> Any:
-            from tunespec.app.plots.frame_plot import build_preview
+            from tunespec.app.gui.plots.frame_plot import build_preview
             from tunespec.core.io.raw import load_raw
 
             stem = Path(self._preview_dir.name) / "preview"

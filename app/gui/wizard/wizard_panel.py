@@ -32,13 +32,13 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from tunespec.app.wizard.calibrate_page import CalibratePage
-from tunespec.app.wizard.capture_page import CapturePage
-from tunespec.app.wizard.connect_page import ConnectPage
-from tunespec.app.wizard.estimate_page import EstimatePage
-from tunespec.app.wizard.export_page import ExportPage
-from tunespec.app.wizard.sample_page import SamplePage
-from tunespec.app.wizard.step_page import StepPage, StepState
+from tunespec.app.gui.wizard.calibrate_page import CalibratePage
+from tunespec.app.gui.wizard.capture_page import CapturePage
+from tunespec.app.gui.wizard.connect_page import ConnectPage
+from tunespec.app.gui.wizard.estimate_page import EstimatePage
+from tunespec.app.gui.wizard.export_page import ExportPage
+from tunespec.app.gui.wizard.sample_page import SamplePage
+from tunespec.app.gui.wizard.step_page import StepPage, StepState
 
 __all__ = ["WizardPanel"]
 
@@ -59,7 +59,7 @@ class WizardPanel(QWidget):
     Parameters
     ----------
     measurement
-        The :class:`~tunespec.app.wizard.measurement.Measurement` the steps work on.
+        The :class:`~tunespec.app.gui.wizard.measurement.Measurement` the steps work on.
     """
 
     #: The current step changed: its index.
@@ -327,7 +327,7 @@ class WizardPanel(QWidget):
     def _show_folder_error(self, exc: Exception) -> None:
         from html import escape
 
-        from tunespec.app.panels.device_panel import format_error
+        from tunespec.app.gui.panels.device_panel import format_error
 
         text = str(exc) if isinstance(exc, RuntimeError) else format_error(exc)
         html = f"<span style='color:#c00000'>{escape(text)}</span>"

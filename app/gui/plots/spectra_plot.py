@@ -1,8 +1,8 @@
 """The base of every spectral plot: a pyqtgraph plot with wavelength on x.
 
-Subclasses (:class:`~tunespec.app.plots.spd_plot.SpdPlot`,
-:class:`~tunespec.app.plots.sensitivity_plot.SensitivityPlot`,
-:class:`~tunespec.app.plots.reflectance_plot.ReflectancePlot`) only decide what
+Subclasses (:class:`~tunespec.app.gui.plots.spd_plot.SpdPlot`,
+:class:`~tunespec.app.gui.plots.sensitivity_plot.SensitivityPlot`,
+:class:`~tunespec.app.gui.plots.reflectance_plot.ReflectancePlot`) only decide what
 curves to show; drawing and clearing are shared here.
 """
 

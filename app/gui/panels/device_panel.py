@@ -1,7 +1,7 @@
 """Connect the light source and camera; drive channels, exposure and ISO; live view.
 
 The panel talks to the devices only through a
-:class:`~tunespec.app.workers.DeviceController` (queued signals to the device thread);
+:class:`~tunespec.app.gui.workers.DeviceController` (queued signals to the device thread);
 it never calls a device itself, so nothing here can block the event loop.
 """
 
@@ -30,8 +30,8 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from tunespec.app.plots.frame_plot import FramePlot, FramePreview
-from tunespec.app.workers import BenchInfo, DeviceController
+from tunespec.app.gui.plots.frame_plot import FramePlot, FramePreview
+from tunespec.app.gui.workers import BenchInfo, DeviceController
 
 __all__ = ["DevicePanel", "format_error"]
 

@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 from PySide6.QtWidgets import QWidget
 
-from tunespec.app.plots.spectra_plot import CHANNEL_COLOURS, SpectraPlot
+from tunespec.app.gui.plots.spectra_plot import CHANNEL_COLOURS, SpectraPlot
 
 __all__ = ["SensitivityPlot"]
 

@@ -6,9 +6,9 @@ from typing import Any
 
 from PySide6.QtWidgets import QWidget
 
-from tunespec.app.wizard.measurement import SAMPLE_DIR, PhaseResult, capture_job
-from tunespec.app.wizard.step_page import StepPage
-from tunespec.app.workers import DeviceJob
+from tunespec.app.gui.wizard.measurement import SAMPLE_DIR, PhaseResult, capture_job
+from tunespec.app.gui.wizard.step_page import StepPage
+from tunespec.app.gui.workers import DeviceJob
 
 __all__ = ["SamplePage"]
 

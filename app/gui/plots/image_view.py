@@ -6,7 +6,7 @@
 u(reflectance), the reflectance at one wavelength). Hovering or clicking a pixel
 plots its spectrum with its 95 % band (+-1.96 u); two rectangles (A and B) give
 their mean L*a*b* and spread and the CIEDE2000 between their means. It can also run
-``estimate-image`` for a session on the worker pool (:class:`~tunespec.app.workers.
+``estimate-image`` for a session on the worker pool (:class:`~tunespec.app.gui.workers.
 Worker`) with a progress bar and Cancel, and shows the result when it is done.
 """
 
@@ -220,8 +220,8 @@ class ImageView(QWidget):
     ) -> Any:
         """Run ``estimate-image`` on the worker pool (on the Dask scheduler named in
         :attr:`scheduler_edit`, else locally); the result is shown when done."""
+        from tunespec.app.gui.workers import Worker
         from tunespec.app.pipeline import image as pipeline
-        from tunespec.app.workers import Worker
 
         scheduler = self.scheduler_edit.text().strip() or None
         self.worker = Worker(

@@ -3,7 +3,7 @@
 The frame is shown with four draggable corner handles (TL, TR, BR, BL) and the patch
 grid with its ROIs drawn through the layout's homography. Rows, columns, margins,
 patch and ROI fractions are editable; corners can be found automatically (the core's
-corner finder runs in a :class:`~tunespec.app.workers.Worker`) and then corrected by
+corner finder runs in a :class:`~tunespec.app.gui.workers.Worker`) and then corrected by
 dragging. Layouts load from and save to JSON through ``TargetLayout.load/save``.
 
 All geometry (homography, ROI quads) comes from ``core.layout``; this module only
@@ -38,8 +38,8 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from tunespec.app.plots.frame_plot import FramePlot, FramePreview, build_preview
-from tunespec.app.workers import Worker
+from tunespec.app.gui.plots.frame_plot import FramePlot, FramePreview, build_preview
+from tunespec.app.gui.workers import Worker
 from tunespec.core.errors import TuneSpecError
 from tunespec.core.layout import TargetLayout
 

@@ -30,6 +30,8 @@ from typing import Any
 import numpy as np
 from PySide6.QtCore import QObject, Signal
 
+from tunespec.app.gui.settings import AppSettings
+from tunespec.app.gui.workers import DeviceContext, DeviceController
 from tunespec.app.pipeline.folder import (
     CALIBRATION_DIR,
     CHART_DIR,
@@ -53,8 +55,6 @@ from tunespec.app.pipeline.folder import (
     write_estimate,
     write_measurement_doc,
 )
-from tunespec.app.settings import AppSettings
-from tunespec.app.workers import DeviceContext, DeviceController
 from tunespec.core.datasets import resource_path
 from tunespec.core.errors import InputError, read_json
 from tunespec.core.layout import TargetLayout

@@ -8,7 +8,7 @@ import numpy as np
 import pyqtgraph as pg
 from PySide6.QtWidgets import QWidget
 
-from tunespec.app.plots.spectra_plot import SpectraPlot
+from tunespec.app.gui.plots.spectra_plot import SpectraPlot
 
 __all__ = ["SpdPlot"]
 

@@ -1,3 +1,3 @@
 """wizard package (importing it applies the Qt binding work-arounds)."""
 
-import tunespec.app.qt_compat  # noqa: F401
+import tunespec.app.gui.qt_compat  # noqa: F401

@@ -7,8 +7,8 @@ from typing import Any
 from PySide6.QtCore import Slot
 from PySide6.QtWidgets import QWidget
 
-from tunespec.app.panels.device_panel import format_error
-from tunespec.app.wizard.step_page import StepPage, StepState
+from tunespec.app.gui.panels.device_panel import format_error
+from tunespec.app.gui.wizard.step_page import StepPage, StepState
 
 __all__ = ["ConnectPage"]
 

@@ -23,23 +23,23 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-import tunespec.app.qt_compat  # noqa: F401 (before any signal)
-from tunespec.app.editors.target_layout_editor import TargetLayoutEditor
-from tunespec.app.panels.device_panel import DevicePanel, format_error
-from tunespec.app.panels.log_panel import LogPanel
-from tunespec.app.panels.stats_table_panel import (
+import tunespec.app.gui.qt_compat  # noqa: F401 (before any signal)
+from tunespec.app.gui.editors.target_layout_editor import TargetLayoutEditor
+from tunespec.app.gui.panels.device_panel import DevicePanel, format_error
+from tunespec.app.gui.panels.log_panel import LogPanel
+from tunespec.app.gui.panels.stats_table_panel import (
     show_table1,
     show_table2,
     table1_panel,
     table2_panel,
 )
-from tunespec.app.plots.reflectance_plot import ReflectancePlot
-from tunespec.app.plots.sensitivity_plot import SensitivityPlot
-from tunespec.app.plots.spd_plot import SpdPlot
-from tunespec.app.settings import AppSettings
-from tunespec.app.wizard.measurement import CHART_DIR, SAMPLE_DIR, Measurement
-from tunespec.app.wizard.wizard_panel import WizardPanel
-from tunespec.app.workers import BenchInfo, DeviceController, Throttle, Worker
+from tunespec.app.gui.plots.reflectance_plot import ReflectancePlot
+from tunespec.app.gui.plots.sensitivity_plot import SensitivityPlot
+from tunespec.app.gui.plots.spd_plot import SpdPlot
+from tunespec.app.gui.settings import AppSettings
+from tunespec.app.gui.wizard.measurement import CHART_DIR, SAMPLE_DIR, Measurement
+from tunespec.app.gui.wizard.wizard_panel import WizardPanel
+from tunespec.app.gui.workers import BenchInfo, DeviceController, Throttle, Worker
 
 __all__ = ["MainWindow"]
 
@@ -416,7 +416,7 @@ PIPELINE_MODULES = (
     # step holds the GIL for tens of ms at a time (unmarshalling its code)
     "colour",
     "tunespec.app.report.report",
-    "tunespec.app.plots.frame_plot",
+    "tunespec.app.gui.plots.frame_plot",
     "cv2",
     "rawpy",
     "scipy.ndimage",
