@@ -33,7 +33,13 @@ from tunespec.core.fusion import fuse_patch, material_prior
 from tunespec.core.hdr import HdrImage, hdr_patch_responses, merge_brackets
 from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import read_json
-from tunespec.core.progress import ProgressFn, StopFn, check_stop, report
+from tunespec.core.progress import (
+    ProgressFn,
+    StopFn,
+    check_stop,
+    report,
+    sub_progress,
+)
 from tunespec.core.responses import Responses
 from tunespec.core.single_shot import apply_xyz_transform, xyz_transform
 from tunespec.core.spectra import DEFAULT_GRID, Spectra, read_spectra_csv
@@ -184,7 +190,9 @@ def process_gonio(
         offsets: never the XYZ it then measures.
     scheduler
         ``None``: geometries one after another here. Otherwise the per-geometry
-        work (target detection, HDR merge, ROI statistics) runs on Dask:
+        work (target detection, HDR merge, ROI statistics) runs on the pipeline's
+        Dask engine (:mod:`tunespec.app.pipeline.engine`, shared with the spectral
+        images):
         ``"threads"`` or ``"processes"`` locally, or a Dask distributed
         scheduler's address (``tcp://host:8786``, needs the ``distributed``
         package).
@@ -204,8 +212,7 @@ def process_gonio(
             data.append(_process_geometry(*job))
             report(progress, 0.8 * len(data) / len(jobs))
     else:
-        data = _on_dask(jobs, scheduler)
-        report(progress, 0.8)
+        data = _on_dask(jobs, scheduler, sub_progress(progress, 0.0, 0.8), should_stop)
     n_p, n_g, wl = layout.n_patches, len(plan.steps), DEFAULT_GRID.wavelength_nm
     R = np.full((n_p, n_g, wl.size), np.nan)
     uR = np.full_like(R, np.nan)
@@ -245,27 +252,22 @@ def process_gonio(
                        xyz, u_xyz, lab, np.array([s.spectral for s in plan.steps]))  # fmt: skip
 
 
-def _on_dask(jobs: list[tuple[Any, ...]], scheduler: str) -> list[GeometryData]:
-    """``_process_geometry`` for every job on a Dask scheduler (local or by address)."""
-    try:
-        import dask
-    except ImportError:
-        raise InputError("processing on Dask needs the dask package") from None
+def _on_dask(
+    jobs: list[tuple[Any, ...]],
+    scheduler: str,
+    progress: ProgressFn | None,
+    should_stop: StopFn | None,
+) -> list[GeometryData]:
+    """``_process_geometry`` for every job on the pipeline's Dask engine (the one the
+    spectral images use: local by default, a ``dask.distributed`` cluster by
+    address)."""
+    import dask
+
+    from tunespec.app.pipeline.engine import compute, connect
+
     tasks = [dask.delayed(_process_geometry)(*job) for job in jobs]
-    if "://" not in scheduler:
-        if scheduler not in ("threads", "processes", "sync"):
-            raise InputError(
-                f"scheduler {scheduler!r}: threads, processes, sync or tcp://HOST:PORT"
-            )
-        return list(dask.compute(*tasks, scheduler=scheduler))
-    try:
-        from distributed import Client
-    except ImportError:
-        raise InputError(
-            f"scheduler {scheduler}: a Dask cluster needs the distributed package"
-        ) from None
-    with Client(scheduler) as client:
-        return list(client.gather(client.compute(tasks)))
+    with connect(scheduler) as sched:
+        return compute([(t, []) for t in tasks], sched, progress, should_stop)
 
 
 def calibration_correction(

@@ -19,17 +19,17 @@ output folders at the same paths (a shared file system).
 
 from __future__ import annotations
 
-import contextlib
 import shutil
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from os import PathLike
 from pathlib import Path
 from typing import Any
 
+from tunespec.app.pipeline.engine import compute, connect, one_blas_thread
 from tunespec.core.errors import InputError
-from tunespec.core.progress import Cancelled, ProgressFn, StopFn, report
+from tunespec.core.progress import ProgressFn, StopFn, report
 from tunespec.core.spectra import Grid
 
 __all__ = [
@@ -167,7 +167,7 @@ def session_graph(
         out, shape, bank, rows, provenance, dask_key_name=f"outputs-{job.work}"
     )
     blocks = [
-        delayed(_one_blas_thread, pure=True)(
+        delayed(one_blas_thread, pure=True)(
             st.estimate_block,
             job,
             bank,
@@ -187,21 +187,11 @@ def session_graph(
     return final, blocks
 
 
-def _one_blas_thread(func: Any, *args: Any, **kwargs: Any) -> Any:
-    """``func(*args, **kwargs)`` with BLAS limited to one thread: Dask already runs
-    a task per core, and a second BLAS thread per task only contends (measured on
-    the 2-core machine: a block's product 32 ms with one thread, 56 ms with two)."""
-    from threadpoolctl import threadpool_limits
-
-    with threadpool_limits(1):
-        return func(*args, **kwargs)
-
-
 def _after(func: Any) -> Any:
     """``func`` with a first argument that only orders it after other tasks."""
 
     def run(_deps: Any, *args: Any, **kwargs: Any) -> Any:
-        return _one_blas_thread(func, *args, **kwargs)
+        return one_blas_thread(func, *args, **kwargs)
 
     run.__name__ = func.__name__
     return run
@@ -296,95 +286,6 @@ def _provenance(
     }  # fmt: skip
 
 
-@contextlib.contextmanager
-def _scheduler(scheduler: Any) -> Iterator[Any]:
-    """The scheduler to compute on: ``"threads"``/``"sync"`` (local), or a connected
-    ``distributed.Client`` (an address is connected to, and closed again, here) --
-    before any work is planned, so a wrong address fails at once."""
-    if scheduler is None or scheduler in ("threads", "sync", "synchronous"):
-        yield scheduler or "threads"
-        return
-    from distributed import Client
-
-    if isinstance(scheduler, Client):
-        yield scheduler
-        return
-    try:
-        client = Client(str(scheduler), timeout="10s")
-    except (OSError, TimeoutError) as exc:
-        raise InputError(
-            f"--scheduler {scheduler}: cannot connect to a dask.distributed "
-            f"scheduler ({exc})"
-        ) from None
-    try:
-        yield client
-    finally:
-        client.close()
-
-
-def _compute(
-    graphs: Sequence[tuple[Any, list[Any]]],
-    scheduler: Any,
-    progress: ProgressFn | None,
-    should_stop: StopFn | None,
-) -> list[Any]:
-    """Compute ``(final, parts)`` graphs locally or on a ``dask.distributed`` client;
-    returns the finals' results. On a cluster, progress counts the parts (the blocks
-    of rows) as they finish."""
-    if isinstance(scheduler, str):
-        finals = [g for g, _ in graphs]
-        return _compute_local(finals, scheduler, progress, should_stop)
-    from distributed import as_completed
-
-    client = scheduler
-    finals = [g for g, _ in graphs]
-    parts = [p for _, ps in graphs for p in ps]
-    futures = client.compute([*finals, *parts])
-    results: list[Any] = [None] * len(finals)
-    try:
-        for done, fut in enumerate(as_completed(futures), start=1):
-            if should_stop is not None and should_stop():
-                raise Cancelled()
-            i = futures.index(fut)
-            if i < len(finals):
-                results[i] = fut.result()
-            else:
-                fut.result()  # raises the task's error here
-            report(progress, done / len(futures))
-    except BaseException:
-        client.cancel(futures)
-        raise
-    return results
-
-
-def _compute_local(
-    graphs: Sequence[Any],
-    scheduler: str,
-    progress: ProgressFn | None,
-    should_stop: StopFn | None,
-) -> list[Any]:
-    import dask
-    from dask.callbacks import Callback
-
-    class _Progress(Callback):  # type: ignore[misc]
-        def _start_state(self, dsk: Any, state: Any) -> None:
-            self.total = max(1, len(dsk))
-            self.done = 0
-
-        def _pretask(self, key: Any, dsk: Any, state: Any) -> None:
-            if should_stop is not None and should_stop():
-                raise Cancelled()
-
-        def _posttask(
-            self, key: Any, result: Any, dsk: Any, state: Any, worker_id: Any
-        ) -> None:
-            self.done += 1
-            report(progress, self.done / self.total)
-
-    with _Progress():
-        return list(dask.compute(*graphs, scheduler=scheduler))
-
-
 def estimate_images(
     session_dir: str | PathLike[str],
     sensitivities: str | PathLike[str],
@@ -419,9 +320,9 @@ def estimate_images(
     """
     grid = settings.grid or _default_grid()
     cal = _load_calibration(sensitivities, grid)
-    with _scheduler(scheduler) as sched:
+    with connect(scheduler) as sched:
         graph = session_graph(session_dir, cal, out_dir, settings)
-        return _compute([graph], sched, progress, should_stop)[0]
+        return compute([graph], sched, progress, should_stop)[0]
 
 
 def _default_grid() -> Grid:
@@ -490,7 +391,7 @@ def batch_images(
         else:
             todo.append((s, out))
     group = max(1, int(sessions_at_once))
-    with _scheduler(scheduler) as sched:
+    with connect(scheduler) as sched:
         for k in range(0, len(todo), group):
             part = todo[k : k + group]
             base = k / len(todo)
@@ -499,7 +400,7 @@ def batch_images(
                 report(progress, base + f * n / len(todo))
 
             graphs = [session_graph(s, cal, out, settings) for s, out in part]
-            _compute(graphs, sched, sub, should_stop)
+            compute(graphs, sched, sub, should_stop)
             done.extend(str(s) for s, _ in part)
     report(progress, 1.0)
     return {"done": done, "skipped": skipped, "calibration_sha256": cal.sha256}
