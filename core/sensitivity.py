@@ -1027,32 +1027,23 @@ def estimate_camera_sensitivity(
         Patch reflectances on the same grid; must contain every patch name.
     method
         ``"bayes"`` (default: empirical Bayes with per-LED self-calibration,
-        :mod:`.sensitivity_bayes`), ``"smooth"`` or ``"pca"`` (the paper's Eq. 4), see
-        the module docstring and :data:`SENSITIVITY_METHODS`.
+        :mod:`.sensitivity_bayes`), ``"smooth"`` or ``"pca"`` (the paper's Eq. 4).
     database
-        Camera name -> sensitivities (R, G, B) on the inputs' grid, the a priori
-        knowledge. Default: the shipped database (:func:`load_camera_database` on the
-        inputs' grid).
+        Camera name -> sensitivities (R, G, B), the a priori knowledge. Default:
+        the shipped database (:func:`load_camera_database`).
     exclude
-        Camera name(s) to leave out of the database (e.g. the camera under test, for a
-        leave-one-out check).
+        Camera name(s) to leave out of the database (a leave-one-out check).
     n_components
         ``"pca"``: principal components per channel (the paper uses 4).
     explained_variance
         ``"pca"``: if given, the fewest components explaining this fraction of the
         database's variance instead of ``n_components`` (the paper: 0.97).
     fit_spd_shift
-        Also fit a wavelength-scale error of the spectroradiometer that reported
-        ``illuminants`` (one shift for all, within +-:data:`SPD_SHIFT_RANGE_NM`),
-        using the known reflectances as the wavelength reference. The estimate then
-        belongs to the corrected spectra: pass
-        ``estimate.correct_illuminants(spectra)`` wherever these illuminants (or
-        later readings of the same instrument) meet the sensitivity, e.g. in Wiener
-        estimation. A 1 nm shift, uncorrected, costs about 0.3 CIEDE2000 on average
-        (``benchmarks/loo_cameras.py``); sensitivities cannot absorb it. ``None``
-        (default): on for ``"bayes"`` and ``"smooth"``, off for ``"pca"`` (the
-        paper's method as published). The fitted shift is also kept in
-        ``sensitivity.meta["spd_shift_nm"]``.
+        Also fit one wavelength-scale error of the spectroradiometer that reported
+        ``illuminants`` (within +-:data:`SPD_SHIFT_RANGE_NM`; a 1 nm shift costs
+        about 0.3 CIEDE2000, ``benchmarks/loo_cameras.py``). The estimate then
+        belongs to ``estimate.correct_illuminants(spectra)``. ``None`` (default):
+        on for ``"bayes"`` and ``"smooth"``, off for ``"pca"`` (as published).
     self_calibrate
         ``"bayes"``: fit every LED's gain and wavelength offset too (default: with
         ``fit_spd_shift``); the corrections are in ``.led_correction`` and applied
@@ -1068,12 +1059,10 @@ def estimate_camera_sensitivity(
     Raises
     ------
     InputError
-        Names in the responses missing from the spectra (naming their source file),
-        different grids, NaN values, an unknown method or excluded camera.
+        Names missing from the spectra, different grids, NaN values, an unknown
+        method or excluded camera.
     SingularSystemError
         Too few or degenerate stimuli, or no usable (unsaturated) patch.
-    Cancelled
-        If ``should_stop()`` turned true.
 
     References
     ----------
@@ -1084,32 +1073,98 @@ def estimate_camera_sensitivity(
     --------
     >>> from tunespec.core.datasets import load_camera, load_colorchecker_sg, load_led_set
     >>> from tunespec.core.simulate import scale_to_exposure, simulate_responses
-    >>> truth = load_camera("Canon EOS 5D Mark III")
-    >>> refl = load_colorchecker_sg()
+    >>> name = "Canon EOS 5D Mark III"
+    >>> truth, refl = load_camera(name), load_colorchecker_sg()
     >>> leds = scale_to_exposure(refl, load_led_set(), truth)
     >>> resp = simulate_responses(refl, leds, truth, noise=None, rng=0)
-    >>> est = estimate_camera_sensitivity(
-    ...     resp, leds, refl, exclude="Canon EOS 5D Mark III"
-    ... )
+    >>> est = estimate_camera_sensitivity(resp, leds, refl, exclude=name)
     >>> est.sensitivity.names
     ('R', 'G', 'B')
     """
-    if method not in SENSITIVITY_METHODS:
-        raise InputError(
-            f"unknown sensitivity method {method!r}; choose one of "
-            f"{', '.join(SENSITIVITY_METHODS)}"
-        )
+    fit_spd_shift, self_calibrate = _options(method, fit_spd_shift, self_calibrate)
     report(progress, 0.0)
     problem = _prepare(responses, illuminants, reflectances)
+    db = _database(database, exclude, problem.wavelength_nm, illuminants.step_nm)
+    _check_solvable(problem, method, db)
+    if method == "bayes":
+        S, params, correction, covariance = _estimate_sensitivity_bayes(
+            problem, db, fit_shift=fit_spd_shift, self_calibrate=self_calibrate,
+            illuminant_names=tuple(responses.illuminants), should_stop=should_stop,
+        )  # fmt: skip
+        shift_nm = float(correction.common_shift_nm)
+        shift_at_bound = abs(shift_nm) >= SPD_SHIFT_RANGE_NM
+    else:
+        correction, covariance = None, None
+        S, params, shift_nm, shift_at_bound = _estimate_classic(
+            problem, db, method, fit_spd_shift=fit_spd_shift,
+            n_components=n_components, explained_variance=explained_variance,
+            progress=progress, should_stop=should_stop,
+        )  # fmt: skip
+    excluded = sorted({exclude} if isinstance(exclude, str) else set(exclude or ()))
+    params |= {"n_stimuli": int(problem.C.shape[0]), "n_patches": len(problem.patches),
+               "excluded_cameras": excluded, "spd_shift_fitted": fit_spd_shift,
+               "spd_shift_nm": shift_nm, "spd_shift_at_bound": shift_at_bound}  # fmt: skip
+    report(progress, 1.0)
+    meta = {"source": f"estimated ({method})", "spd_shift_nm": repr(shift_nm)}
+    if correction is not None:
+        meta["led_correction"] = json.dumps(correction.as_dict())
+    sens = Spectra(problem.wavelength_nm, S, CHANNELS, meta)
+    return SensitivityEstimate(
+        sens, method, params, problem.excluded_patches, spd_shift_nm=shift_nm,
+        led_correction=correction, covariance=covariance,
+    )  # fmt: skip
+
+
+def _check_solvable(problem: _Problem, method: str, db: dict[str, Spectra]) -> None:
+    """Raise if the stimuli are degenerate or ``"pca"`` has no database."""
     if _numerical_rank(problem.A) < min(_MIN_RANK_SMOOTH, problem.A.shape[1]):
         raise SingularSystemError(
             f"the {problem.A.shape[0]} stimuli span fewer than {_MIN_RANK_SMOOTH} "
             "independent spectra; use more patches or illuminants"
         )
-    db = _database(database, exclude, problem.wavelength_nm, illuminants.step_nm)
     if method == "pca" and not db:
         raise InputError("method 'pca' needs a camera database (it is empty)")
+
+
+def _estimate_classic(
+    problem: _Problem,
+    db: dict[str, Spectra],
+    method: str,
+    *,
+    fit_spd_shift: bool,
+    n_components: int,
+    explained_variance: float | None,
+    progress: ProgressFn | None,
+    should_stop: StopFn | None,
+) -> tuple[NDArray[np.float64], dict[str, Any], float, bool]:
+    """``"smooth"`` or ``"pca"`` after the optional common SPD-shift fit:
+    ``(S, params, shift_nm, shift_at_bound)``."""
     shift_nm, shift_at_bound = 0.0, False
+    if fit_spd_shift:
+        shift_nm, shift_at_bound = _fit_spd_shift(problem, db, should_stop)
+        report(progress, 0.2)
+    S, params = SENSITIVITY_METHODS[method](
+        problem.shifted(shift_nm),
+        db,
+        n_components=n_components,
+        explained_variance=explained_variance,
+        progress=None if progress is None else _scaled(progress, 0.2 * fit_spd_shift),
+        should_stop=should_stop,
+    )
+    return S, params, shift_nm, shift_at_bound
+
+
+def _options(
+    method: str, fit_spd_shift: bool | None, self_calibrate: bool | None
+) -> tuple[bool, bool]:
+    """``(fit_spd_shift, self_calibrate)`` with their per-method defaults resolved
+    (see :func:`estimate_camera_sensitivity`); an unknown method or per-LED
+    self-calibration without ``"bayes"`` is an :class:`InputError`."""
+    if method not in SENSITIVITY_METHODS:
+        raise InputError(
+            f"unknown sensitivity method {method!r}; choose one of "
+            f"{', '.join(SENSITIVITY_METHODS)}"
+        )
     if fit_spd_shift is None:
         fit_spd_shift = method in ("smooth", "bayes")
     if self_calibrate is None:
@@ -1118,59 +1173,7 @@ def estimate_camera_sensitivity(
         raise InputError(
             f"per-LED self-calibration needs method 'bayes', not {method!r}"
         )
-    if fit_spd_shift and method != "bayes":
-        shift_nm, shift_at_bound = _fit_spd_shift(problem, db, should_stop)
-        report(progress, 0.2)
-    correction: LedCorrection | None = None
-    covariance = None
-    if method == "bayes":
-        S, params, correction, covariance = _estimate_sensitivity_bayes(
-            problem,
-            db,
-            fit_shift=bool(fit_spd_shift),
-            self_calibrate=bool(self_calibrate),
-            illuminant_names=tuple(responses.illuminants),
-            should_stop=should_stop,
-        )
-        shift_nm = float(correction.common_shift_nm)
-        shift_at_bound = abs(shift_nm) >= SPD_SHIFT_RANGE_NM
-    else:
-        problem = problem.shifted(shift_nm)
-        S, params = SENSITIVITY_METHODS[method](
-            problem,
-            db,
-            n_components=n_components,
-            explained_variance=explained_variance,
-            progress=None
-            if progress is None
-            else _scaled(progress, 0.2 * fit_spd_shift),
-            should_stop=should_stop,
-        )
-    params = {
-        **params,
-        "n_stimuli": int(problem.C.shape[0]),
-        "n_patches": len(problem.patches),
-        "excluded_cameras": sorted(
-            {exclude} if isinstance(exclude, str) else set(exclude or ())
-        ),
-        "spd_shift_fitted": bool(fit_spd_shift),
-        "spd_shift_nm": shift_nm,
-        "spd_shift_at_bound": shift_at_bound,
-    }
-    report(progress, 1.0)
-    meta = {"source": f"estimated ({method})", "spd_shift_nm": repr(shift_nm)}
-    if correction is not None:
-        meta["led_correction"] = json.dumps(correction.as_dict())
-    sens = Spectra(problem.wavelength_nm, S, CHANNELS, meta)
-    return SensitivityEstimate(
-        sens,
-        method,
-        params,
-        problem.excluded_patches,
-        spd_shift_nm=shift_nm,
-        led_correction=correction,
-        covariance=covariance,
-    )
+    return bool(fit_spd_shift), bool(self_calibrate)
 
 
 def _scaled(progress: ProgressFn, start: float) -> ProgressFn:

@@ -334,6 +334,45 @@ def lab_covariance(
     return J @ xyz_cov @ J.transpose(0, 2, 1)
 
 
+def _response_error_covariance(
+    responses: Responses,
+    illuminants: Spectra,
+    calibration: SensitivityEstimate,
+    reflectance: Spectra,
+) -> NDArray[np.float64]:
+    """The true error covariance of every patch's stacked responses, (n_p, m, m):
+    the noise of the ROI means (``rgb_std**2 / n_pixels``; none for saturated
+    ones), the flat-field residual :data:`FLAT_FIELD_RESIDUAL` and, with a
+    ``"bayes"`` calibration, the calibration's response covariance at the estimate
+    (:func:`calibration_response_covariance`)."""
+    n_p, m_rows = len(responses.patches), 3 * len(responses.illuminants)
+    rgb = responses.rgb.reshape(n_p, m_rows)
+    true_var = (FLAT_FIELD_RESIDUAL * rgb) ** 2
+    if responses.rgb_std is not None:
+        n_pix = (
+            responses.n_pixels
+            if responses.n_pixels is not None
+            else np.ones(responses.rgb.shape[:2])
+        )
+        true_var = true_var + (responses.rgb_std**2 / n_pix[..., None]).reshape(
+            n_p, m_rows
+        )
+    if responses.saturated is not None:
+        sat = (np.nan_to_num(responses.saturated, nan=0.0) > 0)[..., None]
+        sat = np.broadcast_to(sat, responses.rgb.shape).reshape(n_p, m_rows)
+        true_var = np.where(sat, 0.0, true_var)
+    noise_all = np.zeros((n_p, m_rows, m_rows))
+    idx = np.arange(m_rows)
+    noise_all[:, idx, idx] = true_var
+    if calibration.covariance is not None:
+        wl, values = reflectance.wavelength_nm, reflectance.values
+        unclipped = Spectra(wl, np.clip(values, 0.0, 1.5), reflectance.names)
+        noise_all += calibration_response_covariance(
+            calibration, illuminants.select(responses.illuminants), unclipped
+        )
+    return noise_all
+
+
 def reflectance_uncertainty(
     wiener: WienerEstimate,
     responses: Responses,
@@ -343,6 +382,13 @@ def reflectance_uncertainty(
     prior_scale: float | None = None,
 ) -> ReflectanceUncertainty:
     """Error covariance of a Wiener estimate, with the calibration's uncertainty.
+
+    The error of Eq. 5's estimate ``r_hat = m + W (c - F m)`` is
+    ``E = (I - W F) K_mis (I - W F)^T + W K_e W^T`` (the Wiener error covariance,
+    Haneishi et al., Applied Optics 39(35), 2000):
+    ``K_e`` the responses' true error covariance (noise, flat field, and the
+    calibration's covariance propagated through Eq. 1), ``K_mis`` the prior
+    mismatch fitted to this target's responses and scaled by ``prior_scale``.
 
     Parameters
     ----------
@@ -379,36 +425,10 @@ def reflectance_uncertainty(
     n_p = len(responses.patches)
     used = wiener.noise_variance.reshape(n_p, m_rows)
     rgb = responses.rgb.reshape(n_p, m_rows)
-    true_var = (FLAT_FIELD_RESIDUAL * rgb) ** 2
-    if responses.rgb_std is not None:
-        n_pix = (
-            responses.n_pixels
-            if responses.n_pixels is not None
-            else np.ones(responses.rgb.shape[:2])
-        )
-        true_var = true_var + (responses.rgb_std**2 / n_pix[..., None]).reshape(
-            n_p, m_rows
-        )
-    if responses.saturated is not None:
-        sat = (np.nan_to_num(responses.saturated, nan=0.0) > 0)[..., None]
-        true_var = np.where(
-            np.broadcast_to(sat, responses.rgb.shape).reshape(n_p, m_rows),
-            0.0,
-            true_var,
-        )
-    cal = None
-    if calibration.covariance is not None:
-        unclipped = Spectra(wl, np.clip(refl.values, 0.0, 1.5), refl.names)
-        cal = calibration_response_covariance(
-            calibration, illuminants.select(responses.illuminants), unclipped
-        )
-    noise_all = np.zeros((n_p, m_rows, m_rows))
-    idx = np.arange(m_rows)
-    noise_all[:, idx, idx] = true_var
-    if cal is not None:
-        noise_all += cal
+    noise_all = _response_error_covariance(responses, illuminants, calibration, refl)
     alpha, sigma, length = fit_generic_prior(F, K, mean, rgb, noise_all, wl)
     IM = matern32(wl, length)
+    idx = np.arange(m_rows)
     FK = F @ K
     G = FK @ F.T
     n = wl.size

@@ -220,25 +220,15 @@ def wiener_reflectance(
         G, FK, mean, resid, var.reshape(n_p, m_rows), np.diag(K), patches
     )
     est, clipped, n_clipped = _clip_estimate(est, patches, clip)
+    params = {"noise": "global" if noise_std is not None else "patch",
+              "noise_from": noise_from, "center_prior": center_prior, "clip": clip,
+              "n_prior": len(prior), "n_ridged": n_ridged}  # fmt: skip
     return WienerEstimate(
         reflectance=Spectra(wl, est, patches, {"source": "wiener_reflectance (Eq. 5)"}),
-        clipped=clipped,
-        n_clipped_samples=n_clipped,
-        variance=post_var,
-        noise_variance=var,
-        ridge=ridge_floor if n_ridged else 0.0,
-        params={
-            "noise": "global" if noise_std is not None else "patch",
-            "noise_from": noise_from,
-            "center_prior": center_prior,
-            "clip": clip,
-            "n_prior": len(prior),
-            "n_ridged": n_ridged,
-        },
-        lighting=F,
-        prior_mean=mean,
-        prior_covariance=K,
-    )
+        clipped=clipped, n_clipped_samples=n_clipped, variance=post_var,
+        noise_variance=var, ridge=ridge_floor if n_ridged else 0.0, params=params,
+        lighting=F, prior_mean=mean, prior_covariance=K,
+    )  # fmt: skip
 
 
 def _default_prior(wl: NDArray[np.float64]) -> Spectra:
