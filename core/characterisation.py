@@ -186,6 +186,11 @@ def aces_idt(
     with 0 where they were not estimated. Errors: CIEDE2000 between ACES2065-1
     converted to XYZ and the reflectances' XYZ adapted to the ACES white, on the
     training set and on ``test``.
+
+    References
+    ----------
+    Academy of Motion Picture Arts and Sciences, P-2013-001 (ACES input device
+    transform procedure); colour-science ``colour.matrix_idt``.
     """
     colour = _colour()
     from colour.characterisation import (
@@ -244,6 +249,11 @@ def illuminant_mix(
     Least squares on the grid both cover (the LEDs band-averaged onto it), target
     scaled to the LEDs' power. Returns the weights and the relative RMS mismatch of
     the mix.
+
+    References
+    ----------
+    Eq. 1 of the paper for the mixed spectrum; Lawson and Hanson, *Solving Least
+    Squares Problems* (1974), ch. 23 (non-negative least squares).
     """
     from scipy.optimize import nnls
 

@@ -581,6 +581,12 @@ def correct_spd_shift(illuminants: Spectra, spd_shift_nm: float) -> Spectra:
     InputError
         If ``spd_shift_nm`` is not finite.
 
+    References
+    ----------
+    The paper, Eq. 1 (the reported SPD enters the forward model); the shift model
+    is a wavelength-scale error of the spectroradiometer (CIE 250:2022,
+    spectroradiometric measurement of optical radiation sources).
+
     Examples
     --------
     >>> import numpy as np

@@ -239,6 +239,10 @@ def apply_led_corrections(
     Cubic-spline interpolation (a narrowband LED spans few samples of a 5 nm grid),
     end values held outside the grid.
 
+    References
+    ----------
+    The paper, Eq. 1 and 3, with per-LED gain and wavelength-offset corrections.
+
     Examples
     --------
     >>> import numpy as np
@@ -718,6 +722,11 @@ def fit_bayes(
     -------
     BayesFit
         With the covariance of ``(s_R, s_G, s_B, log gain, offset)``.
+
+    References
+    ----------
+    The paper, Eq. 3; D. J. C. MacKay, "Bayesian interpolation", Neural
+    Computation 4(3), 415-447 (1992) (hyper-parameters by the evidence).
     """
     n_i, n = L_rep.shape
     data = _data(R, C, var, step_nm)

@@ -304,6 +304,10 @@ def perturb_spd(
     Spectra
         Same names and grid; values outside the grid are held at the end values.
 
+    References
+    ----------
+    The paper, Eq. 1 (what the light source's spectroradiometer reports enters it).
+
     Examples
     --------
     >>> import numpy as np

@@ -328,6 +328,11 @@ def resampling_matrix(
     rule and normalised: a local average that preserves area and centroid (see
     :meth:`Spectra.resample`).
 
+    References
+    ----------
+    ASTM E308-18 (interpolation of spectral data); CIE 167:2005 (tabulating
+    spectral data for colour computations).
+
     Examples
     --------
     >>> import numpy as np

@@ -175,6 +175,11 @@ def sensitivity_rms(
     float
         In units of the channel peak (0.01 = 1 % of the peak).
 
+    References
+    ----------
+    Jiang et al., "What is the space of spectral sensitivity functions for digital
+    color cameras?", WACV 2013 (sensitivities compared after peak normalisation).
+
     Examples
     --------
     >>> import numpy as np

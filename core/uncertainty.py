@@ -139,6 +139,12 @@ def fit_generic_prior(
     -------
     alpha, sigma : (n_p,)
     length_nm : float
+
+    References
+    ----------
+    D. J. C. MacKay, "Bayesian interpolation" (1992) (maximum evidence);
+    Rasmussen and Williams, *Gaussian Processes for Machine Learning* (2006), Eq. 4.17
+    (Matern 3/2 kernel).
     """
     y = rgb - F @ mean
     base = F @ K @ F.T
@@ -324,6 +330,11 @@ def lab_covariance(
     Returns
     -------
     (n, 3, 3)
+
+    References
+    ----------
+    JCGM 100:2008 (GUM), section 5 (law of propagation of uncertainty, first
+    order); CIE 015:2018 (CIELAB).
     """
     h = 1e-4
     J = np.empty((xyz.shape[0], 3, 3))

@@ -335,6 +335,10 @@ def on_integration_grid(
 
     Pass the illuminants already corrected with the calibration's light-source
     corrections (on their own grid), as ``tunespec estimate`` does.
+
+    References
+    ----------
+    The paper, Eq. 1 (integrated on the finer grid of the sensitivities).
     """
     fine = integration_grid(sensitivity, estimate, illuminants)
     return (
