@@ -52,16 +52,21 @@ def chain(demo, tmp_path_factory) -> Path:
         "--illuminants-out", d / "illuminants.csv")  # fmt: skip
     _ok("calibrate", "--responses", d / "chart_responses.csv",
         "--illuminants", d / "chart_illuminants.csv",
-        "--reflectances", demo / "chart_camera.ti3",
+        "--reflectances", demo / "export/chart_camera.ti3",
         "-o", d / "sensitivities.csv", "--stats", d / "table1.json")  # fmt: skip
+    _estimate_and_evaluate(d, d / "sensitivities.csv", "reflectances.csv",
+                           demo / "export/reference_reflectances.ti3", "table2.json")  # fmt: skip
+    return d
+
+
+def _estimate_and_evaluate(d, sensitivities, out, reference, stats) -> None:
+    """``estimate`` (on the demo's estimation grid) of the sample's responses and
+    illuminants in ``d`` into ``d/out``, then ``evaluate`` into ``d/stats``."""
     _ok("estimate", "--responses", d / "responses.csv",
         "--illuminants", d / "illuminants.csv",
-        "--sensitivities", d / "sensitivities.csv", "--grid", "400:700:5",
-        "-o", d / "reflectances.csv")  # fmt: skip
-    _ok("evaluate", "--estimated", d / "reflectances.csv",
-        "--reference", demo / "reference_reflectances.ti3",
-        "--stats", d / "table2.json")  # fmt: skip
-    return d
+        "--sensitivities", sensitivities, "--grid", "400:700:5", "-o", d / out)  # fmt: skip
+    _ok("evaluate", "--estimated", d / out, "--reference", reference,
+        "--stats", d / stats)  # fmt: skip
 
 
 def test_readme_chain_reproduces_the_demo_exactly(demo, chain) -> None:
@@ -73,16 +78,13 @@ def test_readme_chain_reproduces_the_demo_exactly(demo, chain) -> None:
     assert table2["grid"] == "400:700:5"
     assert {k: table2[k] for k in summary["table2"]} == summary["table2"]
     for name in ("sensitivities.csv", "reflectances.csv", "responses.csv"):
-        assert (chain / name).read_bytes() == (demo / name).read_bytes(), name
+        assert (chain / name).read_bytes() == (demo / "export" / name).read_bytes(), (
+            name
+        )
     # the demo's rawtoaces JSON gives nearly the estimate of its CSV: rawtoaces' schema
     # holds 380-780 nm at 5 nm, the calibration 2 nm (CALIBRATION_MAX_STEP_NM)
-    _ok("estimate", "--responses", chain / "responses.csv",
-        "--illuminants", chain / "illuminants.csv",
-        "--sensitivities", demo / "sensitivities.json", "--grid", "400:700:5",
-        "-o", chain / "from_json.csv")  # fmt: skip
-    _ok("evaluate", "--estimated", chain / "from_json.csv",
-        "--reference", demo / "reference_reflectances.csv",
-        "--stats", chain / "table2_json.json")  # fmt: skip
+    _estimate_and_evaluate(chain, demo / "export/sensitivities.json", "from_json.csv",
+                           demo / "export/reference_reflectances.csv", "table2_json.json")  # fmt: skip
     from_json = json.loads((chain / "table2_json.json").read_text())
     got, want = from_json["average"], summary["table2"]["average"]
     assert abs(got["delta_e00"] - want["delta_e00"]) < 0.05, (got, want)
@@ -91,20 +93,20 @@ def test_readme_chain_reproduces_the_demo_exactly(demo, chain) -> None:
 
 #: Files the commands write, by kind (relative to the demo or the chain folder).
 REFLECTANCES = (
-    "reflectances.csv", "reflectances.ti3", "reference_reflectances.csv",
-    "reference_reflectances.ti3", "chart_camera.ti3", "estimate/reflectance.csv",
+    "export/reflectances.csv", "export/reflectances.ti3", "export/reference_reflectances.csv",
+    "export/reference_reflectances.ti3", "export/chart_camera.ti3", "estimate/reflectance.csv",
     "estimate/reference.csv", "truth/truth_reflectances.csv",
 )  # fmt: skip
 ILLUMINANTS = (
-    "illuminants.csv", "chart_illuminants.csv", "calibration/illuminants.csv",
+    "export/illuminants.csv", "export/chart_illuminants.csv", "calibration/illuminants.csv",
     "estimate/illuminants.csv",
 )  # fmt: skip
 SENSITIVITIES = (
-    "sensitivities.csv", "sensitivities.json", "calibration/sensitivity.csv",
+    "export/sensitivities.csv", "export/sensitivities.json", "calibration/sensitivity.csv",
     "truth/truth_sensitivity_absolute.csv",
 )  # fmt: skip
 RESPONSES = (
-    "responses.csv", "estimate/responses.csv", "chart_responses.csv",
+    "export/responses.csv", "estimate/responses.csv", "export/chart_responses.csv",
     "calibration/responses.csv",
 )  # fmt: skip
 
@@ -112,25 +114,25 @@ RESPONSES = (
 def test_every_export_is_read_back_with_default_options(demo, chain, tmp_path):
     t = tmp_path
     # command outputs that are not in the demo folder, one of each kind
-    _ok("export-cgats", "--reflectances", demo / "reflectances.csv", "--responses",
-        demo / "responses.csv", "--illuminant", "LED525", "-o", t / "x.ti3")  # fmt: skip
+    _ok("export-cgats", "--reflectances", demo / "export/reflectances.csv", "--responses",
+        demo / "export/responses.csv", "--illuminant", "LED525", "-o", t / "x.ti3")  # fmt: skip
     _ok("export-rawtoaces", "--sensitivities", chain / "sensitivities.csv",
         "-o", t / "s.json")  # fmt: skip
     _ok("simulate-responses", "--sensitivities", t / "s.json", "--illuminants",
-        demo / "illuminants.csv", "--reflectances", t / "x.ti3",
+        demo / "export/illuminants.csv", "--reflectances", t / "x.ti3",
         "--illuminants-out", t / "sim_ill.csv", "-o", t / "sim_resp.csv")  # fmt: skip
     reflectances = [demo / f for f in REFLECTANCES] + [t / "x.ti3"]
     illuminants = [demo / f for f in ILLUMINANTS] + [t / "sim_ill.csv"]
     sensitivities = [demo / f for f in SENSITIVITIES] + [t / "s.json"]
     responses = [demo / f for f in RESPONSES] + [t / "sim_resp.csv"]
-    sample = [demo / "responses.csv", demo / "illuminants.csv"]
+    sample = [demo / "export/responses.csv", demo / "export/illuminants.csv"]
     for r in reflectances:
         _ok("evaluate", "--estimated", r, "--reference", r)
         _ok("export-cgats", "--reflectances", r, "-o", t / "r.ti3")
         _ok("estimate", "--responses", sample[0], "--illuminants", sample[1],
             "--sensitivities", chain / "sensitivities.csv", "--prior", r,
             "--noise-std", "0.001", "-o", t / "r.csv")  # fmt: skip
-        _ok("simulate-responses", "--sensitivities", demo / "sensitivities.csv",
+        _ok("simulate-responses", "--sensitivities", demo / "export/sensitivities.csv",
             "--illuminants", sample[1], "--reflectances", r, "-o", t / "sr.csv")  # fmt: skip
     for s in sensitivities:
         _ok("estimate", "--responses", sample[0], "--illuminants", sample[1],
@@ -141,7 +143,7 @@ def test_every_export_is_read_back_with_default_options(demo, chain, tmp_path):
             "--sensitivities", chain / "sensitivities.csv", "--noise-std", "0.001",
             "-o", t / "i.csv")  # fmt: skip
     for rs in responses:
-        _ok("estimate", "--responses", rs, "--illuminants", demo / "chart_illuminants.csv",
+        _ok("estimate", "--responses", rs, "--illuminants", demo / "export/chart_illuminants.csv",
             "--sensitivities", chain / "sensitivities.csv", "--noise-std", "0.001",
             "-o", t / "q.csv")  # fmt: skip
     # a chart's responses and reflectances in any of the formats calibrate
@@ -153,7 +155,7 @@ def test_every_export_is_read_back_with_default_options(demo, chain, tmp_path):
 
 @requires_argyll
 def test_colprof_builds_an_input_profile_and_profcheck_reports(demo, tmp_path):
-    shutil.copy(demo / "chart_camera.ti3", tmp_path / "chart_camera.ti3")
+    shutil.copy(demo / "export/chart_camera.ti3", tmp_path / "chart_camera.ti3")
     done = subprocess.run(
         ["colprof", "-v", "-a", "m", "-O", "camera.icc", "chart_camera"],
         cwd=tmp_path, capture_output=True, text=True, timeout=120,
@@ -175,14 +177,16 @@ def test_colprof_builds_an_input_profile_and_profcheck_reports(demo, tmp_path):
 @requires_argyll
 def test_spec2cie_output_is_accepted(demo, tmp_path) -> None:
     out = tmp_path / "argyll.ti3"
-    subprocess.run(["spec2cie", demo / "reflectances.ti3", out], check=True, timeout=60)
+    subprocess.run(
+        ["spec2cie", demo / "export/reflectances.ti3", out], check=True, timeout=60
+    )
     _ok(
         "evaluate",
         "--estimated",
         out,
         "--reference",
-        demo / "reference_reflectances.ti3",
+        demo / "export/reference_reflectances.ti3",
     )
-    transforms = json.loads((demo / "camera_transforms.json").read_text())
+    transforms = json.loads((demo / "export/camera_transforms.json").read_text())
     kinds = [(t["kind"], t["illuminant"]) for t in transforms["transforms"]]
     assert kinds == [("aces_idt", "D55"), ("ccm", "D50"), ("ccm", "D65"), ("ccm", "A")]

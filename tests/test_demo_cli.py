@@ -121,5 +121,10 @@ def test_demo_command_prints_both_tables(tmp_path, capsys) -> None:
     assert rc == 0
     assert "Table 1" in text and "Table 2" in text and "average" in text
     assert (out / "summary.json").is_file()
+    # the exports under export/, listed there, as the GUI wizard writes them
+    index = json.loads((out / "export" / "exports.json").read_text())
+    assert index["reflectances_csv"] == "reflectances.csv"
+    assert all((out / "export" / name).is_file() for name in index.values())
+    assert not (out / "reflectances.csv").exists()
     summary = json.loads((out / "summary.json").read_text())
     assert summary["table1_rgb_rms_mean"] <= 0.0024

@@ -34,6 +34,7 @@ def test_example_is_every_section_and_makes_a_plan(tmp_path) -> None:
     cfg = tomllib.loads(example_config())
     assert set(cfg) == {
         "out",
+        "scheduler",
         "bench",
         "capture",
         "chart",
@@ -51,6 +52,7 @@ def test_example_is_every_section_and_makes_a_plan(tmp_path) -> None:
     assert plan.method == "bayes" and plan.exposure == "auto"
     assert str(plan.grid) == "380:730:5" and str(plan.estimation_grid) == "400:700:5"
     assert plan.reference is not None  # the simulated bench's truth: Table 2
+    assert plan.scheduler == "threads" and plan.images is False
 
 
 def test_load_config_docstring_example_parses(tmp_path) -> None:
@@ -78,7 +80,7 @@ def test_the_printed_example_runs(tmp_path, capsys) -> None:
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
     assert summary["table1_rgb_rms_mean"] < 0.01
     assert summary["table2_delta_e00_mean"] < 2.0
-    assert (tmp_path / "run" / "report.pdf").stat().st_size > 10_000
+    assert (tmp_path / "run" / "export" / "report.pdf").stat().st_size > 10_000
 
 
 def test_a_bad_example_value_names_the_key(tmp_path) -> None:
@@ -86,3 +88,52 @@ def test_a_bad_example_value_names_the_key(tmp_path) -> None:
     path.write_text(example_config().replace("iso = 100", 'iso = "high"'))
     with pytest.raises(InputError, match=r"capture\.iso"):
         plan_from_config(load_config(path))
+
+
+@pytest.mark.parametrize(
+    "value", ['"tcp://host"', '"tcp://host:70000"', '"cluster"', "8786", '"http://h:1"']
+)
+def test_a_bad_scheduler_is_one_line_naming_the_file_and_key(
+    tmp_path, capsys, value
+) -> None:
+    path = tmp_path / "run.toml"
+    path.write_text(f'out = "m"\nscheduler = {value}\n', encoding="utf-8")
+    assert main(["run", str(path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err
+    assert str(path) in err and "scheduler:" in err and "tcp://HOST:8786" in err
+    assert not (tmp_path / "m").exists()  # nothing started
+
+
+@pytest.mark.parametrize("value", [None, "threads", "sync", "tcp://10.1.2.3:8786"])
+def test_the_scheduler_reaches_the_plan(tmp_path, value) -> None:
+    text = 'out = "m"\n' + ("" if value is None else f'scheduler = "{value}"\n')
+    path = tmp_path / "run.toml"
+    path.write_text(text + "[export]\nimages = true\n", encoding="utf-8")
+    plan = plan_from_config(load_config(path))
+    assert plan.scheduler == value and plan.images
+
+
+@pytest.mark.slow
+def test_a_run_computes_the_images_on_the_configured_cluster(tmp_path) -> None:
+    """``scheduler = "tcp://..."`` with ``[export] images = true``: the sample's
+    per-pixel images are computed by the cluster's workers, into export/images/."""
+    from distributed import LocalCluster
+
+    with LocalCluster(
+        n_workers=1, processes=False, protocol="tcp", dashboard_address=None
+    ) as cluster:
+        path = tmp_path / "run.toml"
+        path.write_text(
+            f'out = "m"\nscheduler = "{cluster.scheduler_address}"\n'
+            '[bench]\nresolution = "512x340"\n'
+            "[export]\nreport = false\nimages = true\n",
+            encoding="utf-8",
+        )
+        assert main(["run", str(path), "-q"]) == 0
+        ran = set(cluster.scheduler.task_prefixes)
+    images = tmp_path / "m" / "export" / "images"
+    prov = json.loads((images / "provenance.json").read_text())
+    assert prov["shape"][0] > 0 and len(prov["channels"]) == 22
+    assert (images / "srgb.png").is_file()
+    assert ran, "no task reached the cluster"

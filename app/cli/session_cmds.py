@@ -219,8 +219,9 @@ def _print_result(out: Console, result: object, wall_s: float) -> None:
     for w in result.warnings:  # type: ignore[attr-defined]
         out.warn(w)
     files = result.files  # type: ignore[attr-defined]
+    exports = {p.parent for p in files.values() if p.name != "summary.json"}
     out.say(
-        f"\n{len(files)} files in {result.out_dir}, e.g. "  # type: ignore[attr-defined]
+        f"\n{len(files)} files in {', '.join(sorted(map(str, exports)))}, e.g. "
         + ", ".join(p.name for p in list(files.values())[:6])
     )
     if "report_html" in files:

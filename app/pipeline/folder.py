@@ -9,10 +9,15 @@
       sample/           the sample target's session
       calibration/      sensitivities and Table 1 (:func:`write_calibration`)
       estimate/         reflectances, their references, Table 2 (:func:`write_estimate`)
-      export/           the wizard's exports and report (``exports.json`` lists them)
+      export/           every export and the report, whoever ran the export step
+                        (``tunespec run``/``demo`` or the GUI wizard);
+                        ``exports.json`` lists them (:func:`write_exports_index`)
       truth/            a simulated bench's truth (``tunespec run``/``demo``)
       summary.json      the headline numbers and Tables 1-2 (``tunespec run``/``demo``)
-      *.csv *.json *.ti3 report.html report.pdf   the exports of ``tunespec run``/``demo``
+
+Folders written before the exports moved under ``export/`` (``tunespec run``/``demo``
+put them at the root) still open and resume: the exports are not an input of any
+step, so the wizard and ``tunespec run`` simply write them again under ``export/``.
 
 Every path of a measurement is named here once, and every result has one writer and
 one reader here: a measurement taken by the CLI opens in the GUI wizard (its
@@ -25,7 +30,7 @@ from __future__ import annotations
 
 import json
 import logging
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from os import PathLike
 from pathlib import Path
@@ -58,11 +63,13 @@ __all__ = [
     "read_calibration",
     "read_capture_warnings",
     "read_estimate",
+    "read_exports_index",
     "read_measurement_doc",
     "session_fingerprint",
     "step_warnings",
     "write_calibration",
     "write_estimate",
+    "write_exports_index",
     "write_measurement_doc",
 ]
 
@@ -75,6 +82,8 @@ CALIBRATION_DIR, ESTIMATE_DIR, EXPORT_DIR = "calibration", "estimate", "export"
 #: The warnings of a session's capture, beside its manifest: a capture that is
 #: resumed does not meter again, so a weak LED would otherwise be forgotten.
 CAPTURE_WARNINGS_FILE = "capture_warnings.json"
+#: The index of the export step's files in ``export/``: export kind -> file name.
+EXPORTS_INDEX_FILE = "exports.json"
 #: Pass/fail limit on Table 1's RGB mean (full scale) when none is chosen.
 DEFAULT_THRESHOLD_RGB_MEAN = 0.005
 
@@ -222,6 +231,10 @@ class MeasurementFolder:
     @property
     def measurement_path(self) -> Path:
         return self.root / MEASUREMENT_FILE
+
+    @property
+    def exports_index_path(self) -> Path:
+        return self.export_dir / EXPORTS_INDEX_FILE
 
     def has_session(self, which: str) -> bool:
         """Whether a capture of ``which`` was started here."""
@@ -470,6 +483,32 @@ def read_estimate(folder: Path, sample_root: Path) -> EstimateResult | None:
     except (OSError, ValueError, KeyError, InputError) as exc:
         log.warning("no usable estimate in %s: %s", folder, exc)
         return None
+
+
+def write_exports_index(out_dir: Path, files: Mapping[str, Path]) -> Path:
+    """Write ``exports.json`` (export kind -> file name) atomically, last: its
+    presence marks the export step done."""
+    index = Path(out_dir) / EXPORTS_INDEX_FILE
+    names = {k: Path(p).name for k, p in files.items()}
+    atomic_write_text(index, dumps_json(names, indent=1))
+    return index
+
+
+def read_exports_index(out_dir: Path) -> dict[str, Path] | None:
+    """The exports :func:`write_exports_index` listed in ``out_dir``; ``None`` when
+    there is no index, it is unreadable, or a file it lists is missing."""
+    index = Path(out_dir) / EXPORTS_INDEX_FILE
+    if not index.is_file():
+        return None
+    try:
+        doc = read_json(index)
+        paths = {str(k): Path(out_dir) / str(v) for k, v in doc.items()}
+    except (InputError, AttributeError, TypeError) as exc:
+        log.warning("no usable exports in %s: %s", out_dir, exc)
+        return None
+    if not all(p.is_file() for p in paths.values()):
+        return None
+    return paths
 
 
 # -- the processed sessions beside a result (the export needs no raw frame again) ------

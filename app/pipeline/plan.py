@@ -9,6 +9,7 @@ report. :func:`demo_plan` is ``tunespec demo``; :func:`plan_from_config` reads a
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from os import PathLike
@@ -48,6 +49,7 @@ __all__ = [
     "Plan",
     "chart_layout",
     "check_config",
+    "check_scheduler",
     "demo_plan",
     "example_config",
     "load_config",
@@ -117,6 +119,14 @@ class Plan:
         Calibration grid and estimation/Table-2 grid.
     report
         Also write the HTML/PDF report.
+    images
+        Also estimate the sample's per-pixel images (reflectance cube, XYZ, L*a*b*,
+        uncertainty; :func:`tunespec.app.pipeline.image.estimate_images`) into
+        ``export/images/``.
+    scheduler
+        Where the Dask steps compute (the per-pixel images): ``None`` (Dask's local
+        threads), a local scheduler's name or a ``dask.distributed`` address
+        ``tcp://HOST:PORT`` (:func:`tunespec.app.pipeline.engine.connect`).
     input_files
         The files the plan was read from (configuration, layouts, spectra): the
         report lists them with their SHA-256.
@@ -140,6 +150,8 @@ class Plan:
     grid: Grid = CALIBRATION_GRID
     estimation_grid: Grid = ESTIMATION_GRID
     report: bool = True
+    images: bool = False
+    scheduler: str | None = None
     input_files: tuple[Path, ...] = ()
 
 
@@ -191,7 +203,8 @@ def load_config(path: str | PathLike[str]) -> dict[str, Any]:
     Sections: ``bench``, ``capture``, ``chart`` (``layout``, ``reflectances``),
     ``sample`` (``layout``, ``reflectances``, ``reference``), ``calibrate``
     (``method``, ``grid``), ``estimate`` (``prior``, ``grid``), ``export``
-    (``report``).
+    (``report``, ``images``); top-level ``out`` and ``scheduler``
+    (:func:`check_scheduler`).
 
     Raises
     ------
@@ -208,13 +221,14 @@ def load_config(path: str | PathLike[str]) -> dict[str, Any]:
         raise InputError("expected a table/object at the top", path=path)
     known = {
         "out": None,
+        "scheduler": None,
         "bench": {"light", "camera", "resolution", "seed"},
         "capture": {"exposure", "brackets", "iso"},
         "chart": {"layout", "reflectances"},
         "sample": {"layout", "reflectances", "reference"},
         "calibrate": {"method", "grid"},
         "estimate": {"prior", "grid"},
-        "export": {"report"},
+        "export": {"report", "images"},
     }
     for key, value in cfg.items():
         if key not in known:
@@ -316,6 +330,8 @@ def plan_from_config(config: Mapping[str, Any] | str | PathLike[str]) -> Plan:
         grid=grid,
         estimation_grid=est_grid,
         report=cfg.get("export", {}).get("report", True),
+        images=cfg.get("export", {}).get("images", False),
+        scheduler=cfg.get("scheduler"),
         input_files=tuple(
             p
             for p in (
@@ -430,9 +446,42 @@ def check_config(cfg: Mapping[str, Any]) -> None:
                 Grid.parse(grid)
             except InputError as exc:
                 raise InputError(f"{section}.grid: {exc.message}", path=src) from None
-    report_files = cfg.get("export", {}).get("report", True)
-    if not isinstance(report_files, bool):
+    for key, default in (("report", True), ("images", False)):
+        flag = cfg.get("export", {}).get(key, default)
+        if not isinstance(flag, bool):
+            raise InputError(
+                f"export.{key}: expected true or false, got {shown(flag)}", path=src
+            )
+    check_scheduler(cfg.get("scheduler"), "scheduler", path=src)
+
+
+#: A ``dask.distributed`` scheduler's address: ``tcp://HOST:PORT`` (or ``tls://``,
+#: ``ws://``, ``wss://``; a host name, IPv4 or ``[IPv6]``).
+_SCHEDULER_ADDRESS = re.compile(
+    r"(?:tcp|tls|ws|wss)://(?:\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9][A-Za-z0-9.-]{0,252})"
+    r":([0-9]{1,5})"
+)
+
+
+def check_scheduler(value: Any, key: str, path: Any = None) -> str | None:
+    """A scheduler as :func:`tunespec.app.pipeline.engine.connect` takes it, checked
+    before anything runs (nothing is connected to here).
+
+    Raises
+    ------
+    InputError
+        One line naming ``key``: not text, not a local scheduler's name, or not an
+        address ``tcp://HOST:PORT`` with a port in 1-65535.
+    """
+    from tunespec.app.pipeline.engine import LOCAL_SCHEDULERS
+
+    if value is None or value in LOCAL_SCHEDULERS:
+        return value
+    m = _SCHEDULER_ADDRESS.fullmatch(value) if isinstance(value, str) else None
+    if m is None or not 0 < int(m.group(1)) < 65536:
         raise InputError(
-            f"export.report: expected true or false, got {shown(report_files)}",
-            path=src,
+            f"{key}: expected one of {', '.join(LOCAL_SCHEDULERS)} or a "
+            f"dask.distributed address such as tcp://HOST:8786, got {shown(value)}",
+            path=path,
         )
+    return value

@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from tunespec.app.pipeline.engine import connect
 from tunespec.app.pipeline.folder import (
     DEFAULT_THRESHOLD_RGB_MEAN,
     CalibrationResult,
@@ -372,9 +373,11 @@ def _run_on(
     progress: ProgressFn | None,
     should_stop: StopFn | None,
     on_frame: FrameCallback | None,
+    scheduler: Any = None,
 ) -> RunResult:
-    """Every step of ``plan`` on an open ``bench``."""
-    hooks = _Hooks(_Stages(progress, _STAGE_WEIGHTS), should_stop, on_frame)
+    """Every step of ``plan`` on an open ``bench`` (the Dask steps on ``scheduler``)."""
+    weights = {**_STAGE_WEIGHTS, **({"images": 20.0} if plan.images else {})}
+    hooks = _Hooks(_Stages(progress, weights), should_stop, on_frame)
     folder = MeasurementFolder.at(plan.out_dir)
     _write_plan(folder, plan)
     # a simulated bench is opened showing the chart; hardware shows what the
@@ -432,7 +435,7 @@ def _run_on(
     files: dict[str, Path] = hooks.stages.timed(
         "export",
         lambda p: export(
-            folder.root,
+            folder.export_dir,
             calibration=cal,
             estimation=est,
             chart=chart,
@@ -450,6 +453,10 @@ def _run_on(
             chart_reflectances=plan.chart_reflectances,
         ),
     )
+    if plan.images:
+        files["images_provenance"] = hooks.stages.timed(
+            "images", lambda p: _images(folder, plan, scheduler, p, should_stop)
+        )
     if sample_bench is not bench:
         sample_bench.camera.close()
     result = RunResult(
@@ -466,6 +473,31 @@ def _run_on(
     files["summary_json"] = folder.write_summary(result.summary())
     report(progress, 1.0)
     return result
+
+
+def _images(
+    folder: MeasurementFolder,
+    plan: Plan,
+    scheduler: Any,
+    progress: ProgressFn | None,
+    should_stop: StopFn | None,
+) -> Path:
+    """The sample's per-pixel images (``app.pipeline.image``) in ``export/images/``,
+    from the calibration just written, on ``scheduler`` (``engine.connect``'s);
+    returns their ``provenance.json``."""
+    from tunespec.app.pipeline.image import ImageSettings, estimate_images
+
+    out = folder.export_dir / "images"
+    estimate_images(
+        folder.sample_dir,
+        folder.calibration_dir / "sensitivity.csv",
+        out,
+        settings=ImageSettings(grid=plan.estimation_grid),
+        scheduler=scheduler,
+        progress=progress,
+        should_stop=should_stop,
+    )
+    return out / "provenance.json"
 
 
 def run(
@@ -493,21 +525,27 @@ def run(
         Called after every captured frame (live view).
     """
     t0 = time.perf_counter()
-    with open_bench(
-        plan.light,
-        plan.camera,
-        layout=plan.chart_layout,
-        reflectances=plan.chart_reflectances,
-        resolution=plan.resolution,
-        seed=plan.seed,
-        prompt=prompt,
-    ) as bench:
+    # a cluster is connected to before anything is captured: a wrong or unreachable
+    # address fails at once, not after the captures
+    with (
+        connect(plan.scheduler if plan.images else None) as scheduler,
+        open_bench(
+            plan.light,
+            plan.camera,
+            layout=plan.chart_layout,
+            reflectances=plan.chart_reflectances,
+            resolution=plan.resolution,
+            seed=plan.seed,
+            prompt=prompt,
+        ) as bench,
+    ):
         result = _run_on(
             bench,
             plan,
             progress=progress,
             should_stop=should_stop,
             on_frame=on_frame,
+            scheduler=scheduler,
         )
     result.timings_s["total"] = time.perf_counter() - t0
     return result

@@ -26,7 +26,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from tunespec.app.pipeline.folder import add_capture_warnings, clear_capture_warnings
+from tunespec.app.pipeline.folder import (
+    add_capture_warnings,
+    clear_capture_warnings,
+    write_exports_index,
+)
 from tunespec.app.pipeline.plan import ESTIMATION_GRID, chart_layout, sample_layout
 from tunespec.core.colorimetry import ReflectanceStats, reflectance_stats
 from tunespec.core.datasets import load_colorchecker_sg
@@ -447,7 +451,11 @@ def export(
 
     Files: the chart's ``chart_responses.csv`` / ``chart_illuminants.csv``, the
     ``core.io.export`` set (sensitivities, reflectances, the sample's responses and
-    illuminants, Tables 1-2, ``.ti3``) and ``report.html`` / ``report.pdf``.
+    illuminants, Tables 1-2, ``.ti3``) and ``report.html`` / ``report.pdf``, and
+    last ``exports.json`` listing them
+    (:func:`~tunespec.app.pipeline.folder.write_exports_index`). A measurement puts
+    them in its ``export/`` folder (``MeasurementFolder.export_dir``), whichever
+    front end runs the step.
 
     The report's provenance: ``provenance`` (seed, resolution, configuration...),
     the ``sessions`` (:func:`session_provenance`) and the SHA-256 of every file of
@@ -519,6 +527,7 @@ def export(
             input_files=input_files,
             threshold_rgb_mean=threshold_rgb_mean,
         )
+    write_exports_index(out, files)
     return files
 
 

@@ -8,6 +8,8 @@ by ``tunespec run`` without capturing again what is already there.
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 from PySide6.QtCore import QSettings
@@ -104,29 +106,61 @@ def test_a_wizard_measurement_is_resumed_by_the_cli(qtbot, tmp_path):
     assert model.restore_estimate() is not None
 
 
+#: What makes each export a new document: the CGATS ``CREATED`` keyword and the
+#: rawtoaces header's creation date and UUID. Everything else must be identical.
+_STAMPS = re.compile(
+    r'^CREATED "[^"]*"$|"(document_creation_date|unique_identifier)": "[^"]*"',
+    re.MULTILINE,
+)
+
+
+def _unstamped(path) -> str:
+    text = path.read_text()
+    assert _STAMPS.search(text), f"{path.name} differs and has no stamp"
+    return _STAMPS.sub("", text)
+
+
 def test_the_cli_and_the_wizard_jobs_write_identical_results(tmp_path):
     """The same plan's steps through the CLI and through the wizard's jobs (headless,
-    on the CLI's sessions) give the same files, byte for byte."""
+    on the CLI's sessions) give the same files, byte for byte: results and exports,
+    both under the one folder layout (``export/`` included)."""
     import filecmp
+    import json
 
     from tunespec.app.gui.wizard import measurement
     from tunespec.app.pipeline.plan import chart_layout, sample_layout
+    from tunespec.core.io.session import Session
     from tunespec.devices.registry import layout_reflectances
 
     cli = tmp_path / "cli"
     run_demo(cli, resolution=SIM["resolution"], report_files=False)
     wiz = tmp_path / "wizard"
     cal = measurement.calibrate_job(cli / "chart", wiz / "calibration", chart_layout())
-    measurement.estimate_job(
+    est = measurement.estimate_job(
         cli / "sample",
         wiz / "estimate",
         sample_layout(),
         cal.sensitivity,
         layout_reflectances(sample_layout()),
+        calibration=cal.calibration.estimate,  # as the wizard's estimate page does
     )
-    for sub in ("calibration", "estimate"):
+    # the export page's job, with the devices of the session as the page passes them
+    devices = Session.open(cli / "sample").devices
+    measurement.export_job(wiz / "export", cli, cal, est, devices)
+    report = {"report.html", "report.pdf"}  # the CLI run wrote none (report_files)
+    for sub in ("calibration", "estimate", "export"):
         names = sorted(p.name for p in (cli / sub).iterdir())
-        assert names == sorted(p.name for p in (wiz / sub).iterdir())
+        wiz_names = sorted(p.name for p in (wiz / sub).iterdir())
+        assert names == [n for n in wiz_names if n not in report]
         assert "responses.csv" in names
         for name in names:
-            assert filecmp.cmp(cli / sub / name, wiz / sub / name, shallow=False), name
+            if name == "exports.json":
+                continue
+            a, b = cli / sub / name, wiz / sub / name
+            if not filecmp.cmp(a, b, shallow=False):  # only the documents' stamps
+                assert _unstamped(a) == _unstamped(b), name
+    assert len(names) >= 20  # every export, not only the results
+    index = json.loads((wiz / "export" / "exports.json").read_text())
+    assert {k: v for k, v in index.items() if v not in report} == json.loads(
+        (cli / "export" / "exports.json").read_text()
+    )

@@ -76,7 +76,12 @@ def test_demo_outputs_share_one_file_mode_and_leave_no_tmp_folder(demo) -> None:
 def test_demo_progress_and_outputs(demo) -> None:
     result, fractions = demo
     assert fractions == sorted(fractions) and fractions[-1] == 1.0
-    out = result.out_dir
+    out = result.out_dir / "export"  # every export under export/, as the wizard's
+    assert (result.out_dir / "summary.json").is_file()
+    assert json.loads((out / "exports.json").read_text()) == {
+        k: p.name for k, p in result.files.items() if k != "summary_json"
+    }
+    assert not list(result.out_dir.glob("*.csv"))  # none left at the root
     for name in (
         "chart_responses.csv",
         "chart_illuminants.csv",
@@ -89,7 +94,6 @@ def test_demo_progress_and_outputs(demo) -> None:
         "table2_reflectance.csv",
         "report.html",
         "report.pdf",
-        "summary.json",
     ):
         assert (out / name).is_file(), name
     # what `tunespec calibrate` / `estimate` read
@@ -99,7 +103,7 @@ def test_demo_progress_and_outputs(demo) -> None:
     assert illum.names == chart.illuminants
     refl = read_spectra_csv(out / "reflectances.csv")
     assert refl.wavelength_nm[0] == ESTIMATION_GRID.start_nm
-    summary = json.loads((out / "summary.json").read_text())
+    summary = json.loads((result.out_dir / "summary.json").read_text())
     assert summary["table1_rgb_rms_mean"] == pytest.approx(result.table1.mean[3])
     # the uncertainties beside the values (issue 10)
     u = read_spectra_csv(out / "reflectances_uncertainty.csv")
@@ -116,7 +120,7 @@ def test_demo_progress_and_outputs(demo) -> None:
     assert np.array(meta["covariance"]["values"]).shape == (n_par, n_par)
     # both sessions complete and checksummed
     for name in ("chart", "sample"):
-        assert Session.open(out / name).missing() == []
+        assert Session.open(result.out_dir / name).missing() == []
 
 
 def test_illuminants_are_measured_spd_times_exposure(demo) -> None:
@@ -134,12 +138,19 @@ def test_rerun_resumes_without_capturing(demo, tmp_path) -> None:
     result, _ = demo
     out = tmp_path / "again"
     shutil.copytree(result.out_dir, out)
+    # a folder of the layout before the exports moved under export/: at the root
+    for f in (out / "export").iterdir():
+        f.rename(out / f.name)
+    (out / "export").rmdir()
     before = {
         p.name: p.stat().st_mtime_ns for p in (out / "chart" / "frames").iterdir()
     }
     again = run_demo(out, resolution=RESOLUTION, report_files=False)
     after = {p.name: p.stat().st_mtime_ns for p in (out / "chart" / "frames").iterdir()}
     assert after == before
+    # resumed, and the exports written again where they now belong
+    assert again.files["reflectances_csv"] == out / "export" / "reflectances.csv"
+    assert (out / "export" / "exports.json").is_file()
     assert again.table1.mean[3] == pytest.approx(result.table1.mean[3])
 
 
@@ -155,7 +166,7 @@ def test_config_run_on_existing_sessions(demo, tmp_path) -> None:
     )
     run = run_config(cfg)
     assert run.table1.mean[3] == pytest.approx(result.table1.mean[3])
-    assert (tmp_path / "run" / "sensitivities.csv").is_file()
+    assert (tmp_path / "run" / "export" / "sensitivities.csv").is_file()
 
 
 def test_config_errors_name_the_file(tmp_path) -> None:

@@ -46,6 +46,7 @@ from tunespec.app.pipeline.folder import (
     read_calibration,
     read_capture_warnings,
     read_estimate,
+    read_exports_index,
     read_measurement_doc,
     read_processed,
     restore_calibration_steps,
@@ -56,9 +57,8 @@ from tunespec.app.pipeline.folder import (
     write_measurement_doc,
 )
 from tunespec.core.datasets import resource_path
-from tunespec.core.errors import InputError, read_json
+from tunespec.core.errors import InputError
 from tunespec.core.layout import TargetLayout
-from tunespec.core.limits import dumps_json
 from tunespec.core.progress import (
     Cancelled,
     ProgressFn,
@@ -406,15 +406,8 @@ class Measurement(QObject):
         if self.folder is None:
             return None
         folder = self.folder / EXPORT_DIR
-        index = folder / "exports.json"
-        if not index.is_file():
-            return None
-        try:
-            paths = {k: folder / v for k, v in read_json(index).items()}
-        except (InputError, AttributeError, TypeError) as exc:
-            log.warning("no usable exports in %s: %s", folder, exc)
-            return None
-        if not all(p.is_file() for p in paths.values()):
+        paths = read_exports_index(folder)
+        if paths is None:
             return None
         self.export = ExportResult(paths, folder)
         return self.export
@@ -850,9 +843,6 @@ def export_job(
         sessions={"chart": folder / CHART_DIR, "sample": folder / SAMPLE_DIR},
         input_files=[folder / MEASUREMENT_FILE, *input_files],
         threshold_rgb_mean=calibration.threshold,
-    )
-    (Path(out_dir) / "exports.json").write_text(
-        dumps_json({k: Path(p).name for k, p in files.items()}, indent=1)
     )
     if progress is not None:
         progress(1.0)
