@@ -34,8 +34,6 @@ CalibrationIlluminant1 50778; EXIF: ExposureTime 33434, PhotographicSensitivity
 
 from __future__ import annotations
 
-import contextlib
-import os
 import struct
 from collections.abc import Sequence
 from datetime import datetime
@@ -46,7 +44,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from tunespec.core.io.session import create_temp_file
+from tunespec.core.io.session import atomic_write_bytes
 
 __all__ = ["CANON_5D_MARK_III_COLOR_MATRIX", "CFA_PATTERNS", "write_dng"]
 
@@ -326,18 +324,6 @@ def _tiff_bytes(
 
 
 def _write_atomic(path: Path, chunks: Sequence[bytes | memoryview]) -> None:
-    """Write ``chunks`` to ``path`` via a temporary file and a rename."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    # the umask's permissions, as every other output (mkstemp's would be 0600)
-    tmp = create_temp_file(path.parent, f".{path.name}.", ".part")
-    try:
-        with open(tmp, "wb") as fh:
-            for chunk in chunks:
-                fh.write(chunk)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
+    """Write ``chunks`` to ``path`` via a temporary file and a rename (the umask's
+    permissions, as every other output)."""
+    atomic_write_bytes(path, chunks, ".part")

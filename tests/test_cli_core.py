@@ -7,11 +7,10 @@ import json
 import numpy as np
 import pytest
 
+from tests.helpers import SHIPPED_SPECTRA, write_shipped_spectra
 from tunespec.app.cli import main
 from tunespec.core.datasets import (
     load_camera,
-    load_colorchecker_sg,
-    load_led_set,
     resource_path,
 )
 from tunespec.core.io.export import COLORIMETRY_COLUMNS
@@ -20,11 +19,7 @@ from tunespec.core.spectra import Grid, read_spectra_csv, write_spectra_csv
 
 @pytest.fixture(scope="module")
 def files(tmp_path_factory):
-    d = tmp_path_factory.mktemp("cli")
-    write_spectra_csv(load_camera(), d / "cam.csv")
-    write_spectra_csv(load_led_set(), d / "leds.csv")
-    write_spectra_csv(load_colorchecker_sg(), d / "sg.csv")
-    return d
+    return write_shipped_spectra(tmp_path_factory.mktemp("cli"))
 
 
 def _simulate(sensitivities, illuminants, reflectances, *options) -> int:
@@ -163,9 +158,7 @@ def test_simulate_calibrate_estimate_evaluate(files, capsys) -> None:
 def test_bad_input_is_one_line_exit_2(files, capsys, mutate, fragment) -> None:
     d = files
     _simulate(
-        str(d / "cam.csv"),
-        str(d / "leds.csv"),
-        str(d / "sg.csv"),
+        *(d / f for f in SHIPPED_SPECTRA),
         "--no-noise",
         "-o",
         str(d / "ok.csv"),
@@ -213,9 +206,7 @@ def test_short_wavelength_range_is_reported(files, tmp_path, capsys) -> None:
 def test_more_bad_input_is_one_line_exit_2(files, tmp_path, capsys) -> None:
     d = files
     _simulate(
-        str(d / "cam.csv"),
-        str(d / "leds.csv"),
-        str(d / "sg.csv"),
+        *(d / f for f in SHIPPED_SPECTRA),
         "--no-noise",
         "--exposure-target",
         "0.8",

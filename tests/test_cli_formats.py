@@ -8,11 +8,10 @@ import json
 import numpy as np
 import pytest
 
+from tests.helpers import write_shipped_spectra
 from tunespec.app.cli import main
 from tunespec.core.datasets import (
-    load_camera,
     load_colorchecker_sg,
-    load_led_set,
     resource_path,
 )
 from tunespec.core.io.spectral import read_spectral
@@ -22,10 +21,7 @@ from tunespec.core.spectra import write_spectra_csv
 @pytest.fixture(scope="module")
 def calibrated(tmp_path_factory):
     """A calibration (with its .meta.json) and a target's responses, from the CLI."""
-    d = tmp_path_factory.mktemp("formats")
-    write_spectra_csv(load_camera(), d / "cam.csv")
-    write_spectra_csv(load_led_set(), d / "leds.csv")
-    write_spectra_csv(load_colorchecker_sg(), d / "sg.csv")
+    d = write_shipped_spectra(tmp_path_factory.mktemp("formats"))
     sim = ["simulate-responses", "--sensitivities", d / "cam.csv", "--illuminants"]
     assert main(map(str, [*sim, d / "leds.csv", "--reflectances", d / "sg.csv",
                           "--exposure-target", "0.8", "--illuminants-out", d / "L.csv",

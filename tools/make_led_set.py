@@ -87,12 +87,17 @@ def main() -> None:
     cols["WHITE_COOL"] = cool / cool.max() * 0.8
     cols["WHITE_WARM"] = warm / warm.max() * 0.8
     out = ROOT / "resources/leds/cal1_model_22.csv"
+    write_columns_csv(out, wl, cols, ".6g")
+    print(f"wrote {out} ({len(cols)} LEDs)")
+
+
+def write_columns_csv(out: Path, wl: np.ndarray, cols: dict, fmt: str) -> None:
+    """A spectral CSV: ``wavelength_nm`` then one column per key of ``cols``."""
     with out.open("w", newline="") as fh:
         w = csv.writer(fh, lineterminator="\n")
         w.writerow(["wavelength_nm", *cols])
         for i, x in enumerate(wl):
-            w.writerow([f"{x:g}", *(f"{cols[k][i]:.6g}" for k in cols)])
-    print(f"wrote {out} ({len(cols)} LEDs)")
+            w.writerow([f"{x:g}", *(format(cols[k][i], fmt) for k in cols)])
 
 
 if __name__ == "__main__":

@@ -11,11 +11,11 @@ reflection. This is a model, not a measurement. Run from the repository root:
 
 from __future__ import annotations
 
-import csv
 import json
 from pathlib import Path
 
 import numpy as np
+from make_led_set import write_columns_csv  # a sibling script (tools/)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -50,12 +50,9 @@ def main() -> None:
     ]:
         a = c * dyes["C"] + m * dyes["M"] + y * dyes["Y"]
         cols[f"C{c}M{m}Y{y}"] = 0.02 + (base - 0.02) * np.exp(-2.0 * a)
-    out = ROOT / "resources/charts/neugebauer_cmy_model.csv"
-    with out.open("w", newline="") as fh:
-        w = csv.writer(fh, lineterminator="\n")
-        w.writerow(["wavelength_nm", *cols])
-        for i, x in enumerate(wl):
-            w.writerow([f"{x:g}", *(f"{cols[k][i]:.6f}" for k in cols)])
+    write_columns_csv(
+        ROOT / "resources/charts/neugebauer_cmy_model.csv", wl, cols, ".6f"
+    )
     layout = {
         "format": "tunespec-layout",
         "version": 1,
@@ -74,9 +71,7 @@ def main() -> None:
             "patch_size": "1.75 cm as in the paper",
         },
     }
-    (ROOT / "resources/layouts/neugebauer_cmy.json").write_text(
-        json.dumps(layout, indent=2) + "\n"
-    )
+    _write_layout("neugebauer_cmy.json", layout)
     sg = {
         "format": "tunespec-layout",
         "version": 1,
@@ -95,10 +90,12 @@ def main() -> None:
             "naming": "letter = column A-N, digit = row 1-10",
         },
     }
-    (ROOT / "resources/layouts/colorchecker_sg.json").write_text(
-        json.dumps(sg, indent=2) + "\n"
-    )
+    _write_layout("colorchecker_sg.json", sg)
     print("wrote sample target reflectances and layouts")
+
+
+def _write_layout(name: str, layout: dict) -> None:
+    (ROOT / "resources/layouts" / name).write_text(json.dumps(layout, indent=2) + "\n")
 
 
 if __name__ == "__main__":

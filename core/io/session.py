@@ -128,8 +128,13 @@ def create_temp_file(folder: Path, prefix: str, suffix: str = ".tmp") -> Path:
     raise FileExistsError(f"no free temporary name in {folder}")  # pragma: no cover
 
 
-def atomic_write_bytes(path: str | PathLike[str], data: bytes) -> None:
-    """Write ``data`` to ``path`` atomically: temporary file, fsync, ``os.replace``.
+def atomic_write_bytes(
+    path: str | PathLike[str],
+    data: bytes | Sequence[bytes | memoryview],
+    suffix: str = ".tmp",
+) -> None:
+    """Write ``data`` (bytes, or chunks written one after the other) to ``path``
+    atomically: temporary file (``suffix`` after its name), fsync, ``os.replace``.
 
     A reader (or a process started after a crash) sees either the old content or the
     new one, never a partial file. The file's permissions are those of a plain
@@ -137,10 +142,12 @@ def atomic_write_bytes(path: str | PathLike[str], data: bytes) -> None:
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = create_temp_file(path.parent, f".{path.name}.")
+    tmp = create_temp_file(path.parent, f".{path.name}.", suffix)
+    chunks = [data] if isinstance(data, bytes | bytearray | memoryview) else data
     try:
         with open(tmp, "wb") as fh:
-            fh.write(data)
+            for chunk in chunks:
+                fh.write(chunk)
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, path)

@@ -30,7 +30,7 @@ import math
 import os
 from pathlib import Path
 from types import ModuleType
-from typing import Any
+from typing import Any, TypeVar
 
 from tunespec.core.io.session import create_temp_file
 from tunespec.devices.protocols import (
@@ -364,14 +364,13 @@ class Gphoto2Camera:
             raise DeviceCommandError(
                 f"{self._model}: no timed shutter speeds offered (mode dial on M?)"
             )
-        choice, seconds = min(options, key=lambda cs: abs(math.log2(cs[1] / t)))
-        if abs(math.log2(seconds / t)) > MAX_MISMATCH_STOPS:
-            lo = min(s for _, s in options)
-            hi = max(s for _, s in options)
-            raise DeviceCommandError(
-                f"{self._model}: exposure {t:g} s is outside the camera's timed "
-                f"range {lo:g}-{hi:g} s"
-            )
+        lo, hi = min(s for _, s in options), max(s for _, s in options)
+        choice, seconds = _nearest(
+            options,
+            t,
+            f"{self._model}: exposure {t:g} s is outside the camera's timed "
+            f"range {lo:g}-{hi:g} s",
+        )
         self._set_value(widget, choice, SHUTTER_SPEED)
         self._apply_config(config, f"setting the shutter speed to {choice}")
         self._exposure_s = seconds
@@ -391,12 +390,12 @@ class Gphoto2Camera:
         options = [(c, int(c)) for c in _choices(widget) if c.strip().isdigit()]
         if not options:
             raise DeviceCommandError(f"{self._model}: no numeric ISO values offered")
-        choice, value = min(options, key=lambda cv: abs(math.log2(cv[1] / iso)))
-        if abs(math.log2(value / iso)) > MAX_MISMATCH_STOPS:
-            raise DeviceCommandError(
-                f"{self._model}: ISO {iso} is not offered; "
-                f"choices {', '.join(c for c, _ in options)}"
-            )
+        choice, value = _nearest(
+            options,
+            iso,
+            f"{self._model}: ISO {iso} is not offered; "
+            f"choices {', '.join(c for c, _ in options)}",
+        )
         self._set_value(widget, choice, ISO)
         self._apply_config(config, f"setting ISO {choice}")
         self._iso = value
@@ -513,6 +512,21 @@ def _find_widget(widget: Any, name: str) -> Any:
         if found is not None:
             return found
     return None
+
+
+_N = TypeVar("_N", int, float)
+
+
+def _nearest(
+    options: list[tuple[str, _N]], target: float, error: str
+) -> tuple[str, _N]:
+    """The ``(choice, value)`` of ``options`` nearest to ``target`` in stops (log2);
+    ``DeviceCommandError(error)`` when even that is more than
+    ``MAX_MISMATCH_STOPS`` away."""
+    choice, value = min(options, key=lambda cv: abs(math.log2(cv[1] / target)))
+    if abs(math.log2(value / target)) > MAX_MISMATCH_STOPS:
+        raise DeviceCommandError(error)
+    return choice, value
 
 
 def _choices(widget: Any) -> list[str]:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
 
 from PySide6.QtCore import QEvent, QObject, QPoint, QPointF, Qt, SignalInstance
 from PySide6.QtGui import QMouseEvent
@@ -68,3 +70,61 @@ def caught(
     catcher = SignalCatcher(signal)
     yield catcher
     qtbot.waitUntil(lambda: catcher.count > 0, timeout=timeout)
+
+
+def ini_settings(folder: Path, name: str = "settings") -> Any:
+    """``AppSettings`` in ``folder/NAME.ini`` (never the user's)."""
+    from PySide6.QtCore import QSettings
+
+    from tunespec.app.gui.settings import AppSettings
+
+    return AppSettings(
+        QSettings(str(folder / f"{name}.ini"), QSettings.Format.IniFormat)
+    )
+
+
+def new_main_window(
+    qtbot: QtBot, folder: Path, sim_options: dict[str, Any], *, show: bool = True
+) -> Any:
+    """A ``MainWindow`` on the simulated bench with :func:`ini_settings`, shown."""
+    from tunespec.app.gui.main_window import MainWindow
+
+    w = MainWindow(ini_settings(folder), sim_options=sim_options)
+    qtbot.addWidget(w)
+    if show:
+        w.show()
+    return w
+
+
+@contextmanager
+def main_window(
+    qtbot: QtBot,
+    folder: Path,
+    sim_options: dict[str, Any],
+    *,
+    show: bool = True,
+    exposed: bool = False,
+) -> Iterator[Any]:
+    """:func:`new_main_window`, waited for until exposed if asked, closed after."""
+    w = new_main_window(qtbot, folder, sim_options, show=show)
+    if exposed:
+        qtbot.waitExposed(w)
+    try:
+        yield w
+    finally:
+        w.close()
+
+
+@contextmanager
+def device_panel(qtbot: QtBot, sim_options: dict[str, Any]) -> Iterator[Any]:
+    """A ``DevicePanel`` on its own controller, shut down after."""
+    from tunespec.app.gui.panels.device_panel import DevicePanel
+    from tunespec.app.gui.workers import DeviceController
+
+    controller = DeviceController()
+    panel = DevicePanel(controller, sim_options=sim_options)
+    qtbot.addWidget(panel)
+    try:
+        yield panel
+    finally:
+        controller.shutdown()

@@ -5,20 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tests.app.helpers import caught
-from tunespec.app.gui.panels.device_panel import DevicePanel
-from tunespec.app.gui.workers import DeviceController
+from tests.app.helpers import caught, device_panel
 
 SIM = {"realtime": False, "resolution": (256, 192), "seed": 1}
 
 
 @pytest.fixture
 def panel(qtbot):
-    controller = DeviceController()
-    panel = DevicePanel(controller, sim_options=SIM)
-    qtbot.addWidget(panel)
-    yield panel
-    controller.shutdown()
+    with device_panel(qtbot, SIM) as panel:
+        yield panel
 
 
 def test_connect_levels_frame_disconnect_on_the_simulated_bench(panel, qtbot):

@@ -6,13 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pyqtgraph as pg
 import pytest
-from PySide6.QtCore import QPoint, QSettings
+from PySide6.QtCore import QPoint
 
+from tests.app.helpers import main_window
 from tests.app.test_wizard import SIM, run_step
-from tunespec.app.gui.main_window import MainWindow
 from tunespec.app.gui.plots.sensitivity_plot import SensitivityPlot
 from tunespec.app.gui.plots.spd_plot import SpdPlot
-from tunespec.app.gui.settings import AppSettings
 from tunespec.core.spectra import Spectra
 
 
@@ -24,15 +23,8 @@ def _rgb(scale: float) -> Spectra:
 
 @pytest.fixture
 def window(qtbot, tmp_path):
-    settings = AppSettings(
-        QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
-    )
-    w = MainWindow(settings, sim_options=SIM)
-    qtbot.addWidget(w)
-    w.show()
-    qtbot.waitExposed(w)
-    yield w
-    w.close()
+    with main_window(qtbot, tmp_path, SIM, exposed=True) as w:
+        yield w
 
 
 def test_the_legend_does_not_cover_the_curves(qtbot):

@@ -9,11 +9,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from PySide6.QtCore import QSettings
 
+from tests.app.helpers import main_window
 from tests.app.test_wizard import SIM, capture_chart, run_step
-from tunespec.app.gui.main_window import TAB_LAYOUT, MainWindow
-from tunespec.app.gui.settings import AppSettings
+from tunespec.app.gui.main_window import TAB_LAYOUT
 from tunespec.core.processing import find_session_corners
 
 #: Automatic corners against the simulation's truth, mosaic pixels (as the demo's).
@@ -22,14 +21,8 @@ MAX_CORNER_ERROR_PX = 1.0
 
 @pytest.fixture
 def window(qtbot, tmp_path):
-    settings = AppSettings(
-        QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
-    )
-    w = MainWindow(settings, sim_options=SIM)
-    qtbot.addWidget(w)
-    w.show()
-    yield w
-    w.close()
+    with main_window(qtbot, tmp_path, SIM) as w:
+        yield w
 
 
 @pytest.mark.slow

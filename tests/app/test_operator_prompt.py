@@ -25,13 +25,19 @@ def _present_white(context, *, progress, should_stop):
     return "white in place"
 
 
-def test_the_operator_is_asked_and_the_job_waits(qtbot, tmp_path):
+def _wizard_on_a_fake_bench(qtbot) -> tuple[DeviceController, WizardPanel]:
+    """A wizard panel whose controller opened the scripted CAL1 and gphoto2."""
     controller = DeviceController(_opener)
     wizard = WizardPanel(Measurement(controller, AppSettings()))
     qtbot.addWidget(wizard)
-    wizard.show()
     with caught(qtbot, controller.devices_opened):
         controller.open_devices("cal1:///dev/null", "gphoto2")
+    return controller, wizard
+
+
+def test_the_operator_is_asked_and_the_job_waits(qtbot, tmp_path):
+    controller, wizard = _wizard_on_a_fake_bench(qtbot)
+    wizard.show()
     job = DeviceJob(_present_white)
     done = []
     job.signals.returned.connect(done.append)
@@ -46,11 +52,7 @@ def test_the_operator_is_asked_and_the_job_waits(qtbot, tmp_path):
 
 
 def test_aborting_while_the_operator_is_asked(qtbot):
-    controller = DeviceController(_opener)
-    wizard = WizardPanel(Measurement(controller, AppSettings()))
-    qtbot.addWidget(wizard)
-    with caught(qtbot, controller.devices_opened):
-        controller.open_devices("cal1:///dev/null", "gphoto2")
+    controller, wizard = _wizard_on_a_fake_bench(qtbot)
     job = DeviceJob(_present_white)
     errors = []
     job.signals.errored.connect(errors.append)

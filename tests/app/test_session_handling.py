@@ -7,12 +7,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from PySide6.QtCore import QSettings
 from PySide6.QtWidgets import QFileDialog
 
+from tests.app.helpers import new_main_window
 from tests.app.test_wizard import SIM, run_step
 from tunespec.app.gui.main_window import MainWindow
-from tunespec.app.gui.settings import AppSettings
 
 
 class FakeDialog:
@@ -32,12 +31,7 @@ def make_window(qtbot, tmp_path):
     windows = []
 
     def make() -> MainWindow:
-        settings = AppSettings(
-            QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
-        )
-        w = MainWindow(settings, sim_options=SIM)
-        qtbot.addWidget(w)
-        w.show()
+        w = new_main_window(qtbot, tmp_path, SIM)
         windows.append(w)
         return w
 

@@ -6,11 +6,10 @@ import numpy as np
 import pytest
 from PySide6.QtCore import QSettings
 
-from tests.app.helpers import caught
+from tests.app.helpers import caught, device_panel, main_window
 from tunespec.app.gui import workers
 from tunespec.app.gui.editors.target_layout_editor import TargetLayoutEditor
 from tunespec.app.gui.main_window import MainWindow
-from tunespec.app.gui.panels.device_panel import DevicePanel
 from tunespec.app.gui.plots.frame_plot import build_preview
 from tunespec.app.gui.settings import AppSettings
 from tunespec.app.gui.wizard.measurement import (
@@ -31,13 +30,8 @@ SIM = {"realtime": False, "resolution": (256, 192), "seed": 1}
 
 @pytest.fixture
 def window(qtbot, tmp_path):
-    settings = AppSettings(
-        QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
-    )
-    w = MainWindow(settings, sim_options=SIM)
-    qtbot.addWidget(w)
-    yield w
-    w.close()
+    with main_window(qtbot, tmp_path, SIM, show=False) as w:
+        yield w
 
 
 def _calibration(m: Measurement) -> CalibrationResult:
@@ -187,11 +181,8 @@ def test_corners_found_for_the_other_target_are_not_used(qtbot):
 
 @pytest.fixture
 def panel(qtbot):
-    controller = workers.DeviceController()
-    panel = DevicePanel(controller, sim_options=SIM)
-    qtbot.addWidget(panel)
-    yield panel
-    controller.shutdown()
+    with device_panel(qtbot, SIM) as panel:
+        yield panel
 
 
 def test_live_view_goes_on_after_a_capture(panel, qtbot):

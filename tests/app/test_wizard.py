@@ -7,10 +7,8 @@ import time
 
 import numpy as np
 import pytest
-from PySide6.QtCore import QSettings
 
-from tunespec.app.gui.main_window import MainWindow
-from tunespec.app.gui.settings import AppSettings
+from tests.app.helpers import main_window
 from tunespec.app.gui.wizard.step_page import StepState
 from tunespec.core.spectra import CALIBRATION_GRID
 
@@ -22,14 +20,8 @@ STEP_TIMEOUT_MS = 120_000
 
 @pytest.fixture
 def window(qtbot, tmp_path):
-    settings = AppSettings(
-        QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
-    )
-    w = MainWindow(settings, sim_options=SIM)
-    qtbot.addWidget(w)
-    w.show()
-    yield w
-    w.close()
+    with main_window(qtbot, tmp_path, SIM) as w:
+        yield w
 
 
 def run_step(qtbot, wizard, page, *, expect=StepState.DONE):

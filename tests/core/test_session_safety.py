@@ -110,15 +110,24 @@ def test_spd_temp_name_keeps_the_process_id(tmp_path, monkeypatch) -> None:
     assert seen and str(os.getpid()) in os.path.basename(seen[0])
 
 
+def _lock_script(root, *lines: str) -> str:
+    """Python code taking the session lock of ``root`` in another process, then
+    running ``lines`` (``lock`` is the lock)."""
+    head = "from tunespec.core.io.session import SessionLock\n"
+    return (
+        head
+        + f"lock = SessionLock({str(root)!r}); lock.acquire()\n"
+        + "".join(f"{line}\n" for line in lines)
+    )
+
+
 def test_a_second_writer_is_refused_naming_the_holder(tmp_path) -> None:
     root = tmp_path / "s"
     root.mkdir()
-    code = (
-        "import sys, time\n"
-        "from tunespec.core.io.session import SessionLock\n"
-        f"lock = SessionLock({str(root)!r}); lock.acquire()\n"
-        "print('locked', flush=True); sys.stdin.readline(); lock.release()\n"
-    )
+    code = _lock_script(
+        root, "import sys", "print('locked', flush=True)", "sys.stdin.readline()",
+        "lock.release()",
+    )  # fmt: skip
     with subprocess.Popen(
         [sys.executable, "-c", code],
         stdin=subprocess.PIPE,
@@ -146,11 +155,8 @@ def test_a_second_writer_is_refused_naming_the_holder(tmp_path) -> None:
 def test_a_stale_lock_of_a_killed_process_is_taken_over(tmp_path) -> None:
     root = tmp_path / "s"
     root.mkdir()
-    code = (
-        "import os, signal\n"
-        "from tunespec.core.io.session import SessionLock\n"
-        f"SessionLock({str(root)!r}).acquire()\n"
-        "os.kill(os.getpid(), signal.SIGKILL)\n"
+    code = _lock_script(
+        root, "import os, signal", "os.kill(os.getpid(), signal.SIGKILL)"
     )
     child = subprocess.run([sys.executable, "-c", code], check=False)
     assert child.returncode == -9

@@ -41,18 +41,24 @@ def _arm(point: str, nth: int, delay_s: float) -> None:
         calls["n"] += 1
         return calls["n"] == nth
 
-    if point == "raw_write":
-        real_raw = dng._write_atomic
+    def half_written_then_die(real, suffix, to_bytes):
+        """``real(path, data)``, but the due call leaves half of ``data`` in a
+        temporary file beside ``path`` and dies."""
 
-        def raw(path, chunks):
+        def write(path, data):
             if due():
-                data = b"".join(bytes(c) for c in chunks)
-                part = path.with_name(f".{path.name}.killed.part")
-                part.write_bytes(data[: len(data) // 2])
+                blob = to_bytes(data)
+                part = path.with_name(f".{path.name}.killed{suffix}")
+                part.write_bytes(blob[: len(blob) // 2])
                 _die()
-            return real_raw(path, chunks)
+            return real(path, data)
 
-        dng._write_atomic = raw
+        return write
+
+    if point == "raw_write":
+        dng._write_atomic = half_written_then_die(
+            dng._write_atomic, ".part", lambda c: b"".join(bytes(x) for x in c)
+        )
     elif point == "spd_write":
         real_spd = session_mod.write_spectra_csv
 
@@ -65,16 +71,9 @@ def _arm(point: str, nth: int, delay_s: float) -> None:
 
         session_mod.write_spectra_csv = spd
     elif point == "manifest_write":
-        real_text = session_mod.atomic_write_text
-
-        def text(path, content):
-            if due():
-                part = path.with_name(f".{path.name}.killed.tmp")
-                part.write_text(content[: len(content) // 2])
-                _die()
-            return real_text(path, content)
-
-        session_mod.atomic_write_text = text
+        session_mod.atomic_write_text = half_written_then_die(
+            session_mod.atomic_write_text, ".tmp", str.encode
+        )
     elif point == "before_record":
         real_put = session_mod.Session._put
 

@@ -1,0 +1,23 @@
+"""Small helpers shared by the tests outside the GUI (``tests/app/helpers.py``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from tunespec.core.datasets import load_camera, load_colorchecker_sg, load_led_set
+from tunespec.core.spectra import write_spectra_csv
+
+#: The files :func:`write_shipped_spectra` writes: camera, LEDs, ColorChecker SG.
+SHIPPED_SPECTRA = ("cam.csv", "leds.csv", "sg.csv")
+
+
+def write_shipped_spectra(folder: Path) -> Path:
+    """The shipped camera sensitivities, 22 LED spectra and SG reflectances as the
+    CSV files ``cam.csv``, ``leds.csv`` and ``sg.csv`` in ``folder`` (returned)."""
+    for spectra, name in zip(
+        (load_camera(), load_led_set(), load_colorchecker_sg()),
+        SHIPPED_SPECTRA,
+        strict=True,
+    ):
+        write_spectra_csv(spectra, folder / name)
+    return folder
