@@ -95,9 +95,9 @@ def open_light_source(
     Raises
     ------
     InputError
-        An unknown spec.
+        ``spec`` is neither ``sim`` nor a ``cal1`` spec.
     DeviceError
-        The device cannot be opened.
+        The CAL1 does not answer (its port or socket cannot be opened).
     """
     head, _ = _split_spec(spec)
     if head in ("sim", "sim://"):

@@ -35,11 +35,25 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tunespec.core.colorimetry import delta_e_2000, lab_d50, xyz_d50
-from tunespec.core.datasets import load_colorchecker_sg
+from tunespec.app.cli import export_cmds
+from tunespec.core.colorimetry import delta_e_2000, lab_d50, reflectance_stats, xyz_d50
+from tunespec.core.datasets import (
+    load_camera,
+    load_colorchecker_sg,
+    load_led_set,
+    read_rawtoaces_json,
+)
+from tunespec.core.errors import InputError
+from tunespec.core.forward_model import render_rgb
 from tunespec.core.io.cgats import read_cgats, ti3_table, write_cgats
-from tunespec.core.io.export import reflectance_ti3
-from tunespec.core.spectra import Grid, Spectra
+from tunespec.core.io.export import (
+    export_measurement,
+    reflectance_ti3,
+    sensitivity_meta_path,
+)
+from tunespec.core.responses import Responses, read_responses_csv, write_responses_csv
+from tunespec.core.sensitivity import correct_spd_shift
+from tunespec.core.spectra import Grid, Spectra, read_spectra_csv, write_spectra_csv
 
 requires_argyll = pytest.mark.skipif(
     shutil.which("spec2cie") is None or shutil.which("colverify") is None,
@@ -176,9 +190,6 @@ def test_colverify_reproduces_our_delta_e(tmp_path: Path) -> None:
 
 @requires_argyll
 def test_colverify_of_the_exports_reproduces_table2(tmp_path: Path) -> None:
-    from tunespec.core.colorimetry import reflectance_stats
-    from tunespec.core.io.export import export_measurement
-
     # Estimate on a shorter grid than the reference, as in the demo (400-700 nm).
     ref = load_colorchecker_sg(Grid(380.0, 730.0, 10.0))
     est = load_colorchecker_sg(Grid(400.0, 700.0, 10.0))
@@ -201,11 +212,14 @@ def test_colverify_of_the_exports_reproduces_table2(tmp_path: Path) -> None:
 # ------------------------------------------------------------------ the export CLI
 
 
+def _cli_ok(*argv: str | Path) -> None:
+    """:func:`_cli` that must succeed."""
+    assert _cli(*argv) == 0, argv
+
+
 def _cli(*argv: str | Path) -> int:
     """Run an export subcommand through its own parser (as ``tunespec`` does)."""
     import argparse
-
-    from tunespec.app.cli import export_cmds
 
     parser = argparse.ArgumentParser(prog="tunespec")
     export_cmds.register(parser.add_subparsers(dest="command", required=True))
@@ -215,11 +229,6 @@ def _cli(*argv: str | Path) -> int:
 
 @pytest.fixture(scope="module")
 def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    from tunespec.core.datasets import load_camera, load_led_set
-    from tunespec.core.forward_model import render_rgb
-    from tunespec.core.responses import Responses, write_responses_csv
-    from tunespec.core.spectra import write_spectra_csv
-
     d = tmp_path_factory.mktemp("cli")
     grid = Grid(380.0, 730.0, 10.0)
     sg = load_colorchecker_sg(grid).select(["A1", "B2", "C3", "D4", "N10"])
@@ -243,25 +252,9 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 def test_cli_export_cgats(
     files: dict[str, Path], capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from tunespec.core.errors import InputError
-    from tunespec.core.responses import read_responses_csv
-    from tunespec.core.spectra import read_spectra_csv
-
     out = files["dir"] / "out.ti3"
-    assert (
-        _cli(
-            "export-cgats",
-            "--reflectances",
-            files["refl"],
-            "--responses",
-            files["resp"],
-            "--illuminant",
-            "WHITE_COOL",
-            "-o",
-            out,
-        )
-        == 0
-    )
+    _cli_ok("export-cgats", "--reflectances", files["refl"], "--responses",
+            files["resp"], "--illuminant", "WHITE_COOL", "-o", out)  # fmt: skip
     assert capsys.readouterr().out == (
         f"5 patches (names, RGB, XYZ, Lab, 36 bands) written to {out}\n"
     )
@@ -272,53 +265,19 @@ def test_cli_export_cgats(
         t.spectra().values, read_spectra_csv(files["refl"]).values
     )
     with pytest.raises(InputError, match="several illuminants"):
-        _cli(
-            "export-cgats",
-            "--reflectances",
-            files["refl"],
-            "--responses",
-            files["resp"],
-            "-o",
-            out,
-        )
-    assert (
-        _cli(
-            "export-cgats",
-            "--reflectances",
-            files["refl"],
-            "--no-spectra",
-            "--grid",
-            "400:700:10",
-            "-o",
-            out,
-        )
-        == 0
-    )
+        _cli("export-cgats", "--reflectances", files["refl"], "--responses",
+             files["resp"], "-o", out)  # fmt: skip
+    _cli_ok("export-cgats", "--reflectances", files["refl"], "--no-spectra",
+            "--grid", "400:700:10", "-o", out)  # fmt: skip
     assert read_cgats(out).spectra() is None and read_cgats(out).rgb is None
 
 
 def test_cli_export_rawtoaces(
     files: dict[str, Path], capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from tunespec.core.datasets import read_rawtoaces_json
-    from tunespec.core.spectra import read_spectra_csv
-
     out = files["dir"] / "cam.json"
-    assert (
-        _cli(
-            "export-rawtoaces",
-            "--sensitivities",
-            files["cam"],
-            "--manufacturer",
-            "Canon",
-            "--model",
-            "EOS 5D Mark III",
-            "--absolute",
-            "-o",
-            out,
-        )
-        == 0
-    )
+    _cli_ok("export-rawtoaces", "--sensitivities", files["cam"], "--manufacturer",
+            "Canon", "--model", "EOS 5D Mark III", "--absolute", "-o", out)  # fmt: skip
     back = read_rawtoaces_json(out)
     cam = read_spectra_csv(files["cam"])
     assert back.wavelength_nm.tolist() == list(range(380, 781, 5))  # as rawtoaces needs
@@ -335,26 +294,9 @@ def test_cli_export_rawtoaces(
 
 def test_cli_report(files: dict[str, Path]) -> None:
     out = files["dir"] / "report"
-    assert (
-        _cli(
-            "report",
-            "-o",
-            out,
-            "--reflectances",
-            files["refl"],
-            "--reference",
-            files["refl"],
-            "--sensitivities",
-            files["cam"],
-            "--illuminants",
-            files["leds"],
-            "--responses",
-            files["resp"],
-            "--session-id",
-            "S-9",
-        )
-        == 0
-    )
+    _cli_ok("report", "-o", out, "--reflectances", files["refl"], "--reference",
+            files["refl"], "--sensitivities", files["cam"], "--illuminants",
+            files["leds"], "--responses", files["resp"], "--session-id", "S-9")  # fmt: skip
     text = (out / "report.html").read_text()
     assert "S-9" in text and "Table 2: reflectance accuracy" in text
     assert '<td class="num">0.00</td>' in text  # estimate == reference
@@ -364,17 +306,8 @@ def test_cli_report(files: dict[str, Path]) -> None:
 @requires_argyll
 def test_cli_export_is_read_by_argyll(files: dict[str, Path]) -> None:
     out = files["dir"] / "argyll_in.ti3"
-    _cli(
-        "export-cgats",
-        "--reflectances",
-        files["refl"],
-        "--responses",
-        files["resp"],
-        "--illuminant",
-        "LED450",
-        "-o",
-        out,
-    )
+    _cli_ok("export-cgats", "--reflectances", files["refl"], "--responses",
+            files["resp"], "--illuminant", "LED450", "-o", out)  # fmt: skip
     _run(
         "spec2cie",
         "-n",
@@ -398,11 +331,6 @@ def test_cli_report_table1_undoes_the_fitted_spd_shift(
     import json
 
     from tunespec.app.report import report as report_module
-    from tunespec.core.forward_model import render_rgb
-    from tunespec.core.io.export import sensitivity_meta_path
-    from tunespec.core.responses import Responses, write_responses_csv
-    from tunespec.core.sensitivity import correct_spd_shift
-    from tunespec.core.spectra import read_spectra_csv, write_spectra_csv
 
     d = files["dir"] / "shift"
     d.mkdir()

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import threading
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -32,6 +33,7 @@ __all__ = [
     "progress_bar",
     "resolve_grid",
     "seed_arg",
+    "serve_until_stopped",
 ]
 
 EXIT_INPUT = 2
@@ -258,3 +260,14 @@ def close_progress() -> None:
 def progress_bar(label: str, *, lines_to: TextIO | None = None) -> ProgressFn:
     """A progress callback for ``label`` (:class:`TerminalProgress`)."""
     return TerminalProgress(label, lines_to=lines_to)
+
+
+def serve_until_stopped(stop: threading.Event, out: TextIO) -> None:
+    """An emulator's foreground loop: wait until ``stop`` is set or Ctrl-C (then
+    ``stopped`` is written to ``out``)."""
+    out.flush()
+    try:
+        while not stop.wait(0.5):
+            pass
+    except KeyboardInterrupt:
+        out.write("stopped\n")

@@ -14,7 +14,7 @@ import threading
 from collections.abc import Mapping, Sequence
 from typing import Any, TextIO
 
-from tunespec.app.cli.common import seed_arg
+from tunespec.app.cli.common import seed_arg, serve_until_stopped
 from tunespec.core.errors import InputError
 
 __all__ = ["register", "run_cal1_emulator"]
@@ -186,10 +186,5 @@ def run_cal1_emulator(
             f"light source spec: {emu.spec}\n"
             "press Ctrl-C to stop\n"
         )
-        out.flush()
-        try:
-            while not stop.wait(0.5):
-                pass
-        except KeyboardInterrupt:
-            out.write("stopped\n")
+        serve_until_stopped(stop, out)
     return 0

@@ -17,6 +17,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TextIO
 
+from tunespec.app.cli.common import serve_until_stopped
 from tunespec.core.errors import InputError
 from tunespec.core.spectra import Spectra
 
@@ -395,10 +396,5 @@ def run_zaber_emulator(
             f"Zaber emulator ({n_devices} stages) listening on {emu.host}:{emu.port}\n"
             f"goniometer spec: {emu.spec()}\npress Ctrl-C to stop\n"
         )
-        out.flush()
-        try:
-            while not stop.wait(0.5):
-                pass
-        except KeyboardInterrupt:
-            out.write("stopped\n")
+        serve_until_stopped(stop, out)
     return 0

@@ -127,6 +127,31 @@ class CalibrationResult:
     calibration: Any = None
     chart: Any = None
 
+    @classmethod
+    def from_step(
+        cls,
+        cal: Any,
+        chart: Any,
+        *,
+        threshold: float,
+        warnings: tuple[str, ...],
+        elapsed_s: float = 0.0,
+    ) -> CalibrationResult:
+        """The result of the calibrate step: ``cal`` (``steps.Calibration``) of the
+        processed ``chart``."""
+        return cls(
+            sensitivity=cal.sensitivity,
+            table1=cal.table1,
+            threshold=float(threshold),
+            method=str(cal.estimate.method),
+            layout=chart.layout,
+            excluded_patches=tuple(cal.estimate.excluded_patches),
+            warnings=warnings,
+            elapsed_s=elapsed_s,
+            calibration=cal,
+            chart=chart,
+        )
+
     @property
     def rgb_mean(self) -> float:
         """Table 1's RGB mean, the number compared with :attr:`threshold`."""
@@ -172,6 +197,30 @@ class EstimateResult:
     elapsed_s: float = 0.0
     estimation: Any = None
     sample: Any = None
+
+    @classmethod
+    def from_step(
+        cls,
+        est: Any,
+        sample: Any,
+        *,
+        reference: Spectra | None,
+        warnings: tuple[str, ...],
+        elapsed_s: float = 0.0,
+    ) -> EstimateResult:
+        """The result of the estimate step: ``est`` (``steps.Estimation``) of the
+        processed ``sample``, with the ``reference`` of its patches (Table 2)."""
+        return cls(
+            reflectance=est.reflectance,
+            table2=est.table2,
+            reference=reference,
+            layout=sample.layout,
+            clipped=tuple(est.wiener.clipped),
+            warnings=warnings,
+            elapsed_s=elapsed_s,
+            estimation=est,
+            sample=sample,
+        )
 
 
 @dataclass(frozen=True)

@@ -13,6 +13,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from functools import partial
 from os import PathLike
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -273,39 +274,23 @@ def _write_results(
     """
     excluded = tuple(cal.estimate.excluded_patches)
     cal_warnings = step_warnings(folder.chart_dir, chart, excluded)
+    threshold = DEFAULT_THRESHOLD_RGB_MEAN
+    cal_result = CalibrationResult.from_step(
+        cal, chart, threshold=threshold, warnings=cal_warnings
+    )
     write_calibration(
-        folder.calibration_dir,
-        CalibrationResult(
-            sensitivity=cal.sensitivity,
-            table1=cal.table1,
-            threshold=DEFAULT_THRESHOLD_RGB_MEAN,
-            method=str(cal.estimate.method),
-            layout=chart.layout,
-            excluded_patches=excluded,
-            warnings=cal_warnings,
-            calibration=cal,
-            chart=chart,
-        ),
-        session_fingerprint(folder.chart_dir),
+        folder.calibration_dir, cal_result, session_fingerprint(folder.chart_dir)
     )
     reference = None
     if plan.reference is not None:
         names = [n for n in est.reflectance.names if n in plan.reference.names]
         reference = plan.reference.select(names) if names else None
     est_warnings = step_warnings(folder.sample_dir, sample)
+    est_result = EstimateResult.from_step(
+        est, sample, reference=reference, warnings=est_warnings
+    )
     write_estimate(
-        folder.estimate_dir,
-        EstimateResult(
-            reflectance=est.reflectance,
-            table2=est.table2,
-            reference=reference,
-            layout=sample.layout,
-            clipped=tuple(est.wiener.clipped),
-            warnings=est_warnings,
-            estimation=est,
-            sample=sample,
-        ),
-        session_fingerprint(folder.sample_dir),
+        folder.estimate_dir, est_result, session_fingerprint(folder.sample_dir)
     )
     return cal_warnings, est_warnings
 
@@ -366,6 +351,38 @@ def _capture_and_process(
     return session, processed
 
 
+def _calibrate(
+    plan: Plan,
+    chart: ProcessedSession,
+    should_stop: StopFn | None,
+    progress: ProgressFn | None,
+) -> Calibration:
+    """The calibrate step of ``plan`` on the processed chart."""
+    return calibrate(
+        chart,
+        plan.chart_reflectances,
+        method=plan.method,
+        grid=plan.grid,
+        progress=progress,
+        should_stop=should_stop,
+    )
+
+
+def _estimate(
+    plan: Plan, sample: ProcessedSession, cal: Calibration, _progress: Any
+) -> Estimation:
+    """The estimate step of ``plan`` on the processed sample (closed form: no
+    progress to report)."""
+    return estimate(
+        sample,
+        cal.sensitivity,
+        prior=plan.prior,
+        reference=plan.reference,
+        grid=plan.estimation_grid,
+        calibration=cal.estimate,
+    )
+
+
 def _run_on(
     bench: Bench,
     plan: Plan,
@@ -386,15 +403,7 @@ def _run_on(
         hooks, folder, plan, "chart", bench, plan.chart_layout, plan.exposure
     )
     cal: Calibration = hooks.stages.timed(
-        "calibrate",
-        lambda p: calibrate(
-            chart,
-            plan.chart_reflectances,
-            method=plan.method,
-            grid=plan.grid,
-            progress=p,
-            should_stop=should_stop,
-        ),
+        "calibrate", partial(_calibrate, plan, chart, should_stop)
     )
     sample_bench = bench_for_target(
         bench, plan.sample_layout, plan.sample_reflectances, seed=plan.seed + 1
@@ -406,15 +415,7 @@ def _run_on(
         hooks, folder, plan, "sample", sample_bench, plan.sample_layout, sample_exposure
     )
     est: Estimation = hooks.stages.timed(
-        "estimate",
-        lambda p: estimate(
-            sample,
-            cal.sensitivity,
-            prior=plan.prior,
-            reference=plan.reference,
-            grid=plan.estimation_grid,
-            calibration=cal.estimate,
-        ),
+        "estimate", partial(_estimate, plan, sample, cal)
     )
     cal_warnings, est_warnings = _write_results(folder, plan, cal, chart, est, sample)
     warnings = (

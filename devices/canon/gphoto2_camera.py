@@ -371,8 +371,7 @@ class Gphoto2Camera:
             f"{self._model}: exposure {t:g} s is outside the camera's timed "
             f"range {lo:g}-{hi:g} s",
         )
-        self._set_value(widget, choice, SHUTTER_SPEED)
-        self._apply_config(config, f"setting the shutter speed to {choice}")
+        self._set_and_apply(config, widget, choice, SHUTTER_SPEED, "the shutter speed")
         self._exposure_s = seconds
 
     @property
@@ -396,8 +395,7 @@ class Gphoto2Camera:
             f"{self._model}: ISO {iso} is not offered; "
             f"choices {', '.join(c for c, _ in options)}",
         )
-        self._set_value(widget, choice, ISO)
-        self._apply_config(config, f"setting ISO {choice}")
+        self._set_and_apply(config, widget, choice, ISO, "ISO")
         self._iso = value
 
     def capture(self, stem: Path | str) -> Path:
@@ -471,6 +469,13 @@ class Gphoto2Camera:
             self._camera.set_config(config)
         except self._gp.GPhoto2Error as exc:
             raise map_gphoto2_error(exc, action) from exc
+
+    def _set_and_apply(
+        self, config: Any, widget: Any, choice: str, name: str, what: str
+    ) -> None:
+        """Set ``widget`` (``name``) to ``choice`` and send ``config`` to the camera."""
+        self._set_value(widget, choice, name)
+        self._apply_config(config, f"setting {what} to {choice}")
 
     def _widget(self, config: Any, name: str) -> Any:
         widget = _find_widget(config, name)

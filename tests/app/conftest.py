@@ -46,3 +46,13 @@ def temp_settings(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
         for scope in (QSettings.Scope.UserScope, QSettings.Scope.SystemScope):
             QSettings.setPath(fmt, scope, str(folder))
     yield folder
+
+
+@pytest.fixture
+def panel(qtbot) -> Iterator[object]:
+    """A device panel on the simulated bench (small frames), shut down after."""
+    from tests.app.helpers import device_panel
+
+    sim = {"realtime": False, "resolution": (256, 192), "seed": 1}
+    with device_panel(qtbot, sim) as panel:
+        yield panel

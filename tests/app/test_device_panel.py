@@ -5,15 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tests.app.helpers import caught, device_panel
+from tests.app.helpers import caught
 
 SIM = {"realtime": False, "resolution": (256, 192), "seed": 1}
-
-
-@pytest.fixture
-def panel(qtbot):
-    with device_panel(qtbot, SIM) as panel:
-        yield panel
 
 
 def test_connect_levels_frame_disconnect_on_the_simulated_bench(panel, qtbot):

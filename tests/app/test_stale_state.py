@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from PySide6.QtCore import QSettings
 
-from tests.app.helpers import caught, device_panel, main_window
+from tests.app.helpers import caught, main_window
 from tunespec.app.gui import workers
 from tunespec.app.gui.editors.target_layout_editor import TargetLayoutEditor
 from tunespec.app.gui.main_window import MainWindow
@@ -177,12 +177,6 @@ def test_corners_found_for_the_other_target_are_not_used(qtbot):
     qtbot.waitUntil(lambda: editor._finder_worker is None, timeout=5000)
     np.testing.assert_allclose(editor.target_layout.corners_px, found + 5.0)
     assert "not used" in editor.status_label.text()
-
-
-@pytest.fixture
-def panel(qtbot):
-    with device_panel(qtbot, SIM) as panel:
-        yield panel
 
 
 def test_live_view_goes_on_after_a_capture(panel, qtbot):

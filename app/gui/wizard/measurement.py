@@ -685,17 +685,12 @@ def calibrate_job(
         progress=sub_progress(progress, 0.6, 1.0),
         should_stop=should_stop,
     )
-    result = CalibrationResult(
-        sensitivity=cal.sensitivity,
-        table1=cal.table1,
-        threshold=float(threshold),
-        method=str(cal.estimate.method),
-        layout=chart.layout,
-        excluded_patches=tuple(cal.estimate.excluded_patches),
+    result = CalibrationResult.from_step(
+        cal,
+        chart,
+        threshold=threshold,
         warnings=step_warnings(chart_root, chart, cal.estimate.excluded_patches),
         elapsed_s=time.monotonic() - t0,
-        calibration=cal,
-        chart=chart,
     )
     write_calibration(out_dir, result, session_fingerprint(chart_root))
     return result
@@ -742,16 +737,12 @@ def estimate_job(
         table2 = evaluate(est.reflectance.select(ref.names), ref)
     if progress is not None:
         progress(1.0)
-    result = EstimateResult(
-        reflectance=est.reflectance,
-        table2=table2,
+    result = EstimateResult.from_step(
+        type(est)(est.wiener, table2, est.uncertainty),
+        sample,
         reference=ref,
-        layout=sample.layout,
-        clipped=tuple(est.wiener.clipped),
         warnings=step_warnings(sample_root, sample),
         elapsed_s=time.monotonic() - t0,
-        estimation=type(est)(est.wiener, table2, est.uncertainty),
-        sample=sample,
     )
     write_estimate(out_dir, result, session_fingerprint(sample_root))
     return result
