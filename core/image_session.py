@@ -71,6 +71,7 @@ from tunespec.core.image import (
 from tunespec.core.io.image_formats import ImageOutputs, pwrite_all
 from tunespec.core.io.raw import load_raw
 from tunespec.core.io.session import Session, find_darks, frames_by_channel
+from tunespec.core.processing import BRACKET_CLIP_LEVEL
 from tunespec.core.spectra import Grid, Spectra
 
 __all__ = [
@@ -304,12 +305,6 @@ def prepare_darks(job: ImageJob, index: int) -> str:
 def _dark(job: ImageJob, frame: _Frame) -> NDArray[np.float32]:
     path = job.work_path(f"dark_{job.dark_index(frame)}.f32")
     return np.fromfile(path, dtype=np.float32).reshape(3, *job.plane_shape)
-
-
-#: Bracket merging treats a cell above this fraction of full scale as clipped: the
-#: sensor's full well clips the charge before the read noise is added, so a clipped
-#: photosite can read a little under the white level without being flagged.
-BRACKET_CLIP_LEVEL = 0.95
 
 
 def _merged(
