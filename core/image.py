@@ -520,28 +520,11 @@ def build_wiener_bank(
     from tunespec.core.uncertainty import FLAT_FIELD_RESIDUAL
     from tunespec.core.wiener import _prior_moments
 
-    F = np.asarray(F, dtype=np.float64)
-    P = np.asarray(prior, dtype=np.float64)
-    w = np.asarray(white, dtype=np.float64).ravel()
-    wl = np.asarray(wavelength_nm, dtype=np.float64)
+    F, P, w, wl = _bank_inputs(F, prior, white, wavelength_nm)
     m, n_wl = F.shape
-    if m % 3 or w.size != m or P.ndim != 2 or P.shape[1] != n_wl or wl.size != n_wl:
-        raise InputError(
-            f"Wiener bank: F {F.shape}, prior {P.shape}, white {w.shape} and "
-            f"{wl.size} wavelengths do not fit together"
-        )
-    if not np.all(np.isfinite(w) & (w > 0)):
-        raise InputError("Wiener bank: the white board's levels must be positive")
     flat_residual = FLAT_FIELD_RESIDUAL if flat_residual is None else flat_residual
     mean, K = _prior_moments(P, True)
-    lo, hi = sorted(float(v) for v in phi_range)
-    if not (lo > 0 and math.isfinite(hi)):
-        raise InputError(f"Wiener bank: flat-field factors {phi_range} must be > 0")
-    if hi / lo < 1.01:
-        n_phi = 1
-    phi_edges = np.exp(np.linspace(math.log(lo), math.log(hi) + 1e-9, n_phi + 1))
-    top = 1.25 if level_max is None else float(level_max)
-    level_edges = np.linspace(0.0, math.sqrt(top), n_levels + 1) ** 2
+    level_edges, phi_edges = _bank_edges(phi_range, level_max, n_levels, n_phi)
     channel = np.tile(np.arange(3), m // 3)
     FK = F @ K
     G = FK @ F.T
@@ -558,17 +541,8 @@ def build_wiener_bank(
     rho, phi = bank.centres()
     c_model = rho[:, None] * w[None, :]  # (n_bins, m): c ~= rho w
     Ke = np.maximum(bank.noise_variance(c_model, phi), RIDGE_RELATIVE * scale)
-    n_bins = rho.size
-    A = np.repeat(G[None], n_bins, axis=0)
-    idx = np.arange(m)
-    A[:, idx, idx] += Ke
-    try:
-        sol = np.linalg.solve(A, np.broadcast_to(FK, (n_bins, m, n_wl)))
-    except np.linalg.LinAlgError as exc:
-        raise SingularSystemError(f"F K F^T + K_e is singular: {exc}") from None
+    sol, P_post = _bin_solutions(G, FK, K, Ke)
     W = sol.transpose(0, 2, 1)  # K F^T A^-1 (A, K symmetric)
-    P_post = K[None] - np.einsum("jl,bjk->blk", FK, sol)
-    P_post = 0.5 * (P_post + P_post.transpose(0, 2, 1))
     var_rms = np.maximum(np.einsum("bll->b", P_post) / n_wl, 0.0)
     xyz_cov = T.T[None] @ P_post @ T[None]
     offset = mean[None] - W @ (F @ mean)
@@ -577,8 +551,66 @@ def build_wiener_bank(
         phi_edges, np.ascontiguousarray(sol, dtype=np.float32),
         offset.astype(np.float32), var_rms, xyz_cov,
         T, {"n_levels": n_levels, "n_phi": int(phi_edges.size - 1),
-            "level_max": top, "ridge": RIDGE_RELATIVE * scale},
+            "level_max": float(level_edges[-1]), "ridge": RIDGE_RELATIVE * scale},
     )  # fmt: skip
+
+
+def _bank_inputs(
+    F: ArrayLike, prior: ArrayLike, white: ArrayLike, wavelength_nm: ArrayLike
+) -> tuple[NDArray[np.float64], ...]:
+    """``F``, the prior, the white levels and the wavelengths as float64, checked."""
+    F = np.asarray(F, dtype=np.float64)
+    P = np.asarray(prior, dtype=np.float64)
+    w = np.asarray(white, dtype=np.float64).ravel()
+    wl = np.asarray(wavelength_nm, dtype=np.float64)
+    m, n_wl = F.shape
+    if m % 3 or w.size != m or P.ndim != 2 or P.shape[1] != n_wl or wl.size != n_wl:
+        raise InputError(
+            f"Wiener bank: F {F.shape}, prior {P.shape}, white {w.shape} and "
+            f"{wl.size} wavelengths do not fit together"
+        )
+    if not np.all(np.isfinite(w) & (w > 0)):
+        raise InputError("Wiener bank: the white board's levels must be positive")
+    return F, P, w, wl
+
+
+def _bank_edges(
+    phi_range: tuple[float, float],
+    level_max: float | None,
+    n_levels: int,
+    n_phi: int,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Bin edges of the level (uniform in sqrt) and of ``phi`` (geometric; one bin
+    when the range is within 1 %)."""
+    lo, hi = sorted(float(v) for v in phi_range)
+    if not (lo > 0 and math.isfinite(hi)):
+        raise InputError(f"Wiener bank: flat-field factors {phi_range} must be > 0")
+    if hi / lo < 1.01:
+        n_phi = 1
+    phi_edges = np.exp(np.linspace(math.log(lo), math.log(hi) + 1e-9, n_phi + 1))
+    top = 1.25 if level_max is None else float(level_max)
+    level_edges = np.linspace(0.0, math.sqrt(top), n_levels + 1) ** 2
+    return level_edges, phi_edges
+
+
+def _bin_solutions(
+    G: NDArray[np.float64],
+    FK: NDArray[np.float64],
+    K: NDArray[np.float64],
+    Ke: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Per bin ``(G + diag K_e)^-1 F K`` (n_bins, m, n_wl) and the posterior
+    covariance ``K - K F^T (G + K_e)^-1 F K`` (n_bins, n_wl, n_wl), symmetrised."""
+    n_bins, m = Ke.shape
+    A = np.repeat(G[None], n_bins, axis=0)
+    idx = np.arange(m)
+    A[:, idx, idx] += Ke
+    try:
+        sol = np.linalg.solve(A, np.broadcast_to(FK, (n_bins, *FK.shape)))
+    except np.linalg.LinAlgError as exc:
+        raise SingularSystemError(f"F K F^T + K_e is singular: {exc}") from None
+    P_post = K[None] - np.einsum("jl,bjk->blk", FK, sol)
+    return sol, 0.5 * (P_post + P_post.transpose(0, 2, 1))
 
 
 # -- estimation ------------------------------------------------------------------------
