@@ -67,6 +67,7 @@ __all__ = [
     "DEFAULT_PHI_BINS",
     "NoiseModel",
     "PixelEstimate",
+    "SensorFigures",
     "WienerBank",
     "block_noise_stats",
     "build_wiener_bank",
@@ -195,6 +196,48 @@ class NoiseModel:
         b = self.shot_gain if channel_index is ... else self.shot_gain[channel_index]
         p = np.asarray(phi, dtype=np.float64)
         return p * p * a + p * b * c
+
+
+@dataclass(frozen=True)
+class SensorFigures:
+    """A sensor's data-sheet figures; :meth:`model` is its :class:`NoiseModel` once
+    the number of averaged darks is known (from the session).
+
+    Parameters
+    ----------
+    full_well_e
+        Electrons at full scale at the base ISO.
+    read_noise_e
+        Read noise, electrons RMS.
+    iso_gain
+        ISO of the session / base ISO.
+    """
+
+    full_well_e: float
+    read_noise_e: float
+    iso_gain: float = 1.0
+
+    def __post_init__(self) -> None:
+        ok = [math.isfinite(float(v)) for v in (self.full_well_e, self.read_noise_e)]
+        if not (
+            all(ok)
+            and self.full_well_e > 0
+            and self.read_noise_e >= 0
+            and self.iso_gain > 0
+        ):
+            raise InputError(
+                f"sensor figures: full well {self.full_well_e:g} e- (> 0), read noise "
+                f"{self.read_noise_e:g} e- (>= 0), ISO gain {self.iso_gain:g} (> 0)"
+            )
+
+    def model(self, n_darks: int = 1) -> NoiseModel:
+        """The noise model with ``n_darks`` dark frames averaged and subtracted."""
+        return NoiseModel.from_camera(
+            full_well_e=self.full_well_e,
+            read_noise_e=self.read_noise_e,
+            n_darks=n_darks,
+            iso_gain=self.iso_gain,
+        )
 
 
 def block_noise_stats(

@@ -61,6 +61,7 @@ from tunespec.core.image import (
     DEFAULT_LEVEL_BINS,
     DEFAULT_PHI_BINS,
     NoiseModel,
+    SensorFigures,
     WienerBank,
     block_noise_stats,
     build_wiener_bank,
@@ -491,7 +492,7 @@ def setup_estimation(
     prior: Spectra,
     grid: Grid,
     *,
-    noise: NoiseModel | None = None,
+    noise: NoiseModel | SensorFigures | None = None,
     n_levels: int = DEFAULT_LEVEL_BINS,
     n_phi: int = DEFAULT_PHI_BINS,
 ) -> WienerBank:
@@ -510,7 +511,8 @@ def setup_estimation(
     prior
         Prior reflectances on ``grid``, the estimation grid.
     noise
-        The sensor's noise model; default: fitted to the white frames
+        The sensor's noise model, or its figures (the session's averaged darks
+        complete the model); default: fitted to the white frames
         (:func:`tunespec.core.image.photon_transfer_fit`).
 
     Returns
@@ -520,7 +522,9 @@ def setup_estimation(
     """
     import cv2
 
-    if noise is None:
+    if isinstance(noise, SensorFigures):
+        noise = noise.model(int(job.meta.get("n_darks", 1)))
+    elif noise is None:
         noise = photon_transfer_fit(
             np.concatenate([r.ptc_level for r in results], axis=1),
             np.concatenate([r.ptc_var for r in results], axis=1),

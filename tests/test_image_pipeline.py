@@ -315,3 +315,27 @@ def test_exposure_brackets_are_merged(tmp_path) -> None:
     # merged values come from frames taken a minute after the reference frame
     # whose SPD x exposure is the illuminant
     assert abs(board_l["hdr"] - board_l["one"]) < 1.0, board_l
+
+
+def test_camera_noise_model_option(bench_session, images, tmp_path) -> None:
+    """``--noise-model camera:...`` (the simulated sensor's figures) replaces the
+    photon-transfer fit; the fit found the same photon term, so the images agree."""
+    import json
+
+    out = tmp_path / "camera"
+    assert main([
+        "estimate-image", str(bench_session["session"]), "--sensitivities",
+        str(bench_session["sens"]), "--out", str(out), "--quiet",
+        "--noise-model", "camera:67000,30", "--level-bins", "16",
+    ]) == 0  # fmt: skip
+    prov = json.loads((out / "provenance.json").read_text())
+    fitted = json.loads((images["out"] / "provenance.json").read_text())
+    nm = prov["noise_model"]
+    assert nm["source"] == "camera" and nm["n_level_bins"] == 16
+    np.testing.assert_allclose(nm["shot_gain_fs"], [1 / 67000, 0.5 / 67000, 1 / 67000])
+    # the photon-transfer fit of the white frames against the sensor's truth
+    np.testing.assert_allclose(
+        fitted["noise_model"]["shot_gain_fs"], nm["shot_gain_fs"], rtol=0.25
+    )
+    lab = _read(out)["lab"]
+    assert np.median(np.abs(lab[..., 0] - images["lab"][..., 0])) < 0.05

@@ -41,6 +41,10 @@ __all__ = [
 ]
 
 WORK_DIR = ".work"
+#: Most Wiener matrices per level and per flat-field factor (the bank is
+#: ``levels x phi`` matrices of ``3 n_i x n_wl``, built once per session).
+MAX_LEVEL_BINS = 256
+MAX_PHI_BINS = 32
 
 
 @dataclass(frozen=True)
@@ -60,8 +64,15 @@ class ImageSettings:
     n_levels, n_phi
         Bins of the noise model (:mod:`tunespec.core.image`).
     noise
-        A :class:`~tunespec.core.image.NoiseModel` of the sensor; ``None`` fits one
-        to the session's white frames.
+        A :class:`~tunespec.core.image.NoiseModel` of the sensor or its
+        :class:`~tunespec.core.image.SensorFigures`; ``None`` fits one to the
+        session's white frames (photon transfer).
+
+    Raises
+    ------
+    InputError
+        Bin counts outside 1 to :data:`MAX_LEVEL_BINS` / :data:`MAX_PHI_BINS`, a
+        noise model of another type.
     """
 
     grid: Grid | None = None
@@ -70,6 +81,25 @@ class ImageSettings:
     n_levels: int = 32
     n_phi: int = 4
     noise: Any = None
+
+    def __post_init__(self) -> None:
+        from tunespec.core.image import NoiseModel, SensorFigures
+
+        for name, value, top in (
+            ("level bins", self.n_levels, MAX_LEVEL_BINS),
+            ("phi bins", self.n_phi, MAX_PHI_BINS),
+        ):
+            if not (isinstance(value, int) and 1 <= value <= top):
+                raise InputError(
+                    f"{name}: expected an integer from 1 to {top}, got {value!r}"
+                )
+        if not (
+            self.noise is None or isinstance(self.noise, NoiseModel | SensorFigures)
+        ):
+            raise InputError(
+                f"noise model: expected a NoiseModel or SensorFigures, got "
+                f"{type(self.noise).__name__}"
+            )
 
 
 @dataclass(frozen=True)
