@@ -74,6 +74,7 @@ __all__ = [
     "estimate_pixels",
     "lab_from_xyz",
     "photon_transfer_fit",
+    "scratch",
     "srgb8_from_xyz_d50",
     "wiener_pixels_exact",
 ]
@@ -696,6 +697,7 @@ def estimate_pixels(
     *,
     clip: bool = True,
     exact: bool = False,
+    out: NDArray[np.float32] | None = None,
 ) -> PixelEstimate:
     """Eq. 5 for every pixel: ``r = offset_b + W_b c`` with the pixel's bin ``b``.
 
@@ -714,6 +716,9 @@ def estimate_pixels(
     exact
         Solve every pixel with its own ``K_e`` (:func:`wiener_pixels_exact`) instead
         of its bin's matrix: for measuring the binning error.
+    out : (n, n_wl) float32, optional
+        Where the reflectances go (e.g. a :func:`scratch` buffer); the result's
+        ``reflectance`` is then this array.
 
     Returns
     -------
@@ -743,11 +748,15 @@ def estimate_pixels(
     sat = np.isnan(rho)  # a NaN (clipped) response makes its pixel's level NaN
     bins = np.full(n, -1, dtype=np.int64)
     ok = ~sat if not exact else np.zeros(n, dtype=bool)
+    if out is not None and (
+        out.shape != (n, bank.mean.size) or out.dtype != np.float32
+    ):
+        raise InputError(f"pixels: output {out.shape} is not ({n}, {bank.mean.size})")
+    est = np.empty((n, bank.mean.size), dtype=np.float32) if out is None else out
     if ok.all():
         bins = bank.bins_of_level(rho, phi)
-        est = _apply_bins(bank, c, bins)
+        _apply_bins(bank, c, bins, est)
     else:
-        est = np.empty((n, bank.mean.size), dtype=np.float32)
         if ok.any():
             b = bank.bins_of_level(rho[ok], phi[ok])
             est[ok] = _apply_bins(bank, c[ok], b)
@@ -771,7 +780,10 @@ def estimate_pixels(
 
 
 def _apply_bins(
-    bank: WienerBank, c: NDArray[np.float32], bins: NDArray[np.int64]
+    bank: WienerBank,
+    c: NDArray[np.float32],
+    bins: NDArray[np.int64],
+    out: NDArray[np.float32] | None = None,
 ) -> NDArray[np.float32]:
     """``r = offset_b + c W_b^T`` for every pixel (row), bin by bin.
 
@@ -786,10 +798,10 @@ def _apply_bins(
     # bins are small integers: a stable sort of int16 is numpy's radix sort, O(n)
     order = np.argsort(bins.astype(np.int16), kind="stable")
     counts = np.bincount(bins, minlength=bank.Wt.shape[0])
-    cs = _workspace("sorted_c", (n, m))
+    cs = scratch("sorted_c", (n, m))
     # indices from argsort are in range: "clip" skips numpy's bounds checks (2x)
     np.take(c, order, axis=0, out=cs, mode="clip")
-    es = _workspace("sorted_r", (n, n_wl))
+    es = scratch("sorted_r", (n, n_wl))
     start = 0
     for b in np.flatnonzero(counts):
         sl = slice(start, start + int(counts[b]))
@@ -798,19 +810,27 @@ def _apply_bins(
         es[sl] += bank.offset[b]
     inverse = np.empty_like(order)
     inverse[order] = np.arange(order.size)
-    return np.take(es, inverse, axis=0, mode="clip")
+    return np.take(es, inverse, axis=0, mode="clip", out=out)
 
 
 _THREAD = threading.local()
 
 
-def _workspace(name: str, shape: tuple[int, int]) -> NDArray[np.float32]:
-    """A float32 scratch array of ``shape`` for this thread, reused across calls."""
-    buf = getattr(_THREAD, name, None)
-    size = shape[0] * shape[1]
+def scratch(name: str, shape: tuple[int, ...], dtype: Any = np.float32) -> NDArray[Any]:
+    """A scratch array of ``shape`` for this thread, reused across calls.
+
+    Large fresh arrays cost a page fault per page on first touch (and the kernel
+    zeroes them), as much as the arithmetic that fills them; a block or frame
+    buffer kept per thread is faulted once. The contents are undefined and the next
+    call with the same ``name`` on this thread overwrites them.
+    """
+    dt = np.dtype(dtype)
+    size = math.prod(shape)
+    key = f"{name}:{dt.str}"
+    buf = getattr(_THREAD, key, None)
     if buf is None or buf.size < size:
-        buf = np.empty(size, dtype=np.float32)
-        setattr(_THREAD, name, buf)
+        buf = np.empty(size, dtype=dt)
+        setattr(_THREAD, key, buf)
     return buf[:size].reshape(shape)
 
 

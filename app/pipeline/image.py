@@ -182,8 +182,11 @@ def session_graph(
         )
         for j in range(len(job.channels))
     ]
-    bank = delayed(st.setup_estimation, pure=True)(
-        job, channels, calibration.sensitivity, calibration.meta, calibration.prior,
+    warm = delayed(st.warm_up, pure=True)(
+        calibration.grid.wavelength_nm, dask_key_name=f"warm-{job.work}"
+    )
+    bank = delayed(_after(st.setup_estimation), pure=True)(
+        warm, job, channels, calibration.sensitivity, calibration.meta, calibration.prior,
         calibration.grid, noise=settings.noise, n_levels=settings.n_levels,
         n_phi=settings.n_phi, dask_key_name=f"setup-{job.work}",
     )  # fmt: skip
