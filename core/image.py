@@ -276,12 +276,15 @@ def block_noise_stats(
     x = planes[:, : hb * block_px, : wb * block_px].reshape(
         3, hb, block_px, wb, block_px
     )
-    blocks = x[:, rows].astype(np.float64)
-    level = blocks.mean(axis=(2, 4)).reshape(3, -1)
+    # float32 (numpy's pairwise sums and two-pass variance keep ~1e-7 relative over
+    # a block's 256 values): float64 copies of the rows cost more in fresh pages
+    # than the statistics themselves
+    blocks = np.asarray(x[:, rows], dtype=np.float32)
+    level = blocks.mean(axis=(2, 4), dtype=np.float64).reshape(3, -1)
     d = np.diff(blocks, axis=4)
     # the variance (not the mean square) of the differences: a gradient of the
     # light field across the block shifts their mean, not their spread
-    var = 0.5 * d.var(axis=(2, 4)).reshape(3, -1)
+    var = 0.5 * d.var(axis=(2, 4), dtype=np.float64).reshape(3, -1)
     keep = np.ones(rows.size * wb, dtype=bool)
     if saturated is not None:
         s = saturated[: hb * block_px, : wb * block_px].reshape(
