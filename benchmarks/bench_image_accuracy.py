@@ -166,17 +166,24 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--noise-free", action="store_true", help="also a capture without noise"
     )
+    parser.add_argument(
+        "--dark", choices=("pixel", "smooth"), default="pixel",
+        help="estimate-image's --dark",
+    )  # fmt: skip
     args = parser.parse_args(argv)
     from tunespec.devices.registry import parse_resolution
 
     res = parse_resolution(args.resolution)
     work = args.work or Path(tempfile.gettempdir()) / f"tunespec-acc-{args.resolution}"
-    _evaluate(work, _capture(work, res, False), args.resolution, [])
+    dark = ["--dark", args.dark]
+    _evaluate(
+        work, _capture(work, res, False), f"{args.resolution}, dark {args.dark}", dark
+    )
     if args.noise_free:
         quiet = work / "noise-free"
         _evaluate(
             quiet, _capture(quiet, res, True), f"{args.resolution} without noise",
-            ["--noise-model", "camera:67000,30"],
+            ["--noise-model", "camera:67000,30", *dark],
         )  # fmt: skip
     return 0
 

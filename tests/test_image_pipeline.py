@@ -369,3 +369,33 @@ def test_per_pixel_error_is_noise_not_bias(images, bench_session) -> None:
     assert de_bias < 1.0 * de_patch
     assert de_pixels.mean() < de_bias + de_noise.mean()
     assert de_noise.mean() > 0.8 * de_pixels.mean()
+
+
+def test_smooth_dark_takes_the_dark_frames_noise_out(
+    images, bench_session, tmp_path
+) -> None:
+    """``--dark smooth``: the single dark frame's read noise no longer adds to every
+    pixel; the per-pixel CIEDE2000 of the patches drops (measured 0.37 -> 0.27 at
+    768x512, the accuracy benchmark), the uncertainty stays calibrated."""
+    import json
+
+    from tunespec.core.colorimetry import delta_e_2000, lab_d50
+
+    out = tmp_path / "smooth"
+    assert main([
+        "estimate-image", str(bench_session["session"]), "--sensitivities",
+        str(bench_session["sens"]), "--out", str(out), "--quiet", "--dark", "smooth",
+    ]) == 0  # fmt: skip
+    got = _read(out)
+    assert json.loads((out / "provenance.json").read_text())["dark"] == "smooth"
+    mats, pm = bench_session["materials"], bench_session["plane_materials"]
+    n = len(bench_session["processed"].layout.patch_names)
+    sel = (pm >= 2) & (pm < 2 + n)
+    truth = lab_d50(mats.values, GRID.wavelength_nm)[pm[sel]]
+    de = {
+        k: delta_e_2000(v["lab"][sel].astype(np.float64), truth).mean()
+        for k, v in (("pixel", images), ("smooth", got))
+    }
+    assert de["smooth"] < 0.85 * de["pixel"], de
+    z_l = (got["lab"][sel][:, 0] - truth[:, 0]) / got["unc"][sel][:, 0]
+    assert COVERAGE_RANGE[0] < np.mean(np.abs(z_l) < 1.96) < COVERAGE_RANGE[1]

@@ -67,6 +67,11 @@ class ImageSettings:
         A :class:`~tunespec.core.image.NoiseModel` of the sensor or its
         :class:`~tunespec.core.image.SensorFigures`; ``None`` fits one to the
         session's white frames (photon transfer).
+    dark
+        ``"pixel"``: the mean dark frame subtracted pixel by pixel; ``"smooth"``:
+        its smooth level and hot pixels only
+        (:func:`tunespec.core.image_session.smooth_dark`), which removes the dark
+        frame's read noise from every pixel.
 
     Raises
     ------
@@ -81,9 +86,16 @@ class ImageSettings:
     n_levels: int = 32
     n_phi: int = 4
     noise: Any = None
+    dark: str = "pixel"
 
     def __post_init__(self) -> None:
         from tunespec.core.image import NoiseModel, SensorFigures
+        from tunespec.core.image_session import DARK_MODES
+
+        if self.dark not in DARK_MODES:
+            raise InputError(
+                f"dark: expected one of {', '.join(DARK_MODES)}, got {self.dark!r}"
+            )
 
         for name, value, top in (
             ("level bins", self.n_levels, MAX_LEVEL_BINS),
@@ -167,7 +179,7 @@ def session_graph(
     work = out / WORK_DIR
     if work.exists():
         shutil.rmtree(work)  # left by a killed run: the stack is rebuilt
-    job = st.plan_image_job(session, work)
+    job = st.plan_image_job(session, work, dark=settings.dark)
     rect = _rectification(session) if settings.rectify else None
     shape = rect.shape if rect is not None else job.plane_shape
     darks = [
@@ -306,6 +318,7 @@ def _provenance(
         "homography_out_to_plane": None if rect is None else
         [list(r) for r in rect.H_out_to_plane],
         "clip": settings.clip,
+        "dark": settings.dark,
         "software": f"tunespec {tunespec_version()}",
         "started_utc": _now(),
         "files": {

@@ -83,3 +83,10 @@ def test_settings_check_their_values() -> None:
         ImageSettings(noise="camera")
     ok = NoiseModel([1e-6] * 3, [1e-5] * 3)
     assert ImageSettings(noise=ok).noise is ok
+
+
+def test_dark_option() -> None:
+    assert _parse().dark == "pixel"
+    assert _parse("--dark", "smooth").dark == "smooth"
+    with pytest.raises(InputError, match="dark: expected one of pixel, smooth"):
+        ImageSettings(dark="median")
