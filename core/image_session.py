@@ -513,9 +513,11 @@ def prepare_channel(job: ImageJob, j: int) -> ChannelResult:
         target[k] *= factor  # Eq. 2: A' = mean(A_B) A / A_B
         target[k][sat] = np.nan
     offset = 3 * j * h * w * STACK_DTYPE.itemsize
-    half = scratch("stack_planes", target.shape, STACK_DTYPE)
-    np.copyto(half, target, casting="same_kind")
-    pwrite_all(job.work_path(RESPONSES), offset, half)
+    if target.dtype != STACK_DTYPE:
+        stored = scratch("stack_planes", target.shape, STACK_DTYPE)
+        np.copyto(stored, target, casting="same_kind")
+        target = stored
+    pwrite_all(job.work_path(RESPONSES), offset, target)
     return ChannelResult(
         mean_b, level, var, factor_grid[1].astype(np.float32),
         tuple(int(k) for k in np.flatnonzero(~own)), int(sat.sum()),
@@ -555,18 +557,18 @@ def read_response_rows(
     return out[:, :, col0:col1] if (col0, col1) != (0, w) else out
 
 
-def _read_stack_rows(job: ImageJob, row0: int, row1: int) -> NDArray[np.float16]:
+def _read_stack_rows(job: ImageJob, row0: int, row1: int) -> NDArray[Any]:
     """Rows ``row0:row1`` of every plane of the stack as stored, (m, rows, w), in
     this thread's scratch buffer ``stack_rows`` (positioned reads)."""
     h, w = job.plane_shape
     m = job.n_responses
-    half = scratch("stack_rows", (m, row1 - row0, w), STACK_DTYPE)
+    stored = scratch("stack_rows", (m, row1 - row0, w), STACK_DTYPE)
     size = STACK_DTYPE.itemsize
     path = job.work_path(RESPONSES)
     fd = os.open(path, os.O_RDONLY)
     try:
         for k in range(m):
-            view = memoryview(half[k]).cast("B")
+            view = memoryview(stored[k]).cast("B")
             done = 0
             while done < view.nbytes:
                 got = os.preadv(fd, [view[done:]], ((k * h + row0) * w) * size + done)
@@ -575,7 +577,7 @@ def _read_stack_rows(job: ImageJob, row0: int, row1: int) -> NDArray[np.float16]
                 done += got
     finally:
         os.close(fd)
-    return half
+    return stored
 
 
 def _read_phi(job: ImageJob, row0: int, row1: int) -> NDArray[np.float32]:
@@ -738,7 +740,9 @@ def estimate_block(
     import cv2
 
     if rectification is None:
-        planes = _read_stack_rows(job, row0, row1).view(np.uint16)
+        planes = _read_stack_rows(job, row0, row1)
+        if planes.dtype == np.float16:  # transposed as the bits they are
+            planes = planes.view(np.uint16)
         phi = _read_phi(job, row0, row1)
     else:
         planes, phi = _rectified(job, rectification, row0, row1)
@@ -748,8 +752,10 @@ def estimate_block(
     # no fresh pages per block
     t = scratch("block_pixels_t", (r * cols, m), planes.dtype)
     cv2.transpose(planes.reshape(m, r * cols), dst=t)
-    c = scratch("block_pixels", (r * cols, m))
-    np.copyto(c, t.view(STACK_DTYPE) if t.dtype == np.uint16 else t)
+    c = t
+    if t.dtype != np.float32:
+        c = scratch("block_pixels", (r * cols, m))
+        np.copyto(c, t.view(STACK_DTYPE))
     del planes, t
     est = estimate_pixels(
         bank, c, phi.reshape(-1), clip=clip,
