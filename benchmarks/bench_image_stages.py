@@ -109,17 +109,13 @@ def run_stages(session_dir: Path, sensitivities: Path, out: Path) -> np.ndarray:
     rows = st.block_rows_for(shape[1])
     prov = pim._provenance(session, job, cal, settings, None, shape)
     outputs = stage("create outputs", pim._create_outputs, out, shape, bank, rows, prov)
+
+    def block(r0: int) -> Any:
+        r1 = min(r0 + rows, shape[0])
+        return st.estimate_block(job, bank, outputs, r0, r1, systematic=systematic)
+
     blocks = [
-        stage(
-            "4 blocks: read, Eq. 5, write",
-            st.estimate_block,
-            job,
-            bank,
-            outputs,
-            r0,
-            min(r0 + rows, shape[0]),
-            systematic=systematic,
-        )
+        stage("4 blocks: read, Eq. 5, write", block, r0)
         for r0 in range(0, shape[0], rows)
     ]
     stage("5 preview, provenance", pim._finish, job, outputs, bank, blocks, prov)
