@@ -74,6 +74,7 @@ __all__ = [
     "estimate_pixels",
     "lab_from_xyz",
     "photon_transfer_fit",
+    "release_scratch",
     "scratch",
     "srgb8_from_xyz_d50",
     "wiener_pixels_exact",
@@ -816,7 +817,8 @@ def _apply_bins(
     return np.take(es, inverse, axis=0, mode="clip", out=out)
 
 
-_THREAD = threading.local()
+_SCRATCH: dict[tuple[int, str], NDArray[Any]] = {}
+_SCRATCH_LOCK = threading.Lock()
 
 
 def scratch(name: str, shape: tuple[int, ...], dtype: Any = np.float32) -> NDArray[Any]:
@@ -825,16 +827,28 @@ def scratch(name: str, shape: tuple[int, ...], dtype: Any = np.float32) -> NDArr
     Large fresh arrays cost a page fault per page on first touch (and the kernel
     zeroes them), as much as the arithmetic that fills them; a block or frame
     buffer kept per thread is faulted once. The contents are undefined and the next
-    call with the same ``name`` on this thread overwrites them.
+    call with the same ``name`` on this thread overwrites them;
+    :func:`release_scratch` drops the buffers when the work is done.
     """
     dt = np.dtype(dtype)
     size = math.prod(shape)
-    key = f"{name}:{dt.str}"
-    buf = getattr(_THREAD, key, None)
+    key = (threading.get_ident(), f"{name}:{dt.str}")
+    with _SCRATCH_LOCK:
+        buf = _SCRATCH.get(key)
     if buf is None or buf.size < size:
         buf = np.empty(size, dtype=dt)
-        setattr(_THREAD, key, buf)
+        with _SCRATCH_LOCK:
+            _SCRATCH[key] = buf
     return buf[:size].reshape(shape)
+
+
+def release_scratch() -> int:
+    """Forget every thread's :func:`scratch` buffers (arrays still in use stay
+    valid); returns the bytes released to the allocator."""
+    with _SCRATCH_LOCK:
+        n = sum(b.nbytes for b in _SCRATCH.values())
+        _SCRATCH.clear()
+    return n
 
 
 def _bin_variances(
