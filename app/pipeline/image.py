@@ -320,6 +320,7 @@ def _provenance(
         [list(r) for r in rect.H_out_to_plane],
         "clip": settings.clip,
         "dark": settings.dark,
+        "settings": _settings_doc(settings, g),
         "software": f"tunespec {tunespec_version()}",
         "started_utc": _now(),
         "files": {
@@ -331,6 +332,34 @@ def _provenance(
             "preview": "srgb.png",
         },
     }  # fmt: skip
+
+
+def _settings_doc(settings: ImageSettings, grid: Grid) -> dict[str, Any]:
+    """What of the settings shapes the images (a batch redoes a session whose
+    images were made otherwise)."""
+    noise = settings.noise
+    if noise is None:
+        noise_doc: Any = "photon-transfer"
+    elif hasattr(noise, "full_well_e"):
+        noise_doc = {
+            "full_well_e": noise.full_well_e,
+            "read_noise_e": noise.read_noise_e,
+            "iso_gain": noise.iso_gain,
+        }
+    else:
+        noise_doc = {
+            "read_var": noise.read_var.tolist(),
+            "shot_gain": noise.shot_gain.tolist(),
+        }
+    return {
+        "grid_nm": [grid.start_nm, grid.end_nm, grid.step_nm],
+        "rectify": settings.rectify,
+        "clip": settings.clip,
+        "dark": settings.dark,
+        "n_levels": settings.n_levels,
+        "n_phi": settings.n_phi,
+        "noise": noise_doc,
+    }
 
 
 def estimate_images(
@@ -416,8 +445,8 @@ def batch_images(
     """Images of every session in ``folder`` with one calibration, resumable.
 
     Each session's images go to ``out_root/<its path under folder>``; a session whose
-    output holds a ``provenance.json`` for the same session fingerprint and
-    calibration is skipped. ``sessions_at_once`` sessions form one Dask graph (their
+    output holds a ``provenance.json`` for the same session fingerprint,
+    calibration and settings is skipped. ``sessions_at_once`` sessions form one Dask graph (their
     LEDs and blocks run in parallel; more would hold more response stacks on disk at
     once), group after group; a killed batch loses only the sessions in progress.
 
@@ -445,6 +474,7 @@ def batch_images(
             prov is not None
             and prov.get("session_fingerprint") == Session.open(s).fingerprint()
             and prov.get("calibration_sha256") == cal.sha256
+            and prov.get("settings") == _settings_doc(settings, grid)
         ):
             skipped.append(str(s))
         else:

@@ -90,3 +90,25 @@ def test_dark_option() -> None:
     assert _parse("--dark", "smooth").dark == "smooth"
     with pytest.raises(InputError, match="dark: expected one of pixel, smooth"):
         ImageSettings(dark="median")
+
+
+def test_settings_doc_survives_json_and_tells_settings_apart() -> None:
+    """A batch skips a session only when its provenance's settings are these."""
+    import json
+
+    from tunespec.app.pipeline.image import _settings_doc
+    from tunespec.core.spectra import Grid
+
+    grid = Grid(400.0, 700.0, 5.0)
+    docs = [
+        _settings_doc(s, grid)
+        for s in (
+            ImageSettings(),
+            ImageSettings(dark="smooth"),
+            ImageSettings(noise=SensorFigures(67000.0, 30.0)),
+            ImageSettings(noise=NoiseModel([1e-6] * 3, [1e-5] * 3), n_levels=8),
+        )
+    ]
+    for d in docs:
+        assert json.loads(json.dumps(d)) == d
+    assert len({json.dumps(d, sort_keys=True) for d in docs}) == len(docs)
