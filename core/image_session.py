@@ -97,6 +97,7 @@ __all__ = [
     "prepare_darks",
     "read_response_rows",
     "rectification_for",
+    "release_buffers",
     "setup_estimation",
     "smooth_dark",
     "systematic_table",
@@ -390,6 +391,17 @@ def prepare_darks(job: ImageJob, index: int) -> str:
 _DARK_CACHE: dict[tuple[str, int], NDArray[np.float32]] = {}
 _DARK_CACHE_SIZE = 2
 _DARK_LOCK = threading.Lock()
+
+
+def release_buffers() -> int:
+    """Drop the cached dark planes and every thread's scratch buffers (call when
+    the images are done); returns the bytes released."""
+    from tunespec.core.image import release_scratch
+
+    with _DARK_LOCK:
+        n = sum(d.nbytes for d in _DARK_CACHE.values())
+        _DARK_CACHE.clear()
+    return n + release_scratch()
 
 
 def _dark(job: ImageJob, frame: _Frame) -> NDArray[np.float32]:

@@ -404,13 +404,14 @@ def estimate_images(
 @contextlib.contextmanager
 def _scratch_released() -> Iterator[None]:
     """The local threads' frame and block buffers (about 0.5 GB a thread at full
-    resolution) are dropped when the work ends, so a GUI does not keep them."""
-    from tunespec.core.image import release_scratch
+    resolution) and the cached dark planes are dropped when the work ends, so a
+    GUI does not keep them."""
+    from tunespec.core.image_session import release_buffers
 
     try:
         yield
     finally:
-        release_scratch()
+        release_buffers()
 
 
 def _default_grid() -> Grid:
