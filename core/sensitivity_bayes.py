@@ -699,15 +699,12 @@ def fit_bayes(
 
     Parameters
     ----------
-    wavelength_nm : (n,)
-    L_rep : (n_i, n)
-        Illuminant spectra as reported (exposure-scaled).
-    R : (n_p, n)
-        Reflectances of the usable patches.
+    wavelength_nm, step_nm : (n,), float
+        The grid and its step.
+    L_rep, R : (n_i, n), (n_p, n)
+        Illuminant spectra as reported (exposure-scaled); usable patches' reflectances.
     C, var : (n_p, n_i, 3)
         Responses and their (relative) variances.
-    step_nm
-        Grid step.
     bases
         Per channel the database's principal components (q, n), or ``None`` for no
         database prior.
