@@ -706,14 +706,13 @@ def fit_bayes(
     C, var : (n_p, n_i, 3)
         Responses and their (relative) variances.
     bases
-        Per channel the database's principal components (q, n), or ``None`` for no
-        database prior.
+        Per channel the database's principal components (q, n), or ``None``.
     mode
         :data:`CORRECTION_MODES`: ``"per-led"`` fits every LED's gain and offset,
         ``"common"`` one offset for all (the instrument's wavelength scale),
         ``"none"`` takes the reported spectra as they are.
     sigma_gain, sigma_shift_nm
-        Prior widths of the per-LED corrections (see the module docstring).
+        Prior widths of the per-LED corrections (module docstring).
 
     Returns
     -------
