@@ -29,6 +29,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     _add_match(sub)
     _add_gonio_plan(sub)
     _add_gonio_demo(sub)
+    _add_gonio_run(sub)
 
 
 def _angles(text: str) -> list[float]:
@@ -216,6 +217,115 @@ def cmd_gonio_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_gonio_run(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    from tunespec.app.cli.common import seed_arg
+    from tunespec.app.cli.session_cmds import _resolution
+
+    p = sub.add_parser(
+        "gonio-run",
+        help="a multi-geometry session on devices by spec (CAL1, camera, Zaber)",
+        description="Capture the plan on real devices - the specs of 'tunespec "
+        "capture' for the light and the camera, and a goniometer spec - then process, "
+        "fuse and write gonio.nc and per-geometry CSVs. Needs the sensitivities of "
+        "'tunespec calibrate'. Each LED is measured once with the light's "
+        "spectroradiometer, the mix chosen from those. Killed, it resumes with --resume.",
+    )
+    p.add_argument("--out", type=Path, required=True, help="session folder")
+    p.add_argument("--plan", type=Path, help="plan JSON (gonio-plan or the GUI editor)")
+    p.add_argument(
+        "--light", default="sim", help="sim | cal1:///dev/ttyUSB0 | cal1+socket://H:P"
+    )
+    p.add_argument(
+        "--camera",
+        default=None,
+        help="gphoto2 | gphoto2:usb:BUS,DEV | sim (default: sim with a simulated "
+        "light, gphoto2 otherwise)",
+    )
+    p.add_argument(
+        "--gonio",
+        default="sim",
+        help="sim | zaber:///dev/ttyUSB0 | zaber+socket://HOST:PORT[?axes=...]",
+    )
+    p.add_argument(
+        "--sensitivities",
+        type=Path,
+        help="calibrated sensitivities (tunespec calibrate; needed for a new session)",
+    )
+    p.add_argument("--layout", type=Path, required=True, help="sample target layout")
+    _mix_arg(p, default=None)
+    p.add_argument(
+        "--resume", action="store_true", help="continue the session in --out"
+    )
+    p.add_argument(
+        "--scheduler", help="Dask: threads, processes or tcp://HOST:PORT (default none)"
+    )
+    p.add_argument(
+        "--resolution", type=_resolution, metavar="WxH", help="simulated camera size"
+    )
+    p.add_argument("--seed", type=seed_arg, default=0, help="simulation seed")
+    p.set_defaults(func=cmd_gonio_run, output_dirs=("out",))
+
+
+def _start_plan(args: argparse.Namespace) -> None:
+    """Write ``--plan`` (with ``--mix``) into a new session; check a resumed one."""
+    from tunespec.app.pipeline.gonio import GonioPlan
+
+    started = (args.out / "plan.json").exists()
+    if started and not args.resume:
+        raise InputError(
+            f"{args.out} holds a gonio session already: add --resume to continue it, "
+            "or choose another --out"
+        )
+    if not started:
+        if args.plan is None or args.sensitivities is None:
+            raise InputError("a new gonio-run session needs --plan and --sensitivities")
+        plan = GonioPlan.load(args.plan)
+        args.out.mkdir(parents=True, exist_ok=True)
+        replace(plan, mix=args.mix or plan.mix).save(args.out / "plan.json")
+        return
+    if args.plan is not None:
+        raise InputError("--plan is for a new session; a resumed one keeps its plan")
+    kept = GonioPlan.load(args.out / "plan.json").mix
+    if args.mix is not None and kept != args.mix:
+        raise InputError(
+            f"--mix {args.mix}: the session in {args.out} uses the {kept} mix"
+        )
+
+
+def cmd_gonio_run(args: argparse.Namespace) -> int:
+    """Run ``gonio-run``."""
+    from tunespec.app.cli.common import absolute_sensitivities, progress_bar
+    from tunespec.app.pipeline.gonio_devices import run_gonio_session
+    from tunespec.core.layout import TargetLayout
+    from tunespec.core.spectra import read_spectra_csv
+    from tunespec.devices.protocols import DeviceError
+
+    _start_plan(args)
+    saved = args.out / "calibration.csv"
+    S = (
+        read_spectra_csv(saved, allow_negative=True)
+        if saved.exists()
+        else absolute_sensitivities(args.sensitivities)
+    )
+    try:
+        s = run_gonio_session(
+            args.out, light=args.light, camera=args.camera, gonio=args.gonio,
+            sensitivity=S, layout=TargetLayout.load(args.layout),
+            layout_path=args.layout, resolution=args.resolution, seed=args.seed,
+            scheduler=args.scheduler, progress=progress_bar("gonio session"),
+        )  # fmt: skip
+    except DeviceError as exc:
+        raise type(exc)(
+            f"{exc}; every frame taken is in {args.out}: continue with --resume"
+        ) from exc
+    print(
+        f"{s['n_geometries']} geometries ({s['n_spectral']} spectral, {s['mix']} "
+        f"mix), {s['frames_taken_now']} frames taken now"
+    )
+    print(f"data set -> {args.out / 'gonio.nc'}", file=sys.stderr)
+    return 0
+
+
 def _add_match(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "match-illuminant",
@@ -333,21 +443,14 @@ def cmd_match(args: argparse.Namespace) -> int:
 
 def _measure_leds(spec: str) -> Spectra:
     """Each channel of the light at level 1, as its spectroradiometer reports it."""
-    import numpy as np
-
+    from tunespec.app.pipeline.gonio_devices import measure_led_spectra
     from tunespec.devices.registry import open_light_source
 
     light = open_light_source(spec)
     try:
-        names = [c.name for c in light.channels()]
-        rows = []
-        for j in range(len(names)):
-            light.set_levels(np.eye(len(names))[j])
-            rows.append(light.measure_spd())
-        light.all_off()
+        return measure_led_spectra(light)
     finally:
         light.close()
-    return Spectra(rows[0].wavelength_nm, [r.values[0] for r in rows], tuple(names))
 
 
 def _drive_and_measure(

@@ -134,9 +134,17 @@ def _process_geometry(gdir: Path, index: int, plan: GonioPlan, layout: TargetLay
     step = plan.steps[index]
     rel = HDR_EXPOSURES if step.hdr else (1.0,)
     dark = _load(gdir, DARK, 0)
-    shortest = _load(gdir, MIX, len(rel) - 1) - dark
-    corners, _ = locate_target(shortest[1], layout)
-    rois = _roi_pixels(layout, corners, shortest.shape[1:])
+    # the shortest bracket first (a specular lobe saturates the longer ones), a
+    # longer one where the shortest is too dark to follow the target's sides
+    for k in range(len(rel) - 1, -1, -1):
+        frame = _load(gdir, MIX, k) - dark
+        try:
+            corners, _ = locate_target(frame[1], layout)
+            break
+        except InputError:
+            if k == 0:
+                raise
+    rois = _roi_pixels(layout, corners, frame.shape[1:])
     position = read_json(gdir / "position.json")
     exposures = read_json(gdir / "exposure.json")
     cos_i = math.cos(math.radians(abs(float(position["theta_i"]))))
