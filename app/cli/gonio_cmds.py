@@ -296,21 +296,26 @@ def cmd_gonio_run(args: argparse.Namespace) -> int:
     """Run ``gonio-run``."""
     from tunespec.app.cli.common import absolute_sensitivities, progress_bar
     from tunespec.app.pipeline.gonio_devices import run_gonio_session
+    from tunespec.core.io.export import read_sensitivity_meta
     from tunespec.core.layout import TargetLayout
+    from tunespec.core.sensitivity_bayes import LedCorrection
     from tunespec.core.spectra import read_spectra_csv
     from tunespec.devices.protocols import DeviceError
 
     _start_plan(args)
     saved = args.out / "calibration.csv"
-    S = (
-        read_spectra_csv(saved, allow_negative=True)
-        if saved.exists()
-        else absolute_sensitivities(args.sensitivities)
-    )
+    corr = None
+    if saved.exists():
+        S = read_spectra_csv(saved, allow_negative=True)
+    else:
+        S = absolute_sensitivities(args.sensitivities)
+        side = read_sensitivity_meta(args.sensitivities)
+        if "led_correction" in side:
+            corr = LedCorrection.from_dict(side["led_correction"], side["meta_path"])
     try:
         s = run_gonio_session(
             args.out, light=args.light, camera=args.camera, gonio=args.gonio,
-            sensitivity=S, layout=TargetLayout.load(args.layout),
+            sensitivity=S, layout=TargetLayout.load(args.layout), led_correction=corr,
             layout_path=args.layout, resolution=args.resolution, seed=args.seed,
             scheduler=args.scheduler, progress=progress_bar("gonio session"),
         )  # fmt: skip

@@ -10,6 +10,7 @@ then :func:`tunespec.app.pipeline.gonio_process.process_gonio`); what differs:
 
 - the sensitivities come from a calibration (``tunespec calibrate``, absolute units:
   full scale per W sr^-1 m^-2 nm^-1 nm s), so a frame's exposure is in seconds;
+  they are sampled onto the working grid (5 nm) the session computes on;
 - each LED's spectrum at level 1 is measured once with the light's
   spectroradiometer (``leds_reported.csv``) and the mix chosen from those
   (:func:`tunespec.app.pipeline.gonio_mix.choose_mix`);
@@ -33,7 +34,12 @@ from tunespec.core.io.session import atomic_write_text
 from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import dumps_json, read_json
 from tunespec.core.progress import ProgressFn, StopFn, sub_progress
-from tunespec.core.spectra import Spectra, read_spectra_csv, write_spectra_csv
+from tunespec.core.spectra import (
+    DEFAULT_GRID,
+    Spectra,
+    read_spectra_csv,
+    write_spectra_csv,
+)
 
 __all__ = ["DeviceGonioBench", "measure_led_spectra", "run_gonio_session"]
 
@@ -113,6 +119,7 @@ def run_gonio_session(
     gonio: str,
     sensitivity: Spectra,
     layout: TargetLayout,
+    led_correction: Any = None,
     layout_path: str | Path | None = None,
     resolution: tuple[int, int] | None = None,
     seed: int = 0,
@@ -122,23 +129,44 @@ def run_gonio_session(
 ) -> dict[str, Any]:
     """Capture (or resume) and process the plan in ``out`` on the named devices.
 
-    ``out/plan.json`` must exist (the CLI writes it). The sensitivities are saved
-    with the session (``calibration.csv``) and a resumed session uses those. Returns
+    ``out/plan.json`` must exist (the CLI writes it). The sensitivities and the
+    calibration's per-LED corrections (``led_correction``, a
+    :class:`~tunespec.core.sensitivity_bayes.LedCorrection`: metering errors of the
+    light's spectroradiometer that the calibration separated from the sensitivities)
+    are saved with the session (``calibration.csv``, ``led_correction.json``) and a
+    resumed session uses those; the corrections are applied to every illuminant of
+    Eq. 1, the mix's through its LEDs
+    (:func:`~tunespec.app.pipeline.gonio_process.calibration_correction`). Returns
     the summary written to ``summary.json``: geometries, the goniometer's read-back
     positions, the mix and per geometry the mean single-shot XYZ uncertainty.
     """
     from tunespec.app.pipeline.gonio_output import write_gonio_outputs
-    from tunespec.app.pipeline.gonio_process import process_gonio
+    from tunespec.app.pipeline.gonio_process import (
+        calibration_correction,
+        process_gonio,
+    )
     from tunespec.core.datasets import load_colorchecker_sg
+    from tunespec.core.sensitivity_bayes import LedCorrection
     from tunespec.devices.goniometer_registry import open_goniometer
     from tunespec.devices.registry import open_bench
 
     root = Path(out)
     plan = GonioPlan.load(root / "plan.json")
-    cal = root / "calibration.csv"
+    cal, corr_path = root / "calibration.csv", root / "led_correction.json"
     if not cal.exists():
+        if led_correction is not None:
+            atomic_write_text(corr_path, dumps_json(led_correction.as_dict()))
         write_spectra_csv(sensitivity, cal)
-    S = read_spectra_csv(cal, allow_negative=True)
+    corr = (
+        LedCorrection.from_dict(read_json(corr_path), str(corr_path))
+        if corr_path.exists()
+        else None
+    )
+    # the gonio pipeline integrates Eq. 1 on the working grid (the measured SPDs are
+    # band-averaged onto it): finer calibrations are abridged to it (ASTM E308)
+    S = read_spectra_csv(cal, allow_negative=True).resample(
+        DEFAULT_GRID, source=str(cal)
+    )
     with (
         open_bench(light, camera, layout=layout.with_corners(None),
                    layout_path=layout_path, resolution=resolution, seed=seed,
@@ -150,7 +178,15 @@ def run_gonio_session(
         devices = DeviceGonioBench(bench.light, stage, bench.camera, root / RAW_DIR)
         taken = capture_gonio(plan, root, devices, S, levels, should_stop=should_stop,
                               progress=sub_progress(progress, 0.0, 0.7))  # fmt: skip
-    result = process_gonio(root, S, layout, load_colorchecker_sg(), scheduler=scheduler,
+    correct = (
+        calibration_correction(
+            corr, read_spectra_csv(root / "leds_reported.csv"), levels
+        )
+        if corr is not None
+        else None
+    )
+    result = process_gonio(root, S, layout, load_colorchecker_sg(), correct=correct,
+                           scheduler=scheduler,
                            progress=sub_progress(progress, 0.7, 0.95),
                            should_stop=should_stop)  # fmt: skip
     files = write_gonio_outputs(result, root)

@@ -60,6 +60,11 @@ def _sensitivities(tmp_path):
         S = bench.camera.absolute_sensitivity()
     path = tmp_path / "cal.csv"
     write_spectra_csv(S, path)
+    # the calibration's side file: per-LED corrections (here: none to make)
+    leds = [{"name": f"LED{w}", "gain": 1.0, "shift_nm": 0.0} for w in (410, 420)]
+    (tmp_path / "cal.csv.meta.json").write_text(
+        json.dumps({"led_correction": {"common_shift_nm": 0.0, "leds": leds}})
+    )
     return path
 
 
@@ -111,6 +116,8 @@ def test_gonio_run_on_cal1_and_zaber_emulators_resumes_after_a_drop(
     summary = json.loads((out / "summary.json").read_text())
     theta_r = [p["theta_r"] for p in summary["positions"]]
     assert theta_r == pytest.approx([10, 20, 30, 40], abs=0.01)
+    corr = json.loads((out / "led_correction.json").read_text())  # kept, and used
+    assert [d["name"] for d in corr["leds"]] == ["LED410", "LED420"]
     mix = json.loads((out / "mix.json").read_text())
     assert mix["mix"] == "d50" and mix["measured"]["delta_uv"] < 1e-3
     assert "/1 1 move abs" in " ".join(zaber.received)
