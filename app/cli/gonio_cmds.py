@@ -159,32 +159,11 @@ def _add_gonio_demo(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 def cmd_gonio_demo(args: argparse.Namespace) -> int:
     """Run ``gonio-demo``."""
     from tunespec.app.cli.common import progress_bar
-    from tunespec.app.pipeline.gonio import GonioPlan
     from tunespec.app.pipeline.gonio_bench import run_gonio_demo
     from tunespec.core.limits import valid_number
 
     valid_number(args.geometries, "--geometries", lo=4, hi=14, integer=True)
-    started = (args.out / "plan.json").exists()
-    if started and not args.resume:
-        raise InputError(
-            f"{args.out} holds a gonio session already: add --resume to continue it, "
-            "or choose another --out"
-        )
-    if args.plan is not None:
-        if started:
-            raise InputError(
-                "--plan is for a new session; a resumed one keeps its plan"
-            )
-        args.out.mkdir(parents=True, exist_ok=True)
-        plan = GonioPlan.load(args.plan)
-        plan = replace(plan, mix=args.mix or plan.mix)
-        plan.save(args.out / "plan.json")
-    elif started and args.mix is not None:
-        kept = GonioPlan.load(args.out / "plan.json").mix
-        if kept != args.mix:
-            raise InputError(
-                f"--mix {args.mix}: the session in {args.out} uses the {kept} mix"
-            )
+    _start_plan(args)
     try:
         summary = run_gonio_demo(
             args.out,
@@ -260,14 +239,20 @@ def _add_gonio_run(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> 
         "--scheduler", help="Dask: threads, processes or tcp://HOST:PORT (default none)"
     )
     p.add_argument(
+        "--iso", type=int, default=100, help="camera ISO, as at calibration (100)"
+    )
+    p.add_argument(
         "--resolution", type=_resolution, metavar="WxH", help="simulated camera size"
     )
     p.add_argument("--seed", type=seed_arg, default=0, help="simulation seed")
     p.set_defaults(func=cmd_gonio_run, output_dirs=("out",))
 
 
-def _start_plan(args: argparse.Namespace) -> None:
-    """Write ``--plan`` (with ``--mix``) into a new session; check a resumed one."""
+def _start_plan(args: argparse.Namespace, *, needs: tuple[str, ...] = ()) -> None:
+    """Write ``--plan`` (with ``--mix``) into a new session; check a resumed one.
+
+    ``needs``: options a new session cannot do without (e.g. ``plan``).
+    """
     from tunespec.app.pipeline.gonio import GonioPlan
 
     started = (args.out / "plan.json").exists()
@@ -277,11 +262,13 @@ def _start_plan(args: argparse.Namespace) -> None:
             "or choose another --out"
         )
     if not started:
-        if args.plan is None or args.sensitivities is None:
-            raise InputError("a new gonio-run session needs --plan and --sensitivities")
-        plan = GonioPlan.load(args.plan)
-        args.out.mkdir(parents=True, exist_ok=True)
-        replace(plan, mix=args.mix or plan.mix).save(args.out / "plan.json")
+        missing = [f"--{n}" for n in needs if getattr(args, n) is None]
+        if missing:
+            raise InputError(f"a new session needs {' and '.join(missing)}")
+        if args.plan is not None:
+            plan = GonioPlan.load(args.plan)
+            args.out.mkdir(parents=True, exist_ok=True)
+            replace(plan, mix=args.mix or plan.mix).save(args.out / "plan.json")
         return
     if args.plan is not None:
         raise InputError("--plan is for a new session; a resumed one keeps its plan")
@@ -298,11 +285,13 @@ def cmd_gonio_run(args: argparse.Namespace) -> int:
     from tunespec.app.pipeline.gonio_devices import run_gonio_session
     from tunespec.core.io.export import read_sensitivity_meta
     from tunespec.core.layout import TargetLayout
+    from tunespec.core.limits import valid_number
     from tunespec.core.sensitivity_bayes import LedCorrection
     from tunespec.core.spectra import read_spectra_csv
     from tunespec.devices.protocols import DeviceError
 
-    _start_plan(args)
+    valid_number(args.iso, "--iso", lo=50, hi=102400, integer=True)
+    _start_plan(args, needs=("plan", "sensitivities"))
     saved = args.out / "calibration.csv"
     corr = None
     if saved.exists():
@@ -316,7 +305,8 @@ def cmd_gonio_run(args: argparse.Namespace) -> int:
         s = run_gonio_session(
             args.out, light=args.light, camera=args.camera, gonio=args.gonio,
             sensitivity=S, layout=TargetLayout.load(args.layout), led_correction=corr,
-            layout_path=args.layout, resolution=args.resolution, seed=args.seed,
+            layout_path=args.layout, resolution=args.resolution, iso=args.iso,
+            seed=args.seed,
             scheduler=args.scheduler, progress=progress_bar("gonio session"),
         )  # fmt: skip
     except DeviceError as exc:

@@ -100,11 +100,11 @@ def _setup(
         doc = choose_mix(mix_kind, reported, est.sensitivity, bench.light, root)
         write_spectra_csv(est.sensitivity, cal)
         write_spectra_csv(reported, leds)
-        atomic_write_text(mix, dumps_json({**doc, **led_correction_doc(est)}))
-    return load_setup(root, mix_kind)
+        atomic_write_text(mix, dumps_json({**doc, **_led_correction_doc(est)}))
+    return _load_setup(root, mix_kind)
 
 
-def led_correction_doc(estimate: Any) -> dict[str, Any]:
+def _led_correction_doc(estimate: Any) -> dict[str, Any]:
     """The calibration's per-LED corrections, JSON-ready (kept in ``mix.json``)."""
     c = estimate.led_correction
     return {"led_correction": {
@@ -112,7 +112,7 @@ def led_correction_doc(estimate: Any) -> dict[str, Any]:
         "common_shift_nm": c.common_shift_nm}}  # fmt: skip
 
 
-def load_setup(root: Path, mix_kind: str) -> tuple[Spectra, Any, np.ndarray]:
+def _load_setup(root: Path, mix_kind: str) -> tuple[Spectra, Any, np.ndarray]:
     """Sensitivities, the illuminant correction and the mix levels kept in ``root``."""
     from tunespec.app.pipeline.gonio_process import calibration_correction
     from tunespec.core.errors import InputError

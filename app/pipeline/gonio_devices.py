@@ -40,6 +40,7 @@ from tunespec.core.spectra import (
     read_spectra_csv,
     write_spectra_csv,
 )
+from tunespec.devices.protocols import DeviceProtocolError
 
 __all__ = ["DeviceGonioBench", "measure_led_spectra", "run_gonio_session"]
 
@@ -70,7 +71,7 @@ class DeviceGonioBench:
         self.camera.set_exposure(float(exposure))
         used = float(self.camera.exposure_s)
         if not used > 0:
-            raise ValueError(f"the camera reports an exposure of {used} s")
+            raise DeviceProtocolError(f"the camera reports an exposure of {used} s")
         stem = self.raw_dir / (f"frame_{key:08x}" if key is not None else "frame")
         raw = load_raw(self.camera.capture(stem))
         planes = raw.planes * np.float32(exposure / used)
@@ -122,6 +123,7 @@ def run_gonio_session(
     led_correction: Any = None,
     layout_path: str | Path | None = None,
     resolution: tuple[int, int] | None = None,
+    iso: int = 100,
     seed: int = 0,
     scheduler: str | None = None,
     progress: ProgressFn | None = None,
@@ -174,6 +176,7 @@ def run_gonio_session(
                    ) as bench,
         closing(open_goniometer(gonio)) as stage,
     ):  # fmt: skip
+        bench.camera.set_iso(iso)  # the calibration's: its scale depends on the gain
         levels = _setup(root, bench.light, S, plan.mix)
         devices = DeviceGonioBench(bench.light, stage, bench.camera, root / RAW_DIR)
         taken = capture_gonio(plan, root, devices, S, levels, should_stop=should_stop,
