@@ -291,20 +291,23 @@ def cmd_gonio_run(args: argparse.Namespace) -> int:
     from tunespec.devices.protocols import DeviceError
 
     valid_number(args.iso, "--iso", lo=50, hi=102400, integer=True)
-    _start_plan(args, needs=("plan", "sensitivities"))
-    saved = args.out / "calibration.csv"
-    corr = None
+    layout = TargetLayout.load(args.layout)
+    saved, corr, S = args.out / "calibration.csv", None, None
+    # every input read before the session folder gets its plan
     if saved.exists():
         S = read_spectra_csv(saved, allow_negative=True)
-    else:
+    elif args.sensitivities is not None:
         S = absolute_sensitivities(args.sensitivities)
         side = read_sensitivity_meta(args.sensitivities)
         if "led_correction" in side:
             corr = LedCorrection.from_dict(side["led_correction"], side["meta_path"])
+    _start_plan(args, needs=("plan", "sensitivities"))
+    if S is None:
+        raise InputError(f"{args.out} has no calibration.csv yet: give --sensitivities")
     try:
         s = run_gonio_session(
             args.out, light=args.light, camera=args.camera, gonio=args.gonio,
-            sensitivity=S, layout=TargetLayout.load(args.layout), led_correction=corr,
+            sensitivity=S, layout=layout, led_correction=corr,
             layout_path=args.layout, resolution=args.resolution, iso=args.iso,
             seed=args.seed,
             scheduler=args.scheduler, progress=progress_bar("gonio session"),

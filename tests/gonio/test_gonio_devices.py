@@ -162,3 +162,17 @@ def test_device_frames_are_scaled_to_the_requested_exposure(tmp_path):
     assert np.all(frame[:, 0, 0] == 1.0)
     rest = frame.reshape(3, -1)[:, 1:]
     assert rest == pytest.approx(np.full_like(rest, half * 0.3 / used), rel=1e-6)
+
+
+def test_gonio_run_checks_its_inputs_before_writing_anything(tmp_path, capsys):
+    out = tmp_path / "s"
+    base = ["gonio-run", "--out", str(out), "--layout", str(LAYOUT)]
+    assert main(base) == 2  # a new session: plan and sensitivities needed
+    assert main([*base, "--plan", str(_plan(tmp_path)),
+                 "--sensitivities", str(tmp_path / "none.csv")]) == 2  # fmt: skip
+    assert main([*base, "--iso", "7"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 3
+    assert "needs --plan and --sensitivities" in err[0] and "none.csv" in err[1]
+    assert "--iso" in err[2]
+    assert not out.exists() or not (out / "plan.json").exists()
