@@ -67,7 +67,7 @@ def test_invalid_angle_is_rejected_inline_with_one_clear_message(editor, tmp_pat
     assert editor.plan() is None
     msg = editor.error_label.text()
     assert msg == "Row 4: theta_r = 95 deg outside 0..89.9"
-    assert "\n" not in msg
+    assert "\n" not in msg and editor.summary_label.text() == ""
     bad = editor.table.item(3, COLUMNS.index("theta_r"))
     assert bad.background().color().red() == 255  # the entry is marked
     assert editor.table.item(3, COLUMNS.index("theta_i")).background().style() == (

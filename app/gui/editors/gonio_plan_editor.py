@@ -77,6 +77,7 @@ class GonioPlanEditor(QDialog):
         self.table.horizontalHeader().setSectionResizeMode(
             QHeaderView.ResizeMode.ResizeToContents
         )
+        self.table.horizontalHeader().setStretchLastSection(True)
         self.mix_combo = QComboBox(self)
         self.mix_combo.addItems(list(MIX_KINDS))
         self.mix_combo.setToolTip(
@@ -213,6 +214,7 @@ class GonioPlanEditor(QDialog):
             self._loading = False
         self._plan = plan
         ok = plan is not None
+        self.summary_label.clear()
         if ok:
             self.error_label.clear()
             n_s = sum(s.spectral for s in plan.steps)
