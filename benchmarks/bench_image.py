@@ -22,6 +22,8 @@ CFA DNGs) into ``--work`` (kept for later runs). Then, side by side in one run:
   responses, 61 wavelengths; sorting by bin, one product per bin, unsorting)
   against ``numpy.matmul`` of the same float32 shapes in one product, on this machine (goal: the stage at >= 50 % of the product's
   throughput);
+- **write floor**: writing as many bytes as the outputs hold into a fresh file, with
+  no computing: what the page cache of this machine charges for the outputs alone;
 - **binning error**: binned vs. exact per-pixel solutions (own ``K_e`` per pixel) of
   noisy pixels of the 190 training reflectances, RMS and CIEDE2000.
 """
@@ -94,6 +96,34 @@ print(json.dumps({{"wall_s": wall, "peak_rss_bytes": rss, "user_s": ru.ru_utime,
         [sys.executable, "-c", code], check=True, capture_output=True, text=True
     )
     return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def _output_bytes(out: Path) -> int:
+    """Bytes of the files ``estimate-image`` wrote (cube twice, TIFFs, PNG)."""
+    return sum(p.stat().st_size for p in out.rglob("*") if p.is_file())
+
+
+def _write_floor(folder: Path, n_bytes: int) -> float:
+    """Wall seconds to write ``n_bytes`` of float32 noise into a fresh file in
+    ``folder`` with positioned writes of 64 MB (as the outputs are written): what
+    the outputs cost this machine's page cache alone, without computing them."""
+    import os
+
+    import numpy as np
+
+    chunk = np.random.default_rng(0).random((16 << 20,), dtype=np.float32)
+    view = memoryview(chunk).cast("B")
+    path = folder / "write-floor.tmp"
+    t0 = time.perf_counter()
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC)
+    try:
+        for offset in range(0, n_bytes, view.nbytes):
+            os.pwrite(fd, view[: min(view.nbytes, n_bytes - offset)], offset)
+    finally:
+        os.close(fd)
+    wall = time.perf_counter() - t0
+    path.unlink()
+    return wall
 
 
 def _synthetic_system() -> tuple:
@@ -262,6 +292,12 @@ def main(argv: list[str] | None = None) -> int:
     print(
         f"peak RSS of estimate-image: {peak / 1e6:.0f} MB  (goal < "
         f"{GOAL_PEAK_BYTES / 1e9:.0f} GB: {'met' if peak < GOAL_PEAK_BYTES else 'NOT met'})"
+    )
+    n_out = _output_bytes(work / "images")
+    floor = _write_floor(work, n_out)
+    print(
+        f"writing the outputs' {n_out / 1e9:.2f} GB alone (no computing): {floor:.2f} s "
+        f"= {floor / d:.2f} x the decode"
     )
     w = _wiener_vs_matmul()
     print(

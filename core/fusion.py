@@ -145,6 +145,10 @@ def fuse_patch(
     return FusedSpectra(R, R0, (float(a), float(b)), resid)
 
 
+#: XYZ (white Y = 100) the non-negative correction must reproduce to.
+_XYZ_TOL = 1e-6
+
+
 def _nonnegative(
     R0: NDArray[np.float64],
     B: NDArray[np.float64],
@@ -154,7 +158,9 @@ def _nonnegative(
     """The smallest correction ``B c`` with ``W^T (R0 + B c) = XYZ`` and ``R >= 0``.
 
     A small quadratic programme (SLSQP over the basis coefficients); used when the
-    closed-form correction goes negative (a saturated colour's far end).
+    closed-form correction goes negative (a saturated colour's far end). Where the
+    basis cannot reach ``XYZ`` without going negative, the nearest non-negative
+    spectrum to ``R0`` on the whole grid that reproduces it (SLSQP with bounds).
     """
     from scipy.optimize import minimize
 
@@ -171,4 +177,19 @@ def _nonnegative(
         ],
         options={"maxiter": 200, "ftol": 1e-12},
     )
-    return np.maximum(R0 + Bn @ res.x, 0.0)
+    R = np.maximum(R0 + Bn @ res.x, 0.0)
+    if np.abs(W.T @ R - target).max() <= _XYZ_TOL:
+        return R
+    # the basis cannot reach the XYZ with R >= 0: the nearest non-negative spectrum
+    # on the full grid that does (exists for any XYZ inside the spectral-locus cone)
+    full = minimize(
+        lambda r: float((r - R0) @ (r - R0)),
+        np.maximum(R0, 0.0),
+        jac=lambda r: 2.0 * (r - R0),
+        method="SLSQP",
+        bounds=[(0.0, None)] * R0.size,
+        constraints=[{"type": "eq", "fun": lambda r: (W.T @ r - target) / 100.0,
+                      "jac": lambda r: W.T / 100.0}],
+        options={"maxiter": 500, "ftol": 1e-14},
+    )  # fmt: skip
+    return np.maximum(full.x, 0.0)

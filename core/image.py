@@ -67,12 +67,15 @@ __all__ = [
     "DEFAULT_PHI_BINS",
     "NoiseModel",
     "PixelEstimate",
+    "SensorFigures",
     "WienerBank",
     "block_noise_stats",
     "build_wiener_bank",
     "estimate_pixels",
     "lab_from_xyz",
     "photon_transfer_fit",
+    "release_scratch",
+    "scratch",
     "srgb8_from_xyz_d50",
     "wiener_pixels_exact",
 ]
@@ -197,6 +200,48 @@ class NoiseModel:
         return p * p * a + p * b * c
 
 
+@dataclass(frozen=True)
+class SensorFigures:
+    """A sensor's data-sheet figures; :meth:`model` is its :class:`NoiseModel` once
+    the number of averaged darks is known (from the session).
+
+    Parameters
+    ----------
+    full_well_e
+        Electrons at full scale at the base ISO.
+    read_noise_e
+        Read noise, electrons RMS.
+    iso_gain
+        ISO of the session / base ISO.
+    """
+
+    full_well_e: float
+    read_noise_e: float
+    iso_gain: float = 1.0
+
+    def __post_init__(self) -> None:
+        ok = [math.isfinite(float(v)) for v in (self.full_well_e, self.read_noise_e)]
+        if not (
+            all(ok)
+            and self.full_well_e > 0
+            and self.read_noise_e >= 0
+            and self.iso_gain > 0
+        ):
+            raise InputError(
+                f"sensor figures: full well {self.full_well_e:g} e- (> 0), read noise "
+                f"{self.read_noise_e:g} e- (>= 0), ISO gain {self.iso_gain:g} (> 0)"
+            )
+
+    def model(self, n_darks: int = 1) -> NoiseModel:
+        """The noise model with ``n_darks`` dark frames averaged and subtracted."""
+        return NoiseModel.from_camera(
+            full_well_e=self.full_well_e,
+            read_noise_e=self.read_noise_e,
+            n_darks=n_darks,
+            iso_gain=self.iso_gain,
+        )
+
+
 def block_noise_stats(
     planes: NDArray[np.floating],
     saturated: NDArray[np.bool_] | None = None,
@@ -232,12 +277,15 @@ def block_noise_stats(
     x = planes[:, : hb * block_px, : wb * block_px].reshape(
         3, hb, block_px, wb, block_px
     )
-    blocks = x[:, rows].astype(np.float64)
-    level = blocks.mean(axis=(2, 4)).reshape(3, -1)
+    # float32 (numpy's pairwise sums and two-pass variance keep ~1e-7 relative over
+    # a block's 256 values): float64 copies of the rows cost more in fresh pages
+    # than the statistics themselves
+    blocks = np.asarray(x[:, rows], dtype=np.float32)
+    level = blocks.mean(axis=(2, 4), dtype=np.float64).reshape(3, -1)
     d = np.diff(blocks, axis=4)
     # the variance (not the mean square) of the differences: a gradient of the
     # light field across the block shifts their mean, not their spread
-    var = 0.5 * d.var(axis=(2, 4)).reshape(3, -1)
+    var = 0.5 * d.var(axis=(2, 4), dtype=np.float64).reshape(3, -1)
     keep = np.ones(rows.size * wb, dtype=bool)
     if saturated is not None:
         s = saturated[: hb * block_px, : wb * block_px].reshape(
@@ -520,28 +568,11 @@ def build_wiener_bank(
     from tunespec.core.uncertainty import FLAT_FIELD_RESIDUAL
     from tunespec.core.wiener import _prior_moments
 
-    F = np.asarray(F, dtype=np.float64)
-    P = np.asarray(prior, dtype=np.float64)
-    w = np.asarray(white, dtype=np.float64).ravel()
-    wl = np.asarray(wavelength_nm, dtype=np.float64)
+    F, P, w, wl = _bank_inputs(F, prior, white, wavelength_nm)
     m, n_wl = F.shape
-    if m % 3 or w.size != m or P.ndim != 2 or P.shape[1] != n_wl or wl.size != n_wl:
-        raise InputError(
-            f"Wiener bank: F {F.shape}, prior {P.shape}, white {w.shape} and "
-            f"{wl.size} wavelengths do not fit together"
-        )
-    if not np.all(np.isfinite(w) & (w > 0)):
-        raise InputError("Wiener bank: the white board's levels must be positive")
     flat_residual = FLAT_FIELD_RESIDUAL if flat_residual is None else flat_residual
     mean, K = _prior_moments(P, True)
-    lo, hi = sorted(float(v) for v in phi_range)
-    if not (lo > 0 and math.isfinite(hi)):
-        raise InputError(f"Wiener bank: flat-field factors {phi_range} must be > 0")
-    if hi / lo < 1.01:
-        n_phi = 1
-    phi_edges = np.exp(np.linspace(math.log(lo), math.log(hi) + 1e-9, n_phi + 1))
-    top = 1.25 if level_max is None else float(level_max)
-    level_edges = np.linspace(0.0, math.sqrt(top), n_levels + 1) ** 2
+    level_edges, phi_edges = _bank_edges(phi_range, level_max, n_levels, n_phi)
     channel = np.tile(np.arange(3), m // 3)
     FK = F @ K
     G = FK @ F.T
@@ -558,17 +589,8 @@ def build_wiener_bank(
     rho, phi = bank.centres()
     c_model = rho[:, None] * w[None, :]  # (n_bins, m): c ~= rho w
     Ke = np.maximum(bank.noise_variance(c_model, phi), RIDGE_RELATIVE * scale)
-    n_bins = rho.size
-    A = np.repeat(G[None], n_bins, axis=0)
-    idx = np.arange(m)
-    A[:, idx, idx] += Ke
-    try:
-        sol = np.linalg.solve(A, np.broadcast_to(FK, (n_bins, m, n_wl)))
-    except np.linalg.LinAlgError as exc:
-        raise SingularSystemError(f"F K F^T + K_e is singular: {exc}") from None
+    sol, P_post = _bin_solutions(G, FK, K, Ke)
     W = sol.transpose(0, 2, 1)  # K F^T A^-1 (A, K symmetric)
-    P_post = K[None] - np.einsum("jl,bjk->blk", FK, sol)
-    P_post = 0.5 * (P_post + P_post.transpose(0, 2, 1))
     var_rms = np.maximum(np.einsum("bll->b", P_post) / n_wl, 0.0)
     xyz_cov = T.T[None] @ P_post @ T[None]
     offset = mean[None] - W @ (F @ mean)
@@ -577,8 +599,66 @@ def build_wiener_bank(
         phi_edges, np.ascontiguousarray(sol, dtype=np.float32),
         offset.astype(np.float32), var_rms, xyz_cov,
         T, {"n_levels": n_levels, "n_phi": int(phi_edges.size - 1),
-            "level_max": top, "ridge": RIDGE_RELATIVE * scale},
+            "level_max": float(level_edges[-1]), "ridge": RIDGE_RELATIVE * scale},
     )  # fmt: skip
+
+
+def _bank_inputs(
+    F: ArrayLike, prior: ArrayLike, white: ArrayLike, wavelength_nm: ArrayLike
+) -> tuple[NDArray[np.float64], ...]:
+    """``F``, the prior, the white levels and the wavelengths as float64, checked."""
+    F = np.asarray(F, dtype=np.float64)
+    P = np.asarray(prior, dtype=np.float64)
+    w = np.asarray(white, dtype=np.float64).ravel()
+    wl = np.asarray(wavelength_nm, dtype=np.float64)
+    m, n_wl = F.shape
+    if m % 3 or w.size != m or P.ndim != 2 or P.shape[1] != n_wl or wl.size != n_wl:
+        raise InputError(
+            f"Wiener bank: F {F.shape}, prior {P.shape}, white {w.shape} and "
+            f"{wl.size} wavelengths do not fit together"
+        )
+    if not np.all(np.isfinite(w) & (w > 0)):
+        raise InputError("Wiener bank: the white board's levels must be positive")
+    return F, P, w, wl
+
+
+def _bank_edges(
+    phi_range: tuple[float, float],
+    level_max: float | None,
+    n_levels: int,
+    n_phi: int,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Bin edges of the level (uniform in sqrt) and of ``phi`` (geometric; one bin
+    when the range is within 1 %)."""
+    lo, hi = sorted(float(v) for v in phi_range)
+    if not (lo > 0 and math.isfinite(hi)):
+        raise InputError(f"Wiener bank: flat-field factors {phi_range} must be > 0")
+    if hi / lo < 1.01:
+        n_phi = 1
+    phi_edges = np.exp(np.linspace(math.log(lo), math.log(hi) + 1e-9, n_phi + 1))
+    top = 1.25 if level_max is None else float(level_max)
+    level_edges = np.linspace(0.0, math.sqrt(top), n_levels + 1) ** 2
+    return level_edges, phi_edges
+
+
+def _bin_solutions(
+    G: NDArray[np.float64],
+    FK: NDArray[np.float64],
+    K: NDArray[np.float64],
+    Ke: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Per bin ``(G + diag K_e)^-1 F K`` (n_bins, m, n_wl) and the posterior
+    covariance ``K - K F^T (G + K_e)^-1 F K`` (n_bins, n_wl, n_wl), symmetrised."""
+    n_bins, m = Ke.shape
+    A = np.repeat(G[None], n_bins, axis=0)
+    idx = np.arange(m)
+    A[:, idx, idx] += Ke
+    try:
+        sol = np.linalg.solve(A, np.broadcast_to(FK, (n_bins, *FK.shape)))
+    except np.linalg.LinAlgError as exc:
+        raise SingularSystemError(f"F K F^T + K_e is singular: {exc}") from None
+    P_post = K[None] - np.einsum("jl,bjk->blk", FK, sol)
+    return sol, 0.5 * (P_post + P_post.transpose(0, 2, 1))
 
 
 # -- estimation ------------------------------------------------------------------------
@@ -621,6 +701,7 @@ def estimate_pixels(
     *,
     clip: bool = True,
     exact: bool = False,
+    out: NDArray[np.float32] | None = None,
 ) -> PixelEstimate:
     """Eq. 5 for every pixel: ``r = offset_b + W_b c`` with the pixel's bin ``b``.
 
@@ -639,6 +720,9 @@ def estimate_pixels(
     exact
         Solve every pixel with its own ``K_e`` (:func:`wiener_pixels_exact`) instead
         of its bin's matrix: for measuring the binning error.
+    out : (n, n_wl) float32, optional
+        Where the reflectances go (e.g. a :func:`scratch` buffer); the result's
+        ``reflectance`` is then this array.
 
     Returns
     -------
@@ -668,11 +752,15 @@ def estimate_pixels(
     sat = np.isnan(rho)  # a NaN (clipped) response makes its pixel's level NaN
     bins = np.full(n, -1, dtype=np.int64)
     ok = ~sat if not exact else np.zeros(n, dtype=bool)
+    if out is not None and (
+        out.shape != (n, bank.mean.size) or out.dtype != np.float32
+    ):
+        raise InputError(f"pixels: output {out.shape} is not ({n}, {bank.mean.size})")
+    est = np.empty((n, bank.mean.size), dtype=np.float32) if out is None else out
     if ok.all():
         bins = bank.bins_of_level(rho, phi)
-        est = _apply_bins(bank, c, bins)
+        _apply_bins(bank, c, bins, est)
     else:
-        est = np.empty((n, bank.mean.size), dtype=np.float32)
         if ok.any():
             b = bank.bins_of_level(rho[ok], phi[ok])
             est[ok] = _apply_bins(bank, c[ok], b)
@@ -696,7 +784,10 @@ def estimate_pixels(
 
 
 def _apply_bins(
-    bank: WienerBank, c: NDArray[np.float32], bins: NDArray[np.int64]
+    bank: WienerBank,
+    c: NDArray[np.float32],
+    bins: NDArray[np.int64],
+    out: NDArray[np.float32] | None = None,
 ) -> NDArray[np.float32]:
     """``r = offset_b + c W_b^T`` for every pixel (row), bin by bin.
 
@@ -711,10 +802,10 @@ def _apply_bins(
     # bins are small integers: a stable sort of int16 is numpy's radix sort, O(n)
     order = np.argsort(bins.astype(np.int16), kind="stable")
     counts = np.bincount(bins, minlength=bank.Wt.shape[0])
-    cs = _workspace("sorted_c", (n, m))
+    cs = scratch("sorted_c", (n, m))
     # indices from argsort are in range: "clip" skips numpy's bounds checks (2x)
     np.take(c, order, axis=0, out=cs, mode="clip")
-    es = _workspace("sorted_r", (n, n_wl))
+    es = scratch("sorted_r", (n, n_wl))
     start = 0
     for b in np.flatnonzero(counts):
         sl = slice(start, start + int(counts[b]))
@@ -723,20 +814,41 @@ def _apply_bins(
         es[sl] += bank.offset[b]
     inverse = np.empty_like(order)
     inverse[order] = np.arange(order.size)
-    return np.take(es, inverse, axis=0, mode="clip")
+    return np.take(es, inverse, axis=0, mode="clip", out=out)
 
 
-_THREAD = threading.local()
+_SCRATCH: dict[tuple[int, str], NDArray[Any]] = {}
+_SCRATCH_LOCK = threading.Lock()
 
 
-def _workspace(name: str, shape: tuple[int, int]) -> NDArray[np.float32]:
-    """A float32 scratch array of ``shape`` for this thread, reused across calls."""
-    buf = getattr(_THREAD, name, None)
-    size = shape[0] * shape[1]
+def scratch(name: str, shape: tuple[int, ...], dtype: Any = np.float32) -> NDArray[Any]:
+    """A scratch array of ``shape`` for this thread, reused across calls.
+
+    Large fresh arrays cost a page fault per page on first touch (and the kernel
+    zeroes them), as much as the arithmetic that fills them; a block or frame
+    buffer kept per thread is faulted once. The contents are undefined and the next
+    call with the same ``name`` on this thread overwrites them;
+    :func:`release_scratch` drops the buffers when the work is done.
+    """
+    dt = np.dtype(dtype)
+    size = math.prod(shape)
+    key = (threading.get_ident(), f"{name}:{dt.str}")
+    with _SCRATCH_LOCK:
+        buf = _SCRATCH.get(key)
     if buf is None or buf.size < size:
-        buf = np.empty(size, dtype=np.float32)
-        setattr(_THREAD, name, buf)
+        buf = np.empty(size, dtype=dt)
+        with _SCRATCH_LOCK:
+            _SCRATCH[key] = buf
     return buf[:size].reshape(shape)
+
+
+def release_scratch() -> int:
+    """Forget every thread's :func:`scratch` buffers (arrays still in use stay
+    valid); returns the bytes released to the allocator."""
+    with _SCRATCH_LOCK:
+        n = sum(b.nbytes for b in _SCRATCH.values())
+        _SCRATCH.clear()
+    return n
 
 
 def _bin_variances(

@@ -8,7 +8,8 @@ The stages (each a plain function of picklable arguments, so that
 2. :func:`prepare_channel` - per LED: white and target frames read once
    (:func:`tunespec.core.io.raw.load_raw`, 2 x 2 Bayer superpixels, no
    demosaicing), dark subtracted, exposure brackets merged, flat-fielded with Eq. 2
-   and written as three planes of the response stack ``responses.f32``
+   and written as three planes of the response stack ``responses.f16`` (half
+   precision, :data:`STACK_DTYPE`)
    (``3 n_i`` planes, illuminant-major as Eq. 5's ``c``); clipped cells become NaN.
    The white board ``A_B`` is smoothed (block means, interpolated back
    bilinearly; :func:`flat_block_px`): the light field is smooth at that scale,
@@ -47,6 +48,8 @@ section "Capturing and Processing", Eq. 1, 2, 5 and 6.
 from __future__ import annotations
 
 import math
+import os
+import threading
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from os import PathLike
@@ -61,19 +64,23 @@ from tunespec.core.image import (
     DEFAULT_LEVEL_BINS,
     DEFAULT_PHI_BINS,
     NoiseModel,
+    SensorFigures,
     WienerBank,
     block_noise_stats,
     build_wiener_bank,
     estimate_pixels,
     photon_transfer_fit,
+    scratch,
     srgb8_from_xyz_d50,
 )
 from tunespec.core.io.image_formats import ImageOutputs, pwrite_all
 from tunespec.core.io.raw import load_raw
 from tunespec.core.io.session import Session, find_darks, frames_by_channel
+from tunespec.core.processing import BRACKET_CLIP_LEVEL
 from tunespec.core.spectra import Grid, Spectra
 
 __all__ = [
+    "DARK_MODES",
     "FLAT_BLOCK_PX",
     "PTC_BLOCK_PX",
     "ChannelResult",
@@ -90,8 +97,11 @@ __all__ = [
     "prepare_darks",
     "read_response_rows",
     "rectification_for",
+    "release_buffers",
     "setup_estimation",
+    "smooth_dark",
     "systematic_table",
+    "warm_up",
 ]
 
 #: Largest side of the blocks (plane pixels) the white board is smoothed over
@@ -106,7 +116,12 @@ FLAT_WINDOW_PX = 100
 FLAT_MIN_PRECISION = 0.002
 #: Pixels per block of rows in stage 4 (bounds its memory: about 1 kB per pixel).
 BLOCK_PIXELS = 1 << 18
-RESPONSES = "responses.f32"
+RESPONSES = "responses.f16"
+#: The response stack's type on disk. Half precision rounds a response by at most
+#: 2^-11 of itself (RMS 1.4e-4 relative), 20x below the photon noise of a superpixel
+#: at the full well (1 / sqrt(67000) = 3.9e-3 relative, and more at lower levels):
+#: it adds 0.1 % to the noise variance and halves the bytes written and read.
+STACK_DTYPE = np.dtype("<f2")
 PHI = "phi.f32"
 
 
@@ -193,10 +208,13 @@ def plan_image_job(
     work: str | PathLike[str],
     *,
     channels: Sequence[str] | None = None,
+    dark: str = "pixel",
 ) -> ImageJob:
     """Check that a session is complete and list what the stages read.
 
-    Creates ``work`` and the (sparse) response stack in it.
+    Creates ``work`` and the (sparse) response stack in it. ``dark``: ``"pixel"``
+    subtracts the mean dark frame pixel by pixel, ``"smooth"`` its
+    :func:`smooth_dark` version.
 
     Raises
     ------
@@ -206,6 +224,8 @@ def plan_image_job(
     """
     import rawpy
 
+    if dark not in DARK_MODES:
+        raise InputError(f"dark: expected one of {', '.join(DARK_MODES)}, got {dark!r}")
     frames = session.frames
     whites = frames_by_channel(frames, "white")
     targets = frames_by_channel(frames, "target")
@@ -259,9 +279,12 @@ def plan_image_job(
         str(session.root), session.fingerprint(), tuple(wanted), tuple(w_out),
         tuple(t_out), tuple(dark_frames), tuple(keys), shape, str(work),
         tuple(spd_files), tuple(spd_t),
-        {"n_darks": max(len(d) for d in dark_frames)},
+        {"n_darks": max(len(d) for d in dark_frames), "dark": dark},
     )  # fmt: skip
-    _allocate(job.work_path(RESPONSES), job.n_responses * shape[0] * shape[1] * 4)
+    _allocate(
+        job.work_path(RESPONSES),
+        job.n_responses * shape[0] * shape[1] * STACK_DTYPE.itemsize,
+    )
     return job
 
 
@@ -275,20 +298,79 @@ def _allocate(path: Path, n_bytes: int) -> None:
 
 
 def _planes(
-    job: ImageJob, frame: _Frame
+    job: ImageJob, frame: _Frame, slot: str = ""
 ) -> tuple[NDArray[np.float32], NDArray[np.bool_]]:
+    """A frame's planes and clipped cells; with a ``slot``, the planes are this
+    thread's :func:`~tunespec.core.image.scratch` buffer of that name (a frame is
+    66 MB at full resolution: fresh pages for every frame cost as much as the
+    conversion)."""
     raw = load_raw(frame.path)
+    h, w = job.plane_shape
     if raw.shape != job.plane_shape:
         raise InputError(
             f"a {raw.shape[1] * 2}x{raw.shape[0] * 2} frame in a session of "
-            f"{job.plane_shape[1] * 2}x{job.plane_shape[0] * 2} frames",
+            f"{w * 2}x{h * 2} frames",
             path=frame.path,
         )
-    return raw.planes, raw.saturated
+    out = scratch(f"planes_{slot}", (3, h, w)) if slot else None
+    return raw.planes_in(0, h, 0, w, out=out), raw.saturated
+
+
+#: Side of the box the dark planes are smoothed over with ``dark="smooth"``.
+DARK_SMOOTH_PX = 15
+#: With ``dark="smooth"``, a pixel further than this many robust standard
+#: deviations from the smoothed dark keeps its own dark value (hot pixels, strong
+#: fixed pattern).
+DARK_OUTLIER_SIGMA = 5.0
+DARK_MODES = ("pixel", "smooth")
+
+
+def smooth_dark(plane: NDArray[np.float32]) -> NDArray[np.float32]:
+    """A dark plane without its temporal noise: the :data:`DARK_SMOOTH_PX` box mean,
+    except where the pixel departs from it by more than :data:`DARK_OUTLIER_SIGMA`
+    robust standard deviations (1.4826 x the median absolute departure), which
+    keep their own value.
+
+    Subtracting a dark frame pixel by pixel adds its read noise to every pixel (with
+    one dark frame, the read-noise variance doubles); its smooth level and its hot
+    pixels are what the subtraction is for. The box mean keeps linear gradients
+    (amplifier glow, a warm corner) and removes ``1 - 1/15^2`` of the noise
+    variance; a fixed pattern below the read noise is not corrected (it cannot be
+    told from noise in one frame).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> rng = np.random.default_rng(0)
+    >>> d = (0.01 + 1e-3 * rng.standard_normal((64, 64))).astype(np.float32)
+    >>> d[10, 20] = 0.5  # a hot pixel
+    >>> s = smooth_dark(d)
+    >>> float(s[10, 20]), bool(np.std(s[30:, 30:]) < 2e-4)
+    (0.5, True)
+    """
+    import cv2
+
+    k = DARK_SMOOTH_PX
+    plane = np.ascontiguousarray(plane, dtype=np.float32)
+    box = cv2.blur(plane, (k, k), borderType=cv2.BORDER_REFLECT)
+    dev = plane - box
+    sigma = 1.4826 * float(np.median(np.abs(dev)))
+    far = np.abs(dev) > DARK_OUTLIER_SIGMA * max(sigma, 1e-12)
+    if far.any():
+        # the smooth level around hot pixels without them: the box mean again,
+        # over the other pixels only
+        keep = (~far).astype(np.float32)
+        num = cv2.blur(plane * keep, (k, k), borderType=cv2.BORDER_REFLECT)
+        den = cv2.blur(keep, (k, k), borderType=cv2.BORDER_REFLECT)
+        box = np.where(den > 0, num / np.maximum(den, 1e-6), box)
+        box[far] = plane[far]
+    return box.astype(np.float32, copy=False)
 
 
 def prepare_darks(job: ImageJob, index: int) -> str:
-    """Stage 1: the mean dark planes of ``job.dark_keys[index]``; returns the file."""
+    """Stage 1: the mean dark planes of ``job.dark_keys[index]`` (smoothed by
+    :func:`smooth_dark` when ``job.meta["dark"]`` is ``"smooth"``); returns the
+    file."""
     acc: NDArray[np.float32] | None = None
     frames = job.darks[index]
     for f in frames:
@@ -296,20 +378,46 @@ def prepare_darks(job: ImageJob, index: int) -> str:
         acc = planes if acc is None else acc + planes
     assert acc is not None
     acc *= np.float32(1.0 / len(frames))
+    if job.meta.get("dark") == "smooth":
+        for k in range(3):
+            acc[k] = smooth_dark(acc[k])
     path = job.work_path(f"dark_{index}.f32")
     acc.tofile(path)
     return str(path)
 
 
+#: Mean dark planes kept in memory per process (a session has one or a few
+#: exposures; read once, not once per frame).
+_DARK_CACHE: dict[tuple[str, int], NDArray[np.float32]] = {}
+_DARK_CACHE_SIZE = 2
+_DARK_LOCK = threading.Lock()
+
+
+def release_buffers() -> int:
+    """Drop the cached dark planes and every thread's scratch buffers (call when
+    the images are done); returns the bytes released."""
+    from tunespec.core.image import release_scratch
+
+    with _DARK_LOCK:
+        n = sum(d.nbytes for d in _DARK_CACHE.values())
+        _DARK_CACHE.clear()
+    return n + release_scratch()
+
+
 def _dark(job: ImageJob, frame: _Frame) -> NDArray[np.float32]:
+    """The mean dark planes of ``frame``'s (exposure, ISO), read-only, cached."""
     path = job.work_path(f"dark_{job.dark_index(frame)}.f32")
-    return np.fromfile(path, dtype=np.float32).reshape(3, *job.plane_shape)
-
-
-#: Bracket merging treats a cell above this fraction of full scale as clipped: the
-#: sensor's full well clips the charge before the read noise is added, so a clipped
-#: photosite can read a little under the white level without being flagged.
-BRACKET_CLIP_LEVEL = 0.95
+    key = (str(path), path.stat().st_mtime_ns)
+    with _DARK_LOCK:
+        dark = _DARK_CACHE.get(key)
+    if dark is None:
+        dark = np.fromfile(path, dtype=np.float32).reshape(3, *job.plane_shape)
+        dark.flags.writeable = False
+        with _DARK_LOCK:
+            while len(_DARK_CACHE) >= _DARK_CACHE_SIZE:
+                _DARK_CACHE.pop(next(iter(_DARK_CACHE)))
+            _DARK_CACHE[key] = dark
+    return dark
 
 
 def _merged(
@@ -317,15 +425,18 @@ def _merged(
 ) -> tuple[NDArray[np.float32], NDArray[np.bool_]]:
     """Dark-subtracted planes of a bracket series (longest first), merged: a clipped
     cell takes the next shorter exposure, scaled (as processing's brackets); with
-    brackets, cells above :data:`BRACKET_CLIP_LEVEL` count as clipped."""
-    values, clipped = _planes(job, frames[0])
+    brackets, cells above :data:`BRACKET_CLIP_LEVEL` count as clipped.
+
+    The planes are this thread's scratch buffer ``planes_merged`` (valid until the
+    next call on this thread)."""
+    values, clipped = _planes(job, frames[0], "merged")
     if len(frames) > 1:
         clipped |= values.max(axis=0) > BRACKET_CLIP_LEVEL
     values -= _dark(job, frames[0])
     for f in frames[1:]:
         if not clipped.any():
             break
-        planes, sat = _planes(job, f)
+        planes, sat = _planes(job, f, "bracket")
         sat |= planes.max(axis=0) > BRACKET_CLIP_LEVEL
         use = clipped & ~sat
         planes -= _dark(job, f)
@@ -408,11 +519,16 @@ def prepare_channel(job: ImageJob, j: int) -> ChannelResult:
     del white
     target, t_sat = _merged(job, job.targets[j])
     sat = t_sat | w_sat
+    factor = scratch("flat_factor", (h, w))
     for k in range(3):
-        factor = cv2.resize(factor_grid[k], (w, h), interpolation=cv2.INTER_LINEAR)
+        cv2.resize(factor_grid[k], (w, h), dst=factor, interpolation=cv2.INTER_LINEAR)
         target[k] *= factor  # Eq. 2: A' = mean(A_B) A / A_B
         target[k][sat] = np.nan
-    offset = 3 * j * h * w * 4
+    offset = 3 * j * h * w * STACK_DTYPE.itemsize
+    if target.dtype != STACK_DTYPE:
+        stored = scratch("stack_planes", target.shape, STACK_DTYPE)
+        np.copyto(stored, target, casting="same_kind")
+        target = stored
     pwrite_all(job.work_path(RESPONSES), offset, target)
     return ChannelResult(
         mean_b, level, var, factor_grid[1].astype(np.float32),
@@ -447,15 +563,33 @@ def read_response_rows(
     job: ImageJob, row0: int, row1: int, col0: int = 0, col1: int | None = None
 ) -> NDArray[np.float32]:
     """Responses of plane rows ``row0:row1`` (and columns), (m, rows, cols) float32."""
-    h, w = job.plane_shape
+    w = job.plane_shape[1]
     col1 = w if col1 is None else col1
-    m = job.n_responses
-    out = np.empty((m, row1 - row0, w), dtype=np.float32)
-    with open(job.work_path(RESPONSES), "rb") as fh:
-        for k in range(m):
-            fh.seek((k * h + row0) * w * 4)
-            fh.readinto(memoryview(out[k]).cast("B"))
+    out = _read_stack_rows(job, row0, row1).astype(np.float32)
     return out[:, :, col0:col1] if (col0, col1) != (0, w) else out
+
+
+def _read_stack_rows(job: ImageJob, row0: int, row1: int) -> NDArray[Any]:
+    """Rows ``row0:row1`` of every plane of the stack as stored, (m, rows, w), in
+    this thread's scratch buffer ``stack_rows`` (positioned reads)."""
+    h, w = job.plane_shape
+    m = job.n_responses
+    stored = scratch("stack_rows", (m, row1 - row0, w), STACK_DTYPE)
+    size = STACK_DTYPE.itemsize
+    path = job.work_path(RESPONSES)
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        for k in range(m):
+            view = memoryview(stored[k]).cast("B")
+            done = 0
+            while done < view.nbytes:
+                got = os.preadv(fd, [view[done:]], ((k * h + row0) * w) * size + done)
+                if got <= 0:
+                    raise InputError("the response stack is truncated", path=path)
+                done += got
+    finally:
+        os.close(fd)
+    return stored
 
 
 def _read_phi(job: ImageJob, row0: int, row1: int) -> NDArray[np.float32]:
@@ -496,7 +630,7 @@ def setup_estimation(
     prior: Spectra,
     grid: Grid,
     *,
-    noise: NoiseModel | None = None,
+    noise: NoiseModel | SensorFigures | None = None,
     n_levels: int = DEFAULT_LEVEL_BINS,
     n_phi: int = DEFAULT_PHI_BINS,
 ) -> WienerBank:
@@ -515,7 +649,8 @@ def setup_estimation(
     prior
         Prior reflectances on ``grid``, the estimation grid.
     noise
-        The sensor's noise model; default: fitted to the white frames
+        The sensor's noise model, or its figures (the session's averaged darks
+        complete the model); default: fitted to the white frames
         (:func:`tunespec.core.image.photon_transfer_fit`).
 
     Returns
@@ -525,7 +660,12 @@ def setup_estimation(
     """
     import cv2
 
-    if noise is None:
+    if isinstance(noise, SensorFigures):
+        n_darks = int(job.meta.get("n_darks", 1))
+        if job.meta.get("dark") == "smooth":  # the box mean's noise is negligible
+            n_darks *= DARK_SMOOTH_PX**2
+        noise = noise.model(n_darks)
+    elif noise is None:
         noise = photon_transfer_fit(
             np.concatenate([r.ptc_level for r in results], axis=1),
             np.concatenate([r.ptc_var for r in results], axis=1),
@@ -546,6 +686,18 @@ def setup_estimation(
     )  # fmt: skip
     bank.params["noise_source"] = noise.source
     return bank
+
+
+def warm_up(wavelength_nm: NDArray[np.float64]) -> None:
+    """Import what :func:`setup_estimation` and :func:`systematic_table` use and
+    compute the D50 weights of the grid (cached per process): run as a task beside
+    the LEDs' (:func:`prepare_channel`), so that the two serial stages between the
+    LEDs and the blocks do not wait for it (2 s of colour-science and SciPy imports
+    and weight probing at first use)."""
+    from tunespec.core import sensitivity, uncertainty, wiener  # noqa: F401
+    from tunespec.core.colorimetry import astm_e308_weights_d50
+
+    astm_e308_weights_d50(np.asarray(wavelength_nm, dtype=np.float64))
 
 
 def _corrected_for(
@@ -597,16 +749,30 @@ def estimate_block(
     (rows, cols, 3) uint8
         The sRGB preview of the block.
     """
+    import cv2
+
     if rectification is None:
-        planes = read_response_rows(job, row0, row1)
+        planes = _read_stack_rows(job, row0, row1)
+        if planes.dtype == np.float16:  # transposed as the bits they are
+            planes = planes.view(np.uint16)
         phi = _read_phi(job, row0, row1)
     else:
         planes, phi = _rectified(job, rectification, row0, row1)
     m, r, cols = planes.shape
-    # pixels as rows (band-interleaved by pixel, as the outputs)
-    c = np.ascontiguousarray(planes.reshape(m, r * cols).T)
-    del planes
-    est = estimate_pixels(bank, c, phi.reshape(-1), clip=clip)
+    # pixels as rows (band-interleaved by pixel, as the outputs): OpenCV's blocked
+    # transpose (of the half floats' bits as stored) into this thread's buffers,
+    # no fresh pages per block
+    t = scratch("block_pixels_t", (r * cols, m), planes.dtype)
+    cv2.transpose(planes.reshape(m, r * cols), dst=t)
+    c = t
+    if t.dtype != np.float32:
+        c = scratch("block_pixels", (r * cols, m))
+        np.copyto(c, t.view(STACK_DTYPE))
+    del planes, t
+    est = estimate_pixels(
+        bank, c, phi.reshape(-1), clip=clip,
+        out=scratch("block_reflectance", (r * cols, bank.mean.size)),
+    )  # fmt: skip
     del c
     unc = np.stack([est.u_lab_l, est.u_rms], axis=1)
     if systematic is not None:

@@ -70,6 +70,7 @@ from tunespec.core.responses import Responses, write_responses_csv
 from tunespec.core.spectra import Spectra, write_spectra_csv
 
 __all__ = [
+    "BRACKET_CLIP_LEVEL",
     "FLAT_WINDOW_PX",
     "SATURATION_TOLERANCE",
     "CornerDetection",
@@ -306,18 +307,35 @@ class _Pixels:
     saturated: NDArray[np.bool_]  # (n_total,)
 
 
+#: Bracket merging treats a cell above this fraction of full scale as clipped: the
+#: sensor's full well clips the charge before the read noise is added, so a clipped
+#: photosite can read a little under the white level without being flagged.
+BRACKET_CLIP_LEVEL = 0.95
+
+
+def _bracket_clipped(frame: _Pixels, n_brackets: int) -> NDArray[np.bool_]:
+    """Clipped pixels of one bracket: flagged by the white level or, when there are
+    shorter brackets to take over, above :data:`BRACKET_CLIP_LEVEL`."""
+    clipped = frame.saturated.copy()
+    if n_brackets > 1:
+        clipped |= frame.values.max(axis=0) > BRACKET_CLIP_LEVEL
+    return clipped
+
+
 def _merge_brackets(
     frames: Sequence[_Pixels], darks: Sequence[_Pixels], exposures_s: Sequence[float]
 ) -> _Pixels:
     """Dark-subtract and merge exposure brackets (longest first) in the linear domain.
 
     Each pixel takes the longest exposure in which it is not clipped, scaled to the
-    reference (first) exposure; a pixel clipped in every bracket stays flagged.
+    reference (first) exposure; a pixel clipped in every bracket stays flagged. With
+    brackets, a pixel above :data:`BRACKET_CLIP_LEVEL` of full scale (before dark
+    subtraction) counts as clipped.
     """
     values = frames[0].values - darks[0].values
-    clipped = frames[0].saturated.copy()
+    clipped = _bracket_clipped(frames[0], len(frames))
     for f, d, t in zip(frames[1:], darks[1:], exposures_s[1:], strict=True):
-        use = clipped & ~f.saturated
+        use = clipped & ~_bracket_clipped(f, len(frames))
         if use.any():
             scale = np.float32(exposures_s[0] / t)
             values[:, use] = (f.values[:, use] - d.values[:, use]) * scale

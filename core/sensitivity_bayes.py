@@ -699,24 +699,20 @@ def fit_bayes(
 
     Parameters
     ----------
-    wavelength_nm : (n,)
-    L_rep : (n_i, n)
-        Illuminant spectra as reported (exposure-scaled).
-    R : (n_p, n)
-        Reflectances of the usable patches.
+    wavelength_nm, step_nm : (n,), float
+        The grid and its step.
+    L_rep, R : (n_i, n), (n_p, n)
+        Illuminant spectra as reported (exposure-scaled); usable patches' reflectances.
     C, var : (n_p, n_i, 3)
         Responses and their (relative) variances.
-    step_nm
-        Grid step.
     bases
-        Per channel the database's principal components (q, n), or ``None`` for no
-        database prior.
+        Per channel the database's principal components (q, n), or ``None``.
     mode
         :data:`CORRECTION_MODES`: ``"per-led"`` fits every LED's gain and offset,
         ``"common"`` one offset for all (the instrument's wavelength scale),
         ``"none"`` takes the reported spectra as they are.
     sigma_gain, sigma_shift_nm
-        Prior widths of the per-LED corrections (see the module docstring).
+        Prior widths of the per-LED corrections (module docstring).
 
     Returns
     -------

@@ -370,13 +370,16 @@ class CameraMix:
 
     ``levels`` (n_led,) in [0, 1]; ``camera_rms_deab``: the prior's RMS CIELAB error of
     the camera's best transform under the mix (noise-free); ``metamerism_de00``: mean CIEDE2000 of the
-    reflectance set under the mix vs D50; ``delta_uv`` against D50.
+    reflectance set under the mix vs D50; ``delta_uv`` against D50;
+    ``start_camera_rms_deab``: the camera's error under the start levels (the plain
+    D50 match), for comparison.
     """
 
     levels: NDArray[np.float64]
     camera_rms_deab: float
     metamerism_de00: float
     delta_uv: float
+    start_camera_rms_deab: float = math.nan
 
 
 def _camera_residual(
@@ -464,4 +467,5 @@ def optimise_mix_for_camera(
     if not feasible or camera(x) > camera(x0):
         x = x0
     duv = float(np.hypot(*(uv_prime(x @ Aw) - uv_t)))
-    return CameraMix(x / x.max(), math.sqrt(camera(x)), metamerism(x), duv)
+    return CameraMix(x / x.max(), math.sqrt(camera(x)), metamerism(x), duv,
+                     math.sqrt(camera(x0)))  # fmt: skip

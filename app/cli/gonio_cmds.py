@@ -14,6 +14,7 @@ import argparse
 import sys
 import threading
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from typing import TextIO
 
@@ -29,6 +30,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     _add_match(sub)
     _add_gonio_plan(sub)
     _add_gonio_demo(sub)
+    _add_gonio_run(sub)
 
 
 def _angles(text: str) -> list[float]:
@@ -38,6 +40,17 @@ def _angles(text: str) -> list[float]:
         raise argparse.ArgumentTypeError(
             f"expected comma-separated angles in degrees, got {text!r}"
         ) from None
+
+
+def _mix_arg(p: argparse.ArgumentParser, default: str | None = "d50") -> None:
+    p.add_argument(
+        "--mix",
+        choices=("d50", "camera"),
+        default=default,
+        help="single-shot LED mix: d50 (the plain D50 match, default) or camera "
+        "(that match tuned for the calibrated camera, D50 chromaticity and CIE 51.2 "
+        "category B kept)",
+    )
 
 
 def _add_gonio_plan(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -69,6 +82,7 @@ def _add_gonio_plan(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         "--spectral", type=_angles, default=[0, 20, 45], help="full-capture theta_r"
     )
     p.add_argument("--hdr-from", type=float, default=25.0, help="HDR from this theta_r")
+    _mix_arg(p)
     p.set_defaults(func=cmd_gonio_plan, output_files=("output",))
 
 
@@ -95,7 +109,7 @@ def cmd_gonio_plan(args: argparse.Namespace) -> int:
         )
         for t, ph in views
     )
-    plan = GonioPlan(steps)
+    plan = GonioPlan(steps, mix=args.mix)
     plan.save(args.output)
     n_s = sum(s.spectral for s in steps)
     print(f"{len(steps)} geometries ({n_s} spectral) -> {args.output}")
@@ -122,6 +136,7 @@ def _add_gonio_demo(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         help="geometries of the default plan (4-14)",
     )
     p.add_argument("--plan", type=Path, help="a plan JSON instead of the default plan")
+    _mix_arg(p, default=None)
     p.add_argument("--seed", type=seed_arg, default=0, help="bench seed (default 0)")
     p.add_argument(
         "--resume",
@@ -145,28 +160,16 @@ def _add_gonio_demo(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 def cmd_gonio_demo(args: argparse.Namespace) -> int:
     """Run ``gonio-demo``."""
     from tunespec.app.cli.common import progress_bar
-    from tunespec.app.pipeline.gonio import GonioPlan
     from tunespec.app.pipeline.gonio_bench import run_gonio_demo
     from tunespec.core.limits import valid_number
 
     valid_number(args.geometries, "--geometries", lo=4, hi=14, integer=True)
-    started = (args.out / "plan.json").exists()
-    if started and not args.resume:
-        raise InputError(
-            f"{args.out} holds a gonio session already: add --resume to continue it, "
-            "or choose another --out"
-        )
-    if args.plan is not None:
-        if started:
-            raise InputError(
-                "--plan is for a new session; a resumed one keeps its plan"
-            )
-        args.out.mkdir(parents=True, exist_ok=True)
-        GonioPlan.load(args.plan).save(args.out / "plan.json")
+    _start_plan(args)
     try:
         summary = run_gonio_demo(
             args.out,
             n_geometries=args.geometries,
+            mix=args.mix or "d50",
             seed=args.seed,
             fail_after_moves=args.fail_after_moves,
             scheduler=args.scheduler,
@@ -186,7 +189,137 @@ def cmd_gonio_demo(args: argparse.Namespace) -> int:
         f"fused {summary['spectral_rms_fused']:.4f} "
         f"({summary['rms_ratio_fused_to_full']:.2f}x); D50 dE00 fused mean "
         f"{summary['de00_fused_mean']:.3f} (max {summary['de00_fused_max']:.2f}), "
-        f"full captures {summary['de00_full_captures_mean']:.3f}"
+        f"full captures {summary['de00_full_captures_mean']:.3f}; single shot "
+        f"({summary['mix']} mix) at the single-shot-only geometries "
+        f"{summary['de00_single_shot_fused_mean']:.3f}"
+    )
+    print(f"data set -> {args.out / 'gonio.nc'}", file=sys.stderr)
+    return 0
+
+
+def _add_gonio_run(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    from tunespec.app.cli.common import seed_arg
+    from tunespec.app.cli.session_cmds import _resolution
+
+    p = sub.add_parser(
+        "gonio-run",
+        help="a multi-geometry session on devices by spec (CAL1, camera, Zaber)",
+        description="Capture the plan on real devices - the specs of 'tunespec "
+        "capture' for the light and the camera, and a goniometer spec - then process, "
+        "fuse and write gonio.nc and per-geometry CSVs. Needs the sensitivities of "
+        "'tunespec calibrate'. Each LED is measured once with the light's "
+        "spectroradiometer, the mix chosen from those. Killed, it resumes with --resume.",
+    )
+    p.add_argument("--out", type=Path, required=True, help="session folder")
+    p.add_argument("--plan", type=Path, help="plan JSON (gonio-plan or the GUI editor)")
+    p.add_argument(
+        "--light", default="sim", help="sim | cal1:///dev/ttyUSB0 | cal1+socket://H:P"
+    )
+    p.add_argument(
+        "--camera",
+        default=None,
+        help="gphoto2 | gphoto2:usb:BUS,DEV | sim (default: sim with a simulated "
+        "light, gphoto2 otherwise)",
+    )
+    p.add_argument(
+        "--gonio",
+        default="sim",
+        help="sim | zaber:///dev/ttyUSB0 | zaber+socket://HOST:PORT[?axes=...]",
+    )
+    p.add_argument(
+        "--sensitivities",
+        type=Path,
+        help="calibrated sensitivities (tunespec calibrate; needed for a new session)",
+    )
+    p.add_argument("--layout", type=Path, required=True, help="sample target layout")
+    _mix_arg(p, default=None)
+    p.add_argument(
+        "--resume", action="store_true", help="continue the session in --out"
+    )
+    p.add_argument(
+        "--scheduler", help="Dask: threads, processes or tcp://HOST:PORT (default none)"
+    )
+    p.add_argument(
+        "--iso", type=int, default=100, help="camera ISO, as at calibration (100)"
+    )
+    p.add_argument(
+        "--resolution", type=_resolution, metavar="WxH", help="simulated camera size"
+    )
+    p.add_argument("--seed", type=seed_arg, default=0, help="simulation seed")
+    p.set_defaults(func=cmd_gonio_run, output_dirs=("out",))
+
+
+def _start_plan(args: argparse.Namespace, *, needs: tuple[str, ...] = ()) -> None:
+    """Write ``--plan`` (with ``--mix``) into a new session; check a resumed one.
+
+    ``needs``: options a new session cannot do without (e.g. ``plan``).
+    """
+    from tunespec.app.pipeline.gonio import GonioPlan
+
+    started = (args.out / "plan.json").exists()
+    if started and not args.resume:
+        raise InputError(
+            f"{args.out} holds a gonio session already: add --resume to continue it, "
+            "or choose another --out"
+        )
+    if not started:
+        missing = [f"--{n}" for n in needs if getattr(args, n) is None]
+        if missing:
+            raise InputError(f"a new session needs {' and '.join(missing)}")
+        if args.plan is not None:
+            plan = GonioPlan.load(args.plan)
+            args.out.mkdir(parents=True, exist_ok=True)
+            replace(plan, mix=args.mix or plan.mix).save(args.out / "plan.json")
+        return
+    if args.plan is not None:
+        raise InputError("--plan is for a new session; a resumed one keeps its plan")
+    kept = GonioPlan.load(args.out / "plan.json").mix
+    if args.mix is not None and kept != args.mix:
+        raise InputError(
+            f"--mix {args.mix}: the session in {args.out} uses the {kept} mix"
+        )
+
+
+def cmd_gonio_run(args: argparse.Namespace) -> int:
+    """Run ``gonio-run``."""
+    from tunespec.app.cli.common import absolute_sensitivities, progress_bar
+    from tunespec.app.pipeline.gonio_devices import run_gonio_session
+    from tunespec.core.io.export import read_sensitivity_meta
+    from tunespec.core.layout import TargetLayout
+    from tunespec.core.limits import valid_number
+    from tunespec.core.sensitivity_bayes import LedCorrection
+    from tunespec.core.spectra import read_spectra_csv
+    from tunespec.devices.protocols import DeviceError
+
+    valid_number(args.iso, "--iso", lo=50, hi=102400, integer=True)
+    layout = TargetLayout.load(args.layout)
+    saved, corr, S = args.out / "calibration.csv", None, None
+    # every input read before the session folder gets its plan
+    if saved.exists():
+        S = read_spectra_csv(saved, allow_negative=True)
+    elif args.sensitivities is not None:
+        S = absolute_sensitivities(args.sensitivities)
+        side = read_sensitivity_meta(args.sensitivities)
+        if "led_correction" in side:
+            corr = LedCorrection.from_dict(side["led_correction"], side["meta_path"])
+    _start_plan(args, needs=("plan", "sensitivities"))
+    if S is None:
+        raise InputError(f"{args.out} has no calibration.csv yet: give --sensitivities")
+    try:
+        s = run_gonio_session(
+            args.out, light=args.light, camera=args.camera, gonio=args.gonio,
+            sensitivity=S, layout=layout, led_correction=corr,
+            layout_path=args.layout, resolution=args.resolution, iso=args.iso,
+            seed=args.seed,
+            scheduler=args.scheduler, progress=progress_bar("gonio session"),
+        )  # fmt: skip
+    except DeviceError as exc:
+        raise type(exc)(
+            f"{exc}; every frame taken is in {args.out}: continue with --resume"
+        ) from exc
+    print(
+        f"{s['n_geometries']} geometries ({s['n_spectral']} spectral, {s['mix']} "
+        f"mix), {s['frames_taken_now']} frames taken now"
     )
     print(f"data set -> {args.out / 'gonio.nc'}", file=sys.stderr)
     return 0
@@ -309,21 +442,14 @@ def cmd_match(args: argparse.Namespace) -> int:
 
 def _measure_leds(spec: str) -> Spectra:
     """Each channel of the light at level 1, as its spectroradiometer reports it."""
-    import numpy as np
-
+    from tunespec.app.pipeline.gonio_devices import measure_led_spectra
     from tunespec.devices.registry import open_light_source
 
     light = open_light_source(spec)
     try:
-        names = [c.name for c in light.channels()]
-        rows = []
-        for j in range(len(names)):
-            light.set_levels(np.eye(len(names))[j])
-            rows.append(light.measure_spd())
-        light.all_off()
+        return measure_led_spectra(light)
     finally:
         light.close()
-    return Spectra(rows[0].wavelength_nm, [r.values[0] for r in rows], tuple(names))
 
 
 def _drive_and_measure(

@@ -64,16 +64,84 @@ def _common(p: argparse.ArgumentParser) -> None:
         help="a dask.distributed scheduler (tcp://host:8786); default: local threads",
     )
     p.add_argument("--no-clip", action="store_true", help="do not clip to [0, 1]")
+    p.add_argument(
+        "--noise-model",
+        type=noise_model_arg,
+        default=None,
+        metavar="MODEL",
+        help="the camera's photon + read noise: 'photon-transfer' (default: fitted "
+        "to the session's white frames) or 'camera:FULL_WELL_E,READ_NOISE_E[,"
+        "ISO_GAIN]' (the sensor's figures, e.g. camera:67000,30; ISO_GAIN = session "
+        "ISO / base ISO)",
+    )
+    p.add_argument(
+        "--dark",
+        choices=("pixel", "smooth"),
+        default="pixel",
+        help="'pixel' (default): subtract the mean dark frame pixel by pixel; "
+        "'smooth': its 15 px box mean, hot pixels kept, which takes the dark "
+        "frame's read noise out of every pixel (with one dark frame: a third of "
+        "the per-pixel dE00 on the simulated bench)",
+    )
+    p.add_argument(
+        "--level-bins",
+        type=int,
+        default=None,
+        metavar="N",
+        help="Wiener matrices per signal level (default 32; see tunespec.core.image)",
+    )
+    p.add_argument(
+        "--phi-bins",
+        type=int,
+        default=None,
+        metavar="N",
+        help="Wiener matrices per flat-field factor (default 4)",
+    )
     add_grid_option(p)
     add_output_options(p)
     p.set_defaults(grid=None)  # None: the pipeline's estimation grid, 400:700:5
+
+
+def noise_model_arg(text: str) -> object:
+    """argparse type for ``--noise-model``: ``photon-transfer`` (None: fitted) or
+    ``camera:FULL_WELL_E,READ_NOISE_E[,ISO_GAIN]`` (:class:`SensorFigures`)."""
+    from tunespec.core.errors import TuneSpecError
+    from tunespec.core.image import SensorFigures
+
+    if text == "photon-transfer":
+        return None
+    kind, _, figures = text.partition(":")
+    try:
+        values = [float(v) for v in figures.split(",")]
+        if kind != "camera" or len(values) not in (2, 3):
+            raise ValueError
+        return SensorFigures(*values)
+    except TuneSpecError as exc:  # before ValueError: InputError is one
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected 'photon-transfer' or 'camera:FULL_WELL_E,READ_NOISE_E"
+            f"[,ISO_GAIN]' (e.g. camera:67000,30), got {text!r}"
+        ) from None
 
 
 def _settings(args: argparse.Namespace) -> object:
     from tunespec.app.pipeline.image import ImageSettings
 
     grid: Grid | None = args.grid
-    return ImageSettings(grid=grid, rectify=args.rectify, clip=not args.no_clip)
+    bins = {
+        k: v
+        for k, v in (("n_levels", args.level_bins), ("n_phi", args.phi_bins))
+        if v is not None
+    }
+    return ImageSettings(
+        grid=grid,
+        rectify=args.rectify,
+        clip=not args.no_clip,
+        noise=args.noise_model,
+        dark=args.dark,
+        **bins,
+    )
 
 
 def cmd_estimate_image(args: argparse.Namespace) -> int:

@@ -187,6 +187,8 @@ class MainWindow(QMainWindow):
         edit_menu = self.menuBar().addMenu("&Edit")
         edit_menu.addAction(self.layout_editor.undo_action)
         edit_menu.addAction(self.layout_editor.redo_action)
+        self.gonio_plan_action = QAction("&Gonio plan…", self)
+        edit_menu.addAction(self.gonio_plan_action)
         dev_menu = self.menuBar().addMenu("&Devices")
         self.connect_sim_action = QAction("Connect the &simulated bench", self)
         self.all_off_action = QAction(
@@ -207,6 +209,7 @@ class MainWindow(QMainWindow):
         self.connect_sim_action.triggered.connect(self._on_connect_sim_action_triggered)
         self.all_off_action.triggered.connect(self._on_all_off_action_triggered)
         about.triggered.connect(self._on_about_action_triggered)
+        self.gonio_plan_action.triggered.connect(self._on_gonio_plan_action_triggered)
 
     # -- settings ---------------------------------------------------------------------
     def _restore_settings(self) -> None:
@@ -252,6 +255,16 @@ class MainWindow(QMainWindow):
     def _on_all_off_action_triggered(self) -> None:
         self.wizard_panel.abort()
         self.controller.all_off()
+
+    @Slot()
+    def _on_gonio_plan_action_triggered(self) -> None:
+        """The gonio plan editor (issue 15), a non-modal dialog kept by the window."""
+        from tunespec.app.gui.editors.gonio_plan_editor import GonioPlanEditor
+
+        if getattr(self, "gonio_plan_editor", None) is None:
+            self.gonio_plan_editor = GonioPlanEditor(parent=self)
+        self.gonio_plan_editor.show()
+        self.gonio_plan_editor.raise_()
 
     @Slot()
     def _on_about_action_triggered(self) -> None:

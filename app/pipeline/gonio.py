@@ -13,7 +13,10 @@ Folder layout (every file written atomically; a frame exists completely or not a
 all)::
 
     plan.json                 the plan (geometries, which are spectral / HDR)
-    mix.json                  the LED levels of the D50 mix and their match metrics
+    mix.json                  the LED levels of the session's mix (plain D50 match or
+                              camera-tuned, the plan's ``mix``), the D50 match's
+                              metrics, the spectrum the light reported at those levels
+                              and its Delta u'v', CIE Ra and TM-30 Rf
     gNN_<label>/position.json the goniometer's read-back at that geometry
     gNN_<label>/spd_<illuminant>.csv   the light's measured SPD
     gNN_<label>/exposure.json base exposure per illuminant
@@ -46,6 +49,7 @@ from tunespec.devices.goniometer import ANGLE_AXES, Geometry
 
 __all__ = [
     "HDR_EXPOSURES",
+    "MIX_KINDS",
     "GeometryStep",
     "GonioPlan",
     "capture_gonio",
@@ -59,6 +63,12 @@ HDR_EXPOSURES = (1.0, 1.0 / 8.0, 1.0 / 64.0)
 WHITE_TARGET = 0.8
 MIX = "mix"
 DARK = "dark"
+#: The single-shot mix a plan may choose: ``d50`` the plain D50 match for the eye
+#: (:func:`tunespec.core.illuminant_match.match_illuminant`), ``camera`` that match
+#: re-optimised for the calibrated camera with D50's chromaticity and CIE 51.2
+#: category B metamerism kept (:func:`tunespec.core.single_shot.
+#: optimise_mix_for_camera`).
+MIX_KINDS = ("d50", "camera")
 
 
 @dataclass(frozen=True)
@@ -75,14 +85,20 @@ class GeometryStep:
 
 @dataclass(frozen=True)
 class GonioPlan:
-    """The geometry list of a session, and the LED channels of the spectral captures."""
+    """The geometry list of a session, the LED channels of the spectral captures and
+    the single-shot mix (one of :data:`MIX_KINDS`)."""
 
     steps: tuple[GeometryStep, ...]
     leds: tuple[str, ...] = field(default=())
+    mix: str = "d50"
 
     def __post_init__(self) -> None:
         if not self.steps:
             raise InputError("a gonio plan needs at least one geometry")
+        if self.mix not in MIX_KINDS:
+            raise InputError(
+                f"mix: expected one of {', '.join(MIX_KINDS)}, got {self.mix!r}"
+            )
         seen = set()
         for s in self.steps:
             if s.geometry in seen:
@@ -99,6 +115,7 @@ class GonioPlan:
             "version": 1,
             "geometries": [s.to_dict() for s in self.steps],
             "leds": list(self.leds),
+            "mix": self.mix,
         }
 
     @classmethod
@@ -135,7 +152,12 @@ class GonioPlan:
         leds = doc.get("leds", [])
         if not isinstance(leds, list) or not all(isinstance(n, str) for n in leds):
             raise InputError("leds: expected a list of channel names", path=source)
-        return cls(tuple(steps), tuple(leds))
+        mix = doc.get("mix", "d50")
+        if mix not in MIX_KINDS:
+            raise InputError(
+                f"mix: expected one of {', '.join(MIX_KINDS)}, got {mix!r}", path=source
+            )
+        return cls(tuple(steps), tuple(leds), mix)
 
     def save(self, path: str | Path) -> None:
         atomic_write_text(path, dumps_json(self.to_dict()))
@@ -145,7 +167,9 @@ class GonioPlan:
         return cls.from_dict(read_json(path), source=str(path))
 
 
-def default_plan(n_geometries: int = 14, theta_i: float = 45.0) -> GonioPlan:
+def default_plan(
+    n_geometries: int = 14, theta_i: float = 45.0, mix: str = "d50"
+) -> GonioPlan:
     """An in-plane scan through the specular direction plus two out-of-plane views.
 
     Light at ``theta_i`` (azimuth 0); camera at ``theta_r`` in the plane of incidence
@@ -165,7 +189,7 @@ def default_plan(n_geometries: int = 14, theta_i: float = 45.0) -> GonioPlan:
         spec = pr == 180.0 and tr in (0.0, 20.0, theta_i)
         hdr = pr == 180.0 and tr >= 25.0
         steps.append(GeometryStep(g, spectral=spec, hdr=hdr))
-    return GonioPlan(tuple(steps))
+    return GonioPlan(tuple(steps), mix=mix)
 
 
 def frame_names(step: GeometryStep, leds: Sequence[str]) -> list[tuple[str, int]]:

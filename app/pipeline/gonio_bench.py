@@ -5,7 +5,8 @@
    and read noise; estimated from the spectra the light *reports*,
    :func:`tunespec.core.sensitivity.estimate_camera_sensitivity`);
 2. match the LEDs to D50 with the spectra the light reports for each channel
-   (:func:`tunespec.core.illuminant_match.match_illuminant`);
+   (:func:`tunespec.core.illuminant_match.match_illuminant`), tuned for the camera
+   when the plan's ``mix`` is ``camera`` (:mod:`tunespec.app.pipeline.gonio_mix`);
 3. capture the plan (:func:`tunespec.app.pipeline.gonio.capture_gonio`; resumable);
 4. process and fuse (:func:`tunespec.app.pipeline.gonio_process.process_gonio`),
    write the data set and score it against the bench's truth (``summary.json``).
@@ -83,12 +84,11 @@ def calibrate_on_bench(bench: Any, seed: int) -> tuple[Any, Spectra]:
     return est, reported
 
 
-def _setup(bench: Any, root: Path, seed: int) -> tuple[Spectra, Any, np.ndarray]:
-    """Calibration, its corrections and the D50 mix: made once per folder, reused."""
-    from tunespec.app.pipeline.gonio_process import calibration_correction
-    from tunespec.core.datasets import load_colorchecker_sg
-    from tunespec.core.illuminant_match import illuminant_spd, match_illuminant
-    from tunespec.core.sensitivity_bayes import LedCorrection
+def _setup(
+    bench: Any, root: Path, seed: int, mix_kind: str = "d50"
+) -> tuple[Spectra, Any, np.ndarray]:
+    """Calibration, its corrections and the plan's mix: made once per folder, reused."""
+    from tunespec.app.pipeline.gonio_mix import choose_mix
 
     cal, mix, leds = (
         root / "calibration.csv",
@@ -97,23 +97,42 @@ def _setup(bench: Any, root: Path, seed: int) -> tuple[Spectra, Any, np.ndarray]
     )
     if not (cal.exists() and mix.exists() and leds.exists()):
         est, reported = calibrate_on_bench(bench, seed)
-        match = match_illuminant(
-            reported, illuminant_spd("D50"), load_colorchecker_sg()
-        )
-        c = est.led_correction
-        doc = {**match.as_dict(), "led_correction": {
-            "names": list(c.names), "gain": list(c.gain), "shift_nm": list(c.shift_nm),
-            "common_shift_nm": c.common_shift_nm}}  # fmt: skip
+        doc = choose_mix(mix_kind, reported, est.sensitivity, bench.light, root)
         write_spectra_csv(est.sensitivity, cal)
         write_spectra_csv(reported, leds)
-        atomic_write_text(mix, dumps_json(doc))
-    doc = read_json(mix)
+        atomic_write_text(mix, dumps_json({**doc, **_led_correction_doc(est)}))
+    return _load_setup(root, mix_kind)
+
+
+def _led_correction_doc(estimate: Any) -> dict[str, Any]:
+    """The calibration's per-LED corrections, JSON-ready (kept in ``mix.json``)."""
+    c = estimate.led_correction
+    return {"led_correction": {
+        "names": list(c.names), "gain": list(c.gain), "shift_nm": list(c.shift_nm),
+        "common_shift_nm": c.common_shift_nm}}  # fmt: skip
+
+
+def _load_setup(root: Path, mix_kind: str) -> tuple[Spectra, Any, np.ndarray]:
+    """Sensitivities, the illuminant correction and the mix levels kept in ``root``."""
+    from tunespec.app.pipeline.gonio_process import calibration_correction
+    from tunespec.core.errors import InputError
+    from tunespec.core.sensitivity_bayes import LedCorrection
+
+    doc = read_json(root / "mix.json")
+    if doc.get("mix", "d50") != mix_kind:
+        raise InputError(
+            f"mix.json holds the {doc.get('mix', 'd50')} mix, the plan asks for "
+            f"{mix_kind}: start a new session folder",
+            path=root / "mix.json",
+        )
     c = doc["led_correction"]
     corr = LedCorrection(tuple(c["names"]), tuple(c["gain"]), tuple(c["shift_nm"]),
                          float(c["common_shift_nm"]))  # fmt: skip
     levels = np.array(doc["levels"])
-    correct = calibration_correction(corr, read_spectra_csv(leds), levels)
-    return read_spectra_csv(cal, allow_negative=True), correct, levels
+    leds = read_spectra_csv(root / "leds_reported.csv")
+    correct = calibration_correction(corr, leds, levels)
+    sens = read_spectra_csv(root / "calibration.csv", allow_negative=True)
+    return sens, correct, levels
 
 
 def _truth(bench: Any, plan: GonioPlan) -> np.ndarray:
@@ -130,6 +149,7 @@ def run_gonio_demo(
     out: str | Path,
     *,
     n_geometries: int = 14,
+    mix: str = "d50",
     seed: int = 0,
     fail_after_moves: int | None = None,
     scheduler: str | None = None,
@@ -138,7 +158,10 @@ def run_gonio_demo(
 ) -> dict[str, Any]:
     """Run (or resume) the simulated gonio session in ``out``; return the summary.
 
-    ``scheduler``: see :func:`~tunespec.app.pipeline.gonio_process.process_gonio`.
+    ``mix``: the single-shot mix of a new session's default plan (``d50`` or
+    ``camera``, :mod:`~tunespec.app.pipeline.gonio_mix`); a plan in ``out`` keeps
+    its own. ``scheduler``: see
+    :func:`~tunespec.app.pipeline.gonio_process.process_gonio`.
     """
     from tunespec.app.pipeline.gonio_output import write_gonio_outputs
     from tunespec.app.pipeline.gonio_process import process_gonio, result_summary
@@ -148,17 +171,19 @@ def run_gonio_demo(
     root.mkdir(parents=True, exist_ok=True)
     plan_path = root / "plan.json"
     plan = (
-        GonioPlan.load(plan_path) if plan_path.exists() else default_plan(n_geometries)
+        GonioPlan.load(plan_path)
+        if plan_path.exists()
+        else default_plan(n_geometries, mix=mix)
     )
     bench = open_gonio_bench(seed, fail_after_moves)
-    S, correct, levels = _setup(bench, root, seed)
+    S, correct, levels = _setup(bench, root, seed, plan.mix)
     capture_gonio(plan, root, bench, S, levels, should_stop=should_stop,
                   progress=sub_progress(progress, 0.0, 0.6))  # fmt: skip
     result = process_gonio(root, S, bench.layout, load_colorchecker_sg(),
                            correct=correct, scheduler=scheduler, progress=sub_progress(progress, 0.6, 0.95),
                            should_stop=should_stop)  # fmt: skip
     files = write_gonio_outputs(result, root)
-    summary = result_summary(result, _truth(bench, plan))
+    summary = {"mix": plan.mix, **result_summary(result, _truth(bench, plan))}
     summary["files"] = [str(p.relative_to(root)) for p in files[:1] + files[-1:]]
     atomic_write_text(root / "summary.json", dumps_json(summary))
     return summary

@@ -19,8 +19,9 @@ output folders at the same paths (a shared file system).
 
 from __future__ import annotations
 
+import contextlib
 import shutil
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from os import PathLike
@@ -41,6 +42,10 @@ __all__ = [
 ]
 
 WORK_DIR = ".work"
+#: Most Wiener matrices per level and per flat-field factor (the bank is
+#: ``levels x phi`` matrices of ``3 n_i x n_wl``, built once per session).
+MAX_LEVEL_BINS = 256
+MAX_PHI_BINS = 32
 
 
 @dataclass(frozen=True)
@@ -60,8 +65,20 @@ class ImageSettings:
     n_levels, n_phi
         Bins of the noise model (:mod:`tunespec.core.image`).
     noise
-        A :class:`~tunespec.core.image.NoiseModel` of the sensor; ``None`` fits one
-        to the session's white frames.
+        A :class:`~tunespec.core.image.NoiseModel` of the sensor or its
+        :class:`~tunespec.core.image.SensorFigures`; ``None`` fits one to the
+        session's white frames (photon transfer).
+    dark
+        ``"pixel"``: the mean dark frame subtracted pixel by pixel; ``"smooth"``:
+        its smooth level and hot pixels only
+        (:func:`tunespec.core.image_session.smooth_dark`), which removes the dark
+        frame's read noise from every pixel.
+
+    Raises
+    ------
+    InputError
+        Bin counts outside 1 to :data:`MAX_LEVEL_BINS` / :data:`MAX_PHI_BINS`, a
+        noise model of another type.
     """
 
     grid: Grid | None = None
@@ -70,6 +87,32 @@ class ImageSettings:
     n_levels: int = 32
     n_phi: int = 4
     noise: Any = None
+    dark: str = "pixel"
+
+    def __post_init__(self) -> None:
+        from tunespec.core.image import NoiseModel, SensorFigures
+        from tunespec.core.image_session import DARK_MODES
+
+        if self.dark not in DARK_MODES:
+            raise InputError(
+                f"dark: expected one of {', '.join(DARK_MODES)}, got {self.dark!r}"
+            )
+
+        for name, value, top in (
+            ("level bins", self.n_levels, MAX_LEVEL_BINS),
+            ("phi bins", self.n_phi, MAX_PHI_BINS),
+        ):
+            if not (isinstance(value, int) and 1 <= value <= top):
+                raise InputError(
+                    f"{name}: expected an integer from 1 to {top}, got {value!r}"
+                )
+        if not (
+            self.noise is None or isinstance(self.noise, NoiseModel | SensorFigures)
+        ):
+            raise InputError(
+                f"noise model: expected a NoiseModel or SensorFigures, got "
+                f"{type(self.noise).__name__}"
+            )
 
 
 @dataclass(frozen=True)
@@ -137,7 +180,7 @@ def session_graph(
     work = out / WORK_DIR
     if work.exists():
         shutil.rmtree(work)  # left by a killed run: the stack is rebuilt
-    job = st.plan_image_job(session, work)
+    job = st.plan_image_job(session, work, dark=settings.dark)
     rect = _rectification(session) if settings.rectify else None
     shape = rect.shape if rect is not None else job.plane_shape
     darks = [
@@ -152,8 +195,11 @@ def session_graph(
         )
         for j in range(len(job.channels))
     ]
-    bank = delayed(st.setup_estimation, pure=True)(
-        job, channels, calibration.sensitivity, calibration.meta, calibration.prior,
+    warm = delayed(st.warm_up, pure=True)(
+        calibration.grid.wavelength_nm, dask_key_name=f"warm-{job.work}"
+    )
+    bank = delayed(_after(st.setup_estimation), pure=True)(
+        warm, job, channels, calibration.sensitivity, calibration.meta, calibration.prior,
         calibration.grid, noise=settings.noise, n_levels=settings.n_levels,
         n_phi=settings.n_phi, dask_key_name=f"setup-{job.work}",
     )  # fmt: skip
@@ -273,6 +319,8 @@ def _provenance(
         "homography_out_to_plane": None if rect is None else
         [list(r) for r in rect.H_out_to_plane],
         "clip": settings.clip,
+        "dark": settings.dark,
+        "settings": _settings_doc(settings, g),
         "software": f"tunespec {tunespec_version()}",
         "started_utc": _now(),
         "files": {
@@ -284,6 +332,34 @@ def _provenance(
             "preview": "srgb.png",
         },
     }  # fmt: skip
+
+
+def _settings_doc(settings: ImageSettings, grid: Grid) -> dict[str, Any]:
+    """What of the settings shapes the images (a batch redoes a session whose
+    images were made otherwise)."""
+    noise = settings.noise
+    if noise is None:
+        noise_doc: Any = "photon-transfer"
+    elif hasattr(noise, "full_well_e"):
+        noise_doc = {
+            "full_well_e": noise.full_well_e,
+            "read_noise_e": noise.read_noise_e,
+            "iso_gain": noise.iso_gain,
+        }
+    else:
+        noise_doc = {
+            "read_var": noise.read_var.tolist(),
+            "shot_gain": noise.shot_gain.tolist(),
+        }
+    return {
+        "grid_nm": [grid.start_nm, grid.end_nm, grid.step_nm],
+        "rectify": settings.rectify,
+        "clip": settings.clip,
+        "dark": settings.dark,
+        "n_levels": settings.n_levels,
+        "n_phi": settings.n_phi,
+        "noise": noise_doc,
+    }
 
 
 def estimate_images(
@@ -320,9 +396,22 @@ def estimate_images(
     """
     grid = settings.grid or _default_grid()
     cal = _load_calibration(sensitivities, grid)
-    with connect(scheduler) as sched:
+    with connect(scheduler) as sched, _scratch_released():
         graph = session_graph(session_dir, cal, out_dir, settings)
         return compute([graph], sched, progress, should_stop)[0]
+
+
+@contextlib.contextmanager
+def _scratch_released() -> Iterator[None]:
+    """The local threads' frame and block buffers (about 0.5 GB a thread at full
+    resolution) and the cached dark planes are dropped when the work ends, so a
+    GUI does not keep them."""
+    from tunespec.core.image_session import release_buffers
+
+    try:
+        yield
+    finally:
+        release_buffers()
 
 
 def _default_grid() -> Grid:
@@ -357,8 +446,8 @@ def batch_images(
     """Images of every session in ``folder`` with one calibration, resumable.
 
     Each session's images go to ``out_root/<its path under folder>``; a session whose
-    output holds a ``provenance.json`` for the same session fingerprint and
-    calibration is skipped. ``sessions_at_once`` sessions form one Dask graph (their
+    output holds a ``provenance.json`` for the same session fingerprint,
+    calibration and settings is skipped. ``sessions_at_once`` sessions form one Dask graph (their
     LEDs and blocks run in parallel; more would hold more response stacks on disk at
     once), group after group; a killed batch loses only the sessions in progress.
 
@@ -386,12 +475,13 @@ def batch_images(
             prov is not None
             and prov.get("session_fingerprint") == Session.open(s).fingerprint()
             and prov.get("calibration_sha256") == cal.sha256
+            and prov.get("settings") == _settings_doc(settings, grid)
         ):
             skipped.append(str(s))
         else:
             todo.append((s, out))
     group = max(1, int(sessions_at_once))
-    with connect(scheduler) as sched:
+    with connect(scheduler) as sched, _scratch_released():
         for k in range(0, len(todo), group):
             part = todo[k : k + group]
             base = k / len(todo)

@@ -136,7 +136,7 @@ class ImageOutputs:
             shape=(rows, cols, wl.size),
             chunks=(block_rows, min(cols, ZARR_CHUNK_COLS), wl.size),
             dtype="float32",
-            compressors=BloscCodec(cname="lz4", clevel=5, shuffle="shuffle"),
+            compressors=BloscCodec(cname="lz4", clevel=5, shuffle="bitshuffle"),
             fill_value=float("nan"),
             attributes={
                 "wavelength_nm": wl.tolist(),

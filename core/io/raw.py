@@ -152,12 +152,22 @@ class RawFrame:
         return self.saturated_in(0, h2, 0, w2)
 
     def planes_in(
-        self, row0: int, row1: int, col0: int, col1: int
+        self,
+        row0: int,
+        row1: int,
+        col0: int,
+        col1: int,
+        out: NDArray[np.float32] | None = None,
     ) -> NDArray[np.float32]:
         """The planes of the window ``[row0:row1, col0:col1]`` (plane pixels).
 
         Only the window is converted, so ROI work on a full-size frame needs no
         full float copy.
+
+        Parameters
+        ----------
+        out : (3, rows, cols) float32, optional
+            Where the planes go (a reused buffer), else a new array.
 
         Returns
         -------
@@ -165,7 +175,11 @@ class RawFrame:
             Full-scale units.
         """
         row0, row1, col0, col1 = self._clip_window(row0, row1, col0, col1)
-        out = np.zeros((3, row1 - row0, col1 - col0), dtype=np.float32)
+        shape = (3, row1 - row0, col1 - col0)
+        if out is None:
+            out = np.empty(shape, dtype=np.float32)
+        elif out.shape != shape or out.dtype != np.float32:
+            raise ValueError(f"planes_in: out {out.shape} is not {shape} float32")
         tmp = np.empty(out.shape[1:], dtype=np.float32)
         counts = [0, 0, 0]
         for (dy, dx), ch in self._sites():

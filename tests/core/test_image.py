@@ -235,3 +235,21 @@ def test_image_outputs_round_trip(tmp_path) -> None:
     assert read_provenance(tmp_path / "img") == {"session": "s"}
     with pytest.raises(InputError):
         out.write_rows(3, cube[:4], xyz[:4], lab[:4], unc[:4])
+
+
+def test_scratch_buffers_are_per_thread_and_released() -> None:
+    import threading
+
+    from tunespec.core.image import release_scratch, scratch
+
+    a = scratch("t", (4, 5))
+    a[:] = 1.0
+    assert scratch("t", (2, 5)).base is a.base  # reused, smaller view
+    other = {}
+    t = threading.Thread(target=lambda: other.setdefault("b", scratch("t", (4, 5))))
+    t.start()
+    t.join()
+    assert other["b"].base is not a.base
+    assert release_scratch() >= 2 * 4 * 5 * 4
+    assert scratch("t", (4, 5)).base is not a.base
+    assert float(a.sum()) == 20.0  # still valid for whoever holds it

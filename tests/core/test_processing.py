@@ -247,13 +247,27 @@ def test_clipped_patch_is_flagged(tmp_path) -> None:
     assert any("clipped" in w for w in out.warnings)
 
 
-def test_brackets_merge_clipped_pixels_in_the_linear_domain(tmp_path) -> None:
+def _full_well_loader(path: Path) -> RawFrame:
+    """A sensor whose full well clips the charge at 97 % of the white level: a
+    clipped photosite reads under the white level and is not flagged by it."""
+    cap = BLACK_DN + 0.97 * (WHITE_DN - BLACK_DN)
+    mosaic = np.minimum(np.load(path), np.uint16(round(cap)))
+    return RawFrame(path, mosaic, "RGGB", np.full((2, 2), BLACK_DN), WHITE_DN)
+
+
+@pytest.mark.parametrize(
+    "loader", [_npy_loader, _full_well_loader], ids=["white-level", "full-well"]
+)
+def test_brackets_merge_clipped_pixels_in_the_linear_domain(tmp_path, loader) -> None:
+    """Clipped cells take the short bracket, scaled; with the full well clipping
+    below the white level too (cells just under full scale count as clipped, as in
+    the image path: before, P3's red was the full well's reading, 5 % low)."""
     rgb = _patch_rgb()
     rgb[3] = [1.3, 0.2, 0.2]  # clipped at the long exposure, fine at 1/4 of it
     session, _ = _make_session(
         tmp_path / "s", patch_rgb=rgb, brackets=(1.0, 0.25), with_corners=True
     )
-    out = process_session(session, loader=_npy_loader)
+    out = process_session(session, loader=loader)
     assert not out.flagged
     # the short bracket has 4x the relative quantisation error
     np.testing.assert_allclose(

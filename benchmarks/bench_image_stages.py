@@ -1,0 +1,160 @@
+"""Where the time of ``tunespec estimate-image`` goes, stage by stage.
+
+Usage::
+
+    python benchmarks/bench_image_stages.py [--resolution 5760x3840] [--work DIR]
+
+Runs the stages of :mod:`tunespec.core.image_session` one after the other in this
+thread (no Dask: the sum of the stages is the work the threads share) on the
+session ``benchmarks/bench_image.py`` captures (the same ``--work`` folder; captured
+here if missing), and prints wall, user and system seconds and minor page faults
+of each stage and of the steps inside them (raw decode, planes, dark, Eq. 2, the
+response stack's writes and reads, the per-pixel Wiener estimate, the writers).
+"""
+
+from __future__ import annotations
+
+import argparse
+import resource
+import shutil
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+_TOTALS: dict[str, np.ndarray] = {}
+
+
+def _now() -> np.ndarray:
+    r = resource.getrusage(resource.RUSAGE_THREAD)
+    return np.array([time.perf_counter(), r.ru_utime, r.ru_stime, r.ru_minflt])
+
+
+def _timed(owner: Any, name: str, label: str) -> None:
+    """Replace ``owner.name`` by a wrapper that adds its costs to ``label``."""
+    func: Callable[..., Any] = getattr(owner, name)
+
+    def run(*args: Any, **kwargs: Any) -> Any:
+        t0 = _now()
+        try:
+            return func(*args, **kwargs)
+        finally:
+            _TOTALS[label] = _TOTALS.get(label, 0) + (_now() - t0)
+
+    setattr(owner, name, run)
+
+
+def _instrument() -> None:
+    import zarr
+
+    import tunespec.core.image_session as st
+    from tunespec.core.io import image_formats, raw
+
+    for owner, name, label in (
+        (st, "load_raw", "  raw decode (load_raw)"),
+        (raw.RawFrame, "planes_in", "  planes (black, scale)"),
+        (raw.RawFrame, "saturated_in", "  clipped cells"),
+        (st, "block_noise_stats", "  photon-transfer points"),
+        (st, "pwrite_all", "  response stack: write"),
+        (st, "_read_stack_rows", "  response stack: read"),
+        (st, "estimate_pixels", "  Wiener, colour, uncertainty"),
+        (image_formats, "pwrite_all", "  ENVI + TIFF writes"),
+        (zarr.Array, "__setitem__", "  Zarr write (lz4 threads)"),
+    ):
+        if hasattr(owner, name):  # older trees lack some steps
+            _timed(owner, name, label)
+
+
+def run_stages(session_dir: Path, sensitivities: Path, out: Path) -> np.ndarray:
+    """Every stage of one session in this thread; returns the total costs."""
+    import tunespec.core.image_session as st
+    from tunespec.app.pipeline import image as pim
+    from tunespec.core.io.session import Session
+
+    settings = pim.ImageSettings()
+    cal = pim._load_calibration(sensitivities, pim._default_grid())
+    shutil.rmtree(out, ignore_errors=True)
+    t_all = _now()
+
+    def stage(label: str, func: Callable[..., Any], *args: Any, **kw: Any) -> Any:
+        t0 = _now()
+        try:
+            return func(*args, **kw)
+        finally:
+            _TOTALS[label] = _TOTALS.get(label, 0) + (_now() - t0)
+
+    session = Session.open(session_dir)
+    job = stage("plan", st.plan_image_job, session, out / pim.WORK_DIR)
+    for i in range(len(job.dark_keys)):
+        stage("1 darks", st.prepare_darks, job, i)
+    if hasattr(st, "warm_up"):
+        stage("warm-up (imports, D50 weights)", st.warm_up, cal.grid.wavelength_nm)
+    results = [
+        stage("2 LEDs: read, dark, Eq. 2, stack", st.prepare_channel, job, j)
+        for j in range(len(job.channels))
+    ]
+    bank = stage(
+        "3 setup (noise, F, Wiener bank)", st.setup_estimation, job, results,
+        cal.sensitivity, cal.meta, cal.prior, cal.grid, noise=settings.noise,
+    )  # fmt: skip
+    systematic = stage(
+        "3 systematic uncertainty table", st.systematic_table, job, bank, cal.path,
+        cal.meta, cal.prior, cal.grid,
+    )  # fmt: skip
+    shape = job.plane_shape
+    rows = st.block_rows_for(shape[1])
+    prov = pim._provenance(session, job, cal, settings, None, shape)
+    outputs = stage("create outputs", pim._create_outputs, out, shape, bank, rows, prov)
+
+    def block(r0: int) -> Any:
+        r1 = min(r0 + rows, shape[0])
+        return st.estimate_block(job, bank, outputs, r0, r1, systematic=systematic)
+
+    blocks = [
+        stage("4 blocks: read, Eq. 5, write", block, r0)
+        for r0 in range(0, shape[0], rows)
+    ]
+    stage("5 preview, provenance", pim._finish, job, outputs, bank, blocks, prov)
+    return _now() - t_all
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--resolution", default="5760x3840")
+    parser.add_argument("--work", type=Path, default=None)
+    args = parser.parse_args(argv)
+    sys.path.insert(0, str(Path(__file__).parent))
+    import bench_image
+
+    work = (
+        args.work or Path(tempfile.gettempdir()) / f"tunespec-image-{args.resolution}"
+    )
+    if not (work / "session" / "manifest.json").is_file():
+        work.mkdir(parents=True, exist_ok=True)
+        bench_image._capture(work, args.resolution)
+    from tunespec.app.cli import _one_blas_thread
+
+    _one_blas_thread()
+    _instrument()
+    total = run_stages(
+        work / "session",
+        work / "truth" / "truth_sensitivity_absolute.csv",
+        work / "images_stages",
+    )
+    print(f"{args.resolution}, stages in one thread (steps indented, inside them):")
+    print(f"{'':36s} {'wall s':>7s} {'user s':>7s} {'sys s':>7s} {'faults':>8s}")
+    for label, v in sorted(_TOTALS.items(), key=lambda kv: kv[0].lstrip()):
+        print(f"{label:36s} {v[0]:7.2f} {v[1]:7.2f} {v[2]:7.2f} {v[3]:8.0f}")
+    print(
+        f"{'total':36s} {total[0]:7.2f} {total[1]:7.2f} {total[2]:7.2f} {total[3]:8.0f}"
+    )
+    shutil.rmtree(work / "images_stages", ignore_errors=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
