@@ -281,10 +281,6 @@ class MeasurementFolder:
     def measurement_path(self) -> Path:
         return self.root / MEASUREMENT_FILE
 
-    @property
-    def exports_index_path(self) -> Path:
-        return self.export_dir / EXPORTS_INDEX_FILE
-
     def has_session(self, which: str) -> bool:
         """Whether a capture of ``which`` was started here."""
         return (self.session_dir(which) / MANIFEST_NAME).is_file()

@@ -274,9 +274,8 @@ def _write_results(
     """
     excluded = tuple(cal.estimate.excluded_patches)
     cal_warnings = step_warnings(folder.chart_dir, chart, excluded)
-    threshold = DEFAULT_THRESHOLD_RGB_MEAN
     cal_result = CalibrationResult.from_step(
-        cal, chart, threshold=threshold, warnings=cal_warnings
+        cal, chart, threshold=DEFAULT_THRESHOLD_RGB_MEAN, warnings=cal_warnings
     )
     write_calibration(
         folder.calibration_dir, cal_result, session_fingerprint(folder.chart_dir)
