@@ -90,8 +90,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument(
         "--keep-grid",
         action="store_true",
-        help="write the file's own wavelengths instead of 380-780 nm at 5 nm "
-        "(the only grid rawtoaces reads)",
+        help="keep the file's wavelengths (rawtoaces reads 380-780 nm at 5 nm only)",
     )
     p.add_argument("-o", "--output", required=True, type=Path, help="JSON file")
     add_output_options(p)
@@ -185,11 +184,11 @@ def cmd_export_camera(args: argparse.Namespace) -> int:
     out.inputs(illuminants, chart, sens)
     done = export_camera_characterisation(
         args.out,
+        under=args.under,
         sensitivity=sens,
         chart=chart,
         responses=responses,
         illuminants=illuminants,
-        under=args.under,
     )
     table, transforms, paths = done.table, done.transforms, done.paths
     ti3 = paths["chart_camera_ti3"]
