@@ -39,7 +39,14 @@ from tunespec.app.gui.plots.spd_plot import SpdPlot
 from tunespec.app.gui.settings import AppSettings
 from tunespec.app.gui.wizard.measurement import CHART_DIR, SAMPLE_DIR, Measurement
 from tunespec.app.gui.wizard.wizard_panel import WizardPanel
-from tunespec.app.gui.workers import BenchInfo, DeviceController, Throttle, Worker
+from tunespec.app.gui.workers import (
+    BenchInfo,
+    DeviceController,
+    Throttle,
+    Worker,
+    one_blas_thread,
+    start_process_server,
+)
 
 __all__ = ["MainWindow"]
 
@@ -161,7 +168,7 @@ class MainWindow(QMainWindow):
         # the first capture would otherwise import (and, without .pyc files, compile)
         # the pipeline on the device thread while the GUI waits for the GIL
         self.preloaded = False
-        _one_blas_thread()
+        one_blas_thread()
         self._preload = Worker(_preload_pipeline, hooks=False)
         self._preload.signals.finished.connect(self._on_preload_finished)
         self._preload.start()
@@ -423,20 +430,6 @@ PIPELINE_MODULES = (
 )
 
 
-def _one_blas_thread() -> None:
-    """One BLAS thread for the numerics of the GUI's pool workers.
-
-    They run beside the GUI and device threads; OpenBLAS's own threads wait by
-    spinning, and on two cores the 2 nm calibration took 139 s instead of 4 s with
-    the event loop stalled up to 228 ms (``tools/gui_timing.py``). The same limit
-    the pipeline's Dask tasks use (threadpoolctl); it applies to the BLAS libraries
-    loaded when it is called.
-    """
-    from threadpoolctl import threadpool_limits
-
-    threadpool_limits(limits=1, user_api="blas")
-
-
 def _preload_pipeline() -> None:
     """Import :data:`PIPELINE_MODULES` (pool thread); one that is not installed
     (``rawpy`` is optional) is imported when needed, with its error then.
@@ -465,7 +458,8 @@ def _preload_pipeline() -> None:
         if freeze:
             gc.freeze()
             gc.enable()
-    _one_blas_thread()  # again: scipy brings its own OpenBLAS
+    one_blas_thread()  # again: scipy brings its own OpenBLAS
+    start_process_server()  # the numerics' processes (it imports on its own)
 
 
 def _reference_sensitivity() -> Any:
