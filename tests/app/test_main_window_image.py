@@ -5,6 +5,7 @@ setting the view uses."""
 from __future__ import annotations
 
 import numpy as np
+import pyqtgraph as pg
 import pytest
 from PySide6.QtCore import QSettings
 from PySide6.QtWidgets import QFileDialog
@@ -34,6 +35,9 @@ def test_file_menu_opens_an_image_folder_in_the_image_tab(
     assert view.image.shape == (ROWS, COLS)
     view.layer_combo.setCurrentText("L*")
     np.testing.assert_array_equal(view.image_item.image, data["lab"][:, :, 0])
+    # the pixel's spectrum is drawn in a colour the plot's background is not
+    background = view.spectrum_plot.backgroundBrush().color()
+    assert pg.mkPen(view.curve.opts["pen"]).color() != background
 
     # a folder that holds no image: one line in the status bar, the image kept
     window.tabs.setCurrentIndex(0)
