@@ -176,7 +176,7 @@ class ImageView(QWidget):
         data = self.layer_data(name)
         self.band_spin.setEnabled(name == "wavelength")
         if data.ndim == 3:
-            self.image_item.setImage(data, autoLevels=False, levels=(0, 255))
+            self.image_item.setImage(data, autoLevels=False, levels=None)
         else:
             finite = data[np.isfinite(data)]
             lo, hi = np.percentile(finite, [1, 99]) if finite.size else (0.0, 1.0)
