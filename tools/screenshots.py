@@ -3,8 +3,8 @@
 Runs the measurement wizard on the simulated bench in virtual time (offscreen, no
 display needed), then grabs each view into ``docs/screenshots/*.png``: every
 wizard step (``wizard_<n>_<step>.png``, and the dark frame while it meters,
-``wizard_dark_running.png``), the layout editor, the plots, the tables, the device
-panel, and every page of the report the export step wrote (``report_page_<n>.png``,
+``wizard_dark_running.png``), the layout editor, the plots, the tables, the
+spectral-image tab (``image_view.png``), the device panel, and every page of the report the export step wrote (``report_page_<n>.png``,
 rendered with poppler's ``pdftoppm`` when it is installed)::
 
     python tools/screenshots.py [--out docs/screenshots] [--resolution 1536x1024]
@@ -88,6 +88,7 @@ def main(argv: list[str] | None = None) -> int:
     from PySide6.QtWidgets import QApplication
 
     from tunespec.app.gui.main_window import (
+        TAB_IMAGE,
         TAB_LAYOUT,
         TAB_MEASUREMENT,
         TAB_SPECTRA,
@@ -148,6 +149,7 @@ def main(argv: list[str] | None = None) -> int:
         path = args.out / f"{name}.png"
         window.grab().save(str(path))
         print(f"wrote {path}")
+    _image_shot(window, app, args.out / "image_view.png", TAB_IMAGE)
     device = args.out / "device_panel.png"
     window.device_panel.grab().save(str(device))
     print(f"wrote {device}")
@@ -156,6 +158,26 @@ def main(argv: list[str] | None = None) -> int:
     if export is not None and "report_pdf" in export.paths:
         _report_pages(export.paths["report_pdf"], args.out)
     return 0
+
+
+def _image_shot(window: object, app: object, path: Path, tab: int) -> None:
+    """The spectral-image tab on the chart's per-pixel images (estimated here by
+    the window's action), a pixel's spectrum shown."""
+    view = window.image_view
+    if window.estimate_image() is None:
+        print(f"no spectral image: {window.statusBar().currentMessage()}")
+        return
+    _wait(app, lambda: view.worker is None)
+    if view.image is None:
+        print(f"no spectral image: {view.status.text()}")
+        return
+    rows, cols = view.image.shape
+    view.show_pixel(rows // 2, cols // 2)
+    window.tabs.setCurrentIndex(tab)
+    for _ in range(20):
+        app.processEvents()
+    window.grab().save(str(path))
+    print(f"wrote {path}")
 
 
 def _report_pages(pdf: Path, out: Path) -> None:
