@@ -263,6 +263,10 @@ def cmd_capture(args: argparse.Namespace) -> int:
 
 def _capture_cmd(args: argparse.Namespace, resume: bool) -> int:
     out = Console(args)
+    from tunespec.app.pipeline.folder import (
+        add_capture_warnings,
+        clear_capture_warnings,
+    )
     from tunespec.devices.capture import capture, new_session
     from tunespec.devices.registry import open_bench
 
@@ -281,6 +285,13 @@ def _capture_cmd(args: argparse.Namespace, resume: bool) -> int:
         layout = session.layout
     if layout is None:
         raise InputError("--layout is needed for a new session")
+
+    def warned(text: str) -> None:
+        # kept beside the session the moment it arises, as the pipeline does: the
+        # GUI's steps and the report show the warnings of a CLI capture too
+        add_capture_warnings(args.out, [text])
+        out.warn(text)
+
     with open_bench(
         args.light,
         args.camera,
@@ -290,6 +301,7 @@ def _capture_cmd(args: argparse.Namespace, resume: bool) -> int:
         seed=args.seed,
     ) as bench:
         if session is None:
+            clear_capture_warnings(args.out)  # of an earlier session in this folder
             session = new_session(
                 args.out,
                 bench.light,
@@ -310,7 +322,7 @@ def _capture_cmd(args: argparse.Namespace, resume: bool) -> int:
             retake=args.retake,
             max_exposure_s=args.max_exposure,
             progress=out.progress("capturing"),
-            on_warning=out.warn,
+            on_warning=warned,
         )
     out.say(
         f"{len(result.captured)} frame(s) captured, {result.skipped} already there; "

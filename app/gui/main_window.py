@@ -10,12 +10,14 @@ from __future__ import annotations
 import gc
 import logging
 import math
+from pathlib import Path
 from typing import Any
 
 from PySide6.QtCore import QSettings, Qt, Slot
 from PySide6.QtGui import QAction, QCloseEvent, QKeySequence
 from PySide6.QtWidgets import (
     QDockWidget,
+    QFileDialog,
     QGridLayout,
     QMainWindow,
     QMessageBox,
@@ -33,19 +35,35 @@ from tunespec.app.gui.panels.stats_table_panel import (
     table1_panel,
     table2_panel,
 )
+from tunespec.app.gui.plots.image_view import ImageView
 from tunespec.app.gui.plots.reflectance_plot import ReflectancePlot
 from tunespec.app.gui.plots.sensitivity_plot import SensitivityPlot
 from tunespec.app.gui.plots.spd_plot import SpdPlot
 from tunespec.app.gui.settings import AppSettings
-from tunespec.app.gui.wizard.measurement import CHART_DIR, SAMPLE_DIR, Measurement
+from tunespec.app.gui.wizard.measurement import (
+    CALIBRATION_DIR,
+    CHART_DIR,
+    SAMPLE_DIR,
+    Measurement,
+)
 from tunespec.app.gui.wizard.wizard_panel import WizardPanel
-from tunespec.app.gui.workers import BenchInfo, DeviceController, Throttle, Worker
+from tunespec.app.gui.workers import (
+    BenchInfo,
+    DeviceController,
+    Throttle,
+    Worker,
+    one_blas_thread,
+    start_process_server,
+)
 
 __all__ = ["MainWindow"]
 
 log = logging.getLogger(__name__)
 
-TAB_MEASUREMENT, TAB_LAYOUT, TAB_SPECTRA, TAB_TABLES = range(4)
+TAB_MEASUREMENT, TAB_LAYOUT, TAB_SPECTRA, TAB_TABLES, TAB_IMAGE = range(5)
+
+#: Where "Estimate spectral image" writes, inside the measurement folder.
+IMAGES_DIR = "images"
 
 
 class MainWindow(QMainWindow):
@@ -101,6 +119,8 @@ class MainWindow(QMainWindow):
         self.reflectance_plot = ReflectancePlot()
         self.table1_panel = table1_panel()
         self.table2_panel = table2_panel()
+        self.image_view = ImageView()
+        self.image_view.scheduler_edit.setText(settings.get("image/scheduler"))
 
         spectra = QWidget()
         grid = QGridLayout(spectra)
@@ -116,6 +136,7 @@ class MainWindow(QMainWindow):
         self.tabs.addTab(self.layout_editor, "Target layout")
         self.tabs.addTab(spectra, "Spectra")
         self.tabs.addTab(tables, "Tables")
+        self.tabs.addTab(self.image_view, "Spectral image")
         self.setCentralWidget(self.tabs)
 
         self.device_dock = QDockWidget("Devices", self)
@@ -161,7 +182,7 @@ class MainWindow(QMainWindow):
         # the first capture would otherwise import (and, without .pyc files, compile)
         # the pipeline on the device thread while the GUI waits for the GIL
         self.preloaded = False
-        _one_blas_thread()
+        one_blas_thread()
         self._preload = Worker(_preload_pipeline, hooks=False)
         self._preload.signals.finished.connect(self._on_preload_finished)
         self._preload.start()
@@ -182,6 +203,16 @@ class MainWindow(QMainWindow):
         file_menu.addAction(self.new_action)
         file_menu.addAction(self.open_action)
         file_menu.addMenu(self.wizard_panel.recent_menu)
+        file_menu.addSeparator()
+        self.open_image_action = QAction("Spectral &image…", self)
+        self.open_image_action.setToolTip("Show a folder of per-pixel images")
+        self.estimate_image_action = QAction("&Estimate the spectral image", self)
+        self.estimate_image_action.setToolTip(
+            "Per-pixel reflectances of the measurement's sample (else chart) "
+            "session with its calibration, into its images folder"
+        )
+        file_menu.addAction(self.open_image_action)
+        file_menu.addAction(self.estimate_image_action)
         file_menu.addSeparator()
         file_menu.addAction(self.quit_action)
         edit_menu = self.menuBar().addMenu("&Edit")
@@ -206,6 +237,13 @@ class MainWindow(QMainWindow):
         self.new_action.triggered.connect(self._on_new_action_triggered)
         self.open_action.triggered.connect(self._on_open_action_triggered)
         self.quit_action.triggered.connect(self.close)
+        self.open_image_action.triggered.connect(self._on_open_image_action_triggered)
+        self.estimate_image_action.triggered.connect(
+            self._on_estimate_image_action_triggered
+        )
+        self.image_view.scheduler_edit.editingFinished.connect(
+            self._on_scheduler_edit_editing_finished
+        )
         self.connect_sim_action.triggered.connect(self._on_connect_sim_action_triggered)
         self.all_off_action.triggered.connect(self._on_all_off_action_triggered)
         about.triggered.connect(self._on_about_action_triggered)
@@ -229,11 +267,73 @@ class MainWindow(QMainWindow):
         s.set("ui/tab", self.tabs.currentIndex())
         s.set("devices/light_spec", self.device_panel.light_spec_combo.currentText())
         s.set("devices/camera_spec", self.device_panel.camera_spec_combo.currentText())
+        s.set("image/scheduler", self.image_view.scheduler_edit.text().strip())
         self.measurement.save_settings()
         self.measurement.save()
         s.sync()
 
+    # -- spectral images ----------------------------------------------------------------
+    def open_image(self, folder: str | Path) -> bool:
+        """Show the image folder ``folder`` in the image tab; False (and why, in the
+        status bar) if it is not one."""
+        try:
+            self.image_view.open_folder(folder)
+        except Exception as exc:
+            text = f"Not a spectral image folder: {format_error(exc)}"
+            self.image_view.status.setText(text)
+            self.statusBar().showMessage(text, 15000)
+            return False
+        self.tabs.setCurrentIndex(TAB_IMAGE)
+        return True
+
+    def estimate_image(self) -> Any:
+        """Estimate the per-pixel images of the measurement's sample session (the
+        chart's if there is none) with its calibration, into ``images/<session>``
+        (on the scheduler of the image tab); returns the worker, or None and says why
+        in the status bar."""
+        m = self.measurement
+        why = None
+        sens = m.folder / CALIBRATION_DIR / "sensitivity.csv" if m.folder else None
+        which = next(
+            (w for w in ("sample", "chart") if m.phase_complete(w, None)), None
+        )
+        if self.image_view.worker is not None:
+            why = "a spectral image is being estimated"
+        elif m.folder is None or which is None:
+            why = "capture the chart or the sample of a measurement first"
+        elif sens is None or not sens.is_file():
+            why = "calibrate the measurement first (step 5)"
+        if why is not None:
+            self.statusBar().showMessage(f"Cannot estimate the image: {why}.", 15000)
+            return None
+        session = m.folder / (SAMPLE_DIR if which == "sample" else CHART_DIR)
+        self.tabs.setCurrentIndex(TAB_IMAGE)
+        return self.image_view.estimate(session, sens, m.folder / IMAGES_DIR / which)
+
     # -- slots: menus -----------------------------------------------------------------
+    @Slot()
+    def _on_open_image_action_triggered(self) -> None:
+        m = self.measurement
+        images = m.folder / IMAGES_DIR if m.folder is not None else None
+        start = images if images is not None and images.is_dir() else None
+        folder = QFileDialog.getExistingDirectory(
+            self,
+            "Open a spectral image folder",
+            str(start or self.settings.measurements_dir()),
+        )
+        if folder:
+            self.open_image(folder)
+
+    @Slot()
+    def _on_estimate_image_action_triggered(self) -> None:
+        self.estimate_image()
+
+    @Slot()
+    def _on_scheduler_edit_editing_finished(self) -> None:
+        self.settings.set(
+            "image/scheduler", self.image_view.scheduler_edit.text().strip()
+        )
+
     @Slot()
     def _on_new_action_triggered(self) -> None:
         if self.wizard_panel.ask_new_measurement():
@@ -403,6 +503,8 @@ class MainWindow(QMainWindow):
             # e.g. the measurement folder is gone: the devices must still be closed
             log.error("cannot save the settings or the measurement: %s", exc)
         finally:
+            if self.image_view.worker is not None:
+                self.image_view.worker.abort()
             self.wizard_panel.shutdown()
             self.controller.shutdown()
             self.log_panel.detach()
@@ -436,20 +538,6 @@ PIPELINE_MODULES = (
 )
 
 
-def _one_blas_thread() -> None:
-    """One BLAS thread for the numerics of the GUI's pool workers.
-
-    They run beside the GUI and device threads; OpenBLAS's own threads wait by
-    spinning, and on two cores the 2 nm calibration took 139 s instead of 4 s with
-    the event loop stalled up to 228 ms (``tools/gui_timing.py``). The same limit
-    the pipeline's Dask tasks use (threadpoolctl); it applies to the BLAS libraries
-    loaded when it is called.
-    """
-    from threadpoolctl import threadpool_limits
-
-    threadpool_limits(limits=1, user_api="blas")
-
-
 def _preload_pipeline() -> None:
     """Import :data:`PIPELINE_MODULES` (pool thread); one that is not installed
     (``rawpy`` is optional) is imported when needed, with its error then.
@@ -478,7 +566,8 @@ def _preload_pipeline() -> None:
         if freeze:
             gc.freeze()
             gc.enable()
-    _one_blas_thread()  # again: scipy brings its own OpenBLAS
+    one_blas_thread()  # again: scipy brings its own OpenBLAS
+    start_process_server()  # the numerics' processes (it imports on its own)
 
 
 def _reference_sensitivity() -> Any:

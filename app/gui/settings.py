@@ -42,6 +42,7 @@ DEFAULTS: dict[str, Any] = {
     "calibration/method": "",  # "": the library's default method
     "calibration/threshold_rgb_mean": 0.005,
     "estimate/reference_path": "",
+    "image/scheduler": "",  # a dask.distributed address for the images; "": local
     "ui/tab": 0,
     "ui/geometry": QByteArray(),
     "ui/state": QByteArray(),

@@ -128,9 +128,9 @@ class FramePlot(QWidget):
         self.preview = preview
         # plane pixel u spans mosaic pixels 2u - 0.5 ... 2u + 1.5 (centres at integers)
         rect = QRectF(-0.5, -0.5, 2 * preview.width_px, 2 * preview.height_px)
-        self.image_item.setImage(preview.rgb, autoLevels=False, levels=(0, 255))
+        self.image_item.setImage(preview.rgb, autoLevels=False, levels=None)
         self.image_item.setRect(rect)
-        self.overlay_item.setImage(preview.overlay, autoLevels=False, levels=(0, 255))
+        self.overlay_item.setImage(preview.overlay, autoLevels=False, levels=None)
         self.overlay_item.setRect(rect)
         if new_size:
             self.view_box.autoRange(padding=0.02)

@@ -88,7 +88,11 @@ class ImageView(QWidget):
         for roi in (self.roi_a, self.roi_b):
             roi.hide()
             self.view_box.addItem(roi)
-        self.spectrum_plot = pg.PlotWidget()
+        # white like the other spectra plots (the black curve was invisible on
+        # pyqtgraph's default black)
+        self.spectrum_plot = pg.PlotWidget(background="w")
+        self.spectrum_plot.showGrid(x=True, y=True, alpha=0.25)
+        self.spectrum_plot.getAxis("bottom").enableAutoSIPrefix(False)
         self.spectrum_plot.setLabel("bottom", "wavelength", units="nm")
         self.spectrum_plot.setLabel("left", "reflectance factor")
         self.spectrum_plot.setYRange(0.0, 1.0, padding=0.02)
@@ -172,7 +176,7 @@ class ImageView(QWidget):
         data = self.layer_data(name)
         self.band_spin.setEnabled(name == "wavelength")
         if data.ndim == 3:
-            self.image_item.setImage(data, autoLevels=False, levels=(0, 255))
+            self.image_item.setImage(data, autoLevels=False, levels=None)
         else:
             finite = data[np.isfinite(data)]
             lo, hi = np.percentile(finite, [1, 99]) if finite.size else (0.0, 1.0)

@@ -14,7 +14,7 @@ from tunespec.app.gui.wizard.measurement import (
     calibrate_job,
 )
 from tunespec.app.gui.wizard.step_page import StepPage
-from tunespec.app.gui.workers import Worker
+from tunespec.app.gui.workers import ProcessWorker, Worker
 
 __all__ = ["CalibratePage"]
 
@@ -106,7 +106,7 @@ class CalibratePage(StepPage):
         m.method = self.method_combo.currentData()
         m.threshold = self.threshold_spin.value()
         m.save()
-        return Worker(
+        return ProcessWorker(
             calibrate_job,
             m.path(CHART_DIR),
             m.path(CALIBRATION_DIR),

@@ -71,6 +71,8 @@ class CapturePage(StepPage):
         if kind == "dark":
             self._build_options()
             measurement.folder_changed.connect(self._on_measurement_folder_changed)
+        else:  # no options: the space stays under the description
+            self.body.addStretch(1)
 
     def _build_options(self) -> None:
         """Exposure, ISO and darks: set before the first frame of the session."""

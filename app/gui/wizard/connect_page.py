@@ -34,6 +34,9 @@ class ConnectPage(StepPage):
         super().__init__(measurement)
         self.abort_button.hide()
         self.progress_bar.hide()
+        # no widgets of its own: the space stays under the description, which
+        # would otherwise be spread over the page
+        self.body.addStretch(1)
         c = measurement.controller
         c.devices_opened.connect(self._on_controller_devices_opened)
         c.devices_closed.connect(self._on_controller_devices_closed)

@@ -25,7 +25,7 @@ from tunespec.app.gui.wizard.measurement import (
     estimate_job,
 )
 from tunespec.app.gui.wizard.step_page import StepPage
-from tunespec.app.gui.workers import Worker
+from tunespec.app.gui.workers import ProcessWorker, Worker
 
 __all__ = ["EstimatePage"]
 
@@ -91,7 +91,7 @@ class EstimatePage(StepPage):
         text = self.reference_edit.text().strip()
         m.reference_path = Path(text) if text else None
         m.save()
-        return Worker(
+        return ProcessWorker(
             estimate_job,
             m.path(SAMPLE_DIR),
             m.path(ESTIMATE_DIR),

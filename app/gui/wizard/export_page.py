@@ -14,7 +14,7 @@ from tunespec.app.gui.wizard.measurement import (
     export_job,
 )
 from tunespec.app.gui.wizard.step_page import StepPage
-from tunespec.app.gui.workers import Worker
+from tunespec.app.gui.workers import ProcessWorker, Worker
 
 __all__ = ["ExportPage"]
 
@@ -64,7 +64,7 @@ class ExportPage(StepPage):
             for k, v in sim.items()
             if k in ("seed", "resolution")
         }
-        return Worker(
+        return ProcessWorker(
             export_job,
             m.path(EXPORT_DIR),
             m.require_folder(),

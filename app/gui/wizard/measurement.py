@@ -188,6 +188,8 @@ class Measurement(QObject):
         self.controller = controller
         self.settings = settings or AppSettings()
         self.folder: Path | None = None
+        #: (folder, document) last written by :meth:`save`.
+        self._saved: tuple[Path, str] | None = None
         self.chart_layout = _load_layout(
             self.settings.get("layout/chart_path"), "colorchecker_sg.json"
         )
@@ -304,18 +306,33 @@ class Measurement(QObject):
             self.forget(which)
 
     def save(self) -> None:
-        """Write ``measurement.json`` (atomically)."""
+        """Write ``measurement.json`` (atomically), unless it holds this already.
+
+        Every step saves when it starts; an unchanged document is not written again
+        (the atomic write's fsyncs cost the GUI thread up to tens of ms on a busy
+        disk).
+        """
         if self.folder is None:
             return
-        write_measurement_doc(
-            MeasurementFolder(self.folder),
-            chart_layout=self.chart_layout,
-            sample_layout=self.sample_layout,
-            capture=self.capture_options.to_dict(),
-            method=self.method,
-            threshold_rgb_mean=self.threshold,
-            reference_path=self.reference_path,
-        )
+        fields = {
+            "chart_layout": self.chart_layout,
+            "sample_layout": self.sample_layout,
+            "capture": self.capture_options.to_dict(),
+            "method": self.method,
+            "threshold_rgb_mean": self.threshold,
+            "reference_path": self.reference_path,
+        }
+        doc = {
+            **fields,
+            "chart_layout": self.chart_layout.to_dict(),
+            "sample_layout": self.sample_layout.to_dict(),
+            "reference_path": str(self.reference_path or ""),
+        }
+        key = (self.folder, dumps_json(doc))
+        if key == self._saved and (self.folder / MEASUREMENT_FILE).is_file():
+            return
+        write_measurement_doc(MeasurementFolder(self.folder), **fields)
+        self._saved = key
 
     def save_settings(self) -> None:
         """Remember the options for the next measurement."""
