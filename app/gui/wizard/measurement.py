@@ -59,6 +59,7 @@ from tunespec.app.pipeline.folder import (
 from tunespec.core.datasets import resource_path
 from tunespec.core.errors import InputError
 from tunespec.core.layout import TargetLayout
+from tunespec.core.limits import dumps_json
 from tunespec.core.progress import (
     Cancelled,
     ProgressFn,
