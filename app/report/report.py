@@ -706,6 +706,7 @@ def _chart_map(
     if not names or not set(errors) & set(names):
         return False
     rows, cols = int(layout.rows), int(layout.cols)
+    names = names[: rows * cols]  # the main grid (extra grids are other panels)
     grid = np.full((rows, cols), np.nan)
     for k, name in enumerate(names):
         if name in errors:
