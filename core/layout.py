@@ -445,6 +445,9 @@ def _checked_grids(grids: Any, source: str | None) -> tuple[PatchGrid, ...]:
             )
             for n in ("rows", "cols")
         }
+        total = kw["rows"] * kw["cols"] + sum(g.n_patches for g in out)
+        if total > MAX_PATCHES:
+            raise InputError(f"{key}: more than {MAX_PATCHES} patches", path=source)
         for n in _GRID_KEYS:
             default = 0.0 if n.startswith("pitch") else None
             kw[n] = float(

@@ -90,6 +90,7 @@ def test_bad_extra_grids_are_one_line(kw, fragment) -> None:
             "overlap",
         ),
         ({"rows": 1, "cols": 1, "size": 3}, "unknown key 'size'"),
+        ({"rows": 1000, "cols": 1000}, "more than 10000 patches"),
     ],
 )  # fmt: skip
 def test_bad_extra_grid_in_a_file_names_file_and_key(tmp_path, grids, fragment):
