@@ -176,3 +176,28 @@ def test_it8_capture_reads_the_same_through_argyll_template(tmp_path) -> None:
     assert z.max() < 4.0
     # neighbouring patches differ by far more: a shifted or misnamed ROI would fail
     assert np.median(np.abs(np.diff(ours.rgb, axis=0)) / se[1:]) > 20
+
+
+@pytest.mark.slow
+def test_passport_capture_is_found_and_read(tmp_path) -> None:
+    """Both Passport panels on the bench: the detected outline is the true one (to a
+    pixel) and every patch of both panels is read."""
+    from tunespec.app.pipeline.steps import capture_target, process
+    from tunespec.core.spectra import DEFAULT_GRID
+    from tunespec.devices.registry import open_bench
+    from tunespec.devices.sim.scene import it8_bench_reflectances
+
+    layout = TargetLayout.load(resource_path("layouts", "colorchecker_passport.json"))
+    refl = it8_bench_reflectances(layout.patch_names, DEFAULT_GRID, seed=5)
+    with open_bench("sim", None, layout=layout, reflectances=refl, seed=3) as bench:
+        session, _ = capture_target(bench, tmp_path / "passport", layout)
+        truth = bench.camera.scene.corners_px(*bench.camera.resolution)
+    processed = process(session)
+    np.testing.assert_allclose(processed.layout.corners_px, truth, atol=1.0)
+    assert processed.responses.patches == layout.patch_names
+    # every patch read where it is: its response over all LEDs ranks as its
+    # mean reflectance does (a shifted or misnamed ROI would scramble the order)
+    response = processed.responses.rgb.sum(axis=(1, 2))
+    brightness = refl.select(layout.patch_names).values.mean(axis=1)
+    rank = np.argsort(np.argsort(response)), np.argsort(np.argsort(brightness))
+    assert np.corrcoef(*rank)[0, 1] > 0.95
