@@ -201,3 +201,18 @@ def test_passport_capture_is_found_and_read(tmp_path) -> None:
     brightness = refl.select(layout.patch_names).values.mean(axis=1)
     rank = np.argsort(np.argsort(response)), np.argsort(np.argsort(brightness))
     assert np.corrcoef(*rank)[0, 1] > 0.95
+
+
+@pytest.mark.parametrize(
+    ("line", "fragment"),
+    [
+        ("Y 1 3 A B 0 10 10 10 20 20", "zero patch size or pitch"),
+        ("Y 1 3 A B 10 10 10 10 0 20", "zero patch size or pitch"),
+    ],
+)
+def test_degenerate_template_grid_is_one_line(tmp_path, line, fragment) -> None:
+    p = tmp_path / "d.cht"
+    p.write_text(f"BOXES 2\n  D ALL ALL _ _ 100 70 0 0 0 0\n  {line}\n")
+    with pytest.raises(InputError, match=fragment) as err:
+        read_cht(p).to_layout()
+    assert str(p) in str(err.value)

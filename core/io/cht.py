@@ -84,8 +84,9 @@ class ChtTemplate:
         The chart's outline is the ``D ALL`` box (at its offset, e.g. the IT8's
         ``1 1``) when it holds every patch centre, grown to hold patches that
         overhang it; otherwise the box around the patches and fiducials, widened by
-        half the smallest patch side (the Passport's ``D ALL`` is a small strip). ``width_mm`` scales the template's units to millimetres
-        (default: keep them, which the homography does not mind). The ROI is the
+        half the smallest patch side (the Passport's ``D ALL`` is a small strip).
+        ``width_mm`` scales the template's units to millimetres (default: keep
+        them, which the homography does not mind). The ROI is the
         patch shrunk by ``BOX_SHRINK`` on every side, as scanin reads it (for the
         main grid's patch size; TuneSpec has one ROI fraction per layout).
 
@@ -101,6 +102,10 @@ class ChtTemplate:
         w, h = float(b[0, 2]), float(b[0, 3])
         xi = float(b[1, 0] - b[0, 0]) if cols > 1 else w
         yi = float(b[cols, 1] - b[0, 1]) if rows > 1 else h
+        if min(w, h, xi, yi) <= 0:
+            raise InputError(
+                "a patch grid with zero patch size or pitch", path=self.source
+            )
         frac = w / xi
         if abs(h / yi - frac) > 0.01 * frac:
             raise InputError(
