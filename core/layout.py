@@ -8,6 +8,21 @@ patch of ``patch_fraction`` of the cell's side. The ROI of a patch is its centra
 
 Patch names come from a naming scheme (``"sg"``: letter = column, digit = row, as on
 the ColorChecker SG, A1 ... N10) or an explicit list in row-major order.
+
+Charts of several panels or patch sizes (the ColorChecker Passport's two panels, the
+IT8.7/2's 22 x 12 colour fields over a row of 24 taller grey steps) add
+``extra_grids``: further :class:`PatchGrid` s, each ``rows x cols`` patches of its own
+size and pitch placed anywhere in the chart (a free box is a 1 x 1 grid). Their
+patches follow the main grid's in ``patch_names`` and every per-patch array.
+
+File format (``tunespec-layout``, JSON): ``name``, ``rows``, ``cols``, ``width_mm``,
+``height_mm``, ``margin_mm`` [left, top, right, bottom], ``patch_fraction``,
+``roi_fraction``, ``patch_names`` (all patches: the main grid row-major, then each
+extra grid row-major), ``corners_px`` (null or 4 [x, y]), ``meta`` (texts) and, from
+version 2, ``extra_grids``: a list of ``{"rows", "cols", "x_mm", "y_mm",
+"patch_w_mm", "patch_h_mm", "pitch_x_mm", "pitch_y_mm"}`` (top-left patch's top-left
+corner, patch size, centre-to-centre pitch). A layout without extra grids is written
+as version 1, so older TuneSpec reads it; version 1 files read unchanged.
 """
 
 from __future__ import annotations
@@ -25,14 +40,71 @@ from numpy.typing import ArrayLike, NDArray
 from tunespec.core.errors import InputError, read_json
 from tunespec.core.limits import dumps_json, valid_name, valid_number
 
-__all__ = ["TargetLayout", "apply_homography", "homography_from_corners"]
+__all__ = ["PatchGrid", "TargetLayout", "apply_homography", "homography_from_corners"]
 
-LAYOUT_VERSION = 1
+LAYOUT_VERSION = 2
 #: Limits of a layout file: patches per side and in all, sizes in mm, corners in px.
 MAX_SIDE = 1000
 MAX_PATCHES = 10_000
 MAX_MM = 1e5
 MAX_PX = 1e6
+
+
+@dataclass(frozen=True)
+class PatchGrid:
+    """A further regular grid of equal patches in chart millimetres.
+
+    ``(x_mm, y_mm)`` is the top-left corner of the top-left patch; patch ``(r, c)``
+    spans ``x_mm + c * pitch_x_mm`` ... ``+ patch_w_mm`` (and the same along y).
+    Row-major like the main grid. A pitch is ignored (0 allowed) along a side of one
+    patch; otherwise it is at least the patch size (patches do not overlap).
+    """
+
+    rows: int
+    cols: int
+    x_mm: float
+    y_mm: float
+    patch_w_mm: float
+    patch_h_mm: float
+    pitch_x_mm: float = 0.0
+    pitch_y_mm: float = 0.0
+
+    def __post_init__(self) -> None:
+        numbers = (self.x_mm, self.y_mm, self.patch_w_mm, self.patch_h_mm)
+        if not all(_finite(v) and v >= 0 for v in numbers) or min(numbers[2:]) <= 0:
+            raise InputError("extra grid: position >= 0 and patch size > 0 expected")
+        if not (_finite(self.pitch_x_mm) and _finite(self.pitch_y_mm)):
+            raise InputError("extra grid: pitch must be a finite number")
+        if (self.cols > 1 and self.pitch_x_mm < self.patch_w_mm - 1e-9) or (
+            self.rows > 1 and self.pitch_y_mm < self.patch_h_mm - 1e-9
+        ):
+            raise InputError("extra grid: pitch smaller than the patch (overlap)")
+        if self.rows < 1 or self.cols < 1:
+            raise InputError("extra grid: rows and cols must be >= 1")
+
+    @property
+    def n_patches(self) -> int:
+        return self.rows * self.cols
+
+    def centers_mm(self) -> NDArray[np.float64]:
+        """Patch centres, (n, 2) x/y mm, row-major."""
+        rr, cc = np.mgrid[0 : self.rows, 0 : self.cols]
+        x = self.x_mm + cc.ravel() * self.pitch_x_mm + 0.5 * self.patch_w_mm
+        y = self.y_mm + rr.ravel() * self.pitch_y_mm + 0.5 * self.patch_h_mm
+        return np.stack([x, y], axis=1)
+
+    def bounds_mm(self) -> tuple[float, float, float, float]:
+        """(x0, y0, x1, y1) around all the grid's patches."""
+        return (
+            self.x_mm,
+            self.y_mm,
+            self.x_mm + (self.cols - 1) * self.pitch_x_mm + self.patch_w_mm,
+            self.y_mm + (self.rows - 1) * self.pitch_y_mm + self.patch_h_mm,
+        )
+
+
+def _finite(v: object) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
 
 
 @dataclass(frozen=True)
@@ -58,6 +130,9 @@ class TargetLayout:
     corners_px
         The target's outer corners in the image (TL, TR, BR, BL), ``(4, 2)`` x/y pixels,
         or ``None`` if not yet known.
+    extra_grids
+        Further patch grids (other panels, other patch sizes); their patches follow
+        the main grid's in ``patch_names``.
     """
 
     name: str
@@ -71,6 +146,7 @@ class TargetLayout:
     patch_names: tuple[str, ...] = ()
     corners_px: tuple[tuple[float, float], ...] | None = None
     meta: dict[str, str] = field(default_factory=dict)
+    extra_grids: tuple[PatchGrid, ...] = ()
 
     def __post_init__(self) -> None:
         if self.rows < 1 or self.cols < 1:
@@ -97,12 +173,19 @@ class TargetLayout:
         l, t, r, b = self.margin_mm
         if self.width_mm - l - r <= 0 or self.height_mm - t - b <= 0:
             raise InputError(f"layout {self.name!r}: margins leave no room for patches")
+        grids = tuple(self.extra_grids)
+        if not all(isinstance(g, PatchGrid) for g in grids):
+            raise InputError(f"layout {self.name!r}: extra_grids must be PatchGrids")
+        object.__setattr__(self, "extra_grids", grids)
+        n = self.rows * self.cols + sum(g.n_patches for g in grids)
         names = tuple(self.patch_names) or _sg_names(self.rows, self.cols)
-        if len(names) != self.rows * self.cols:
+        if len(names) != n:
+            extra = f" + {n - self.rows * self.cols} in extra grids" if grids else ""
             raise InputError(
                 f"layout {self.name!r}: {len(names)} patch names for "
-                f"{self.rows}x{self.cols} patches"
+                f"{self.rows}x{self.cols} patches{extra}"
             )
+        self._check_grids_fit()
         if len(set(names)) != len(names):
             raise InputError(f"layout {self.name!r}: duplicate patch names")
         object.__setattr__(self, "patch_names", names)
@@ -115,10 +198,40 @@ class TargetLayout:
                 )
             object.__setattr__(self, "corners_px", tuple(map(tuple, c.tolist())))
 
+    def _check_grids_fit(self) -> None:
+        """Every extra grid inside the chart, none overlapping another's patches."""
+        boxes = [self._main_bounds_mm(), *(g.bounds_mm() for g in self.extra_grids)]
+        for k, (x0, y0, x1, y1) in enumerate(boxes[1:], start=1):
+            if x1 > self.width_mm + 1e-6 or y1 > self.height_mm + 1e-6:
+                raise InputError(
+                    f"layout {self.name!r}: extra grid {k} reaches beyond the "
+                    f"{self.width_mm:g} x {self.height_mm:g} mm chart"
+                )
+            for j, (a0, b0, a1, b1) in enumerate(boxes[:k]):
+                if (
+                    x0 < a1 - 1e-6
+                    and a0 < x1 - 1e-6
+                    and y0 < b1 - 1e-6
+                    and b0 < y1 - 1e-6
+                ):
+                    where = "the main grid" if j == 0 else f"extra grid {j}"
+                    raise InputError(
+                        f"layout {self.name!r}: extra grid {k} overlaps {where}"
+                    )
+
+    def _main_bounds_mm(self) -> tuple[float, float, float, float]:
+        l, t, r, b = self.margin_mm
+        cw, ch = self.cell_size_mm()
+        gx, gy = (
+            0.5 * cw * (1 - self.patch_fraction),
+            0.5 * ch * (1 - self.patch_fraction),
+        )
+        return (l + gx, t + gy, self.width_mm - r - gx, self.height_mm - b - gy)
+
     # -- geometry in target millimetres ------------------------------------------
     @property
     def n_patches(self) -> int:
-        return self.rows * self.cols
+        return self.rows * self.cols + sum(g.n_patches for g in self.extra_grids)
 
     def cell_size_mm(self) -> tuple[float, float]:
         """(width, height) of one grid cell."""
@@ -129,24 +242,37 @@ class TargetLayout:
         )
 
     def patch_centers_mm(self) -> NDArray[np.float64]:
-        """Patch centres, (n_patches, 2) x/y mm, row-major like ``patch_names``."""
+        """Patch centres, (n_patches, 2) x/y mm, in the order of ``patch_names``."""
         l, t, _, _ = self.margin_mm
         cw, ch = self.cell_size_mm()
         rr, cc = np.mgrid[0 : self.rows, 0 : self.cols]
         x = l + (cc.ravel() + 0.5) * cw
         y = t + (rr.ravel() + 0.5) * ch
-        return np.stack([x, y], axis=1)
+        return np.concatenate(
+            [np.stack([x, y], axis=1), *(g.centers_mm() for g in self.extra_grids)]
+        )
+
+    def patch_sizes_mm(self) -> NDArray[np.float64]:
+        """(width, height) of each patch, (n_patches, 2) mm."""
+        cw, ch = self.cell_size_mm()
+        main = np.tile(
+            [cw * self.patch_fraction, ch * self.patch_fraction],
+            (self.rows * self.cols, 1),
+        )
+        extra = [
+            np.tile([g.patch_w_mm, g.patch_h_mm], (g.n_patches, 1))
+            for g in self.extra_grids
+        ]
+        return np.concatenate([main, *extra])
 
     def patch_quads_mm(self, area_fraction: float = 1.0) -> NDArray[np.float64]:
-        """Patch squares scaled to ``area_fraction`` of the patch, (n, 4, 2) mm.
+        """Patch rectangles scaled to ``area_fraction`` of the patch, (n, 4, 2) mm.
 
         ``area_fraction=1`` is the whole patch; ``self.roi_fraction`` the ROI.
         """
-        cw, ch = self.cell_size_mm()
-        s = self.patch_fraction * math.sqrt(area_fraction)
-        hw, hh = 0.5 * cw * s, 0.5 * ch * s
-        offs = np.array([[-hw, -hh], [hw, -hh], [hw, hh], [-hw, hh]])
-        return self.patch_centers_mm()[:, None, :] + offs[None]
+        half = 0.5 * math.sqrt(area_fraction) * self.patch_sizes_mm()
+        signs = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
+        return self.patch_centers_mm()[:, None, :] + signs[None] * half[:, None, :]
 
     def outer_corners_mm(self) -> NDArray[np.float64]:
         """TL, TR, BR, BL of the outer rectangle, (4, 2) mm."""
@@ -179,7 +305,10 @@ class TargetLayout:
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
         d["format"] = "tunespec-layout"
-        d["version"] = LAYOUT_VERSION
+        # version 1 when the file has nothing newer: older TuneSpec reads it
+        d["version"] = LAYOUT_VERSION if self.extra_grids else 1
+        if not self.extra_grids:
+            del d["extra_grids"]
         d["margin_mm"] = list(self.margin_mm)
         d["patch_names"] = list(self.patch_names)
         d["corners_px"] = (
@@ -291,7 +420,46 @@ def _checked_fields(d: Mapping[str, Any], source: str | None) -> dict[str, Any]:
     ):
         raise InputError("meta: expected an object of texts", path=source)
     kw["meta"] = dict(meta)
+    kw["extra_grids"] = _checked_grids(d.get("extra_grids", []), source)
     return kw
+
+
+_GRID_KEYS = ("x_mm", "y_mm", "patch_w_mm", "patch_h_mm", "pitch_x_mm", "pitch_y_mm")
+
+
+def _checked_grids(grids: Any, source: str | None) -> tuple[PatchGrid, ...]:
+    """``extra_grids``: a list of objects with rows, cols and the mm of _GRID_KEYS."""
+    if not isinstance(grids, list | tuple) or len(grids) > MAX_SIDE:
+        raise InputError("extra_grids: expected a list of grid objects", path=source)
+    out = []
+    for k, g in enumerate(grids):
+        key = f"extra_grids[{k}]"
+        if not isinstance(g, Mapping):
+            raise InputError(f"{key}: expected an object", path=source)
+        unknown = set(g) - {"rows", "cols", *_GRID_KEYS}
+        if unknown:
+            raise InputError(f"{key}: unknown key {sorted(unknown)[0]!r}", path=source)
+        kw: dict[str, Any] = {
+            n: valid_number(
+                g.get(n), f"{key}.{n}", path=source, lo=1, hi=MAX_SIDE, integer=True
+            )
+            for n in ("rows", "cols")
+        }
+        total = kw["rows"] * kw["cols"] + sum(g.n_patches for g in out)
+        if total > MAX_PATCHES:
+            raise InputError(f"{key}: more than {MAX_PATCHES} patches", path=source)
+        for n in _GRID_KEYS:
+            default = 0.0 if n.startswith("pitch") else None
+            kw[n] = float(
+                valid_number(
+                    g.get(n, default), f"{key}.{n}", path=source, lo=0, hi=MAX_MM
+                )
+            )
+        try:
+            out.append(PatchGrid(**kw))
+        except InputError as exc:
+            raise InputError(f"{key}: {exc.message}", path=source) from None
+    return tuple(out)
 
 
 def _sg_names(rows: int, cols: int) -> tuple[str, ...]:

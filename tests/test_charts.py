@@ -35,11 +35,15 @@ EXPECTED XYZ 6
 """
 
 
-def test_chart_box_must_start_at_the_origin(tmp_path) -> None:
+def test_offset_chart_box_is_the_outline(tmp_path) -> None:
     p = tmp_path / "d.cht"
-    p.write_text("BOXES 2\n  D ALL ALL _ _ 100 70 5 5 0 0\n  Y 1 3 A B 1 1 1 1 1 1\n")
-    with pytest.raises(InputError, match="origin"):
-        read_cht(p).to_layout()
+    p.write_text(
+        "BOXES 2\n  D ALL ALL _ _ 100 70 5 5 0 0\n  Y 1 3 A B 10 10 10 10 20 20\n"
+    )
+    lay = read_cht(p).to_layout()
+    assert (lay.width_mm, lay.height_mm) == (100.0, 70.0)
+    # patch A1 at (10, 10) in template units is 5 mm in from the box at (5, 5)
+    np.testing.assert_allclose(lay.patch_quads_mm()[0, 0], [5.0, 5.0])
 
 
 def test_small_template_as_layout(tmp_path) -> None:
@@ -83,8 +87,8 @@ def test_argyll_templates() -> None:
     assert sg.n_patches == 140 and sg.patch_names[:2] == ("A1", "B1")
     passport = read_cht(ARGYLL_REF / "ColorCheckerPassport.cht")
     assert len(passport.patch_names) == 50 and len(passport.expected) == 50
-    with pytest.raises(InputError, match="5 patch grids"):
-        passport.to_layout()
+    lay = passport.to_layout()
+    assert lay.n_patches == 50 and len(lay.extra_grids) == 4
 
 
 def test_shipped_colorchecker24_matches_its_reflectances() -> None:

@@ -208,6 +208,9 @@ class ReportData:
     table1_patches
         Table 1's RGB error per fitted patch (mean over the LEDs): the map of the
         chart, the histogram, the worst patches and the per-patch table.
+    chart_choice
+        :meth:`~tunespec.app.pipeline.chart_choice.ChartComparison.to_dict` (or its
+        ``chart_choice.json``): the "Chart choice" section, charts side by side.
     chart_layout
         The chart's :class:`~tunespec.core.layout.TargetLayout` (for the map).
     provenance
@@ -248,6 +251,7 @@ class ReportData:
     threshold_rgb_mean: float | None = None
     table1_patches: Mapping[str, float] | None = None
     chart_layout: Any = None
+    chart_choice: Mapping[str, Any] | None = None
     provenance: Mapping[str, str] = field(default_factory=dict)
     exposures_s: Mapping[str, float] = field(default_factory=dict)
     input_files: Sequence[tuple[str, str]] = ()
@@ -706,6 +710,7 @@ def _chart_map(
     if not names or not set(errors) & set(names):
         return False
     rows, cols = int(layout.rows), int(layout.cols)
+    names = names[: rows * cols]  # the main grid (extra grids are other panels)
     grid = np.full((rows, cols), np.nan)
     for k, name in enumerate(names):
         if name in errors:
@@ -1083,6 +1088,8 @@ def _result_tables(report: ReportData) -> list[_Table]:
     ]
     if report.table2 is not None:
         tables.append(_table2(report.table2))
+    if report.chart_choice is not None:
+        tables.append(_chart_choice_table(report.chart_choice))
     if (
         report.lab is not None
         and report.lab_std is not None
@@ -1129,6 +1136,40 @@ def _result_tables(report: ReportData) -> list[_Table]:
             )
         )
     return tables
+
+
+def _chart_choice_table(choice: Mapping[str, Any]) -> _Table:
+    """The chart comparison of :mod:`tunespec.app.pipeline.chart_choice`, side by side."""
+    rows = tuple(
+        (
+            str(s["chart"]),
+            str(s["n_patches"]),
+            f"{s['table1_rgb_mean']:.5f}",
+            f"{s['sensitivity_rms']:.4f}",
+            f"{s['de00_mean']:.3f}",
+            f"{s['de00_max']:.3f}",
+            f"{s['spectral_rms_mean']:.4f}",
+        )
+        for s in choice["scores"]
+    )
+    return _Table(
+        "Chart choice: calibrating on each chart (simulated bench)",
+        (
+            "Chart",
+            "Patches",
+            "Table 1 RGB mean",
+            "Sensitivity RMS",
+            "Mean ΔE00",
+            "Max ΔE00",
+            "Spectral RMS",
+        ),
+        rows,
+        note="Each chart captured and calibrated on the same simulated bench (seed "
+        f"{choice.get('seed', 0)}); Table 1 on the chart itself, sensitivity RMS "
+        "against the bench's true curves (peak-normalised), Table 2 (D50) on "
+        f"{choice.get('n_held_out', '?')} held-out reflectances no chart carries "
+        f"({choice.get('held_out', '')}). Made by benchmarks/chart_choice.py.",
+    )
 
 
 #: What ``benchmarks/generalisation.py`` (seed 0) measured for the default calibration,

@@ -21,11 +21,12 @@ zero padding kept, ``01``-``12``). ``BOX_SHRINK`` is the margin scanin leaves in
 every patch when it reads it.
 
 :func:`read_cht` reads the template; :meth:`ChtTemplate.to_layout` turns a template
-whose patches form one regular grid (ColorChecker 24, SG, DC) into a
+whose patches form regular grids (ColorChecker 24, SG, DC, Passport, IT8.7/2) into a
 :class:`~tunespec.core.layout.TargetLayout` (the ``D`` box is the outer rectangle, in
 the template's units or scaled to ``width_mm``); the ROI is the shrunk box. Templates
-of several grids (the Passport) are read but refused by ``to_layout``: the layout
-model is one grid (the layout editor's file format; arbitrary boxes are future work).
+of several grids (the Passport's panels, the IT8.7/2's grey scale) become a layout
+with ``extra_grids``; labels may carry a prefix (``GS00``-``GS23``) and ``_`` is an
+empty part.
 
 References
 ----------
@@ -43,7 +44,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tunespec.core.errors import InputError
-from tunespec.core.layout import TargetLayout
+from tunespec.core.layout import PatchGrid, TargetLayout
 from tunespec.core.limits import MAX_COUNT, read_text, shown
 
 __all__ = ["ChtGrid", "ChtTemplate", "read_cht"]
@@ -64,7 +65,7 @@ class ChtTemplate:
 
     source: str
     fiducials: NDArray[np.float64]  # (4, 2), or (0, 2)
-    chart_box: tuple[float, float] | None  # (width, height) of a D box at the origin
+    chart_box: tuple[float, float, float, float] | None  # D ALL box: x0, y0, w, h
     grids: tuple[ChtGrid, ...]
     box_shrink: float
     expected: dict[str, tuple[float, ...]]
@@ -76,39 +77,34 @@ class ChtTemplate:
     def to_layout(
         self, name: str | None = None, *, width_mm: float | None = None
     ) -> TargetLayout:
-        """The template as a one-grid :class:`TargetLayout` (row-major names).
+        """The template as a :class:`TargetLayout`: its largest patch grid is the
+        layout's main grid, the others (the Passport's panels, the IT8's grey steps)
+        its ``extra_grids``; names row-major per grid, top to bottom.
 
-        ``width_mm`` scales the template's units to millimetres (default: keep them,
-        which the homography does not mind). The ROI is the patch shrunk by
-        ``BOX_SHRINK`` on every side, as scanin reads it.
+        The chart's outline is the ``D ALL`` box (at its offset, e.g. the IT8's
+        ``1 1``) when it holds every patch centre, grown to hold patches that
+        overhang it; otherwise the box around the patches and fiducials, widened by
+        half the smallest patch side (the Passport's ``D ALL`` is a small strip).
+        ``width_mm`` scales the template's units to millimetres (default: keep
+        them, which the homography does not mind). The ROI is the
+        patch shrunk by ``BOX_SHRINK`` on every side, as scanin reads it (for the
+        main grid's patch size; TuneSpec has one ROI fraction per layout).
 
         Raises
         ------
         InputError
-            Several patch grids, unequal pitch and size ratios, a grid outside the
-            chart box.
+            A main grid whose size/pitch differ in x and y, grids that overlap.
         """
-        if len(self.grids) != 1:
-            raise InputError(
-                f"{len(self.grids)} patch grids: TuneSpec's layouts are one regular "
-                "grid (a .cht with several, e.g. the Passport, is not supported yet)",
-                path=self.source,
-            )
-        if self.chart_box is None:
-            raise InputError(
-                "no D (chart) box at the origin (D ALL ALL _ _ W H 0 0 ...): the "
-                "chart's outline is unknown",
-                path=self.source,
-            )
-        g = self.grids[0]
-        rows, cols = g.shape
-        b = g.boxes
+        grids = [_upright(g) for g in self.grids]
+        x0, y0, W, H = self._outline(grids)
+        main = max(range(len(grids)), key=lambda k: len(grids[k][0]))
+        names, b, (rows, cols) = grids[main]
         w, h = float(b[0, 2]), float(b[0, 3])
         xi = float(b[1, 0] - b[0, 0]) if cols > 1 else w
         yi = float(b[cols, 1] - b[0, 1]) if rows > 1 else h
-        if xi <= 0 or yi <= 0:
+        if min(w, h, xi, yi) <= 0:
             raise InputError(
-                "patches must run left to right, top to bottom", path=self.source
+                "a patch grid with zero patch size or pitch", path=self.source
             )
         frac = w / xi
         if abs(h / yi - frac) > 0.01 * frac:
@@ -116,34 +112,105 @@ class ChtTemplate:
                 f"patch size / pitch differs in x ({frac:.3f}) and y ({h / yi:.3f})",
                 path=self.source,
             )
-        W, H = self.chart_box
-        left = float(b[0, 0]) - 0.5 * (xi - w)
-        top = float(b[0, 1]) - 0.5 * (yi - h)
+        left = float(b[0, 0]) - x0 - 0.5 * (xi - w)
+        top = float(b[0, 1]) - y0 - 0.5 * (yi - h)
         margins = (left, top, W - left - cols * xi, H - top - rows * yi)
         if min(margins) < -1e-6:
             raise InputError("the patch grid leaves the chart box", path=self.source)
         s = 1.0 if width_mm is None else width_mm / W
+        extra, extra_names = [], []
+        for k, (gn, gb, (gr, gc)) in enumerate(grids):
+            if k == main:
+                continue
+            extra_names.extend(gn)
+            extra.append(
+                PatchGrid(
+                    rows=gr,
+                    cols=gc,
+                    x_mm=(float(gb[0, 0]) - x0) * s,
+                    y_mm=(float(gb[0, 1]) - y0) * s,
+                    patch_w_mm=float(gb[0, 2]) * s,
+                    patch_h_mm=float(gb[0, 3]) * s,
+                    pitch_x_mm=(float(gb[1, 0] - gb[0, 0]) if gc > 1 else 0.0) * s,
+                    pitch_y_mm=(float(gb[gc, 1] - gb[0, 1]) if gr > 1 else 0.0) * s,
+                )
+            )
         shrunk = max(w - 2 * self.box_shrink, 0.0) * max(h - 2 * self.box_shrink, 0.0)
-        return TargetLayout(
-            name=name or Path(self.source).stem,
-            rows=rows,
-            cols=cols,
-            width_mm=W * s,
-            height_mm=H * s,
-            margin_mm=tuple(max(m, 0.0) * s for m in margins),  # type: ignore[arg-type]
-            patch_fraction=min(frac, 1.0),
-            roi_fraction=min(max(shrunk / (w * h), 1e-3), 1.0),
-            patch_names=g.names,
-            meta={"source": f"ArgyllCMS template {Path(self.source).name}"},
-        )
+        try:
+            return TargetLayout(
+                name=name or Path(self.source).stem,
+                rows=rows,
+                cols=cols,
+                width_mm=W * s,
+                height_mm=H * s,
+                margin_mm=tuple(max(m, 0.0) * s for m in margins),  # type: ignore[arg-type]
+                patch_fraction=min(frac, 1.0),
+                roi_fraction=min(max(shrunk / (w * h), 1e-3), 1.0),
+                patch_names=(*names, *extra_names),
+                meta={"source": f"ArgyllCMS template {Path(self.source).name}"},
+                extra_grids=tuple(extra),
+            )
+        except InputError as exc:
+            raise InputError(exc.message, path=self.source) from None
+
+    def _outline(
+        self, grids: list[tuple[tuple[str, ...], NDArray[np.float64], tuple[int, int]]]
+    ) -> tuple[float, float, float, float]:
+        """(x0, y0, width, height) of the chart in template units."""
+        boxes = np.concatenate([b for _, b, _ in grids])
+        lo = boxes[:, :2].min(axis=0)
+        hi = (boxes[:, :2] + boxes[:, 2:]).max(axis=0)
+        centres = boxes[:, :2] + 0.5 * boxes[:, 2:]
+        box = self.chart_box
+        if box is not None and np.all(
+            (centres >= [box[0], box[1]])
+            & (centres <= [box[0] + box[2], box[1] + box[3]])
+        ):
+            # the D box, grown to hold patches that overhang it (the IT8's grey
+            # scale starts 1 unit left of its D box)
+            x0, y0, W, H = box
+            lo = np.minimum(lo, [x0, y0])
+            hi = np.maximum(hi, [x0 + W, y0 + H])
+            return (
+                float(lo[0]),
+                float(lo[1]),
+                float(hi[0] - lo[0]),
+                float(hi[1] - lo[1]),
+            )
+        if len(self.fiducials):
+            lo = np.minimum(lo, self.fiducials.min(axis=0))
+            hi = np.maximum(hi, self.fiducials.max(axis=0))
+        pad = 0.5 * float(boxes[:, 2:].min())
+        lo = np.maximum(lo - pad, 0.0)
+        hi = hi + pad
+        return float(lo[0]), float(lo[1]), float(hi[0] - lo[0]), float(hi[1] - lo[1])
+
+
+def _upright(
+    g: ChtGrid,
+) -> tuple[tuple[str, ...], NDArray[np.float64], tuple[int, int]]:
+    """A grid's names and boxes with positive pitches (rows top to bottom, columns
+    left to right): Argyll's lines may step backwards (the Passport's ``-15.0``)."""
+    rows, cols = g.shape
+    b = g.boxes.reshape(rows, cols, 4)
+    n = np.array(g.names, dtype=object).reshape(rows, cols)
+    if cols > 1 and b[0, 1, 0] < b[0, 0, 0]:
+        b, n = b[:, ::-1], n[:, ::-1]
+    if rows > 1 and b[1, 0, 1] < b[0, 0, 1]:
+        b, n = b[::-1], n[::-1]
+    return tuple(str(v) for v in n.ravel()), b.reshape(-1, 4).copy(), (rows, cols)
 
 
 def _labels(first: str, last: str, *, path: str, line: int) -> list[str]:
     """``A``..``D`` or ``01``..``12``: the label range of a patch line."""
-    if first.isdigit() and last.isdigit():
-        lo, hi = int(first), int(last)
-        width = len(first) if first.startswith("0") else 0
-        out = [str(v).zfill(width) for v in range(lo, hi + 1)]
+    if first == last == "_":
+        return [""]  # no second part, e.g. the IT8's grey steps GS00 ... GS23
+    pre, pre2 = first.rstrip(string.digits), last.rstrip(string.digits)
+    if pre == pre2 and first[len(pre) :].isdigit() and last[len(pre) :].isdigit():
+        lo, hi = int(first[len(pre) :]), int(last[len(pre) :])
+        digits = first[len(pre) :]
+        width = len(digits) if digits.startswith("0") else 0
+        out = [pre + str(v).zfill(width) for v in range(lo, hi + 1)]
     elif len(first) == len(last) == 1 and first.isalpha() and last.isalpha():
         letters = string.ascii_uppercase if first.isupper() else string.ascii_lowercase
         i, j = letters.find(first), letters.find(last)
@@ -213,15 +280,12 @@ def read_cht(path: str | PathLike[str]) -> ChtTemplate:
             fiducials = np.array(
                 [_float(tokens, k, path=path, line=lineno) for k in range(3, 11)]
             ).reshape(4, 2)
-        elif section == "BOXES" and key == "D":
-            # D ALL ALL _ _ W H XO YO XI YI: a box at (XO, YO); the chart box when
-            # it starts at the origin (ColorChecker, SG, DC), a diagnostic area else
-            offset = [_float(tokens, k, path=path, line=lineno) for k in (7, 8)]
-            if offset == [0.0, 0.0]:
-                chart_box = (
-                    _float(tokens, 5, path=path, line=lineno),
-                    _float(tokens, 6, path=path, line=lineno),
-                )
+        elif section == "BOXES" and key == "D" and tokens[1:3] == ["ALL", "ALL"]:
+            # D ALL ALL _ _ W H XO YO XI YI: the whole chart at (XO, YO) for the
+            # ColorChecker, SG, DC and IT8 (to_layout checks that it holds the patches)
+            chart_box = tuple(  # type: ignore[assignment]
+                _float(tokens, k, path=path, line=lineno) for k in (7, 8, 5, 6)
+            )
         elif section == "BOXES" and key in ("X", "Y"):
             grids.append(_grid(tokens, path=path, line=lineno))
         elif section == "EXPECTED" and len(tokens) >= 2:

@@ -236,6 +236,15 @@ class SimScene:
         )
         return cls(layout, refl, **kwargs)  # type: ignore[arg-type]
 
+    @classmethod
+    def it8_7_2(
+        cls, grid: Grid = DEFAULT_GRID, *, seed: int = 0, **kwargs: object
+    ) -> SimScene:
+        """The IT8.7/2 (shipped layout) with :func:`it8_bench_reflectances`."""
+        layout = TargetLayout.load(resource_path("layouts", "it8_7_2.json"))
+        refl = it8_bench_reflectances(layout.patch_names, grid, seed=seed)
+        return cls(layout, refl, **kwargs)  # type: ignore[arg-type]
+
     # -- TargetStage -------------------------------------------------------------
     def present(self, what: Literal["white", "target"]) -> None:
         """Show the white board (``"white"``) or the chart on it (``"target"``)."""
@@ -384,6 +393,7 @@ class SimScene:
             block[inside] = FRAME
             idx = (row * lay.cols + col)[in_patch].astype(np.int16)
             block[in_patch] = idx + 2
+            _paint_extra_grids(block, u, v, lay)
         for region, first in zip(self.regions, self._region_first, strict=True):
             region.paint(out, x, y, width_px, height_px, first)
         return out
@@ -640,3 +650,64 @@ def default_regions(grid: Grid = DEFAULT_GRID) -> tuple[MixedRegion, MixedRegion
         MixedRegion.halftone((0.02, 0.1, 0.2, 0.9), grid),
         MixedRegion.strokes((0.8, 0.1, 0.98, 0.9), grid),
     )
+
+
+def it8_bench_reflectances(
+    names: tuple[str, ...], grid: Grid = DEFAULT_GRID, *, seed: int = 0
+) -> Spectra:
+    """Reflectances for an IT8.7/2 on the bench, drawn from measured sets.
+
+    IT8 reference values are batch-specific (each batch comes with its own CGATS
+    file) and not shippable, so the simulated chart takes measured spectra instead:
+    every colour field (``A01`` ... ``L22``) one of the 164 measured spectra of the
+    ColorChecker SG (ISETCam, MIT) and the ColorChecker 24 (N. Ohta via
+    colour-science, BSD-3-Clause), drawn with a seeded generator (all 164 once, 100
+    again); the grey scale ``GS00`` ... ``GS23`` the ColorChecker 24's measured white
+    (``D1``) at optical densities 0 ... 2.4 in equal steps (GS23 ~ 0.4 %, the
+    IT8's Dmax).
+    """
+    sg = load_colorchecker_sg(grid)
+    cc = read_spectra_csv(resource_path("charts", "colorchecker_24.csv"), grid)
+    pool = np.vstack([sg.values, cc.values])
+    grey_names = [n for n in names if n.startswith("GS")]
+    colour_names = [n for n in names if not n.startswith("GS")]
+    rng = np.random.default_rng(seed)
+    extra = max(len(colour_names) - len(pool), 0)
+    order = np.concatenate(
+        [rng.permutation(len(pool)), rng.integers(0, len(pool), extra)]
+    )[: len(colour_names)]
+    white = cc.values[cc.names.index("D1")]
+    density = np.linspace(0.0, 2.4, len(grey_names))
+    values = dict(zip(colour_names, pool[order], strict=True))
+    values.update(zip(grey_names, white[None] * 10.0 ** -density[:, None], strict=True))
+    return Spectra(
+        sg.wavelength_nm,
+        np.array([values[n] for n in names]),
+        tuple(names),
+        {"source": "IT8 bench: ColorChecker SG (ISETCam) + 24 (Ohta) spectra"},
+    )
+
+
+def _paint_extra_grids(
+    block: NDArray[np.int16],
+    u: NDArray[np.float32],
+    v: NDArray[np.float32],
+    lay: TargetLayout,
+) -> None:
+    """Label the patches of ``lay.extra_grids`` at chart coordinates ``(u, v)`` mm."""
+    first = 2 + lay.rows * lay.cols
+    for g in lay.extra_grids:
+        px = g.pitch_x_mm if g.cols > 1 else g.patch_w_mm
+        py = g.pitch_y_mm if g.rows > 1 else g.patch_h_mm
+        col = np.floor((u - g.x_mm) / px)
+        row = np.floor((v - g.y_mm) / py)
+        in_patch = (
+            (col >= 0)
+            & (col < g.cols)
+            & (row >= 0)
+            & (row < g.rows)
+            & (u - g.x_mm - col * px < g.patch_w_mm)
+            & (v - g.y_mm - row * py < g.patch_h_mm)
+        )
+        block[in_patch] = (first + row * g.cols + col)[in_patch].astype(np.int16)
+        first += g.n_patches

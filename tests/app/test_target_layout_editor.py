@@ -197,3 +197,43 @@ def test_a_layout_from_outside_starts_a_new_history(editor):
     other = TargetLayout.load(resource_path("layouts", "colorchecker_sg.json"))
     editor.set_target_layout(other)
     assert not editor.undo_stack.canUndo()
+
+
+@pytest.mark.parametrize("chart", ["it8.cht", "ColorCheckerPassport.cht"])
+def test_open_cht_save_as_layout_reopen_same_patches(editor, tmp_path, chart):
+    """An ArgyllCMS template of several grids opens, saves as a TuneSpec layout
+    (version 2, extra grids) and reopens with the same patches where they were."""
+    from pathlib import Path
+
+    from tunespec.core.io.cht import read_cht
+
+    cht = Path("/usr/share/color/argyll/ref") / chart
+    if not cht.is_file():
+        pytest.skip("ArgyllCMS reference files not installed")
+    editor.load(cht)
+    opened = editor.target_layout
+    template = read_cht(cht).to_layout()
+    assert opened.patch_names == template.patch_names
+    np.testing.assert_allclose(opened.patch_quads_mm(), template.patch_quads_mm())
+    # the overlay shows every patch, the extra grids' too
+    assert editor.patch_at(*editor._quads_px[-1].mean(axis=0)) == opened.patch_names[-1]
+    editor.save(tmp_path / "chart.json")
+    editor.load(tmp_path / "chart.json")
+    back = editor.target_layout
+    assert back.patch_names == opened.patch_names and back.extra_grids
+    np.testing.assert_allclose(back.patch_quads_mm(), opened.patch_quads_mm())
+    np.testing.assert_allclose(back.roi_quads_px(), opened.roi_quads_px())
+    # an edit of the main grid keeps the extra grids and the names
+    editor.patch_fraction_spin.setValue(0.9)
+    assert editor.target_layout.extra_grids == back.extra_grids
+    assert editor.target_layout.patch_names == back.patch_names
+
+
+def test_a_bad_file_is_one_status_line(editor, tmp_path):
+    p = tmp_path / "bad.cht"
+    p.write_text("BOXES 1\n  Y 1 3 A\n")
+    before = editor.target_layout
+    editor.load(p)
+    assert editor.target_layout == before
+    text = editor.status_label.text()
+    assert text.startswith("Cannot load:") and str(p) in text and "\n" not in text

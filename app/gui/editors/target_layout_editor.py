@@ -41,7 +41,9 @@ from PySide6.QtWidgets import (
 from tunespec.app.gui.plots.frame_plot import FramePlot, FramePreview, build_preview
 from tunespec.app.gui.workers import Worker
 from tunespec.core.errors import TuneSpecError
+from tunespec.core.io.cht import read_cht
 from tunespec.core.layout import TargetLayout
+from tunespec.core.limits import read_bytes
 
 __all__ = ["CORNER_NAMES", "FoundCorners", "TargetLayoutEditor", "find_target_corners"]
 
@@ -625,11 +627,9 @@ class TargetLayoutEditor(QWidget):
             return
         lay = self._layout
         rows, cols = self.rows_spin.value(), self.cols_spin.value()
-        names = (
-            lay.patch_names
-            if rows * cols == lay.n_patches and (rows, cols) == (lay.rows, lay.cols)
-            else ()
-        )
+        # the names stay while the main grid keeps its shape; a new shape takes the
+        # default names (a layout with extra grids then asks for names in the file)
+        names = lay.patch_names if (rows, cols) == (lay.rows, lay.cols) else ()
         try:
             new = replace(
                 lay,
@@ -667,7 +667,10 @@ class TargetLayoutEditor(QWidget):
     @Slot()
     def _on_load_button_clicked(self) -> None:
         path, _ = QFileDialog.getOpenFileName(
-            self, "Load target layout", self.last_dir, "Target layouts (*.json)"
+            self,
+            "Load target layout",
+            self.last_dir,
+            "Target layouts (*.json);;ArgyllCMS chart templates (*.cht);;All files (*)",
         )
         if path:
             self.load(path)
@@ -681,9 +684,11 @@ class TargetLayoutEditor(QWidget):
             self.save(path)
 
     def load(self, path: str | Path) -> None:
-        """Load a layout JSON file (errors are shown, not raised)."""
+        """Load a layout JSON file or an ArgyllCMS ``.cht`` template (errors are
+        shown, not raised). A template keeps its own units (the homography does not
+        mind); saving writes it as a TuneSpec layout."""
         try:
-            lay = TargetLayout.load(path)
+            lay = _read_layout(Path(path))
         except TuneSpecError as exc:
             self.status_label.setText(f"Cannot load: {exc}")
             log.error("cannot load layout: %s", exc)
@@ -779,3 +784,12 @@ class TargetLayoutEditor(QWidget):
     def _on_finder_finished(self) -> None:
         self._finder_worker = None
         self.find_button.setEnabled(self._corner_finder is not None)
+
+
+def _read_layout(path: Path) -> TargetLayout:
+    """A ``tunespec-layout`` JSON file, or an ArgyllCMS ``.cht`` (told by content:
+    a JSON document starts with ``{``)."""
+    head = read_bytes(path).removeprefix(b"\xef\xbb\xbf").lstrip()
+    if head.startswith(b"{"):
+        return TargetLayout.load(path)
+    return read_cht(path).to_layout()
