@@ -68,3 +68,26 @@ def test_cc24_and_sg_calibrate_and_estimate_the_held_out_card(tmp_path) -> None:
     result.save(tmp_path / "c.json")
     back = load_chart_comparison(tmp_path / "c.json")
     assert back["scores"][1]["de00_mean"] == sg.de00_mean
+
+
+@pytest.mark.slow
+def test_demo_report_carries_the_chart_choice_and_a_rerun_reuses_it(tmp_path) -> None:
+    """``tunespec demo`` (chart choice on): ``export/chart_choice.json`` with the
+    CC24 and the SG, the report's section, no scratch captures left; a re-run on the
+    folder reads the comparison back instead of capturing the charts again."""
+    from tunespec.app.pipeline.run import run_demo
+
+    out = tmp_path / "demo"
+    result = run_demo(out, resolution=(512, 340), chart_choice=True)
+    saved = out / "export" / "chart_choice.json"
+    doc = json.loads(saved.read_text(encoding="utf-8"))
+    assert [s["n_patches"] for s in doc["scores"]] == [24, 140]
+    assert all(0.0 < s["de00_mean"] < 1.0 for s in doc["scores"])
+    assert result.files["chart_choice_json"] == saved
+    html = result.files["report_html"].read_text(encoding="utf-8")
+    assert "Chart choice" in html and "ColorChecker 24" in html
+    assert not list(out.glob("chart-choice-*"))
+    stamp = saved.stat().st_mtime_ns
+    again = run_demo(out, resolution=(512, 340), chart_choice=True)
+    assert saved.stat().st_mtime_ns == stamp
+    assert "Chart choice" in again.files["report_html"].read_text(encoding="utf-8")

@@ -125,7 +125,13 @@ def _chart(key: str) -> tuple[TargetLayout, Spectra]:
     return layout, read_spectra_csv(resource_path("charts", refl_file), DEFAULT_GRID)
 
 
-def score_chart(key: str, work_dir: Path, *, seed: int = 0) -> ChartScore:
+def score_chart(
+    key: str,
+    work_dir: Path,
+    *,
+    seed: int = 0,
+    resolution: tuple[int, int] | None = None,
+) -> ChartScore:
     """Calibrate on chart ``key`` and estimate the held-out card (module docstring)."""
     from tunespec.app.pipeline.steps import (
         bench_for_target,
@@ -138,7 +144,9 @@ def score_chart(key: str, work_dir: Path, *, seed: int = 0) -> ChartScore:
 
     layout, refl = _chart(key)
     card, card_refl = held_out_card()
-    with open_bench("sim", None, layout=layout, reflectances=refl, seed=seed) as bench:
+    with open_bench(
+        "sim", None, layout=layout, reflectances=refl, seed=seed, resolution=resolution
+    ) as bench:
         session, _ = capture_target(bench, work_dir / key, layout)
         sample_bench = bench_for_target(bench, card, card_refl)
         sample, _ = capture_target(sample_bench, work_dir / f"{key}-held-out", card)
@@ -165,12 +173,16 @@ def compare_charts(
     charts: Sequence[str] = ("colorchecker_24", "colorchecker_sg"),
     *,
     seed: int = 0,
+    resolution: tuple[int, int] | None = None,
     progress: Callable[[float], None] | None = None,
 ) -> ChartComparison:
-    """Score each of ``charts`` (keys of :data:`CHARTS`) on the same bench."""
+    """Score each of ``charts`` (keys of :data:`CHARTS`) on the same bench
+    (simulated camera of ``resolution``, ``None``: its default)."""
     scores = []
     for k, key in enumerate(charts):
-        scores.append(score_chart(key, Path(work_dir), seed=seed))
+        scores.append(
+            score_chart(key, Path(work_dir), seed=seed, resolution=resolution)
+        )
         if progress is not None:
             progress((k + 1) / len(charts))
     _, card_refl = held_out_card()

@@ -130,6 +130,10 @@ class Plan:
     input_files
         The files the plan was read from (configuration, layouts, spectra): the
         report lists them with their SHA-256.
+    chart_choice
+        Charts (keys of :data:`tunespec.app.pipeline.chart_choice.CHARTS`) each
+        calibrated on a fresh simulated bench of the same seed for the report's
+        "Chart choice" section (``export/chart_choice.json``); simulated light only.
     """
 
     out_dir: Path
@@ -153,6 +157,11 @@ class Plan:
     images: bool = False
     scheduler: str | None = None
     input_files: tuple[Path, ...] = ()
+    chart_choice: tuple[str, ...] = ()
+
+
+#: The charts ``tunespec demo`` compares for the report (24 vs 140 patches).
+DEMO_CHART_CHOICE = ("colorchecker_24", "colorchecker_sg")
 
 
 def demo_plan(
@@ -161,6 +170,7 @@ def demo_plan(
     seed: int = 0,
     resolution: tuple[int, int] = DEMO_RESOLUTION,
     report: bool = True,
+    chart_choice: tuple[str, ...] = (),
 ) -> Plan:
     """The plan of ``tunespec demo``: the simulated bench, SG then the CMY target."""
     return Plan(
@@ -170,6 +180,7 @@ def demo_plan(
         sample_reflectances=sample_reference(),
         reference=sample_reference(),
         report=report,
+        chart_choice=tuple(chart_choice),
     )
 
 

@@ -33,6 +33,7 @@ from tunespec.app.pipeline.folder import (
     write_measurement_doc,
 )
 from tunespec.app.pipeline.plan import (
+    DEMO_CHART_CHOICE,
     DEMO_RESOLUTION,
     Plan,
     demo_plan,
@@ -48,6 +49,7 @@ from tunespec.app.pipeline.steps import (
     export,
     process,
 )
+from tunespec.core.errors import InputError
 from tunespec.core.io.session import Session
 from tunespec.core.processing import ProcessedSession
 from tunespec.core.progress import (
@@ -392,7 +394,11 @@ def _run_on(
     scheduler: Any = None,
 ) -> RunResult:
     """Every step of ``plan`` on an open ``bench`` (the Dask steps on ``scheduler``)."""
-    weights = {**_STAGE_WEIGHTS, **({"images": 20.0} if plan.images else {})}
+    weights = {
+        **_STAGE_WEIGHTS,
+        **({"images": 20.0} if plan.images else {}),
+        **({"chart choice": 90.0} if plan.chart_choice and plan.report else {}),
+    }
     hooks = _Hooks(_Stages(progress, weights), should_stop, on_frame)
     folder = MeasurementFolder.at(plan.out_dir)
     _write_plan(folder, plan)
@@ -432,6 +438,11 @@ def _run_on(
         "chart corners": chart.corners_source,
         "sample corners": sample.corners_source,
     }
+    choice = None
+    if plan.chart_choice and plan.report:
+        choice = hooks.stages.timed(
+            "chart choice", lambda p: _chart_choice(folder, plan, p)
+        )
     files: dict[str, Path] = hooks.stages.timed(
         "export",
         lambda p: export(
@@ -451,6 +462,7 @@ def _run_on(
             input_files=plan.input_files,
             threshold_rgb_mean=DEFAULT_THRESHOLD_RGB_MEAN,
             chart_reflectances=plan.chart_reflectances,
+            chart_choice=choice,
         ),
     )
     if plan.images:
@@ -473,6 +485,40 @@ def _run_on(
     files["summary_json"] = folder.write_summary(result.summary())
     report(progress, 1.0)
     return result
+
+
+def _chart_choice(
+    folder: MeasurementFolder, plan: Plan, progress: ProgressFn | None
+) -> dict[str, Any]:
+    """The report's chart comparison (:mod:`tunespec.app.pipeline.chart_choice`),
+    kept in ``export/chart_choice.json``: read back when a resumed run finds it for
+    the same charts and seed, else computed on benches of the plan's seed and
+    resolution in a scratch folder that is removed again."""
+    import shutil
+    import tempfile
+
+    from tunespec.app.pipeline.chart_choice import compare_charts, load_chart_comparison
+
+    path = folder.export_dir / "chart_choice.json"
+    if path.is_file():
+        kept = load_chart_comparison(path)
+        if kept.get("seed") == plan.seed and len(kept["scores"]) == len(
+            plan.chart_choice
+        ):
+            return kept
+    if plan.light != "sim":
+        raise InputError("chart_choice compares charts on the simulated bench only")
+    scratch = Path(tempfile.mkdtemp(prefix="chart-choice-", dir=folder.root))
+    try:
+        comparison = compare_charts(
+            scratch, plan.chart_choice, seed=plan.seed,
+            resolution=plan.resolution, progress=progress,
+        )  # fmt: skip
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+    folder.export_dir.mkdir(parents=True, exist_ok=True)
+    comparison.save(path)
+    return comparison.to_dict()
 
 
 def _images(
@@ -560,6 +606,7 @@ def run_demo(
     resolution: tuple[int, int] = DEMO_RESOLUTION,
     report_files: bool = True,
     on_frame: FrameCallback | None = None,
+    chart_choice: bool = False,
 ) -> RunResult:
     """The full measurement on the simulated bench, compared with its truth.
 
@@ -567,9 +614,15 @@ def run_demo(
     processes it, calibrates the camera (Table 1), captures the CMY Neugebauer sample
     target, estimates its reflectances with the SG as prior and compares them with
     the truth (Table 2), and writes the exports and the report into ``out_dir``.
-    Re-running on the same folder resumes the sessions there.
+    Re-running on the same folder resumes the sessions there. ``chart_choice``:
+    the report also compares calibrating on a ColorChecker 24 with the SG
+    (:data:`~tunespec.app.pipeline.plan.DEMO_CHART_CHOICE`, on benches of the same
+    seed).
     """
-    plan = demo_plan(out_dir, seed=seed, resolution=resolution, report=report_files)
+    plan = demo_plan(
+        out_dir, seed=seed, resolution=resolution, report=report_files,
+        chart_choice=DEMO_CHART_CHOICE if chart_choice else (),
+    )  # fmt: skip
     return run(plan, progress=progress, should_stop=should_stop, on_frame=on_frame)
 
 

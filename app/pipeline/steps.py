@@ -441,8 +441,11 @@ def export(
     input_files: Sequence[str | PathLike[str]] = (),
     threshold_rgb_mean: float | None = None,
     chart_reflectances: Spectra | None = None,
+    chart_choice: Mapping[str, Any] | None = None,
 ) -> dict[str, Path]:
-    """Write every export (``core.io.export``) and, if asked, the HTML/PDF report.
+    """Write every export (``core.io.export``) and, if asked, the HTML/PDF report
+    (with the "Chart choice" section when ``chart_choice``, a
+    ``chart_choice.json`` document, is given).
 
     The chart's camera ``.ti3`` (for ArgyllCMS ``colprof``) and the camera transforms
     (ACES IDT, CCMs for D50/D65/A) come from ``chart_reflectances`` (default: the
@@ -526,7 +529,10 @@ def export(
             sessions=sessions or {},
             input_files=input_files,
             threshold_rgb_mean=threshold_rgb_mean,
+            chart_choice=chart_choice,
         )
+    if chart_choice is not None and (out / "chart_choice.json").is_file():
+        files["chart_choice_json"] = out / "chart_choice.json"
     write_exports_index(out, files)
     return files
 
@@ -548,6 +554,7 @@ def _write_report(
     sessions: Mapping[str, str | PathLike[str]],
     input_files: Sequence[str | PathLike[str]],
     threshold_rgb_mean: float | None,
+    chart_choice: Mapping[str, Any] | None,
 ) -> tuple[Path, Path]:
     """``report.html`` and ``report.pdf`` of :func:`export` (``app.report``)."""
     from tunespec.app.report.report import ReportData, write_report
@@ -585,5 +592,6 @@ def _write_report(
         provenance={**dict(provenance), **items},
         exposures_s=exposures,
         input_files=tuple(inputs),
+        chart_choice=chart_choice,
     )
     return write_report(out, data)

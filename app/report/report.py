@@ -1168,7 +1168,29 @@ def _chart_choice_table(choice: Mapping[str, Any]) -> _Table:
         f"{choice.get('seed', 0)}); Table 1 on the chart itself, sensitivity RMS "
         "against the bench's true curves (peak-normalised), Table 2 (D50) on "
         f"{choice.get('n_held_out', '?')} held-out reflectances no chart carries "
-        f"({choice.get('held_out', '')}). Made by benchmarks/chart_choice.py.",
+        f"({choice.get('held_out', '')}). {_chart_choice_reading(choice['scores'])} "
+        "Made by app.pipeline.chart_choice (tunespec demo, benchmarks/chart_choice.py); "
+        "one seed is one draw of noise and metering error, run the benchmark with "
+        "several --seed values for the spread.",
+    )
+
+
+def _chart_choice_reading(scores: Sequence[Mapping[str, Any]]) -> str:
+    """One sentence saying what the chart comparison shows, from its numbers."""
+    if len(scores) < 2:
+        return ""
+
+    def span(key: str, fmt: str) -> str:
+        lo = min(scores, key=lambda s: s[key])
+        hi = max(scores, key=lambda s: s[key])
+        return (
+            f"{format(lo[key], fmt)} ({lo['chart']}) to {format(hi[key], fmt)} "
+            f"({hi['chart']})"
+        )
+
+    return (
+        f"Held-out mean ΔE00 ranges from {span('de00_mean', '.3f')}; the "
+        f"sensitivity RMS from {span('sensitivity_rms', '.4f')}."
     )
 
 
