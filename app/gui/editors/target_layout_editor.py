@@ -413,6 +413,11 @@ class TargetLayoutEditor(QWidget):
         self.names_check.setChecked(target_layout.n_patches <= 48)
         if target_layout.corners_px is None and self.frame_plot.image_size is not None:
             self._layout = target_layout.with_corners(self.default_corners())
+        self._commit(before, emit, undo_text)
+
+    def _commit(self, before: TargetLayout, emit: bool, undo_text: str | None) -> None:
+        """Show the layout just set; announce it (``emit``) and make it a step of
+        the undo history (``undo_text``)."""
         self._sync_handles()
         self._redraw()
         if emit:
@@ -480,12 +485,7 @@ class TargetLayoutEditor(QWidget):
         """
         before = self._layout
         self._layout = self._layout.with_corners(np.asarray(corners_px, dtype=float))
-        self._sync_handles()
-        self._redraw()
-        if emit:
-            self.layout_changed.emit(self._layout)
-        if undo_text is not None:
-            self._edited(before, undo_text)
+        self._commit(before, emit, undo_text)
 
     def show_preview(self, preview: FramePreview) -> None:
         """Show a frame; a layout without corners gets default ones inside it."""

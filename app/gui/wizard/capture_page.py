@@ -19,7 +19,7 @@ from tunespec.app.gui.wizard.measurement import (
     PhaseResult,
     capture_job,
 )
-from tunespec.app.gui.wizard.step_page import StepPage
+from tunespec.app.gui.wizard.step_page import StepPage, devices_connected
 from tunespec.app.gui.workers import DeviceJob
 
 __all__ = ["CapturePage"]
@@ -141,9 +141,7 @@ class CapturePage(StepPage):
 
     def can_start(self) -> str | None:
         """Devices must be connected."""
-        if not self.measurement.controller.is_open:
-            return "Connect the devices first (step 1)."
-        return None
+        return devices_connected(self.measurement)
 
     def make_job(self) -> DeviceJob:
         """A device job capturing this phase of the chart session."""

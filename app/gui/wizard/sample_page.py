@@ -7,7 +7,7 @@ from typing import Any
 from PySide6.QtWidgets import QWidget
 
 from tunespec.app.gui.wizard.measurement import SAMPLE_DIR, PhaseResult, capture_job
-from tunespec.app.gui.wizard.step_page import StepPage
+from tunespec.app.gui.wizard.step_page import StepPage, devices_connected
 from tunespec.app.gui.workers import DeviceJob
 
 __all__ = ["SamplePage"]
@@ -41,9 +41,7 @@ class SamplePage(StepPage):
 
     def can_start(self) -> str | None:
         """Devices must be connected."""
-        if not self.measurement.controller.is_open:
-            return "Connect the devices first (step 1)."
-        return None
+        return devices_connected(self.measurement)
 
     def make_job(self) -> DeviceJob:
         """A device job capturing the whole sample session."""

@@ -28,9 +28,17 @@ from tunespec.app.gui.panels.device_panel import format_error
 from tunespec.app.gui.workers import DeviceJob, ProgressClock, Throttle, Worker
 from tunespec.core.progress import Cancelled
 
-__all__ = ["StepPage", "StepState"]
+__all__ = ["StepPage", "StepState", "devices_connected"]
 
 log = logging.getLogger(__name__)
+
+
+def devices_connected(measurement: Any) -> str | None:
+    """``None`` if the measurement's devices are open, else what the operator must
+    do first (a capture page's :meth:`StepPage.can_start`)."""
+    if not measurement.controller.is_open:
+        return "Connect the devices first (step 1)."
+    return None
 
 
 class StepState:
