@@ -20,7 +20,6 @@ JSON, which the report's "Chart choice" section reads (``ReportData.chart_choice
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from os import PathLike
@@ -31,7 +30,9 @@ import numpy as np
 
 from tunespec.core.datasets import load_colorchecker_sg, resource_path
 from tunespec.core.errors import InputError
+from tunespec.core.io.session import atomic_write_text
 from tunespec.core.layout import TargetLayout
+from tunespec.core.limits import dumps_json
 from tunespec.core.spectra import (
     CALIBRATION_GRID,
     DEFAULT_GRID,
@@ -84,7 +85,9 @@ class ChartComparison:
         }
 
     def save(self, path: str | PathLike[str]) -> None:
-        Path(path).write_text(json.dumps(self.to_dict(), indent=2), encoding="utf-8")
+        """Write the comparison as standard JSON, atomically (a resumed run reads
+        it back)."""
+        atomic_write_text(Path(path), dumps_json(self.to_dict()))
 
 
 def held_out_card(grid: Any = DEFAULT_GRID) -> tuple[TargetLayout, Spectra]:

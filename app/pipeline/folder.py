@@ -84,6 +84,8 @@ CALIBRATION_DIR, ESTIMATE_DIR, EXPORT_DIR = "calibration", "estimate", "export"
 CAPTURE_WARNINGS_FILE = "capture_warnings.json"
 #: The index of the export step's files in ``export/``: export kind -> file name.
 EXPORTS_INDEX_FILE = "exports.json"
+#: The report's chart comparison (``app.pipeline.chart_choice``) in ``export/``.
+CHART_CHOICE_FILE = "chart_choice.json"
 #: Pass/fail limit on Table 1's RGB mean (full scale) when none is chosen.
 DEFAULT_THRESHOLD_RGB_MEAN = 0.005
 

@@ -22,6 +22,7 @@ import numpy as np
 
 from tunespec.app.pipeline.engine import connect
 from tunespec.app.pipeline.folder import (
+    CHART_CHOICE_FILE,
     DEFAULT_THRESHOLD_RGB_MEAN,
     CalibrationResult,
     EstimateResult,
@@ -499,7 +500,7 @@ def _chart_choice(
 
     from tunespec.app.pipeline.chart_choice import compare_charts, load_chart_comparison
 
-    path = folder.export_dir / "chart_choice.json"
+    path = folder.export_dir / CHART_CHOICE_FILE
     if path.is_file():
         kept = load_chart_comparison(path)
         if kept.get("seed") == plan.seed and len(kept["scores"]) == len(

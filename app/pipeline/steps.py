@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from tunespec.app.pipeline.folder import (
+    CHART_CHOICE_FILE,
     add_capture_warnings,
     clear_capture_warnings,
     write_exports_index,
@@ -531,8 +532,8 @@ def export(
             threshold_rgb_mean=threshold_rgb_mean,
             chart_choice=chart_choice,
         )
-    if chart_choice is not None and (out / "chart_choice.json").is_file():
-        files["chart_choice_json"] = out / "chart_choice.json"
+    if chart_choice is not None and (out / CHART_CHOICE_FILE).is_file():
+        files["chart_choice_json"] = out / CHART_CHOICE_FILE
     write_exports_index(out, files)
     return files
 
