@@ -149,6 +149,7 @@ class NoiseModel:
         read_noise_e: float,
         n_darks: int = 1,
         iso_gain: float = 1.0,
+        n_frames: int = 1,
     ) -> NoiseModel:
         """The model of a sensor from its figures.
 
@@ -163,6 +164,9 @@ class NoiseModel:
             ``1 / n_darks`` of a frame's).
         iso_gain
             ISO / base ISO (electrons per full scale shrink by it).
+        n_frames
+            Frames averaged at each exposure (repeats): their photon and read
+            noise variance is ``1 / n_frames`` of one frame's.
 
         Examples
         --------
@@ -171,13 +175,14 @@ class NoiseModel:
         (1.0, 0.5)
         """
         fs_e = float(full_well_e) / float(iso_gain)
-        if not (fs_e > 0 and read_noise_e >= 0 and n_darks >= 1):
+        if not (fs_e > 0 and read_noise_e >= 0 and n_darks >= 1 and n_frames >= 1):
             raise InputError(
-                "noise model: full well > 0, read noise >= 0, n_darks >= 1"
+                "noise model: full well > 0, read noise >= 0, n_darks >= 1, "
+                "n_frames >= 1"
             )
         sites = np.array([1.0, 2.0, 1.0])  # photosites averaged per plane (R, G, B)
-        read = (float(read_noise_e) / fs_e) ** 2 * (1.0 + 1.0 / n_darks)
-        return cls(read / sites, (1.0 / fs_e) / sites, "camera")
+        read = (float(read_noise_e) / fs_e) ** 2 * (1.0 / n_frames + 1.0 / n_darks)
+        return cls(read / sites, (1.0 / fs_e) / sites / n_frames, "camera")
 
     def variance(
         self, signal: ArrayLike, phi: ArrayLike = 1.0, channel_index: ArrayLike = ...
@@ -232,13 +237,15 @@ class SensorFigures:
                 f"{self.read_noise_e:g} e- (>= 0), ISO gain {self.iso_gain:g} (> 0)"
             )
 
-    def model(self, n_darks: int = 1) -> NoiseModel:
-        """The noise model with ``n_darks`` dark frames averaged and subtracted."""
+    def model(self, n_darks: int = 1, n_frames: int = 1) -> NoiseModel:
+        """The noise model with ``n_darks`` dark frames averaged and subtracted from
+        the mean of ``n_frames`` repeated frames."""
         return NoiseModel.from_camera(
             full_well_e=self.full_well_e,
             read_noise_e=self.read_noise_e,
             n_darks=n_darks,
             iso_gain=self.iso_gain,
+            n_frames=n_frames,
         )
 
 

@@ -76,7 +76,7 @@ from tunespec.core.image import (
 from tunespec.core.io.image_formats import ImageOutputs, pwrite_all
 from tunespec.core.io.raw import load_raw
 from tunespec.core.io.session import Session, find_darks, frames_by_channel
-from tunespec.core.processing import BRACKET_CLIP_LEVEL
+from tunespec.core.processing import BRACKET_CLIP_LEVEL, exposure_groups
 from tunespec.core.spectra import Grid, Spectra
 
 __all__ = [
@@ -279,7 +279,14 @@ def plan_image_job(
         str(session.root), session.fingerprint(), tuple(wanted), tuple(w_out),
         tuple(t_out), tuple(dark_frames), tuple(keys), shape, str(work),
         tuple(spd_files), tuple(spd_t),
-        {"n_darks": max(len(d) for d in dark_frames), "dark": dark},
+        {
+            "n_darks": max(len(d) for d in dark_frames),
+            # frames averaged at the reference exposure (the fewest of any channel)
+            "n_repeats": min(
+                len(exposure_groups([f.exposure_s for f in t])[0]) for t in t_out
+            ),
+            "dark": dark,
+        },
     )  # fmt: skip
     _allocate(
         job.work_path(RESPONSES),
@@ -420,28 +427,51 @@ def _dark(job: ImageJob, frame: _Frame) -> NDArray[np.float32]:
     return dark
 
 
+def _group_mean(
+    job: ImageJob, frames: Sequence[_Frame], group: range, slot: str, shorter: bool
+) -> tuple[NDArray[np.float32], NDArray[np.bool_]]:
+    """Mean of the dark-subtracted planes of ``frames[group]`` (one exposure) in this
+    thread's scratch buffer ``planes_<slot>``, and the cells clipped in any of them
+    (with ``shorter`` brackets to take over, also those above
+    :data:`BRACKET_CLIP_LEVEL`)."""
+    values: NDArray[np.float32] | None = None
+    clipped = np.zeros(job.plane_shape, dtype=bool)
+    for i in group:
+        planes, sat = _planes(job, frames[i], slot if values is None else "repeat")
+        clipped |= sat
+        if shorter:
+            clipped |= planes.max(axis=0) > BRACKET_CLIP_LEVEL
+        planes -= _dark(job, frames[i])
+        if values is None:
+            values = planes
+        else:
+            values += planes
+    assert values is not None  # a group has at least one frame
+    if len(group) > 1:
+        values *= np.float32(1.0 / len(group))
+    return values, clipped
+
+
 def _merged(
     job: ImageJob, frames: Sequence[_Frame]
 ) -> tuple[NDArray[np.float32], NDArray[np.bool_]]:
-    """Dark-subtracted planes of a bracket series (longest first), merged: a clipped
-    cell takes the next shorter exposure, scaled (as processing's brackets); with
-    brackets, cells above :data:`BRACKET_CLIP_LEVEL` count as clipped.
+    """Dark-subtracted planes of a bracket series (longest first), merged as
+    processing merges them: repeated frames of one exposure averaged
+    (:func:`~tunespec.core.processing.exposure_groups`), a clipped cell takes the
+    next shorter exposure, scaled.
 
     The planes are this thread's scratch buffer ``planes_merged`` (valid until the
     next call on this thread)."""
-    values, clipped = _planes(job, frames[0], "merged")
-    if len(frames) > 1:
-        clipped |= values.max(axis=0) > BRACKET_CLIP_LEVEL
-    values -= _dark(job, frames[0])
-    for f in frames[1:]:
+    groups = exposure_groups([f.exposure_s for f in frames])
+    shorter = len(groups) > 1
+    values, clipped = _group_mean(job, frames, groups[0], "merged", shorter)
+    for group in groups[1:]:
         if not clipped.any():
             break
-        planes, sat = _planes(job, f, "bracket")
-        sat |= planes.max(axis=0) > BRACKET_CLIP_LEVEL
+        planes, sat = _group_mean(job, frames, group, "bracket", shorter)
         use = clipped & ~sat
-        planes -= _dark(job, f)
         values[:, use] = planes[:, use] * np.float32(
-            frames[0].exposure_s / f.exposure_s
+            frames[0].exposure_s / frames[group[0]].exposure_s
         )
         clipped &= ~use
     return values, clipped
@@ -664,7 +694,7 @@ def setup_estimation(
         n_darks = int(job.meta.get("n_darks", 1))
         if job.meta.get("dark") == "smooth":  # the box mean's noise is negligible
             n_darks *= DARK_SMOOTH_PX**2
-        noise = noise.model(n_darks)
+        noise = noise.model(n_darks, int(job.meta.get("n_repeats", 1)))
     elif noise is None:
         noise = photon_transfer_fit(
             np.concatenate([r.ptc_level for r in results], axis=1),

@@ -4,9 +4,10 @@ For every LED channel ``j`` of a session (:mod:`tunespec.core.io.session`) and e
 
 1. **Dark subtraction.** The dark frame(s) taken at the same exposure and ISO (light
    off) are averaged and subtracted from the white and the target frame.
-2. **Exposure brackets (optional HDR).** With several exposures per channel each pixel
-   takes the longest exposure in which it is not saturated, scaled to the reference
-   (longest) exposure; this happens in the linear raw domain.
+2. **Repeats and exposure brackets (optional HDR).** Frames repeated at one exposure
+   are averaged; with several exposures per channel each pixel takes the longest
+   exposure in which it is not saturated, scaled to the reference (longest) exposure;
+   this happens in the linear raw domain.
 3. **Flat field, Eq. 2.** ``A' = mean(A_B[centre]) * A / A_B``, pixel- and
    channel-wise, where ``A_B`` is the white background and the mean is taken over a
    ``window_px`` x ``window_px`` window at the centre of ``A_B``. Within each ROI
@@ -76,6 +77,7 @@ __all__ = [
     "CornerDetection",
     "ProcessedSession",
     "RoiSet",
+    "exposure_groups",
     "find_session_corners",
     "flat_window",
     "process_session",
@@ -313,11 +315,28 @@ class _Pixels:
 BRACKET_CLIP_LEVEL = 0.95
 
 
-def _bracket_clipped(frame: _Pixels, n_brackets: int) -> NDArray[np.bool_]:
-    """Clipped pixels of one bracket: flagged by the white level or, when there are
+def exposure_groups(exposures_s: Sequence[float]) -> list[range]:
+    """The runs of equal exposure in a bracket series (longest first).
+
+    Frames repeated at one exposure (``--repeats``, or a bracket factor given twice)
+    are averaged before the brackets are merged: the mean of ``n`` frames has
+    ``1 / n`` of a frame's photon and read-noise variance.
+
+    >>> exposure_groups([2.0, 2.0, 0.25, 0.25])
+    [range(0, 2), range(2, 4)]
+    """
+    starts = [i for i, t in enumerate(exposures_s) if i == 0 or t != exposures_s[i - 1]]
+    return [
+        range(a, b)
+        for a, b in zip(starts, [*starts[1:], len(exposures_s)], strict=True)
+    ]
+
+
+def _bracket_clipped(frame: _Pixels, shorter: bool) -> NDArray[np.bool_]:
+    """Clipped pixels of one frame: flagged by the white level or, when there are
     shorter brackets to take over, above :data:`BRACKET_CLIP_LEVEL`."""
     clipped = frame.saturated.copy()
-    if n_brackets > 1:
+    if shorter:
         clipped |= frame.values.max(axis=0) > BRACKET_CLIP_LEVEL
     return clipped
 
@@ -327,18 +346,36 @@ def _merge_brackets(
 ) -> _Pixels:
     """Dark-subtract and merge exposure brackets (longest first) in the linear domain.
 
-    Each pixel takes the longest exposure in which it is not clipped, scaled to the
-    reference (first) exposure; a pixel clipped in every bracket stays flagged. With
-    brackets, a pixel above :data:`BRACKET_CLIP_LEVEL` of full scale (before dark
-    subtraction) counts as clipped.
+    Repeated frames of one exposure are averaged (:func:`exposure_groups`); a pixel
+    clipped in any of them counts as clipped at that exposure. Each pixel takes the
+    longest exposure in which it is not clipped, scaled to the reference (first)
+    exposure; a pixel clipped in every bracket stays flagged. With brackets, a pixel
+    above :data:`BRACKET_CLIP_LEVEL` of full scale (before dark subtraction) counts
+    as clipped.
     """
-    values = frames[0].values - darks[0].values
-    clipped = _bracket_clipped(frames[0], len(frames))
-    for f, d, t in zip(frames[1:], darks[1:], exposures_s[1:], strict=True):
-        use = clipped & ~_bracket_clipped(f, len(frames))
+    groups = exposure_groups(exposures_s)
+    shorter = len(groups) > 1
+
+    def averaged(group: range) -> _Pixels:
+        values = frames[group[0]].values - darks[group[0]].values
+        clipped = _bracket_clipped(frames[group[0]], shorter)
+        for i in group[1:]:
+            values += frames[i].values - darks[i].values
+            clipped |= _bracket_clipped(frames[i], shorter)
+        if len(group) > 1:
+            values *= np.float32(1.0 / len(group))
+        return _Pixels(values, clipped)
+
+    merged = averaged(groups[0])
+    values, clipped = merged.values, merged.saturated
+    for group in groups[1:]:
+        if not clipped.any():
+            break
+        other = averaged(group)
+        use = clipped & ~other.saturated
         if use.any():
-            scale = np.float32(exposures_s[0] / t)
-            values[:, use] = (f.values[:, use] - d.values[:, use]) * scale
+            scale = np.float32(exposures_s[0] / exposures_s[group[0]])
+            values[:, use] = other.values[:, use] * scale
             clipped[use] = False
     return _Pixels(values, clipped)
 

@@ -34,6 +34,7 @@ import numpy as np
 
 from tunespec.core.errors import DiskFullError, InputError
 from tunespec.core.io.session import (
+    MAX_BRACKETS,
     CaptureSettings,
     FrameRecord,
     FrameSpec,
@@ -132,6 +133,7 @@ def new_session(
     channels: Sequence[str] | None = None,
     n_darks: int = 1,
     brackets: Sequence[float] = (1.0,),
+    repeats: int = 1,
     target_level: float = 0.75,
     levels: Mapping[str, float] | None = None,
     meta: Mapping[str, str] | None = None,
@@ -155,6 +157,10 @@ def new_session(
         Dark frames per distinct exposure.
     brackets
         Exposure bracket factors, starting with 1.0 (e.g. ``(1.0, 0.125)`` for HDR).
+    repeats
+        Frames per LED and bracket, averaged in processing (``1 / repeats`` of one
+        frame's photon and read-noise variance, for per-pixel images): stored as
+        each bracket factor repeated.
     target_level
         Auto exposure aim, fraction of full scale.
     levels
@@ -175,7 +181,12 @@ def new_session(
             f"unknown LED channel(s) {', '.join(unknown)}; the light source has "
             f"{', '.join(available)}"
         )
-    factors = tuple(float(f) for f in brackets)
+    if not 1 <= int(repeats) <= MAX_BRACKETS // max(1, len(brackets)):
+        raise InputError(
+            f"repeats: expected 1 to {MAX_BRACKETS // max(1, len(brackets))} frames "
+            f"per LED and bracket (at most {MAX_BRACKETS} frames), got {repeats}"
+        )
+    factors = tuple(float(f) for f in brackets for _ in range(int(repeats)))
     if exposure == "auto":
         mode, exposures = "auto", {}
     else:

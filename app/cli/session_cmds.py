@@ -143,6 +143,14 @@ def _add_capture(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
         metavar="1,0.125",
         help="exposure brackets per LED, merged as HDR in processing",
     )
+    p.add_argument(
+        "--repeats",
+        type=int,
+        default=1,
+        metavar="N",
+        help="frames per LED and bracket, averaged in processing (1/N of the noise "
+        "variance, for per-pixel images)",
+    )
     p.add_argument("--darks", type=int, default=1, help="dark frames per exposure")
     p.add_argument("--channels", default=None, help="comma-separated LED channels")
     p.add_argument(
@@ -319,6 +327,7 @@ def _capture_cmd(args: argparse.Namespace, resume: bool) -> int:
                 channels=args.channels.split(",") if args.channels else None,
                 n_darks=args.darks,
                 brackets=args.brackets,
+                repeats=args.repeats,
             )
         result = capture(
             session,

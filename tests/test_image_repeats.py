@@ -1,0 +1,96 @@
+"""``capture --repeats N``: N frames per LED and bracket, averaged in processing and
+in the per-pixel images (1/N of a frame's photon and read-noise variance)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tunespec.app.cli import main
+from tunespec.core.errors import InputError
+
+RESOLUTION = (256, 192)
+
+
+def _bench():
+    from tunespec.devices.registry import open_bench
+    from tunespec.devices.sim.scene import default_regions
+
+    return open_bench(
+        "sim", resolution=RESOLUTION, seed=0,
+        scene_options={"regions": default_regions()},
+    )  # fmt: skip
+
+
+def test_repeats_are_stored_as_repeated_bracket_factors(tmp_path) -> None:
+    from tunespec.devices.capture import new_session
+
+    bench = _bench()
+    try:
+        s = new_session(
+            tmp_path / "a", bench.light, bench.camera, layout=bench.truth["layout"],
+            brackets=(1.0, 0.125), repeats=2,
+        )  # fmt: skip
+        assert s.settings.bracket_factors == (1.0, 1.0, 0.125, 0.125)
+        for bad in (0, 9):
+            with pytest.raises(InputError, match="repeats: expected 1 to 8"):
+                new_session(
+                    tmp_path / f"b{bad}", bench.light, bench.camera,
+                    layout=bench.truth["layout"], brackets=(1.0, 0.125), repeats=bad,
+                )  # fmt: skip
+    finally:
+        bench.close()
+
+
+def _capture(root: Path, repeats: int) -> tuple[Path, np.ndarray]:
+    from tunespec.devices.capture import capture, new_session
+
+    bench = _bench()
+    session = new_session(
+        root / "session", bench.light, bench.camera, layout=bench.truth["layout"],
+        exposure="auto", repeats=repeats, n_darks=repeats,
+    )  # fmt: skip
+    capture(session, bench.light, bench.camera, bench.stage)
+    bench.sim_camera.write_truth(root / "truth")
+    plane = bench.sim_stage.plane_materials(*RESOLUTION)
+    bench.close()
+    return root / "session", plane
+
+
+@pytest.mark.slow
+def test_repeats_shrink_the_pixel_noise(tmp_path) -> None:
+    """Four frames per LED (and four darks): the pixels' spread around their patch's
+    mean and the patches' per-pixel standard deviation (Eq. 6) halve; the camera's
+    noise model knows the frames were averaged."""
+    import tifffile
+
+    from tunespec.core.colorimetry import delta_e_2000
+    from tunespec.core.io.session import Session
+    from tunespec.core.processing import process_session
+
+    spread, eq6 = {}, {}
+    for n in (1, 4):
+        session, pm = _capture(tmp_path / f"r{n}", n)
+        sens = tmp_path / f"r{n}" / "truth" / "truth_sensitivity_absolute.csv"
+        out = tmp_path / f"img{n}"
+        assert main([
+            "estimate-image", str(session), "--sensitivities", str(sens), "--out",
+            str(out), "--quiet", "--noise-model", "camera:67000,30",
+        ]) == 0  # fmt: skip
+        lab = tifffile.imread(out / "lab.tif").astype(np.float64)
+        patches = pm >= 2
+        de = []
+        for m in np.unique(pm[patches]):
+            px = lab[pm == m]
+            de.append(delta_e_2000(px, px.mean(axis=0, keepdims=True)))
+        spread[n] = float(np.concatenate(de).mean())
+        std = process_session(Session.open(session)).responses.rgb_std
+        eq6[n] = float(np.nanmedian(std))
+        noise = json.loads((out / "provenance.json").read_text())["noise_model"]
+        np.testing.assert_allclose(noise["shot_gain_fs"][0], 1 / 67000 / n)
+    # measured 0.52 and 0.50 (sqrt(1/4) = 0.5)
+    assert 0.4 < spread[4] / spread[1] < 0.6, spread
+    assert 0.4 < eq6[4] / eq6[1] < 0.6, eq6
