@@ -39,6 +39,7 @@ DEFAULTS: dict[str, Any] = {
     "capture/exposure": "auto",
     "capture/iso": 100,
     "capture/n_darks": 1,
+    "capture/repeats": 1,
     "calibration/method": "",  # "": the library's default method
     "calibration/threshold_rgb_mean": 0.005,
     "estimate/reference_path": "",

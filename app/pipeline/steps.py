@@ -158,6 +158,7 @@ def capture_target(
     iso: int = 100,
     brackets: Sequence[float] = (1.0,),
     n_darks: int = 1,
+    repeats: int = 1,
     resume: bool = True,
     progress: ProgressFn | None = None,
     should_stop: StopFn | None = None,
@@ -207,6 +208,7 @@ def capture_target(
             iso=iso,
             brackets=brackets,
             n_darks=n_darks,
+            repeats=repeats,
         )
     result = capture(
         session,

@@ -75,7 +75,7 @@ class CapturePage(StepPage):
             self.body.addStretch(1)
 
     def _build_options(self) -> None:
-        """Exposure, ISO and darks: set before the first frame of the session."""
+        """Exposure, ISO, darks and repeats: set before the first frame of the session."""
         opts = self.measurement.capture_options
         self.exposure_combo = QComboBox()
         self.exposure_combo.addItem("automatic (metered per LED)", "auto")
@@ -87,6 +87,11 @@ class CapturePage(StepPage):
             minimum=50, maximum=6400, value=opts.iso, singleStep=100
         )
         self.darks_spin = QSpinBox(minimum=1, maximum=16, value=opts.n_darks)
+        self.repeats_spin = QSpinBox(minimum=1, maximum=16, value=opts.repeats)
+        self.repeats_spin.setToolTip(
+            "Frames per LED, averaged: N frames have 1/N of one frame's noise "
+            "variance (for per-pixel images; with as many dark frames)"
+        )
         self.exposure_spin.setToolTip("Exposure of every frame (fixed exposure only)")
         # the seconds only count with a fixed exposure: greyed out otherwise
         self.exposure_combo.currentIndexChanged.connect(self._on_exposure_combo_changed)
@@ -99,6 +104,7 @@ class CapturePage(StepPage):
         form.addRow("Exposure", row)
         form.addRow("ISO", self.iso_spin)
         form.addRow("Dark frames", self.darks_spin)
+        form.addRow("Frames per LED", self.repeats_spin)
         self.options_widget = QWidget()
         self.options_widget.setLayout(form)
         self.body.addWidget(self.options_widget)
@@ -111,6 +117,7 @@ class CapturePage(StepPage):
             self.exposure_spin.setValue(float(opts.exposure))
         self.iso_spin.setValue(opts.iso)
         self.darks_spin.setValue(opts.n_darks)
+        self.repeats_spin.setValue(opts.repeats)
 
     def _on_exposure_combo_changed(self, _index: int = 0) -> None:
         self.exposure_spin.setEnabled(self.exposure_combo.currentData() == "fixed")
@@ -128,6 +135,7 @@ class CapturePage(StepPage):
             self.exposure_spin.value() if fixed else "auto",
             self.iso_spin.value(),
             self.darks_spin.value(),
+            self.repeats_spin.value(),
         )
 
     def refresh(self) -> None:

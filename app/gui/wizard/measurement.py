@@ -107,14 +107,22 @@ class CaptureOptions:
         ISO speed.
     n_darks
         Dark frames per distinct exposure.
+    repeats
+        Frames per LED, averaged (:func:`tunespec.devices.capture.new_session`).
     """
 
     exposure: str | float = "auto"
     iso: int = 100
     n_darks: int = 1
+    repeats: int = 1
 
     def to_dict(self) -> dict[str, Any]:
-        return {"exposure": self.exposure, "iso": self.iso, "n_darks": self.n_darks}
+        return {
+            "exposure": self.exposure,
+            "iso": self.iso,
+            "n_darks": self.n_darks,
+            "repeats": self.repeats,
+        }
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> CaptureOptions:
@@ -122,7 +130,12 @@ class CaptureOptions:
         exposure: str | float = "auto"
         with contextlib.suppress(TypeError, ValueError):
             exposure = float(d.get("exposure", "auto"))
-        return cls(exposure, int(d.get("iso", 100)), int(d.get("n_darks", 1)))
+        return cls(
+            exposure,
+            int(d.get("iso", 100)),
+            int(d.get("n_darks", 1)),
+            int(d.get("repeats", 1)),
+        )
 
 
 @dataclass(frozen=True)
@@ -202,6 +215,7 @@ class Measurement(QObject):
                 "exposure": self.settings.get("capture/exposure"),
                 "iso": self.settings.get("capture/iso"),
                 "n_darks": self.settings.get("capture/n_darks"),
+                "repeats": self.settings.get("capture/repeats"),
             }
         )
         self.method = self.settings.get("calibration/method")
@@ -341,6 +355,7 @@ class Measurement(QObject):
         s.set("capture/exposure", str(self.capture_options.exposure))
         s.set("capture/iso", self.capture_options.iso)
         s.set("capture/n_darks", self.capture_options.n_darks)
+        s.set("capture/repeats", self.capture_options.repeats)
         s.set("calibration/method", self.method)
         s.set("calibration/threshold_rgb_mean", self.threshold)
         s.set("estimate/reference_path", str(self.reference_path or ""))
@@ -522,7 +537,9 @@ class _PhaseProgress:
         self._last = 0.0
         if session is None:
             self._n_meter = n_channels
-            self.frames_left = _frames_of(kind, n_channels, 1, options.n_darks)
+            self.frames_left = _frames_of(
+                kind, n_channels, options.repeats, options.n_darks
+            )
         elif not session.settings.resolved:
             settings = session.settings
             n = len(settings.channels)
@@ -624,6 +641,7 @@ def capture_job(
             exposure=options.exposure if exposure is None else exposure,
             iso=options.iso,
             n_darks=options.n_darks,
+            repeats=options.repeats,
             resume=True,
             progress=lambda _f: meter.step(),
             should_stop=stop,
