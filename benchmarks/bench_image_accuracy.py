@@ -3,7 +3,7 @@
 Usage::
 
     python benchmarks/bench_image_accuracy.py [--resolution 768x512] [--work DIR]
-                                              [--repeats N] [--dark pixel|smooth]
+                                              [--repeats N] [--dark pixel|smooth] [--seed N]
                                               [--noise-free]
 
 Captures the ColorChecker SG with a CMY halftone and strokes of measured
@@ -48,7 +48,7 @@ class _NoNoise:
 
 
 def _capture(
-    work: Path, res: tuple[int, int], noise_free: bool, repeats: int = 1
+    work: Path, res: tuple[int, int], noise_free: bool, repeats: int = 1, seed: int = 0
 ) -> dict:
     """Capture, process and calibrate a session; the per-pixel truth."""
     import shutil
@@ -63,7 +63,7 @@ def _capture(
 
     shutil.rmtree(work, ignore_errors=True)
     bench = open_bench(
-        "sim", resolution=res, seed=0, scene_options={"regions": default_regions()}
+        "sim", resolution=res, seed=seed, scene_options={"regions": default_regions()}
     )
     if noise_free:
         bench.sim_camera._rng = _NoNoise()
@@ -178,6 +178,7 @@ def main(argv: list[str] | None = None) -> int:
         "--dark", choices=("pixel", "smooth"), default="pixel",
         help="estimate-image's --dark",
     )  # fmt: skip
+    parser.add_argument("--seed", type=int, default=0, help="the bench's seed")
     parser.add_argument(
         "--repeats", type=int, default=1,
         help="frames per LED, averaged (capture --repeats)",
@@ -189,13 +190,15 @@ def main(argv: list[str] | None = None) -> int:
     work = args.work or Path(tempfile.gettempdir()) / f"tunespec-acc-{args.resolution}"
     dark = ["--dark", args.dark]
     _evaluate(
-        work, _capture(work, res, False, args.repeats),
-        f"{args.resolution}, dark {args.dark}, {args.repeats} frame(s) per LED", dark,
+        work, _capture(work, res, False, args.repeats, args.seed),
+        f"{args.resolution}, seed {args.seed}, dark {args.dark}, {args.repeats} "
+        "frame(s) per LED", dark,
     )  # fmt: skip
     if args.noise_free:
         quiet = work / "noise-free"
         _evaluate(
-            quiet, _capture(quiet, res, True), f"{args.resolution} without noise",
+            quiet, _capture(quiet, res, True, 1, args.seed),
+            f"{args.resolution} without noise",
             ["--noise-model", "camera:67000,30", *dark],
         )  # fmt: skip
     return 0
