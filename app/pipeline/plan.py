@@ -18,6 +18,7 @@ from typing import Any
 
 from tunespec.core.datasets import resource_path
 from tunespec.core.errors import InputError
+from tunespec.core.io.session import MAX_BRACKETS, MAX_DARKS
 from tunespec.core.io.spectral import read_spectral
 from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import (
@@ -108,9 +109,9 @@ class Plan:
         The sample target; its reflectances are what a simulated bench renders.
     reference
         Reference reflectances of the sample for Table 2 (``None``: no Table 2).
-    exposure, brackets, iso
+    exposure, brackets, repeats, n_darks, iso
         Capture settings (``"auto"`` meters every LED on the chart; the sample reuses
-        the chart's exposures).
+        the chart's exposures; :func:`tunespec.devices.capture.new_session`).
     method
         Sensitivity method (``None``: the library's default).
     prior
@@ -148,6 +149,8 @@ class Plan:
     reference: Spectra | None = None
     exposure: str | float | Mapping[str, float] = "auto"
     brackets: tuple[float, ...] = (1.0,)
+    repeats: int = 1
+    n_darks: int = 1
     iso: int = 100
     method: str | None = None
     prior: Spectra | None = None
@@ -234,7 +237,7 @@ def load_config(path: str | PathLike[str]) -> dict[str, Any]:
         "out": None,
         "scheduler": None,
         "bench": {"light", "camera", "resolution", "seed"},
-        "capture": {"exposure", "brackets", "iso"},
+        "capture": {"exposure", "brackets", "repeats", "darks", "iso"},
         "chart": {"layout", "reflectances"},
         "sample": {"layout", "reflectances", "reference"},
         "calibrate": {"method", "grid"},
@@ -334,6 +337,8 @@ def plan_from_config(config: Mapping[str, Any] | str | PathLike[str]) -> Plan:
         sample_reflectances=s_refl,
         reference=reference,
         brackets=tuple(_cfg_number(b, "capture.brackets", src) for b in brackets),
+        repeats=_cfg_int(cap.get("repeats", 1), "capture.repeats", src),
+        n_darks=_cfg_int(cap.get("darks", 1), "capture.darks", src),
         exposure=exposure,
         iso=_cfg_int(cap.get("iso", 100), "capture.iso", src),
         method=cal_cfg.get("method"),
@@ -433,13 +438,22 @@ def check_config(cfg: Mapping[str, Any]) -> None:
     else:
         valid_number(exposure, "capture.exposure", path=src, lo=0, hi=1e4, lo_open=True)
     brackets = cap.get("brackets", [1.0])
-    if not isinstance(brackets, list | tuple) or not 1 <= len(brackets) <= 16:
+    if not isinstance(brackets, list | tuple) or not 1 <= len(brackets) <= MAX_BRACKETS:
         raise InputError(
-            f"capture.brackets: expected a list of 1 to 16 numbers, got {shown(brackets)}",
+            f"capture.brackets: expected a list of 1 to {MAX_BRACKETS} numbers, got "
+            f"{shown(brackets)}",
             path=src,
         )
     for b in brackets:
         valid_number(b, "capture.brackets", path=src, lo=0, hi=1, lo_open=True)
+    valid_number(
+        cap.get("repeats", 1), "capture.repeats", path=src, lo=1,
+        hi=MAX_BRACKETS // len(brackets), integer=True,
+    )  # fmt: skip
+    valid_number(
+        cap.get("darks", 1), "capture.darks", path=src, lo=1, hi=MAX_DARKS,
+        integer=True,
+    )  # fmt: skip
     valid_number(
         cap.get("iso", 100), "capture.iso", path=src, lo=1, hi=1e7, integer=True
     )

@@ -258,7 +258,12 @@ def _write_plan(folder: MeasurementFolder, plan: Plan) -> None:
         folder,
         chart_layout=plan.chart_layout,
         sample_layout=plan.sample_layout,
-        capture={"exposure": exposure, "iso": plan.iso, "n_darks": 1},
+        capture={
+            "exposure": exposure,
+            "iso": plan.iso,
+            "n_darks": plan.n_darks,
+            "repeats": plan.repeats,
+        },
         method=plan.method,
     )
 
@@ -338,6 +343,8 @@ def _capture_and_process(
             layout,
             exposure=exposure,
             brackets=plan.brackets,
+            repeats=plan.repeats,
+            n_darks=plan.n_darks,
             iso=plan.iso,
             progress=p,
             should_stop=hooks.should_stop,
