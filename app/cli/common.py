@@ -26,11 +26,15 @@ __all__ = [
     "Console",
     "TerminalProgress",
     "absolute_sensitivities",
+    "add_bench_options",
     "add_grid_option",
     "add_output_options",
+    "add_scheduler_option",
+    "add_sensitivities_option",
     "close_progress",
     "grid_arg",
     "progress_bar",
+    "resolution_arg",
     "resolve_grid",
     "seed_arg",
     "serve_until_stopped",
@@ -62,17 +66,73 @@ def seed_arg(text: str) -> int:
         ) from exc
 
 
-def add_grid_option(parser: argparse.ArgumentParser) -> None:
-    """The shared ``--grid`` option (default: from the data, :func:`resolve_grid`)."""
+def resolution_arg(text: str) -> tuple[int, int]:
+    """argparse type for ``--resolution WxH`` (a simulated camera's size)."""
+    from tunespec.devices.registry import parse_resolution
+
+    try:
+        return parse_resolution(text)
+    except InputError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def add_grid_option(
+    parser: argparse.ArgumentParser,
+    help: str = "working wavelength grid in nm (default: from the data, the widest "
+    "range every input covers at the finest step of the chart, prior and sensitivity "
+    "data, at most 10 nm; printed and kept in the outputs' metadata)",
+) -> None:
+    """The shared ``--grid`` option (default ``None``: the command decides, e.g. from
+    the data with :func:`resolve_grid`)."""
     parser.add_argument(
-        "--grid",
-        type=grid_arg,
-        default=None,
-        metavar="START:END:STEP",
-        help="working wavelength grid in nm (default: from the data, the widest range "
-        "every input covers at the finest step of the chart, prior and sensitivity "
-        "data, at most 10 nm; printed and kept in the outputs' metadata)",
+        "--grid", type=grid_arg, default=None, metavar="START:END:STEP", help=help
     )
+
+
+def add_sensitivities_option(
+    parser: argparse.ArgumentParser,
+    help: str = "sensitivities with R, G, B: the CSV of 'tunespec calibrate' or its "
+    "rawtoaces JSON ('export-rawtoaces', the demo's sensitivities.json), CGATS",
+    *,
+    required: bool = True,
+) -> None:
+    """``--sensitivities``: a camera's R, G, B sensitivities (any format
+    :func:`tunespec.core.datasets.read_sensitivities` reads)."""
+    parser.add_argument("--sensitivities", required=required, type=Path, help=help)
+
+
+def add_scheduler_option(
+    parser: argparse.ArgumentParser,
+    help: str = "a dask.distributed scheduler (tcp://host:8786); default: local threads",
+) -> None:
+    """``--scheduler``: where the Dask steps compute
+    (:func:`tunespec.app.pipeline.engine.connect`)."""
+    parser.add_argument("--scheduler", default=None, metavar="ADDRESS", help=help)
+
+
+def add_bench_options(parser: argparse.ArgumentParser) -> None:
+    """``--light``, ``--camera``, ``--resolution`` and ``--seed``: the devices by spec
+    (:func:`tunespec.devices.registry.open_bench`), as ``capture`` and ``gonio-run``
+    take them."""
+    parser.add_argument(
+        "--light",
+        default="sim",
+        help="sim | cal1:///dev/ttyUSB0 | cal1+socket://HOST:PORT",
+    )
+    parser.add_argument(
+        "--camera",
+        default=None,
+        help="sim[?realtime=1] | gphoto2 | gphoto2:usb:BUS,DEV (default: sim with a "
+        "simulated light, gphoto2 otherwise)",
+    )
+    parser.add_argument(
+        "--resolution",
+        type=resolution_arg,
+        default=None,
+        metavar="WxH",
+        help="simulated camera resolution",
+    )
+    parser.add_argument("--seed", type=seed_arg, default=0, help="simulation seed")
 
 
 def add_output_options(parser: argparse.ArgumentParser) -> None:

@@ -13,6 +13,7 @@ from tunespec.app.cli.common import (
     absolute_sensitivities,
     add_grid_option,
     add_output_options,
+    add_sensitivities_option,
     resolve_grid,
     seed_arg,
 )
@@ -127,13 +128,7 @@ def _add_estimate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
         "with patch-wise noise covariance (Eq. 5-6).",
     )
     _add_responses_and_illuminants(p)
-    p.add_argument(
-        "--sensitivities",
-        required=True,
-        type=Path,
-        help="sensitivities with R, G, B: the CSV of 'tunespec calibrate' or its rawtoaces "
-        "JSON ('export-rawtoaces', the demo's sensitivities.json), CGATS",
-    )
+    add_sensitivities_option(p)
     p.add_argument(
         "--prior", type=Path, help="prior reflectances (default: the SG), any format"
     )
@@ -191,7 +186,7 @@ def _add_simulate_responses(
         "simulate-responses",
         help="forward model (Eq. 1) with photon and read noise",
     )
-    p.add_argument("--sensitivities", required=True, type=Path)
+    add_sensitivities_option(p)
     p.add_argument("--illuminants", required=True, type=Path)
     p.add_argument("--reflectances", required=True, type=Path)
     p.add_argument(

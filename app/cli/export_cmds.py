@@ -16,8 +16,9 @@ from typing import Any
 from tunespec.app.cli.common import (
     Console,
     absolute_sensitivities,
+    add_grid_option,
     add_output_options,
-    grid_arg,
+    add_sensitivities_option,
 )
 from tunespec.core.datasets import read_sensitivities
 from tunespec.core.errors import InputError, read_json
@@ -25,6 +26,10 @@ from tunespec.core.io.spectral import read_spectral
 from tunespec.core.spectra import Grid, Spectra
 
 __all__ = ["register"]
+
+_RESAMPLE_GRID_HELP = (
+    "resample onto this grid in nm (default: keep the file's wavelengths)"
+)
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -55,7 +60,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "--illuminant",
         help="whose RGB to write when the responses hold several illuminants",
     )
-    _add_optional_grid(p)
+    add_grid_option(p, _RESAMPLE_GRID_HELP)
     p.add_argument(
         "--no-spectra", action="store_true", help="leave out the SPEC_nnn fields"
     )
@@ -74,13 +79,10 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "rawtoaces reads it from its camera data folder; TuneSpec's estimate, "
         "simulate-responses and report read it back on the absolute scale.",
     )
-    p.add_argument(
-        "--sensitivities",
-        required=True,
-        type=Path,
-        help="R, G, B sensitivities (the CSV of 'tunespec calibrate', or any format "
-        "with those channels); its .meta.json (LED corrections) is copied beside "
-        "the JSON",
+    add_sensitivities_option(
+        p,
+        "R, G, B sensitivities (the CSV of 'tunespec calibrate', or any format with "
+        "those channels); its .meta.json (LED corrections) is copied beside the JSON",
     )
     p.add_argument("--manufacturer", default="", help='e.g. "Canon"')
     p.add_argument("--model", default="", help='e.g. "EOS 5D Mark III"')
@@ -108,7 +110,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--title", default="TuneSpec measurement report")
     p.add_argument("--reflectances", type=Path, help="estimated reflectances CSV")
     p.add_argument("--reference", type=Path, help="reference reflectances CSV")
-    p.add_argument("--sensitivities", type=Path, help="estimated sensitivities")
+    add_sensitivities_option(p, "estimated sensitivities", required=False)
     p.add_argument(
         "--reference-sensitivities",
         type=Path,
@@ -128,7 +130,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="statistics JSON of 'tunespec calibrate --stats' (Table 1)",
     )
     p.add_argument("--session-id", help="session identifier shown in the report")
-    _add_optional_grid(p)
+    add_grid_option(p, _RESAMPLE_GRID_HELP)
     p.set_defaults(func=cmd_report, output_dirs=("out",))
 
 
@@ -158,9 +160,7 @@ def _add_export_camera(
         type=Path,
         help="the chart's reference reflectances (any format, 0-1 or percent)",
     )
-    p.add_argument(
-        "--sensitivities", required=True, type=Path, help="calibrated sensitivities"
-    )
+    add_sensitivities_option(p, "calibrated sensitivities")
     p.add_argument(
         "--under",
         default="D50",
@@ -209,16 +209,6 @@ def cmd_export_camera(args: argparse.Namespace) -> int:
         }
     )
     return 0
-
-
-def _add_optional_grid(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--grid",
-        type=grid_arg,
-        default=None,
-        metavar="START:END:STEP",
-        help="resample onto this grid in nm (default: keep the file's wavelengths)",
-    )
 
 
 def cmd_export_cgats(args: argparse.Namespace) -> int:

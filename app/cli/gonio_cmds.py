@@ -18,11 +18,22 @@ from dataclasses import replace
 from pathlib import Path
 from typing import TextIO
 
-from tunespec.app.cli.common import serve_until_stopped
+from tunespec.app.cli.common import (
+    add_bench_options,
+    add_scheduler_option,
+    add_sensitivities_option,
+    seed_arg,
+    serve_until_stopped,
+)
 from tunespec.core.errors import InputError
 from tunespec.core.spectra import Spectra
 
 __all__ = ["add_zaber_emulator", "register", "run_zaber_emulator"]
+
+_SCHEDULER_HELP = (
+    "process the geometries on Dask: threads, processes, or a cluster's address "
+    "tcp://HOST:PORT (default: one after another)"
+)
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -117,8 +128,6 @@ def cmd_gonio_plan(args: argparse.Namespace) -> int:
 
 
 def _add_gonio_demo(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    from tunespec.app.cli.common import seed_arg
-
     p = sub.add_parser(
         "gonio-demo",
         help="a multi-geometry session on the simulated gonio bench, end to end",
@@ -143,11 +152,7 @@ def _add_gonio_demo(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         action="store_true",
         help="continue a session in --out where it stopped",
     )
-    p.add_argument(
-        "--scheduler",
-        help="process the geometries on Dask: threads, processes, or a cluster's "
-        "address tcp://HOST:PORT (default: one after another)",
-    )
+    add_scheduler_option(p, _SCHEDULER_HELP)
     p.add_argument(
         "--fail-after-moves",
         type=int,
@@ -198,9 +203,6 @@ def cmd_gonio_demo(args: argparse.Namespace) -> int:
 
 
 def _add_gonio_run(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    from tunespec.app.cli.common import seed_arg
-    from tunespec.app.cli.session_cmds import _resolution
-
     p = sub.add_parser(
         "gonio-run",
         help="a multi-geometry session on devices by spec (CAL1, camera, Zaber)",
@@ -212,40 +214,26 @@ def _add_gonio_run(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> 
     )
     p.add_argument("--out", type=Path, required=True, help="session folder")
     p.add_argument("--plan", type=Path, help="plan JSON (gonio-plan or the GUI editor)")
-    p.add_argument(
-        "--light", default="sim", help="sim | cal1:///dev/ttyUSB0 | cal1+socket://H:P"
-    )
-    p.add_argument(
-        "--camera",
-        default=None,
-        help="gphoto2 | gphoto2:usb:BUS,DEV | sim (default: sim with a simulated "
-        "light, gphoto2 otherwise)",
-    )
+    add_bench_options(p)
     p.add_argument(
         "--gonio",
         default="sim",
         help="sim | zaber:///dev/ttyUSB0 | zaber+socket://HOST:PORT[?axes=...]",
     )
-    p.add_argument(
-        "--sensitivities",
-        type=Path,
-        help="calibrated sensitivities (tunespec calibrate; needed for a new session)",
+    add_sensitivities_option(
+        p,
+        "calibrated sensitivities (tunespec calibrate; needed for a new session)",
+        required=False,
     )
     p.add_argument("--layout", type=Path, required=True, help="sample target layout")
     _mix_arg(p, default=None)
     p.add_argument(
         "--resume", action="store_true", help="continue the session in --out"
     )
-    p.add_argument(
-        "--scheduler", help="Dask: threads, processes or tcp://HOST:PORT (default none)"
-    )
+    add_scheduler_option(p, _SCHEDULER_HELP)
     p.add_argument(
         "--iso", type=int, default=100, help="camera ISO, as at calibration (100)"
     )
-    p.add_argument(
-        "--resolution", type=_resolution, metavar="WxH", help="simulated camera size"
-    )
-    p.add_argument("--seed", type=seed_arg, default=0, help="simulation seed")
     p.set_defaults(func=cmd_gonio_run, output_dirs=("out",))
 
 

@@ -5,7 +5,13 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from tunespec.app.cli.common import Console, add_grid_option, add_output_options
+from tunespec.app.cli.common import (
+    Console,
+    add_grid_option,
+    add_output_options,
+    add_scheduler_option,
+    add_sensitivities_option,
+)
 from tunespec.core.errors import InputError
 from tunespec.core.spectra import Grid
 
@@ -45,11 +51,8 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 
 
 def _common(p: argparse.ArgumentParser) -> None:
-    p.add_argument(
-        "--sensitivities",
-        required=True,
-        type=Path,
-        help="calibrate's sensitivities CSV (its .meta.json: LED corrections)",
+    add_sensitivities_option(
+        p, "calibrate's sensitivities CSV (its .meta.json: LED corrections)"
     )
     p.add_argument("--out", required=True, type=Path, help="output folder")
     p.add_argument(
@@ -57,12 +60,7 @@ def _common(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="resample to the target's plane through the session's homography",
     )
-    p.add_argument(
-        "--scheduler",
-        default=None,
-        metavar="ADDRESS",
-        help="a dask.distributed scheduler (tcp://host:8786); default: local threads",
-    )
+    add_scheduler_option(p)
     p.add_argument("--no-clip", action="store_true", help="do not clip to [0, 1]")
     p.add_argument(
         "--noise-model",

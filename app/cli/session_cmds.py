@@ -6,22 +6,19 @@ import argparse
 import time
 from pathlib import Path
 
-from tunespec.app.cli.common import Console, add_output_options, seed_arg
+from tunespec.app.cli.common import (
+    Console,
+    add_bench_options,
+    add_output_options,
+    resolution_arg,
+    seed_arg,
+)
 from tunespec.core.errors import InputError
 from tunespec.core.io.session import Session, SessionLock
 from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import check_output_file
 
 __all__ = ["register"]
-
-
-def _resolution(text: str) -> tuple[int, int]:
-    from tunespec.devices.registry import parse_resolution
-
-    try:
-        return parse_resolution(text)
-    except InputError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def _exposure(text: str) -> str | float:
@@ -73,7 +70,7 @@ def _add_demo(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--seed", type=seed_arg, default=0, help="simulation seed (0)")
     p.add_argument(
         "--resolution",
-        type=_resolution,
+        type=resolution_arg,
         default=DEMO_RESOLUTION,
         metavar="WxH",
         help=f"simulated camera resolution (default {DEMO_RESOLUTION[0]}x"
@@ -99,17 +96,7 @@ def _add_capture(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
         "frame is saved as it comes; after a crash, --resume takes only what is "
         "missing.",
     )
-    p.add_argument(
-        "--light",
-        default="sim",
-        help="sim | cal1:///dev/ttyUSB0 | cal1+socket://HOST:PORT",
-    )
-    p.add_argument(
-        "--camera",
-        default=None,
-        help="sim[?realtime=1] | gphoto2 | "
-        "gphoto2:usb:BUS,DEV (default: sim with a simulated light)",
-    )
+    add_bench_options(p)
     p.add_argument(
         "--layout", type=Path, help="target layout JSON (needed for a new session)"
     )
@@ -153,14 +140,6 @@ def _add_capture(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
     )
     p.add_argument("--darks", type=int, default=1, help="dark frames per exposure")
     p.add_argument("--channels", default=None, help="comma-separated LED channels")
-    p.add_argument(
-        "--resolution",
-        type=_resolution,
-        default=None,
-        metavar="WxH",
-        help="simulated camera resolution",
-    )
-    p.add_argument("--seed", type=seed_arg, default=0, help="simulation seed")
     add_output_options(p)
     p.set_defaults(func=cmd_capture, output_dirs=("out",))
 
