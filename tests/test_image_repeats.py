@@ -11,16 +11,17 @@ import pytest
 
 from tunespec.app.cli import main
 from tunespec.core.errors import InputError
+from tunespec.core.spectra import Spectra
 
 RESOLUTION = (256, 192)
 
 
-def _bench():
+def _bench(resolution: tuple[int, int] = RESOLUTION):
     from tunespec.devices.registry import open_bench
     from tunespec.devices.sim.scene import default_regions
 
     return open_bench(
-        "sim", resolution=RESOLUTION, seed=0,
+        "sim", resolution=resolution, seed=0,
         scene_options={"regions": default_regions()},
     )  # fmt: skip
 
@@ -45,19 +46,24 @@ def test_repeats_are_stored_as_repeated_bracket_factors(tmp_path) -> None:
         bench.close()
 
 
-def _capture(root: Path, repeats: int) -> tuple[Path, np.ndarray]:
+def _capture(
+    root: Path, repeats: int, resolution: tuple[int, int] = RESOLUTION
+) -> tuple[Path, np.ndarray, Spectra]:
+    """The session, the material of each plane pixel and the materials' spectra."""
+    from tunespec.app.pipeline.plan import ESTIMATION_GRID
     from tunespec.devices.capture import capture, new_session
 
-    bench = _bench()
+    bench = _bench(resolution)
     session = new_session(
         root / "session", bench.light, bench.camera, layout=bench.truth["layout"],
         exposure="auto", repeats=repeats, n_darks=repeats,
     )  # fmt: skip
     capture(session, bench.light, bench.camera, bench.stage)
     bench.sim_camera.write_truth(root / "truth")
-    plane = bench.sim_stage.plane_materials(*RESOLUTION)
+    plane = bench.sim_stage.plane_materials(*resolution)
+    materials = bench.sim_stage.materials.resample(ESTIMATION_GRID)
     bench.close()
-    return root / "session", plane
+    return root / "session", plane, materials
 
 
 @pytest.mark.slow
@@ -73,7 +79,7 @@ def test_repeats_shrink_the_pixel_noise(tmp_path) -> None:
 
     spread, eq6 = {}, {}
     for n in (1, 4):
-        session, pm = _capture(tmp_path / f"r{n}", n)
+        session, pm, _ = _capture(tmp_path / f"r{n}", n)
         sens = tmp_path / f"r{n}" / "truth" / "truth_sensitivity_absolute.csv"
         out = tmp_path / f"img{n}"
         assert main([
@@ -94,3 +100,52 @@ def test_repeats_shrink_the_pixel_noise(tmp_path) -> None:
     # measured 0.52 and 0.50 (sqrt(1/4) = 0.5)
     assert 0.4 < spread[4] / spread[1] < 0.6, spread
     assert 0.4 < eq6[4] / eq6[1] < 0.6, eq6
+
+
+@pytest.mark.slow
+def test_four_frames_and_the_smooth_dark_bring_pixels_near_patchwise(tmp_path) -> None:
+    """Issue 14's accuracy goal: with four frames per LED (and four darks) and
+    ``--dark smooth``, the per-pixel CIEDE2000 against the truth, over the SG's
+    patches and over every pixel of known material, is within 1.5x of the
+    patch-wise estimate's (measured at 384x256: 1.2x and 1.3x; one frame and the
+    pixel dark: 3.2x at 768x512, ``benchmarks/bench_image_accuracy.py``)."""
+    import tifffile
+
+    from tunespec.app.pipeline.plan import ESTIMATION_GRID as GRID
+    from tunespec.core.colorimetry import delta_e_2000, lab_d50
+    from tunespec.core.datasets import load_colorchecker_sg, read_sensitivities
+    from tunespec.core.io.export import read_sensitivity_meta
+    from tunespec.core.io.session import Session
+    from tunespec.core.processing import process_session, write_processed
+    from tunespec.core.sensitivity import correct_illuminants_from_meta
+    from tunespec.core.wiener import wiener_reflectance
+
+    session, pm, mats = _capture(tmp_path, 4, (384, 256))
+    processed = process_session(Session.open(session))
+    write_processed(processed, tmp_path / "resp.csv", tmp_path / "ill.csv")
+    sens = tmp_path / "S.csv"
+    assert main([
+        "calibrate", "--responses", str(tmp_path / "resp.csv"), "--illuminants",
+        str(tmp_path / "ill.csv"), "--reflectances",
+        "resources/charts/colorchecker_sg.csv", "-o", str(sens), "--quiet",
+    ]) == 0  # fmt: skip
+    assert main([
+        "estimate-image", str(session), "--sensitivities", str(sens), "--out",
+        str(tmp_path / "img"), "--quiet", "--dark", "smooth",
+    ]) == 0  # fmt: skip
+    wl = GRID.wavelength_nm
+    ill = correct_illuminants_from_meta(
+        processed.illuminants.resample(GRID, average=True), read_sensitivity_meta(sens)
+    )
+    names = processed.layout.patch_names
+    est = wiener_reflectance(
+        processed.responses, ill, read_sensitivities(sens, GRID),
+        load_colorchecker_sg(GRID),
+    ).reflectance.values  # fmt: skip
+    de_patch = delta_e_2000(lab_d50(est, wl), lab_d50(mats.select(names).values, wl))
+    lab = tifffile.imread(tmp_path / "img" / "lab.tif").astype(np.float64)
+    truth = lab_d50(mats.values, wl)
+    patches = (pm >= 2) & (pm < 2 + len(names))
+    for sel in (patches, pm >= 0):
+        ratio = delta_e_2000(lab[sel], truth[pm[sel]]).mean() / de_patch.mean()
+        assert ratio < 1.5, ratio
