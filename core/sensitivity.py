@@ -63,10 +63,12 @@ from tunespec.core.forward_model import render_rgb
 from tunespec.core.progress import ProgressFn, StopFn, check_stop, report
 from tunespec.core.responses import CHANNELS, Responses
 from tunespec.core.sensitivity_bayes import (
+    ROUGHNESS_CAP_FACTOR,
     LedCorrection,
     _nnls_quadratic,
     _smoothness_penalty,
     apply_led_corrections,
+    database_roughness,
     fit_bayes,
 )
 from tunespec.core.sensitivity_bayes import _subspace_penalty as _basis_penalty
@@ -961,6 +963,13 @@ def _estimate_sensitivity_bayes(
         problem.step_nm,
         bases,
         mode="per-led" if self_calibrate else ("common" if fit_shift else "none"),
+        max_roughness=[
+            ROUGHNESS_CAP_FACTOR
+            * database_roughness(np.array([s.values[k] for s in database.values()]))
+            if database
+            else None
+            for k in range(3)
+        ],
         should_stop=should_stop,
     )
     n = problem.wavelength_nm.size
