@@ -38,14 +38,16 @@ import tempfile
 import time
 from pathlib import Path
 
+from raw_session import decode_all, session_paths
+
 GOAL_RATIO = 1.5
 GOAL_PEAK_BYTES = 2e9
 GOAL_MATMUL_FRACTION = 0.5
 
 
-def _capture(work: Path, resolution: str) -> None:
-    """Capture the session in a child process (its memory is not ours to measure)."""
-    code = f"""
+def _capture_code(work: Path, resolution: str) -> str:
+    """Python source capturing the benchmark session into ``work``."""
+    return f"""
 from tunespec.devices.registry import open_bench, parse_resolution
 from tunespec.devices.capture import new_session, capture
 from tunespec.devices.sim.scene import default_regions
@@ -57,19 +59,6 @@ capture(session, bench.light, bench.camera, bench.stage)
 bench.sim_camera.write_truth({str(work / "truth")!r})
 bench.close()
 """
-    subprocess.run([sys.executable, "-c", code], check=True)
-
-
-def _decode_all(paths: list[Path]) -> tuple[float, float]:
-    """Wall and CPU seconds of decoding every file."""
-    import rawpy
-
-    t0, c0 = time.perf_counter(), time.process_time()
-    for p in paths:
-        with rawpy.imread(str(p)) as raw:
-            mosaic = raw.raw_image_visible.copy()
-        del mosaic
-    return time.perf_counter() - t0, time.process_time() - c0
 
 
 def _images(work: Path, out: Path, workers: int | None) -> dict[str, float]:
@@ -250,29 +239,17 @@ def main(argv: list[str] | None = None) -> int:
     work = (
         args.work or Path(tempfile.gettempdir()) / f"tunespec-image-{args.resolution}"
     )
-    from tunespec.core.io.session import Session
-
-    session_dir = work / "session"
-    if (
-        args.fresh
-        or not (session_dir / "manifest.json").is_file()
-        or Session.open(session_dir).missing(verify=False)
-    ):
-        import shutil
-
-        shutil.rmtree(work, ignore_errors=True)
-        work.mkdir(parents=True)
-        print(f"capturing a 22-LED session at {args.resolution} into {work} ...")
-        _capture(work, args.resolution)
-    session = Session.open(session_dir)
-    paths = [session.path_of(f) for f in session.frames]
-    size_mb = sum(p.stat().st_size for p in paths) / 1e6
-    print(f"session: {len(paths)} raw files, {size_mb:.0f} MB, {args.resolution}")
-
-    _decode_all(paths)  # warm the page cache and the decoder
+    paths = session_paths(
+        work / "session",
+        work,
+        args.resolution,
+        fresh=args.fresh,
+        code=_capture_code(work, args.resolution),
+    )
+    decode_all(paths)  # warm the page cache and the decoder
     decode, images = [], []
     for _ in range(args.repeat):
-        decode.append(_decode_all(paths))
+        decode.append(decode_all(paths))
         images.append(_images(work, work / "images", args.workers))
     d, d_cpu = min(decode)
     best = min(images, key=lambda r: r["wall_s"])

@@ -26,20 +26,21 @@ from __future__ import annotations
 
 import argparse
 import resource
-import subprocess
 import sys
 import tempfile
 import time
 import tracemalloc
 from pathlib import Path
 
+from raw_session import decode_all, session_paths
+
 GOAL_RATIO = 1.5
 GOAL_PEAK_BYTES = 2e9
 
 
-def _capture(work: Path, resolution: str) -> None:
-    """Capture the session in a child process (its memory is not ours to measure)."""
-    code = f"""
+def _capture_code(work: Path, resolution: str) -> str:
+    """Python source capturing the benchmark session into ``work``."""
+    return f"""
 import sys
 from tunespec.core.layout import TargetLayout
 from tunespec.core.datasets import resource_path
@@ -54,18 +55,6 @@ capture(session, bench.light, bench.camera, bench.stage, progress=bar)
 sys.stderr.write("\\n")
 bench.close()
 """
-    subprocess.run([sys.executable, "-c", code], check=True)
-
-
-def _decode_all(paths: list[Path]) -> float:
-    import rawpy
-
-    t0 = time.perf_counter()
-    for p in paths:
-        with rawpy.imread(str(p)) as raw:
-            mosaic = raw.raw_image_visible.copy()
-        del mosaic
-    return time.perf_counter() - t0
 
 
 def _process(session_dir: Path) -> float:
@@ -87,27 +76,17 @@ def main(argv: list[str] | None = None) -> int:
     work = (
         args.work or Path(tempfile.gettempdir()) / f"tunespec-bench-{args.resolution}"
     )
-    from tunespec.core.io.session import Session
-
-    if (
-        args.fresh
-        or not (work / "manifest.json").is_file()
-        or Session.open(work).missing(verify=False)
-    ):
-        import shutil
-
-        shutil.rmtree(work, ignore_errors=True)
-        print(f"capturing a 22-LED session at {args.resolution} into {work} ...")
-        _capture(work, args.resolution)
-    session = Session.open(work)
-    paths = [session.path_of(f) for f in session.frames]
-    size_mb = sum(p.stat().st_size for p in paths) / 1e6
-    print(f"session: {len(paths)} raw files, {size_mb:.0f} MB, {args.resolution}")
-
-    _decode_all(paths)  # warm the page cache and the decoder
+    paths = session_paths(
+        work,
+        work,
+        args.resolution,
+        fresh=args.fresh,
+        code=_capture_code(work, args.resolution),
+    )
+    decode_all(paths)  # warm the page cache and the decoder
     decode_s, process_s = [], []
     for _ in range(args.repeat):
-        decode_s.append(_decode_all(paths))
+        decode_s.append(decode_all(paths)[0])
         process_s.append(_process(work))
     d, p = min(decode_s), min(process_s)
     ratio = p / d

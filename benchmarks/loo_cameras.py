@@ -180,25 +180,10 @@ def run_camera(
     fit_patches, held_patches = split_patches(responses.patches)
     out = CameraResult(camera)
     for label, (method, fit_shift) in VARIANTS.items():
-        t0 = time.perf_counter()
-        est = estimate_camera_sensitivity(
-            responses,
-            reported,
-            setup.sg_work,
-            method=method,
-            database=setup.db_work,
-            exclude=camera,
-            fit_spd_shift=fit_shift,
-        )
-        out.seconds[label] = time.perf_counter() - t0
-        out.rms[label] = sensitivity_rms(est.sensitivity, truth)
-        out.shift[label] = est.spd_shift_nm
-        out.table1[label] = calibration_report(
-            est, responses, reported, setup.sg_work
-        ).training
-        if held_out:
-            est_fit = estimate_camera_sensitivity(
-                responses.subset(list(fit_patches)),
+
+        def fit(resp, method=method, fit_shift=fit_shift):
+            return estimate_camera_sensitivity(
+                resp,
                 reported,
                 setup.sg_work,
                 method=method,
@@ -206,6 +191,17 @@ def run_camera(
                 exclude=camera,
                 fit_spd_shift=fit_shift,
             )
+
+        t0 = time.perf_counter()
+        est = fit(responses)
+        out.seconds[label] = time.perf_counter() - t0
+        out.rms[label] = sensitivity_rms(est.sensitivity, truth)
+        out.shift[label] = est.spd_shift_nm
+        out.table1[label] = calibration_report(
+            est, responses, reported, setup.sg_work
+        ).training
+        if held_out:
+            est_fit = fit(responses.subset(list(fit_patches)))
             rep = calibration_report(
                 est_fit,
                 responses,

@@ -93,20 +93,20 @@ def _exact_capture(data, sensitivity: Spectra) -> tuple[Responses, Spectra]:
 # --- closed loop on the simulated bench ----------------------------------------------
 
 
+def _fit(data, responses, reported, camera=DEFAULT_CAMERA, **options):
+    """Sensitivities from the SG's responses, ``camera`` left out of the database."""
+    return estimate_camera_sensitivity(
+        responses, reported, data["sg"], database=data["db"], exclude=camera, **options
+    )
+
+
 @pytest.mark.parametrize("seed", [0, 1])
 def test_closed_loop_5d_mark_iii_smooth_beats_pca(data, seed) -> None:
     responses, reported = _capture(data, DEFAULT_CAMERA, seed)
     truth = data["db"][DEFAULT_CAMERA]
     rms = {}
     for method in ("pca", "smooth"):
-        est = estimate_camera_sensitivity(
-            responses,
-            reported,
-            data["sg"],
-            method=method,
-            database=data["db"],
-            exclude=DEFAULT_CAMERA,
-        )
+        est = _fit(data, responses, reported, method=method)
         assert est.method == method
         assert est.sensitivity.names == ("R", "G", "B")
         assert est.params["database_size"] == 51
@@ -121,21 +121,13 @@ def test_estimate_is_on_the_absolute_scale_of_the_inputs(data) -> None:
     # 0.3 % flat-field residual of ~0.5 full scale and the 1 % SPD error), and the
     # estimate scales inversely with the illuminants' power unit.
     responses, reported = _capture(data, DEFAULT_CAMERA, 0)
-    est = estimate_camera_sensitivity(
-        responses, reported, data["sg"], database=data["db"], exclude=DEFAULT_CAMERA
-    )
+    est = _fit(data, responses, reported)
     corrected = est.correct_illuminants(reported)
     predicted = predict_responses(est.sensitivity, corrected, data["sg"])
     stats = prediction_stats(responses.rgb, predicted.rgb)
     assert stats.n_stimuli == 3080
     assert stats.mean[3] < 0.003
-    tenfold = estimate_camera_sensitivity(
-        responses,
-        reported.with_values(reported.values * 10.0),
-        data["sg"],
-        database=data["db"],
-        exclude=DEFAULT_CAMERA,
-    )
+    tenfold = _fit(data, responses, reported.with_values(reported.values * 10.0))
     np.testing.assert_allclose(
         tenfold.sensitivity.values * 10.0,
         est.sensitivity.values,
@@ -149,14 +141,7 @@ def _loo(data, cameras: list[str], seed: int) -> dict[str, list[float]]:
     for camera in cameras:
         responses, reported = _capture(data, camera, rng)
         for method in out:
-            est = estimate_camera_sensitivity(
-                responses,
-                reported,
-                data["sg"],
-                method=method,
-                database=data["db"],
-                exclude=camera,
-            )
+            est = _fit(data, responses, reported, camera, method=method)
             out[method].append(sensitivity_rms(est.sensitivity, data["db"][camera]))
     return out
 
@@ -232,15 +217,7 @@ def test_explained_variance_picks_the_fewest_components(data) -> None:
         assert ev_fewer < 0.97
         np.testing.assert_allclose(P @ P.T, np.eye(P.shape[0]), atol=ATOL_EXACT)
     responses, reported = _capture(data, DEFAULT_CAMERA, 0)
-    est = estimate_camera_sensitivity(
-        responses,
-        reported,
-        data["sg"],
-        method="pca",
-        database=data["db"],
-        exclude=DEFAULT_CAMERA,
-        explained_variance=0.97,
-    )
+    est = _fit(data, responses, reported, method="pca", explained_variance=0.97)
     assert all(n >= 4 for n in est.params["n_components"])
     assert all(ev >= 0.97 for ev in est.params["explained_variance"])
 
@@ -285,14 +262,7 @@ def test_wiener_with_shift_corrected_calibration_meets_de00_target(data) -> None
     rng = np.random.default_rng(5)
     truth_fine = data["db_fine"][DEFAULT_CAMERA]
     responses, reported = _capture(data, DEFAULT_CAMERA, rng)
-    est = estimate_camera_sensitivity(
-        responses,
-        reported,
-        data["sg"],
-        database=data["db"],
-        exclude=DEFAULT_CAMERA,
-        fit_spd_shift=True,
-    )
+    est = _fit(data, responses, reported, fit_spd_shift=True)
     # The 190 set under the same exposures (the same scaled, true LED spectra).
     scaled = scale_to_exposure(data["sg_fine"], data["leds_fine"], truth_fine)
     t190 = load_training_reflectances_190(FINE)
@@ -322,9 +292,7 @@ def test_saturated_patches_are_left_out(data) -> None:
         responses.n_pixels,
         sat,
     )
-    est = estimate_camera_sensitivity(
-        flagged, reported, data["sg"], database=data["db"], exclude=DEFAULT_CAMERA
-    )
+    est = _fit(data, flagged, reported)
     assert est.excluded_patches == ("B4", "E5")
     assert est.params["n_patches"] == 138
     assert est.params["n_stimuli"] == 138 * 22

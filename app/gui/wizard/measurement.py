@@ -664,23 +664,28 @@ def _process(
     session_root: Path,
     target_layout: TargetLayout,
     corners: str,
-    out_dir: Path | None,
-    progress: ProgressFn | None,
-    should_stop: StopFn | None,
+    progress: ProgressFn | None = None,
+    should_stop: StopFn | None = None,
 ) -> Any:
-    """``pipeline.process`` with corners ``"auto"`` (found) or ``"editor"`` (given)."""
+    """``pipeline.process`` with corners ``"auto"`` (found) or ``"editor"`` (given).
+
+    Nothing is written: the processed session goes to disk with the result that
+    uses it (``pipeline.folder.write_calibration`` / ``write_estimate``).
+    """
     from tunespec.app.pipeline.steps import process
     from tunespec.core.io.session import Session
 
     given = corners == "editor"
-    return process(
+    processed = process(
         Session.open(session_root),
-        out_dir=out_dir,
+        out_dir=None,
         layout=target_layout if given else target_layout.with_corners(None),
         corners="layout" if given else "auto",
         progress=progress,
         should_stop=should_stop,
     )
+    check_stop(should_stop)
+    return processed
 
 
 def calibrate_job(
@@ -706,14 +711,8 @@ def calibrate_job(
 
     t0 = time.monotonic()
     chart = _process(
-        chart_root,
-        chart_layout,
-        corners,
-        None,  # written with the result (pipeline.folder.write_calibration)
-        sub_progress(progress, 0, 0.6),
-        should_stop,
+        chart_root, chart_layout, corners, sub_progress(progress, 0, 0.6), should_stop
     )
-    check_stop(should_stop)
     cal = calibrate(
         chart,
         layout_reflectances(chart_layout, grid=CALIBRATION_GRID),
@@ -753,14 +752,8 @@ def estimate_job(
 
     t0 = time.monotonic()
     sample = _process(
-        sample_root,
-        sample_layout,
-        corners,
-        None,  # written with the result (pipeline.folder.write_estimate)
-        sub_progress(progress, 0, 0.8),
-        should_stop,
+        sample_root, sample_layout, corners, sub_progress(progress, 0, 0.8), should_stop
     )
-    check_stop(should_stop)
     ref = None
     if reference is not None:
         names = [n for n in sample.responses.patches if n in reference.names]
@@ -814,7 +807,7 @@ def export_job(
         chart, cal = restored
     if chart is None or cal is None:  # a folder of an older version: process again
         chart = _process(
-            folder / CHART_DIR, calibration.layout, "editor", None, None, should_stop
+            folder / CHART_DIR, calibration.layout, "editor", should_stop=should_stop
         )
         cal = calibrate(
             chart,
@@ -832,7 +825,7 @@ def export_job(
         sample = read_processed(
             folder / ESTIMATE_DIR, estimated.layout, estimated.warnings
         ) or _process(
-            folder / SAMPLE_DIR, estimated.layout, "editor", None, None, should_stop
+            folder / SAMPLE_DIR, estimated.layout, "editor", should_stop=should_stop
         )
         est = estimate(sample, cal.sensitivity, reference=None)
         est = type(est)(est.wiener, estimated.table2)

@@ -1,0 +1,53 @@
+"""The captured raw session and the rawpy baseline that the speed benchmarks share.
+
+``bench_image.py`` and ``bench_processing.py`` both time a pipeline against the least
+any raw pipeline must do, ``rawpy.imread`` + ``raw_image_visible`` copy of the same
+files, on a full-resolution session captured once on the simulated bench and kept in
+a work folder for later runs.
+"""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+
+def session_paths(
+    session_dir: Path, work: Path, resolution: str, *, fresh: bool, code: str
+) -> list[Path]:
+    """The raw files of the session in ``session_dir``; captured first if absent.
+
+    ``code`` is the Python source that captures it into ``work``; it runs in a child
+    process, so that its memory is not the benchmark's to measure.
+    """
+    from tunespec.core.io.session import Session
+
+    if (
+        fresh
+        or not (session_dir / "manifest.json").is_file()
+        or Session.open(session_dir).missing(verify=False)
+    ):
+        shutil.rmtree(work, ignore_errors=True)
+        work.mkdir(parents=True)
+        print(f"capturing a 22-LED session at {resolution} into {work} ...")
+        subprocess.run([sys.executable, "-c", code], check=True)
+    session = Session.open(session_dir)
+    paths = [session.path_of(f) for f in session.frames]
+    size_mb = sum(p.stat().st_size for p in paths) / 1e6
+    print(f"session: {len(paths)} raw files, {size_mb:.0f} MB, {resolution}")
+    return paths
+
+
+def decode_all(paths: list[Path]) -> tuple[float, float]:
+    """Wall and CPU seconds of decoding every file (``raw_image_visible`` copy)."""
+    import rawpy
+
+    t0, c0 = time.perf_counter(), time.process_time()
+    for p in paths:
+        with rawpy.imread(str(p)) as raw:
+            mosaic = raw.raw_image_visible.copy()
+        del mosaic
+    return time.perf_counter() - t0, time.process_time() - c0
