@@ -107,6 +107,9 @@ class Score:
     fitted_gain: list[float] = field(default_factory=list)
     true_shift_nm: list[float] = field(default_factory=list)
     true_gain: list[float] = field(default_factory=list)
+    # |estimate - truth| / standard uncertainty of the sensitivities, every sample
+    # where the true curve is above 1 % of its channel's peak (the report's bands)
+    sens_z: list[float] = field(default_factory=list)
     seconds: float = 0.0
 
 
@@ -236,6 +239,36 @@ def coverage(est_r, std_r, lab_est, lab_std, truth_r, lab_true) -> dict[str, flo
     return cov
 
 
+def sensitivity_z(est: SensitivityEstimate, truth: Spectra) -> list[float]:
+    """``|s_est - s_true| / u(s)`` where the true curve exceeds 1 % of its peak."""
+    t = truth.values
+    inside = t > 0.01 * t.max(axis=1, keepdims=True)
+    std = np.maximum(est.std, 1e-300)
+    return (np.abs(est.sensitivity.values - t) / std)[inside].tolist()
+
+
+def tune_band_scale(scores: list[Score]) -> None:
+    """Coverage of the sensitivities' 95 % bands, and the scale of their standard
+    uncertainty that would make it 95 %, chosen with each family left out in turn."""
+    ss = [s for s in scores if s.sens_z]
+    if not ss:
+        return
+    z = {f: np.concatenate([s.sens_z for s in ss if s.family == f]) for f in
+         sorted({s.family for s in ss})}  # fmt: skip
+    every = np.concatenate(list(z.values()))
+    print(
+        f"\nsensitivity 95 % bands: coverage {np.mean(every <= Z95):.3f} "
+        f"({every.size} samples); scale for 95 %: {np.quantile(every, 0.95) / Z95:.2f}"
+    )
+    for f, zf in z.items():
+        rest = np.concatenate([v for g, v in z.items() if g != f])
+        c = float(np.quantile(rest, 0.95) / Z95)
+        print(
+            f"  {f:<26} coverage {np.mean(zf <= Z95):.3f}; scale from the others "
+            f"{c:.2f} -> coverage {np.mean(zf <= Z95 * c):.3f}"
+        )
+
+
 def run_camera(
     cam: gd.Camera, light: str, leds: Spectra, variants, rng, *, metering: bool, setup
 ) -> list[Score]:
@@ -280,6 +313,7 @@ def run_camera(
             seconds=secs,
         )
         if est.covariance is not None:
+            sc.sens_z = sensitivity_z(est, truth_work)
             unc = reflectance_uncertainty(w, resp_t, reported, est)
             sc.coverage_counts = coverage_counts(
                 w, unc, test_est.values, lab_true, test_est.names
@@ -428,6 +462,7 @@ def main(argv: list[str] | None = None) -> int:
     summary = summarise(scores)
     print_summary(summary, variants)
     tune_prior_scale([s for s in scores if s.variant == "bayes"])
+    tune_band_scale([s for s in scores if s.variant == "bayes"])
     corr = shift_correlation([s for s in scores if s.variant == "bayes"])
     if corr is not None:
         print(
