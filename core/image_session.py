@@ -76,6 +76,7 @@ from tunespec.core.image import (
 from tunespec.core.io.image_formats import ImageOutputs, pwrite_all
 from tunespec.core.io.raw import load_raw
 from tunespec.core.io.session import Session, find_darks, frames_by_channel
+from tunespec.core.metering import suppress_meter_floor
 from tunespec.core.processing import BRACKET_CLIP_LEVEL, exposure_groups
 from tunespec.core.spectra import Grid, Spectra
 
@@ -641,7 +642,7 @@ def illuminants_of(job: ImageJob) -> Spectra:
     wl: NDArray[np.float64] | None = None
     rows = []
     for path, t in zip(job.spd_files, job.spd_exposures_s, strict=True):
-        spd = read_spectra_csv(path)
+        spd = suppress_meter_floor(read_spectra_csv(path))
         if wl is None:
             wl = spd.wavelength_nm
         rows.append(np.interp(wl, spd.wavelength_nm, spd.values[0]) * t)

@@ -66,6 +66,7 @@ from tunespec.core.io.session import (
     frames_by_channel,
 )
 from tunespec.core.layout import TargetLayout
+from tunespec.core.metering import suppress_meter_floor
 from tunespec.core.progress import ProgressFn, StopFn, check_stop, report
 from tunespec.core.responses import Responses, write_responses_csv
 from tunespec.core.spectra import Spectra, write_spectra_csv
@@ -782,7 +783,7 @@ def process_session(
     for c in [first, *[c for c in use if c != first]]:
         acc.add(session, c, reader.pixels(whites[c]), reader.pixels(targets[c]))
         ref = targets[c][0]
-        acc.add_spd(c, session.read_spd(ref), ref.exposure_s)
+        acc.add_spd(c, suppress_meter_floor(session.read_spd(ref)), ref.exposure_s)
     warnings.extend(acc.warnings())
     n_px = rois.n_pixels
     n_patch = layout.n_patches

@@ -253,8 +253,10 @@ def open_camera(
 class ReportedSpdLight:
     """What a simulated camera sees of a real light source: its reported SPD.
 
-    ``emitted_spd()`` is the light's own measurement (``measure_spd``), or zero when
-    it reports every level at 0 (a dark frame needs no measurement). Lets
+    ``emitted_spd()`` is the light's own measurement (``measure_spd``) without the
+    spectroradiometer's noise floor (:func:`~tunespec.core.metering.
+    suppress_meter_floor`: no light is emitted there), or zero when it reports every
+    level at 0 (a dark frame needs no measurement). Lets
     ``--camera sim`` run with ``--light cal1+socket://...`` (the emulator) or a real
     CAL1, exercising the driver end to end without a camera.
 
@@ -276,7 +278,9 @@ class ReportedSpdLight:
             return Spectra(
                 self._grid_nm, np.zeros((1, len(self._grid_nm))), ("emitted",)
             )
-        spd = self._light.measure_spd()
+        from tunespec.core.metering import suppress_meter_floor
+
+        spd = suppress_meter_floor(self._light.measure_spd())
         self._grid_nm = spd.wavelength_nm
         return spd
 

@@ -33,6 +33,7 @@ from tunespec.core.fusion import fuse_patch, material_prior
 from tunespec.core.hdr import HdrImage, hdr_patch_responses, merge_brackets
 from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import read_json
+from tunespec.core.metering import suppress_meter_floor
 from tunespec.core.progress import (
     ProgressFn,
     StopFn,
@@ -155,7 +156,7 @@ def _process_geometry(gdir: Path, index: int, plan: GonioPlan, layout: TargetLay
         stack = np.stack([_load(gdir, name, k) - dark for k in range(len(rel))])
         for p, (yy, xx) in enumerate(rois):
             merged[p].append(merge_brackets(stack[:, :, yy, xx], rel))
-        spd = read_spectra_csv(gdir / f"spd_{name}.csv").resample(
+        spd = suppress_meter_floor(read_spectra_csv(gdir / f"spd_{name}.csv")).resample(
             DEFAULT_GRID, average=True
         )
         spectra.append(spd.values[0] * float(exposures[name]) * cos_i)

@@ -53,6 +53,32 @@ def test_demo_reaches_the_papers_numbers(demo) -> None:
     assert result.chart.corners_source == "auto"
 
 
+def test_calibration_meets_the_bench_truth_within_its_uncertainty(demo) -> None:
+    """The bench's spectroradiometer has no gain error, only noise that it clips at
+    zero. Before that floor was taken out of the reported spectra (core.metering) the
+    per-LED gains absorbed it (0.61-1.14), the sensitivities came out 11 % low and
+    their 95 % bands held 50-93 % of the true curves.
+
+    The responses fix the product of sensitivities and light, not how a common
+    factor splits between them (the gains' geometric mean is held at 1): the scale is
+    checked to 3 %, the bands against the true curves at the estimate's scale."""
+    result, _ = demo
+    est = result.calibration.estimate
+    gain = np.asarray(est.led_correction.gain)
+    assert np.all(np.abs(gain - 1.0) < 0.05), gain
+    truth = read_spectra_csv(
+        result.out_dir / "truth" / "truth_sensitivity_absolute.csv"
+    )
+    t = truth.resample(est.sensitivity.grid).values
+    s = est.sensitivity.values
+    scale = np.sum(s * t) / np.sum(t * t)
+    assert scale == pytest.approx(1.0, abs=0.03)
+    inside = t > 0.01 * t.max(axis=1, keepdims=True)
+    covered = np.abs(s - scale * t) <= 1.96 * est.std
+    for k in range(3):
+        assert np.mean(covered[k][inside[k]]) >= 0.9, "RGB"[k]
+
+
 def test_demo_outputs_share_one_file_mode_and_leave_no_tmp_folder(demo) -> None:
     """Manifests and summary.json were 0600 (mkstemp) beside 0644 outputs, and each
     finished session kept an empty tmp/ folder (issue 13)."""
@@ -124,13 +150,18 @@ def test_demo_progress_and_outputs(demo) -> None:
 
 
 def test_illuminants_are_measured_spd_times_exposure(demo) -> None:
+    # ... with the spectroradiometer's clipped noise floor taken out (core.metering)
     result, _ = demo
     session = Session.open(result.out_dir / "chart")
     rec = session.frame("target_LED540")
-    spd = session.read_spd(rec)
-    np.testing.assert_allclose(
-        result.chart.illuminants["LED540"], spd.values[0] * rec.exposure_s
-    )
+    spd = session.read_spd(rec).values[0]
+    got = result.chart.illuminants["LED540"] / rec.exposure_s
+    kept = got > 0
+    np.testing.assert_allclose(got[kept], spd[kept])
+    removed = spd[~kept]
+    assert removed.size > 100  # the floor far from 540 nm
+    assert removed.max() < 0.005 * spd.max()
+    assert 0.001 < removed.sum() / spd.sum() < 0.02
 
 
 @pytest.mark.slow

@@ -1,0 +1,90 @@
+"""The spectroradiometer's noise floor taken out of reported spectra (core.metering)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tunespec.core.datasets import load_camera_database, load_led_set
+from tunespec.core.forward_model import render_rgb
+from tunespec.core.metering import meter_noise_sd, suppress_meter_floor
+from tunespec.core.spectra import Grid, Spectra
+
+WL = np.arange(380.0, 781.0)
+#: The simulated CAL1's metering noise floor: 0.1 % of the peak per reading.
+FLOOR_SD = 0.001
+
+
+def _led(peak_nm: float, fwhm_nm: float = 20.0) -> np.ndarray:
+    return np.exp(-0.5 * ((WL - peak_nm) / (fwhm_nm / 2.3548)) ** 2)
+
+
+def _reported(true: np.ndarray, rng, reads: int = 2) -> np.ndarray:
+    """Mean of ``reads`` readings, each clipped at zero (as capture averages the
+    readings before and after a frame)."""
+    sd = FLOOR_SD * true.max()
+    return np.mean(
+        [
+            np.maximum(true + sd * rng.standard_normal(true.size), 0.0)
+            for _ in range(reads)
+        ],
+        axis=0,
+    )
+
+
+def test_noise_free_spectra_come_back_unchanged() -> None:
+    white = 0.3 + _led(450.0) + 0.8 * np.exp(-0.5 * ((WL - 580.0) / 60.0) ** 2)
+    leds = load_led_set(Grid(380.0, 780.0, 1.0))
+    synthetic = Spectra(WL, np.vstack([_led(700.0), white]), ("LED700", "W"))
+    assert all(meter_noise_sd(v) == 0.0 for v in synthetic.values)
+    # the shipped LED model: the whites' file digits read as noise of 1e-5 of the
+    # peak, far below any of their samples
+    assert max(meter_noise_sd(v) / v.max() for v in leds.values) < 2e-5
+    for s in (synthetic, leds):
+        assert suppress_meter_floor(s) is s
+
+
+@pytest.mark.parametrize("reads", [1, 2])
+def test_the_clipped_floor_goes_and_the_emission_stays(reads) -> None:
+    rng = np.random.default_rng(3)
+    true = _led(700.0)
+    rep = _reported(true, rng, reads)
+    sd = FLOOR_SD / np.sqrt(reads)
+    assert meter_noise_sd(rep) == pytest.approx(sd, rel=0.35)
+    got = suppress_meter_floor(Spectra(WL, rep[None], ("LED700",))).values[0]
+    far = np.abs(WL - 700.0) > 60.0
+    # the floor: about 0.4 sd a sample before, under a tenth of that after
+    assert rep[far].mean() > 0.3 * sd
+    assert got[far].mean() < 0.05 * sd
+    near = ~far
+    np.testing.assert_allclose(got[near], rep[near], atol=4 * sd)
+
+
+def test_unclipped_noise_is_zeroed_below_the_detection_limit() -> None:
+    rng = np.random.default_rng(4)
+    true = _led(520.0)
+    rep = true + FLOOR_SD * rng.standard_normal(WL.size)
+    assert np.any(rep < 0)
+    got = suppress_meter_floor(Spectra(WL, rep[None], ("LED520",))).values[0]
+    assert np.all(got >= 0)
+    assert meter_noise_sd(rep) == pytest.approx(FLOOR_SD, rel=0.25)
+    assert np.all(got[got > 0] >= 3 * 0.75 * FLOOR_SD)
+
+
+def test_eq1_off_channel_response_is_predicted_again() -> None:
+    # The blue channel under a deep-red LED: the clipped floor over 380-600 nm, weighted
+    # by blue's sensitivity, is as large as the true response; without it Eq. 1
+    # predicts the measured response again.
+    grid = Grid(380.0, 780.0, 1.0)
+    cam = next(iter(load_camera_database(grid).values())).values
+    white = np.ones((1, WL.size))
+    true = _led(700.0)
+    c_true = render_rgb(white, true[None], cam, 1.0)[0, 0]
+    rng = np.random.default_rng(5)
+    rep = _reported(true, rng)
+    c_rep = render_rgb(white, rep[None], cam, 1.0)[0, 0]
+    clean = suppress_meter_floor(Spectra(WL, rep[None], ("LED700",))).values
+    c_clean = render_rgb(white, clean, cam, 1.0)[0, 0]
+    assert c_rep[2] / c_true[2] > 1.3
+    assert c_clean[2] / c_true[2] == pytest.approx(1.0, abs=0.1)
+    assert c_clean[0] / c_true[0] == pytest.approx(1.0, abs=0.01)
