@@ -36,6 +36,7 @@ Usage::
     python benchmarks/generalisation.py --no-metering-error --variants bayes,bayes-noselfcal
     python benchmarks/generalisation.py --json out.json
     python benchmarks/generalisation.py --grid 380:730:5  # calibrate on another grid
+    python benchmarks/generalisation.py --meter-noise 0.001 [--clean-meter]  # noisy SPDs
 
 After the table it prints the leave-one-reflectance-collection-out check of
 ``core.uncertainty.PRIOR_MISMATCH_SCALE`` (:func:`tune_prior_scale`).
@@ -64,6 +65,7 @@ import generalisation_data as gd
 
 from tunespec.core.colorimetry import lab_d50, reflectance_stats
 from tunespec.core.datasets import load_camera_database, load_colorchecker_sg
+from tunespec.core.metering import suppress_meter_floor
 from tunespec.core.sensitivity import (
     SensitivityEstimate,
     estimate_camera_sensitivity,
@@ -270,7 +272,16 @@ def tune_band_scale(scores: list[Score]) -> None:
 
 
 def run_camera(
-    cam: gd.Camera, light: str, leds: Spectra, variants, rng, *, metering: bool, setup
+    cam: gd.Camera,
+    light: str,
+    leds: Spectra,
+    variants,
+    rng,
+    *,
+    metering: bool,
+    setup,
+    meter_noise: float = 0.0,
+    clean_meter: bool = False,
 ) -> list[Score]:
     chart_fine, test_fine, chart_work, prior_est, db, test_est = setup
     scaled = scale_to_exposure(chart_fine, leds, cam.truth, target=0.8)
@@ -281,6 +292,10 @@ def run_camera(
         reported_fine, shifts, gains = gd.metering_error(scaled, rng)
     else:
         reported_fine, shifts, gains = scaled, np.zeros(len(leds)), np.ones(len(leds))
+    if meter_noise:
+        reported_fine = gd.metering_noise(reported_fine, rng, meter_noise)
+    if clean_meter:
+        reported_fine = suppress_meter_floor(reported_fine)
     reported = reported_fine.resample(WORK, average=True)
     truth_work = cam.truth.resample(WORK)
     lab_true = lab_d50(test_est)
@@ -412,6 +427,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--variants", default=",".join(VARIANTS))
     ap.add_argument("--lights", default="cal1-model,heldout-leds")
     ap.add_argument("--no-metering-error", action="store_true")
+    ap.add_argument(
+        "--meter-noise",
+        type=float,
+        default=0.0,
+        help="noise of the reported spectra, a fraction of each one's peak, clipped at "
+        "0 and averaged over 2 readings (the simulated CAL1: 0.001)",
+    )
+    ap.add_argument(
+        "--clean-meter",
+        action="store_true",
+        help="take the noise floor out of the reported spectra "
+        "(core.metering.suppress_meter_floor, as processing does)",
+    )
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument(
         "--grid",
@@ -458,6 +486,8 @@ def main(argv: list[str] | None = None) -> int:
                 rng,
                 metering=not args.no_metering_error,
                 setup=setup,
+                meter_noise=args.meter_noise,
+                clean_meter=args.clean_meter,
             )
     summary = summarise(scores)
     print_summary(summary, variants)

@@ -279,3 +279,17 @@ def metering_error(
         ]
     )
     return leds.with_values(vals), shifts, gains
+
+
+def metering_noise(
+    reported: Spectra, rng: np.random.Generator, floor_rel: float, reads: int = 2
+) -> Spectra:
+    """Each reported spectrum read ``reads`` times with Gaussian noise of ``floor_rel``
+    of its peak, every reading clipped at zero (as the simulated CAL1's
+    spectroradiometer), and the readings averaged (as capture does around a frame)."""
+    v = reported.values
+    sd = floor_rel * v.max(axis=1, keepdims=True)
+    reads_ = [
+        np.maximum(v + sd * rng.standard_normal(v.shape), 0.0) for _ in range(reads)
+    ]
+    return reported.with_values(np.mean(reads_, axis=0))

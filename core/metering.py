@@ -13,8 +13,12 @@ standard deviations of the instrument's noise (the IUPAC convention for the limi
 detection), to zero. The noise is estimated per spectrum from the spectrum itself: the
 DER_SNR estimator (the median of second differences) over the samples far below the
 peak that the instrument did not clip. A noise-free spectrum, or a broad one with no
-noise-only region, is returned unchanged. Raw files are never changed: this is applied
-where the reported spectra become the illuminants of Eq. 1.
+noise-only region, is returned unchanged, and so is a cleaned one (the function is
+repeated until it changes nothing, so applying it twice is applying it once). Raw files
+are never changed: this is applied where the reported spectra become the illuminants of
+Eq. 1 (processing, the per-pixel images, gonio sessions) and where a calibration meets
+reported spectra (``estimate_camera_sensitivity`` and ``correct_illuminants``, so
+spectra that did not come through processing are cleaned the same way).
 
 References
 ----------
@@ -43,8 +47,14 @@ __all__ = [
 DETECTION_LIMIT_SD = 3.0
 #: Samples below this fraction of a spectrum's peak estimate its noise.
 NOISE_REGION_FRACTION = 0.01
+#: Passes of :func:`suppress_meter_floor` at most (it stops when one changes nothing).
+_MAX_PASSES = 5
 #: Fewest second differences an estimate of the noise needs; fewer give none.
 _MIN_DIFFERENCES = 16
+#: Independent noise makes two of every three samples a local extremum; a smooth tail
+#: (a noise-free spectrum, however coarsely sampled) almost none. Below this fraction
+#: the region is taken to hold no noise to measure.
+_MIN_EXTREMUM_FRACTION = 1.0 / 3.0
 #: DER_SNR's constant: 1.482602 / sqrt(6) turns the median of |2 f_i - f_i-2 - f_i+2|
 #: into a Gaussian standard deviation (Stoehr et al. 2008).
 _DER_SNR = 1.482602 / np.sqrt(6.0)
@@ -60,8 +70,9 @@ def meter_noise_sd(values: NDArray[np.float64]) -> float:
     instrument clips (exact zeros among them) only the samples above zero are used,
     and those are half-normal: their estimate is divided by ``sqrt(1 - 2 / pi)``, the
     ratio of a half-normal's standard deviation to the Gaussian's. 0.0 when fewer
-    than 16 differences exist (a broad spectrum has no noise-only region) or for a
-    smooth, noise-free spectrum.
+    than 16 differences exist (a broad spectrum has no noise-only region) or where
+    fewer than a third of those samples turn (a local maximum or minimum: a smooth,
+    noise-free tail, which DER_SNR would mistake for noise on a coarse grid).
 
     Examples
     --------
@@ -84,13 +95,20 @@ def meter_noise_sd(values: NDArray[np.float64]) -> float:
     if clipped:
         low = low[low > 0.0]
     d = np.abs(2.0 * low[2:-2] - low[:-4] - low[4:])
-    if d.size < _MIN_DIFFERENCES:
+    if d.size < _MIN_DIFFERENCES or _extremum_fraction(low) < _MIN_EXTREMUM_FRACTION:
         return 0.0
     sd = float(_DER_SNR * np.median(d))
     if clipped:
         sd /= _HALF_NORMAL_SD
     # a smooth tail (no noise) has second differences far below the peak
     return sd if sd > 1e-6 * peak else 0.0
+
+
+def _extremum_fraction(values: NDArray[np.float64]) -> float:
+    """Fraction of interior samples that are a local maximum or minimum."""
+    step = np.sign(np.diff(values))
+    turns = step[1:] * step[:-1] < 0
+    return float(np.mean(turns)) if turns.size else 0.0
 
 
 def suppress_meter_floor(
@@ -117,9 +135,13 @@ def suppress_meter_floor(
     out = np.array(spectra.values, dtype=np.float64)
     changed = False
     for row in out:
-        floor = limit_sd * meter_noise_sd(row)
-        cut = row < floor if floor > 0 else row < 0
-        if np.any(cut):
+        # again until nothing changes: the first pass's zeros sharpen the estimate
+        # of the noise that stood above its limit (two passes, rarely three)
+        for _ in range(_MAX_PASSES):
+            floor = limit_sd * meter_noise_sd(row)
+            cut = (row < floor) & (row != 0.0) if floor > 0 else row < 0
+            if not np.any(cut):
+                break
             row[cut] = 0.0
             changed = True
     return spectra.with_values(out) if changed else spectra

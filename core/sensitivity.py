@@ -60,6 +60,7 @@ from scipy.optimize import minimize_scalar
 from tunespec.core.datasets import load_camera_database
 from tunespec.core.errors import InputError, SingularSystemError
 from tunespec.core.forward_model import render_rgb
+from tunespec.core.metering import suppress_meter_floor
 from tunespec.core.progress import ProgressFn, StopFn, check_stop, report
 from tunespec.core.responses import CHANNELS, Responses
 from tunespec.core.sensitivity_bayes import (
@@ -167,12 +168,15 @@ class SensitivityEstimate:
     def correct_illuminants(self, illuminants: Spectra) -> Spectra:
         """The illuminant spectra with the fitted metering errors undone.
 
-        With a per-LED self-calibration (:attr:`led_correction`) each LED it knows is
+        First the spectroradiometer's noise floor goes (:func:`~tunespec.core.
+        metering.suppress_meter_floor`, as the calibration saw the spectra). With a
+        per-LED self-calibration (:attr:`led_correction`) each LED it knows is
         corrected by its own gain and offset and any other spectrum by the common
         offset; otherwise the fitted common shift is undone
-        (:func:`correct_spd_shift`). Returns ``illuminants`` itself when nothing was
-        fitted.
+        (:func:`correct_spd_shift`). Returns ``illuminants`` itself when nothing
+        changes.
         """
+        illuminants = suppress_meter_floor(illuminants)
         if self.led_correction is not None:
             return self.led_correction.apply(illuminants)
         if self.spd_shift_nm == 0.0:
@@ -416,6 +420,8 @@ def _prepare(
     refl = _select(reflectances, responses.patches, "patch(es) of the responses")
     _check_finite(illum, "illuminant(s)")
     _check_finite(refl, "reflectance(s)")
+    # the reported spectra without their noise floor, as correct_illuminants gives them
+    illum = suppress_meter_floor(illum)
     if not np.all(np.isfinite(responses.rgb)):
         p, i, _ = np.argwhere(~np.isfinite(responses.rgb))[0]
         raise InputError(
@@ -612,7 +618,8 @@ def correct_illuminants_from_meta(
 ) -> Spectra:
     """Undo the light source's metering errors that a calibration found.
 
-    The one place that applies them: the per-LED corrections of a ``"bayes"``
+    The noise floor first (:func:`~tunespec.core.metering.suppress_meter_floor`, as
+    the calibration saw the spectra), then the per-LED corrections of a ``"bayes"``
     calibration (``meta["led_correction"]``, a :class:`LedCorrection` as JSON or a
     dict) or else the common wavelength shift (``spd_shift_nm`` if given, else
     ``meta["spd_shift_nm"]``). ``meta`` is a sensitivity's ``Spectra.meta`` or the
@@ -624,6 +631,7 @@ def correct_illuminants_from_meta(
         A malformed correction or shift (naming ``meta["source"]``).
     """
     source = meta.get("meta_path") or meta.get("source")
+    illuminants = suppress_meter_floor(illuminants)
     doc = meta.get("led_correction")
     if doc is not None and spd_shift_nm is None:
         if isinstance(doc, str):

@@ -290,7 +290,7 @@ def calibration_correction(
     corrected to the uncorrected sum of the calibration's LED spectra at the mix
     levels (the mix's own shape is kept, its metering errors are those of its LEDs).
     """
-    base = leds_reported.resample(DEFAULT_GRID, average=True)
+    base = suppress_meter_floor(leds_reported).resample(DEFAULT_GRID, average=True)
     model = mix_levels @ base.values
     fixed = mix_levels @ led_correction.apply(base).values
     factor = np.where(

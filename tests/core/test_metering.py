@@ -58,6 +58,9 @@ def test_the_clipped_floor_goes_and_the_emission_stays(reads) -> None:
     assert got[far].mean() < 0.05 * sd
     near = ~far
     np.testing.assert_allclose(got[near], rep[near], atol=4 * sd)
+    # cleaned is a fixed point: the calibration and the estimate clean again
+    cleaned = Spectra(WL, got[None], ("LED700",))
+    assert suppress_meter_floor(cleaned) is cleaned
 
 
 def test_unclipped_noise_is_zeroed_below_the_detection_limit() -> None:
