@@ -168,11 +168,11 @@ class SensitivityEstimate:
     def correct_illuminants(self, illuminants: Spectra) -> Spectra:
         """The illuminant spectra with the fitted metering errors undone.
 
-        First the spectroradiometer's noise floor goes (:func:`~tunespec.core.
-        metering.suppress_meter_floor`, as the calibration saw the spectra). With a
-        per-LED self-calibration (:attr:`led_correction`) each LED it knows is
-        corrected by its own gain and offset and any other spectrum by the common
-        offset; otherwise the fitted common shift is undone
+        First the spectroradiometer's noise floor goes
+        (:func:`~tunespec.core.metering.suppress_meter_floor`, as the calibration saw
+        the spectra). With a per-LED self-calibration (:attr:`led_correction`) each
+        LED it knows is corrected by its own gain and offset and any other spectrum
+        by the common offset; otherwise the fitted common shift is undone
         (:func:`correct_spd_shift`). Returns ``illuminants`` itself when nothing
         changes.
         """

@@ -254,8 +254,9 @@ class ReportedSpdLight:
     """What a simulated camera sees of a real light source: its reported SPD.
 
     ``emitted_spd()`` is the light's own measurement (``measure_spd``) without the
-    spectroradiometer's noise floor (:func:`~tunespec.core.metering.
-    suppress_meter_floor`: no light is emitted there), or zero when it reports every
+    spectroradiometer's noise floor
+    (:func:`~tunespec.core.metering.suppress_meter_floor`: no light is emitted
+    there), or zero when it reports every
     level at 0 (a dark frame needs no measurement). Lets
     ``--camera sim`` run with ``--light cal1+socket://...`` (the emulator) or a real
     CAL1, exercising the driver end to end without a camera.
