@@ -100,7 +100,8 @@ def meter_noise_sd(values: NDArray[np.float64]) -> float:
     sd = float(_DER_SNR * np.median(d))
     if clipped:
         sd /= _HALF_NORMAL_SD
-    # a smooth tail (no noise) has second differences far below the peak
+    # rounding jitter of a computed, noise-free tail turns as noise does, at a level
+    # far below any instrument's
     return sd if sd > 1e-6 * peak else 0.0
 
 

@@ -39,6 +39,7 @@ from numpy.typing import NDArray
 
 from tunespec.core.colorimetry import astm_e308_weights_d50, xyz_to_lab_d50
 from tunespec.core.errors import InputError
+from tunespec.core.metering import suppress_meter_floor
 from tunespec.core.responses import Responses
 from tunespec.core.sensitivity import SensitivityEstimate
 from tunespec.core.sensitivity_bayes import _corrected
@@ -239,7 +240,9 @@ def calibration_response_covariance(
         With :attr:`~SensitivityEstimate.covariance` (method ``"bayes"``).
     illuminants : Spectra, (n_i, n_wl')
         The target capture's spectra as the light source reported them (not
-        corrected), any grid covering the calibration's.
+        corrected; their noise floor goes first, as in
+        :meth:`SensitivityEstimate.correct_illuminants`), any grid covering the
+        calibration's.
     reflectance : Spectra, (n_p, n_wl'')
         The (estimated) reflectances, any grid; held constant beyond its ends.
 
@@ -263,6 +266,8 @@ def calibration_response_covariance(
     wl = sens.wavelength_nm
     step = sens.step_nm
     n = wl.size
+    # the corrections apply to the spectra as the calibration saw them
+    illuminants = suppress_meter_floor(illuminants)
     rep = _hold_resample(
         illuminants.wavelength_nm, illuminants.values, wl, average=True
     )
