@@ -36,7 +36,8 @@ Usage::
     python benchmarks/generalisation.py --no-metering-error --variants bayes,bayes-noselfcal
     python benchmarks/generalisation.py --json out.json
     python benchmarks/generalisation.py --grid 380:730:5  # calibrate on another grid
-    python benchmarks/generalisation.py --meter-noise 0.001 [--clean-meter]  # noisy SPDs
+    python benchmarks/generalisation.py --meter-noise 0.001 --report-step-nm 10  # noisy SPDs
+    python benchmarks/generalisation.py --systematic  # stray light, cross-talk, non-linearity
 
 After the table it prints the leave-one-reflectance-collection-out check of
 ``core.uncertainty.PRIOR_MISMATCH_SCALE`` (:func:`tune_prior_scale`).
@@ -84,7 +85,7 @@ from tunespec.core.wiener import on_integration_grid, wiener_reflectance
 
 WORK = CALIBRATION_GRID
 EST = Grid(400.0, 700.0, 5.0)
-VARIANTS = ("bayes", "bayes-noselfcal", "smooth", "pca", "nnls", "truth")
+VARIANTS = ("bayes", "bayes-noselfcal", "smooth", "pca", "nnls", "truth", "truth-read")
 #: Smoothness weight of the ``nnls`` reference (relative to the data's mean diagonal).
 NNLS_LAMBDA = 1e-3
 Z95 = 1.959964
@@ -140,8 +141,8 @@ def nnls_reference(responses, reported: Spectra, chart: Spectra) -> SensitivityE
 def calibrate(
     variant, responses, reported, chart, database, exclude, truth=None
 ) -> SensitivityEstimate:
-    if variant == "truth":  # the floor: true sensitivities (and true spectra)
-        return SensitivityEstimate(truth, "truth")
+    if variant in ("truth", "truth-read"):  # the floor: true sensitivities
+        return SensitivityEstimate(truth, variant)
     if variant == "nnls":
         return nnls_reference(responses, reported, chart)
     method = variant.split("-")[0]
@@ -282,6 +283,9 @@ def run_camera(
     setup,
     meter_noise: float = 0.0,
     clean_meter: bool = False,
+    report_step_nm: float = 1.0,
+    report_slit: bool = False,
+    systematic: bool = False,
 ) -> list[Score]:
     chart_fine, test_fine, chart_work, prior_est, db, test_est = setup
     scaled = scale_to_exposure(chart_fine, leds, cam.truth, target=0.8)
@@ -292,11 +296,16 @@ def run_camera(
         reported_fine, shifts, gains = gd.metering_error(scaled, rng)
     else:
         reported_fine, shifts, gains = scaled, np.zeros(len(leds)), np.ones(len(leds))
+    if systematic:
+        resp = gd.systematic_effects(resp, rng)
+        resp_t = gd.systematic_effects(resp_t, rng)
+    # the instrument's own sampling, then its reading noise on what it reports
+    reported_native = gd.report_at(reported_fine, report_step_nm, slit=report_slit)
     if meter_noise:
-        reported_fine = gd.metering_noise(reported_fine, rng, meter_noise)
+        reported_native = gd.metering_noise(reported_native, rng, meter_noise)
     if clean_meter:
-        reported_fine = suppress_meter_floor(reported_fine)
-    reported = reported_fine.resample(WORK, average=True)
+        reported_native = suppress_meter_floor(reported_native)
+    reported = reported_native.resample(WORK, average=True)
     truth_work = cam.truth.resample(WORK)
     lab_true = lab_d50(test_est)
     out = []
@@ -306,6 +315,8 @@ def run_camera(
             variant, resp, reported, chart_work, db, cam.exclude, truth_work
         )
         secs = time.perf_counter() - t0
+        # ``truth``: the true spectra; ``truth-read``: the true sensitivities with
+        # the light's readings as reported (what no calibration can beat with them)
         used = scaled.resample(WORK, average=True) if variant == "truth" else reported
         t1 = calibration_report(est, resp, used, chart_work).training
         # Eq. 1 integrated on the calibration's grid, reflectance on EST (as
@@ -435,10 +446,30 @@ def main(argv: list[str] | None = None) -> int:
         "0 and averaged over 2 readings (the simulated CAL1: 0.001)",
     )
     ap.add_argument(
-        "--clean-meter",
+        "--raw-meter",
         action="store_true",
-        help="take the noise floor out of the reported spectra "
-        "(core.metering.suppress_meter_floor, as processing does)",
+        help="leave the noise floor in the reported spectra (by default they are "
+        "cleaned at their own sampling, core.metering.suppress_meter_floor, as the "
+        "product's readers and processing do)",
+    )
+    ap.add_argument(
+        "--report-step-nm",
+        type=float,
+        default=1.0,
+        help="the spectroradiometer reports every STEP nm (1: the 1 nm rendering "
+        "itself); its noise is on those samples",
+    )
+    ap.add_argument(
+        "--report-slit",
+        action="store_true",
+        help="each reported sample through a triangular slit as wide as the step "
+        "(default: the spectrum's value there)",
+    )
+    ap.add_argument(
+        "--systematic",
+        action="store_true",
+        help="stray light and cross-talk (0.2 %% per patch and LED) and a "
+        "non-linearity (signal^1.003) on the responses, beside the flat-field residual",
     )
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument(
@@ -487,7 +518,10 @@ def main(argv: list[str] | None = None) -> int:
                 metering=not args.no_metering_error,
                 setup=setup,
                 meter_noise=args.meter_noise,
-                clean_meter=args.clean_meter,
+                clean_meter=not args.raw_meter,
+                report_step_nm=args.report_step_nm,
+                report_slit=args.report_slit,
+                systematic=args.systematic,
             )
     summary = summarise(scores)
     print_summary(summary, variants)

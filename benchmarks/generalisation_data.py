@@ -35,7 +35,7 @@ rawtoaces training reflectances, the 99 CIE 2017 colour-fidelity samples (TM-30)
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
@@ -47,6 +47,7 @@ from tunespec.core.datasets import (
     load_training_reflectances_190,
     resource_path,
 )
+from tunespec.core.responses import Responses
 from tunespec.core.spectra import Grid, Spectra
 
 FINE = Grid(380.0, 730.0, 1.0)
@@ -293,3 +294,40 @@ def metering_noise(
         np.maximum(v + sd * rng.standard_normal(v.shape), 0.0) for _ in range(reads)
     ]
     return reported.with_values(np.mean(reads_, axis=0))
+
+
+def report_at(leds: Spectra, step_nm: float, *, slit: bool = False) -> Spectra:
+    """What a spectroradiometer that reports every ``step_nm`` gives over the fine
+    grid's range: the spectrum's values at those wavelengths, or with ``slit``
+    through a triangular slit of full width at half maximum ``step_nm`` (the hat
+    kernels of :meth:`Spectra.resample` with ``average=True``). ``step_nm`` 1
+    returns the spectra as they are."""
+    if step_nm <= FINE.step_nm:
+        return leds
+    return leds.resample(Grid(FINE.start_nm, FINE.end_nm, step_nm), average=slit)
+
+
+def systematic_effects(
+    responses: Responses,
+    rng: np.random.Generator,
+    *,
+    stray: float = 0.002,
+    nonlinearity: float = 1.003,
+) -> Responses:
+    """Sensor effects that photon and read noise do not describe, on top of the
+    flat-field residual that :class:`~tunespec.core.simulate.NoiseModel` draws:
+
+    - stray light: each patch under each LED gains ``stray * z`` of the mean
+      response under that LED (``z ~ N(0, 1)``, one draw per patch and LED);
+    - cross-talk: each channel gains ``stray * z`` of the patch's mean over the
+      other two channels (one draw per patch, LED and channel);
+    - a slight non-linearity: ``signal ** nonlinearity`` (full-scale units).
+
+    ``rgb_std`` is left as the noise model gave it: the product is not told."""
+    rgb = responses.rgb
+    level = rgb.mean(axis=0, keepdims=True)
+    out = rgb + stray * rng.standard_normal(rgb.shape[:2])[..., None] * level
+    others = (rgb.sum(axis=2, keepdims=True) - rgb) / 2.0
+    out = out + stray * rng.standard_normal(rgb.shape) * others
+    out = np.maximum(out, 0.0) ** nonlinearity
+    return replace(responses, rgb=out)

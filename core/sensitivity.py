@@ -59,6 +59,11 @@ from scipy.optimize import minimize_scalar
 
 from tunespec.core.datasets import load_camera_database
 from tunespec.core.errors import InputError, SingularSystemError
+from tunespec.core.excess import (
+    FLAT_FIELD_RESIDUAL,
+    ExcessVariance,
+    fit_excess_variance,
+)
 from tunespec.core.forward_model import render_rgb
 from tunespec.core.metering import suppress_meter_floor
 from tunespec.core.progress import ProgressFn, StopFn, check_stop, report
@@ -147,6 +152,9 @@ class SensitivityEstimate:
         ``sensitivity`` then belongs to the *corrected* spectra,
         :meth:`correct_illuminants`; use those in Eq. 1 and in reflectance
         estimation.
+    excess
+        The responses' systematic errors beyond the known noise that the chart's
+        residuals show (:func:`~tunespec.core.excess.fit_excess_variance`).
     """
 
     sensitivity: Spectra
@@ -156,6 +164,7 @@ class SensitivityEstimate:
     spd_shift_nm: float = 0.0
     led_correction: LedCorrection | None = None
     covariance: NDArray[np.float64] | None = None
+    excess: ExcessVariance | None = None
 
     @property
     def std(self) -> NDArray[np.float64] | None:
@@ -708,12 +717,19 @@ def calibration_from_meta(
                 ] = T1
             T[3 * T1.shape[0] :, 3 * wl.size :] = np.eye(2 * n_led)
             cov = T @ cov @ T.T
+    excess = None
+    if "excess_variance" in meta:
+        doc = meta["excess_variance"]
+        excess = ExcessVariance.from_dict(
+            json.loads(doc) if isinstance(doc, str) else doc, path=source
+        )
     return SensitivityEstimate(
         sens,
         "bayes" if corr is not None else "unknown",
         spd_shift_nm=float(meta.get("spd_shift_nm", 0.0)),
         led_correction=corr,
         covariance=cov,
+        excess=excess,
     )
 
 
@@ -1127,15 +1143,44 @@ def estimate_camera_sensitivity(
     params |= {"n_stimuli": int(problem.C.shape[0]), "n_patches": len(problem.patches),
                "excluded_cameras": excluded, "spd_shift_fitted": fit_spd_shift,
                "spd_shift_nm": shift_nm, "spd_shift_at_bound": shift_at_bound}  # fmt: skip
+    excess = _excess_variance(problem, S, correction, shift_nm, responses.illuminants)
     report(progress, 1.0)
-    meta = {"source": f"estimated ({method})", "spd_shift_nm": repr(shift_nm)}
+    meta = {"source": f"estimated ({method})", "spd_shift_nm": repr(shift_nm),
+            "excess_variance": json.dumps(excess.as_dict())}  # fmt: skip
     if correction is not None:
         meta["led_correction"] = json.dumps(correction.as_dict())
     sens = Spectra(problem.wavelength_nm, S, CHANNELS, meta)
     return SensitivityEstimate(
         sens, method, params, problem.excluded_patches, spd_shift_nm=shift_nm,
-        led_correction=correction, covariance=covariance,
+        led_correction=correction, covariance=covariance, excess=excess,
     )  # fmt: skip
+
+
+def _excess_variance(
+    problem: _Problem,
+    S: NDArray[np.float64],
+    correction: LedCorrection | None,
+    shift_nm: float,
+    illuminant_names: Sequence[str],
+) -> ExcessVariance:
+    """The chart's residuals beyond its known noise (:func:`fit_excess_variance`):
+    Eq. 1 with the fitted corrections against the responses, the known variance
+    the ROI noise and the flat-field residual."""
+    L = Spectra(problem.wavelength_nm, problem.L, tuple(illuminant_names))
+    if correction is not None:
+        L = correction.apply(L)
+    elif shift_nm:
+        L = correct_spd_shift(L, shift_nm)
+    pred = stimulus_matrix(L.values, problem.R, problem.step_nm) @ S.T
+    noise = (
+        problem.var
+        - (SMOOTH_RELATIVE_ERROR * problem.C) ** 2
+        + (FLAT_FIELD_RESIDUAL * problem.C) ** 2
+    )
+    n_p = len(problem.patches)
+    return fit_excess_variance(
+        problem.C.reshape(n_p, -1), pred.reshape(n_p, -1), noise.reshape(n_p, -1)
+    )
 
 
 def _check_solvable(problem: _Problem, method: str, db: dict[str, Spectra]) -> None:

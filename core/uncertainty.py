@@ -6,8 +6,11 @@ Three sources of error reach a Wiener estimate ``r = m + W (c - F m)``,
 1. what the responses cannot see: the part of the reflectance outside what the
    camera and the LEDs resolve, drawn from the prior (mean ``m``, covariance ``K``);
 2. the noise of the responses: photon and read noise of the ROI mean
-   (``rgb_std^2 / n_pixels``) and the flat-field residual of Eq. 2
-   (:data:`FLAT_FIELD_RESIDUAL` of the response);
+   (``rgb_std^2 / n_pixels``), the flat-field residual of Eq. 2
+   (:data:`FLAT_FIELD_RESIDUAL` of the response) and the systematic errors that the
+   calibration's residuals showed beyond them (stray light, cross-talk,
+   non-linearity: :mod:`tunespec.core.excess`), part of them shared by all of a
+   patch's responses;
 3. the calibration: the joint covariance ``Sigma`` of the sensitivities and the
    light-source corrections (:attr:`SensitivityEstimate.covariance`) moves the
    responses by ``J Sigma J'`` with ``J = d c / d theta`` at the estimate (Eq. 1
@@ -32,13 +35,14 @@ of uncertainty); JCGM 102:2011 (GUM Supplement 2, multivariate models).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
 from tunespec.core.colorimetry import astm_e308_weights_d50, xyz_to_lab_d50
 from tunespec.core.errors import InputError
+from tunespec.core.excess import FLAT_FIELD_RESIDUAL
 from tunespec.core.metering import suppress_meter_floor
 from tunespec.core.responses import Responses
 from tunespec.core.sensitivity import SensitivityEstimate
@@ -47,9 +51,11 @@ from tunespec.core.spectra import Spectra, resampling_matrix
 from tunespec.core.wiener import WienerEstimate
 
 __all__ = [
+    "BUDGET_TERMS",
     "FLAT_FIELD_RESIDUAL",
     "PRIOR_MISMATCH_SCALE",
     "ReflectanceUncertainty",
+    "budget_summary",
     "calibration_response_covariance",
     "fit_generic_prior",
     "lab_covariance",
@@ -67,9 +73,6 @@ __all__ = [
 #: each collection left out in turn the choice stays within 1.40-1.55.
 PRIOR_MISMATCH_SCALE = 1.4
 
-#: Relative standard deviation of a response that flat-fielding (Eq. 2) leaves: the
-#: irradiance ratio between white reference and target is known to about 0.3 %.
-FLAT_FIELD_RESIDUAL = 0.003
 #: Correlation lengths (nm) tried for the generic prior component (Matern 3/2).
 #: Surface reflectances are smooth: a handful of basis functions describe them
 #: (L. T. Maloney, "Evaluation of linear models of surface spectral reflectance with
@@ -196,7 +199,10 @@ class ReflectanceUncertainty:
     estimate under D50 and ``xyz_std``, ``lab_std`` (n_p, 3) their standard
     uncertainties; ``lab_covariance`` (n_p, 3, 3); ``prior_part_variance`` (n_p,
     n_wl) and ``lab_prior_part_variance`` (n_p, 3) the prior-mismatch term's share of
-    the reflectance and CIELAB variances (scaled by ``prior_scale`` squared).
+    the reflectance and CIELAB variances (scaled by ``prior_scale`` squared);
+    ``budget`` each term of :data:`BUDGET_TERMS` that applies as ``(reflectance
+    variance (n_p, n_wl), CIELAB variance (n_p, 3))``: the uncertainty budget (the
+    terms add up to the total, both are first order).
     """
 
     covariance: NDArray[np.float64]
@@ -210,6 +216,9 @@ class ReflectanceUncertainty:
     generic_length_nm: float = 0.0
     prior_part_variance: NDArray[np.float64] | None = None
     lab_prior_part_variance: NDArray[np.float64] | None = None
+    budget: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]] = field(
+        default_factory=dict
+    )
 
 
 def _hold_resample(
@@ -350,43 +359,61 @@ def lab_covariance(
     return J @ xyz_cov @ J.transpose(0, 2, 1)
 
 
-def _response_error_covariance(
+#: The terms of the uncertainty budget (:attr:`ReflectanceUncertainty.budget`).
+BUDGET_TERMS = (
+    "prior mismatch",
+    "response noise",
+    "flat field",
+    "systematic",
+    "calibration",
+)
+
+
+def _response_error_terms(
     responses: Responses,
     illuminants: Spectra,
     calibration: SensitivityEstimate,
     reflectance: Spectra,
-) -> NDArray[np.float64]:
-    """The true error covariance of every patch's stacked responses, (n_p, m, m):
-    the noise of the ROI means (``rgb_std**2 / n_pixels``; none for saturated
-    ones), the flat-field residual :data:`FLAT_FIELD_RESIDUAL` and, with a
-    ``"bayes"`` calibration, the calibration's response covariance at the estimate
-    (:func:`calibration_response_covariance`)."""
+) -> dict[str, NDArray[np.float64]]:
+    """The true error covariance of every patch's stacked responses, (n_p, m, m),
+    term by term: the noise of the ROI means (``rgb_std**2 / n_pixels``), the
+    flat-field residual :data:`FLAT_FIELD_RESIDUAL` (none for saturated responses),
+    the systematic errors the calibration's residuals showed
+    (:attr:`SensitivityEstimate.excess`) and, with a ``"bayes"`` calibration, its
+    response covariance at the estimate (:func:`calibration_response_covariance`).
+    A term the inputs do not carry is left out."""
     n_p, m_rows = len(responses.patches), 3 * len(responses.illuminants)
     rgb = responses.rgb.reshape(n_p, m_rows)
-    true_var = (FLAT_FIELD_RESIDUAL * rgb) ** 2
+    keep = np.ones((n_p, m_rows), dtype=bool)
+    if responses.saturated is not None:
+        sat = (np.nan_to_num(responses.saturated, nan=0.0) > 0)[..., None]
+        keep = ~np.broadcast_to(sat, responses.rgb.shape).reshape(n_p, m_rows)
+    idx = np.arange(m_rows)
+
+    def diagonal(var: NDArray[np.float64]) -> NDArray[np.float64]:
+        out = np.zeros((n_p, m_rows, m_rows))
+        out[:, idx, idx] = np.where(keep, var, 0.0)
+        return out
+
+    terms = {"flat field": diagonal((FLAT_FIELD_RESIDUAL * rgb) ** 2)}
     if responses.rgb_std is not None:
         n_pix = (
             responses.n_pixels
             if responses.n_pixels is not None
             else np.ones(responses.rgb.shape[:2])
         )
-        true_var = true_var + (responses.rgb_std**2 / n_pix[..., None]).reshape(
-            n_p, m_rows
+        terms["response noise"] = diagonal(
+            (responses.rgb_std**2 / n_pix[..., None]).reshape(n_p, m_rows)
         )
-    if responses.saturated is not None:
-        sat = (np.nan_to_num(responses.saturated, nan=0.0) > 0)[..., None]
-        sat = np.broadcast_to(sat, responses.rgb.shape).reshape(n_p, m_rows)
-        true_var = np.where(sat, 0.0, true_var)
-    noise_all = np.zeros((n_p, m_rows, m_rows))
-    idx = np.arange(m_rows)
-    noise_all[:, idx, idx] = true_var
+    if calibration.excess is not None:
+        terms["systematic"] = calibration.excess.covariance(np.where(keep, rgb, 0.0))
     if calibration.covariance is not None:
         wl, values = reflectance.wavelength_nm, reflectance.values
         unclipped = Spectra(wl, np.clip(values, 0.0, 1.5), reflectance.names)
-        noise_all += calibration_response_covariance(
+        terms["calibration"] = calibration_response_covariance(
             calibration, illuminants.select(responses.illuminants), unclipped
         )
-    return noise_all
+    return terms
 
 
 def reflectance_uncertainty(
@@ -441,7 +468,8 @@ def reflectance_uncertainty(
     n_p = len(responses.patches)
     used = wiener.noise_variance.reshape(n_p, m_rows)
     rgb = responses.rgb.reshape(n_p, m_rows)
-    noise_all = _response_error_covariance(responses, illuminants, calibration, refl)
+    terms = _response_error_terms(responses, illuminants, calibration, refl)
+    noise_all = sum(terms.values())
     alpha, sigma, length = fit_generic_prior(F, K, mean, rgb, noise_all, wl)
     IM = matern32(wl, length)
     idx = np.arange(m_rows)
@@ -451,6 +479,10 @@ def reflectance_uncertainty(
     kappa2 = float(PRIOR_MISMATCH_SCALE if prior_scale is None else prior_scale) ** 2
     cov = np.empty((n_p, n, n))
     cov_prior = np.empty((n_p, n, n))
+    # each term's share of every reflectance variance, and its XYZ covariance
+    term_var = {t: np.empty((n_p, n)) for t in terms}
+    term_xyz = {t: np.empty((n_p, 3, 3)) for t in terms}
+    T = astm_e308_weights_d50(wl)  # (n, 3), XYZ = r @ T
     eye = np.eye(n)
     for lo in range(0, n_p, _CHUNK):
         hi = min(lo + _CHUNK, n_p)
@@ -469,14 +501,24 @@ def reflectance_uncertainty(
             @ IWF.transpose(0, 2, 1)
         )
         E = P + W @ noise_all[lo:hi] @ Wt
+        for t, N in terms.items():
+            Et = W @ N[lo:hi] @ Wt
+            term_var[t][lo:hi] = np.diagonal(Et, axis1=1, axis2=2)
+            term_xyz[t][lo:hi] = T.T[None] @ Et @ T[None]
         cov[lo:hi] = 0.5 * (E + E.transpose(0, 2, 1))
         cov_prior[lo:hi] = 0.5 * (P + P.transpose(0, 2, 1))
-    T = astm_e308_weights_d50(wl)  # (n, 3), XYZ = r @ T
     xyz = refl.values @ T
     xyz_cov = T.T[None] @ cov @ T[None]
     lab = xyz_to_lab_d50(xyz)
     lab_cov = lab_covariance(xyz, xyz_cov)
     lab_cov_prior = lab_covariance(xyz, T.T[None] @ cov_prior @ T[None])
+    prior_var = np.diagonal(cov_prior, axis1=1, axis2=2).copy()
+    lab_prior_var = np.diagonal(lab_cov_prior, axis1=1, axis2=2).copy()
+    budget = {"prior mismatch": (prior_var, lab_prior_var)}
+    for t in BUDGET_TERMS[1:]:
+        if t in terms:
+            lab_t = np.diagonal(lab_covariance(xyz, term_xyz[t]), axis1=1, axis2=2)
+            budget[t] = (term_var[t], lab_t.copy())
     # A reflectance factor lies in [0, 1] (as the clipped estimate does), so its
     # standard deviation cannot exceed 0.5 (Popoviciu's inequality); the linear
     # model can claim more where the LEDs see nothing.
@@ -491,6 +533,30 @@ def reflectance_uncertainty(
         lab_covariance=lab_cov,
         generic_sigma=sigma,
         generic_length_nm=length,
-        prior_part_variance=np.diagonal(cov_prior, axis1=1, axis2=2).copy(),
-        lab_prior_part_variance=np.diagonal(lab_cov_prior, axis1=1, axis2=2).copy(),
+        prior_part_variance=prior_var,
+        lab_prior_part_variance=lab_prior_var,
+        budget=budget,
     )
+
+
+def budget_summary(unc: ReflectanceUncertainty) -> dict[str, dict[str, float]]:
+    """The uncertainty budget of a set of estimates, term by term.
+
+    For every term of :attr:`ReflectanceUncertainty.budget`: ``share_L`` its share
+    of the variance of L* and ``share_reflectance`` of the reflectances' variance
+    (both summed over the patches, and over the wavelengths, before the ratio: the
+    shares add up to 1), and ``u_L_median`` the median over the patches of the
+    standard uncertainty of L* it alone would give.
+    """
+    if not unc.budget:
+        return {}
+    total_l = sum(float(np.sum(lab[:, 0])) for _, lab in unc.budget.values())
+    total_r = sum(float(np.sum(r)) for r, _ in unc.budget.values())
+    return {
+        term: {
+            "share_L": float(np.sum(lab[:, 0])) / total_l if total_l > 0 else 0.0,
+            "share_reflectance": float(np.sum(r)) / total_r if total_r > 0 else 0.0,
+            "u_L_median": float(np.median(np.sqrt(np.maximum(lab[:, 0], 0.0)))),
+        }
+        for term, (r, lab) in unc.budget.items()
+    }

@@ -562,6 +562,7 @@ def _write_report(
     """``report.html`` and ``report.pdf`` of :func:`export` (``app.report``)."""
     from tunespec.app.report.report import ReportData, write_report
     from tunespec.core.io.session import sha256_file
+    from tunespec.core.uncertainty import budget_summary
 
     unc = estimation.uncertainty
     items, exposures, inputs = session_provenance(sessions)
@@ -587,6 +588,7 @@ def _write_report(
         lab=None if unc is None else unc.lab,
         lab_std=None if unc is None else unc.lab_std,
         led_correction=calibration.estimate.led_correction,
+        uncertainty_budget=None if unc is None else budget_summary(unc),
         flags=tuple(warnings),
         exports={k: p.name for k, p in files.items()},
         threshold_rgb_mean=threshold_rgb_mean,

@@ -203,6 +203,9 @@ class ReportData:
     led_correction
         :class:`tunespec.core.sensitivity_bayes.LedCorrection`: the light source's
         per-LED corrections found by the calibration (a table).
+    uncertainty_budget
+        :func:`tunespec.core.uncertainty.budget_summary`: each term's share of the
+        variance of L* and of the reflectances (a table).
     threshold_rgb_mean
         Pass/fail limit on Table 1's RGB mean (full scale): the summary's verdict.
     table1_patches
@@ -234,6 +237,7 @@ class ReportData:
     lab: NDArray[np.float64] | None = None
     lab_std: NDArray[np.float64] | None = None
     led_correction: Any = None
+    uncertainty_budget: Mapping[str, Mapping[str, float]] | None = None
     sensitivity_reference_label: str = "reference"
     sensitivity_method: str | None = None
     reflectance: Spectra | None = None
@@ -1034,6 +1038,29 @@ def _table1(
     return _Table(title, header, tuple(rows), note)
 
 
+def _budget_table(budget: Mapping[str, Mapping[str, float]]) -> _Table:
+    """The uncertainty budget: each term's share of u(L*)^2 and of u(reflectance)^2."""
+    rows = tuple(
+        (
+            term,
+            f"{100 * b['share_L']:.1f} %",
+            f"{b['u_L_median']:.3f}",
+            f"{100 * b['share_reflectance']:.1f} %",
+        )
+        for term, b in budget.items()
+    )
+    return _Table(
+        "Uncertainty budget",
+        ("Term", "Share of u(L*)²", "Median u(L*) alone", "Share of u(reflectance)²"),
+        rows,
+        note="Variances add: each share is the term's part of the summed variance "
+        "over the sample's patches (and wavelengths). Prior mismatch: what the LEDs "
+        "and the camera cannot resolve; systematic: the responses' errors beyond the "
+        "noise that the calibration's residuals showed (stray light, cross-talk, "
+        "non-linearity), part of them shared by a patch's responses under all LEDs.",
+    )
+
+
 def _table2(stats: ReflectanceStats | Mapping[str, Any]) -> _Table:
     d = _as_dict(stats)
     rows = [
@@ -1115,6 +1142,8 @@ def _result_tables(report: ReportData) -> list[_Table]:
                 "corrections) and what the LEDs cannot resolve, propagated to first order.",
             )
         )
+    if report.uncertainty_budget:
+        tables.append(_budget_table(report.uncertainty_budget))
     corr = report.led_correction
     if corr is not None and corr.gain_std:
         rows = tuple(

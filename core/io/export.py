@@ -151,8 +151,9 @@ def write_sensitivity_meta(
         "grid": f"{wl[0]:g}:{wl[-1]:g}:{sensitivity.step_nm:g}",
         "spd_shift_nm": float(sensitivity.meta.get("spd_shift_nm", 0.0)),
     }
-    if "led_correction" in sensitivity.meta:
-        doc["led_correction"] = json.loads(sensitivity.meta["led_correction"])
+    for key in ("led_correction", "excess_variance"):
+        if key in sensitivity.meta:
+            doc[key] = json.loads(sensitivity.meta[key])
     if covariance is not None:
         doc["covariance"] = {
             "parameters": "s_R, s_G, s_B at wavelength_nm, then log gain and "
@@ -204,8 +205,10 @@ def write_colorimetry_csv(
 def read_sensitivity_meta(sensitivity_csv: str | PathLike[str]) -> dict[str, Any]:
     """The side file of a sensitivities CSV as a dict (``{}`` when there is none).
 
-    Keys: ``spd_shift_nm``, and from a ``"bayes"`` calibration ``led_correction``
-    and ``covariance`` (an array); ``meta_path`` names the file for messages.
+    Keys: ``spd_shift_nm``, ``excess_variance`` (the responses' systematic errors,
+    :class:`~tunespec.core.excess.ExcessVariance` as a dict), and from a ``"bayes"``
+    calibration ``led_correction`` and ``covariance`` (an array); ``meta_path``
+    names the file for messages.
     """
     path = sensitivity_meta_path(sensitivity_csv)
     if not path.exists():
@@ -217,8 +220,9 @@ def read_sensitivity_meta(sensitivity_csv: str | PathLike[str]) -> dict[str, Any
         "meta_path": str(path),
         "spd_shift_nm": read_spd_shift(sensitivity_csv),
     }
-    if "led_correction" in doc:
-        out["led_correction"] = doc["led_correction"]
+    for key in ("led_correction", "excess_variance"):
+        if key in doc:
+            out[key] = doc[key]
     cov = doc.get("covariance")
     if cov is not None:
         try:

@@ -24,8 +24,10 @@ whatever the file is called. Each *kind* of data then gets its own checks:
     those wavelengths dropped, so the JSON and the CSV of one calibration give the
     same estimates. A relative file without that scale has ``meta["relative"]``.
 ``illuminant``
-    light-source spectra (resampled by band averaging, see
-    :meth:`~tunespec.core.spectra.Spectra.resample`).
+    light-source spectra as a spectroradiometer reported them: the reading noise
+    outside each spectrum's emission bands is set to zero at the file's own sampling
+    (:func:`~tunespec.core.metering.suppress_meter_floor`), then they are resampled
+    by band averaging (:meth:`~tunespec.core.spectra.Spectra.resample`).
 ``spectra``
     anything else (basis functions with ``allow_negative``).
 
@@ -283,6 +285,12 @@ def read_spectral(
         spectra = to_reflectance_factor(spectra, source=source)
     elif kind == "sensitivity":
         spectra = _as_sensitivity(spectra, source)
+    elif kind == "illuminant":
+        # the reading noise goes at the instrument's own sampling, before anything
+        # resamples it (core.metering)
+        from tunespec.core.metering import suppress_meter_floor
+
+        spectra = suppress_meter_floor(spectra)
     spectra = Spectra(
         spectra.wavelength_nm,
         spectra.values,

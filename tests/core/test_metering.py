@@ -71,7 +71,10 @@ def test_unclipped_noise_is_zeroed_below_the_detection_limit() -> None:
     got = suppress_meter_floor(Spectra(WL, rep[None], ("LED520",))).values[0]
     assert np.all(got >= 0)
     assert meter_noise_sd(rep) == pytest.approx(FLOOR_SD, rel=0.25)
-    assert np.all(got[got > 0] >= 3 * 0.75 * FLOOR_SD)
+    # outside the emission band and its 10 nm margins only noise was reported
+    assert np.all(got[np.abs(WL - 520.0) > 40.0] == 0.0)
+    np.testing.assert_array_equal(got[np.abs(WL - 520.0) < 15.0],
+                                  rep[np.abs(WL - 520.0) < 15.0])  # fmt: skip
 
 
 def test_eq1_off_channel_response_is_predicted_again() -> None:
@@ -91,3 +94,32 @@ def test_eq1_off_channel_response_is_predicted_again() -> None:
     assert c_rep[2] / c_true[2] > 1.3
     assert c_clean[2] / c_true[2] == pytest.approx(1.0, abs=0.1)
     assert c_clean[0] / c_true[0] == pytest.approx(1.0, abs=0.01)
+
+
+@pytest.mark.parametrize("step_nm", [5.0, 10.0])
+def test_coarsely_reported_spectra_lose_their_floor_too(step_nm) -> None:
+    # At 10 nm an LED is two or three samples wide: the blue response to a deep-red
+    # LED is predicted again from the spectrum as the instrument reported it
+    # (triangular slit as wide as the step), cleaned before it is resampled.
+    fine = Grid(380.0, 780.0, 1.0)
+    coarse = Grid(380.0, 780.0, step_nm)
+    cam = next(iter(load_camera_database(fine).values())).values
+    true = Spectra(WL, _led(700.0)[None], ("LED700",)).resample(coarse, average=True)
+    rng = np.random.default_rng(6)
+    sd = FLOOR_SD * true.values.max()
+    rep = true.with_values(
+        np.mean(
+            [
+                np.maximum(true.values + sd * rng.standard_normal(true.values.shape), 0)
+                for _ in range(2)
+            ],
+            axis=0,
+        )
+    )
+    white = np.ones((1, WL.size))
+
+    def blue(s: Spectra) -> float:
+        return float(render_rgb(white, s.resample(fine).values, cam, 1.0)[0, 0, 2])
+
+    assert blue(rep) / blue(true) > 1.3
+    assert blue(suppress_meter_floor(rep)) / blue(true) == pytest.approx(1.0, abs=0.15)
