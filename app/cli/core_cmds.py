@@ -213,8 +213,9 @@ def _add_simulate_responses(
 
 def _write_json(path: Path | None, data: dict[str, Any]) -> None:
     if path is not None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(dumps_json(data), encoding="utf-8")
+        from tunespec.core.atomic import atomic_write_text
+
+        atomic_write_text(path, dumps_json(data))
 
 
 def _check_names(

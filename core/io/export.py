@@ -53,6 +53,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from tunespec.core.atomic import atomic_open, atomic_write_text
 from tunespec.core.colorimetry import lab_d50, xyz_d50
 from tunespec.core.errors import InputError, check_names, read_json
 from tunespec.core.io.cgats import CgatsTable, ti3_table, write_cgats
@@ -160,7 +161,7 @@ def write_sensitivity_meta(
             "wavelength_nm": [float(x) for x in wl],
             "values": [[float(f"{v:.7g}") for v in row] for row in covariance],
         }
-    path.write_text(dumps_json(doc), encoding="utf-8")
+    atomic_write_text(path, dumps_json(doc))
     return path
 
 
@@ -196,7 +197,7 @@ def write_colorimetry_csv(
     for j, name in enumerate(names):
         vals = [*unc.xyz[j], *unc.lab[j], *unc.xyz_std[j], *unc.lab_std[j]]
         rows.append((name, *(f"{float(v):.6g}" for v in vals)))
-    with path.open("w", newline="", encoding="utf-8") as fh:
+    with atomic_open(path, newline="") as fh:
         csv.writer(fh).writerows(rows)
     return path
 
@@ -424,13 +425,12 @@ def write_sensitivity_json(
     doc = sensitivity_rawtoaces_document(sensitivity, **header)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(dumps_json(doc, indent=4), encoding="utf-8")
+    atomic_write_text(path, dumps_json(doc, indent=4))
     return path
 
 
 def _write_rows(path: Path, header: list[str], rows: list[list[str]]) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open("w", newline="", encoding="utf-8") as fh:
+    with atomic_open(path, newline="") as fh:
         w = csv.writer(fh, lineterminator="\n")
         w.writerow(header)
         w.writerows(rows)
@@ -900,7 +900,7 @@ def write_camera_transforms(
         "transforms": [t.as_dict() for t in transforms],
     }
     json_path, csv_path = Path(json_path), Path(csv_path)
-    json_path.write_text(dumps_json(doc), encoding="utf-8")
+    atomic_write_text(json_path, dumps_json(doc))
     header = ["kind", "illuminant"]
     header += [f"m{i}{j}" for i in (1, 2, 3) for j in (1, 2, 3)]
     header += ["wb_r", "wb_g", "wb_b"]

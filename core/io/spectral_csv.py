@@ -33,10 +33,10 @@ import math
 import re
 from collections import Counter
 from os import PathLike
-from pathlib import Path
 
 import numpy as np
 
+from tunespec.core.atomic import atomic_open
 from tunespec.core.errors import InputError
 from tunespec.core.limits import (
     MAX_VALUE,
@@ -274,9 +274,7 @@ def write_spectra_csv(
     spectra: Spectra, path: str | PathLike[str], *, header: str = "wavelength_nm"
 ) -> None:
     """Write ``spectra`` as a spectral CSV (full float precision, round-trips exactly)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open("w", newline="", encoding="utf-8") as fh:
+    with atomic_open(path, newline="") as fh:
         w = csv.writer(fh, lineterminator="\n")
         w.writerow([header, *spectra.names])
         for i, wl in enumerate(spectra.wavelength_nm):
