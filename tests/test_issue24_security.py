@@ -160,3 +160,127 @@ def test_run_again_does_not_write_through_links_planted_in_the_folder(
     assert victim.read_text() == VICTIM_TEXT
     assert not any(p.is_symlink() for p in planted)
     assert read_spectra_csv(planted[0]).values.shape[0] > 0
+
+
+# -- reads stay inside the configuration's folder -----------------------------------
+SECRET = "root:*:19000:0:99999:7:::"
+CONFIG_FILE_KEYS = [
+    ("sample", "reference"),
+    ("sample", "reflectances"),
+    ("chart", "reflectances"),
+    ("chart", "layout"),
+    ("estimate", "prior"),
+]
+
+
+def _secret_file(tmp_path: Path) -> Path:
+    secret = tmp_path / "outside" / "shadow"
+    secret.parent.mkdir()
+    secret.write_text(f"{SECRET}\ndaemon:*:19000:0:99999:7:::\n")
+    return secret
+
+
+@pytest.mark.parametrize(("section", "key"), CONFIG_FILE_KEYS)
+@pytest.mark.parametrize("how", ["absolute", "dotdot", "link"])
+def test_a_config_cannot_read_outside_its_folder(
+    tmp_path, capsys, section, key, how
+) -> None:
+    secret = _secret_file(tmp_path)
+    proj = tmp_path / "proj"
+    proj.mkdir()
+    if how == "absolute":
+        value = str(secret)
+    elif how == "dotdot":
+        value = "../outside/shadow"
+    else:
+        (proj / "inside.csv").symlink_to(secret)
+        value = "inside.csv"
+    cfg = proj / "run.toml"
+    cfg.write_text(f'out = "m"\n[{section}]\n{key} = "{value}"\n')
+    rc = main(["run", str(cfg)])
+    err = _one_line(capsys, rc, 2)
+    assert f"{section}.{key}:" in err and "outside the configuration's folder" in err
+    assert "root:" not in err and "daemon" not in err
+    assert not (proj / "m").exists()  # refused before anything ran
+
+
+def test_files_beside_the_config_and_shipped_resources_are_read(tmp_path) -> None:
+    from tunespec.app.pipeline.plan import load_config, plan_from_config
+
+    proj = tmp_path / "proj"
+    (proj / "data").mkdir(parents=True)
+    write_spectra_csv(load_colorchecker_sg(), proj / "data" / "prior.csv")
+    cfg = proj / "run.toml"
+    cfg.write_text(
+        '[estimate]\nprior = "data/prior.csv"\n'
+        '[chart]\nlayout = "layouts/colorchecker_sg.json"\n'
+    )
+    plan = plan_from_config(load_config(cfg))
+    assert plan.prior is not None and len(plan.prior.names) == 140
+    assert plan.chart_layout.rows * plan.chart_layout.cols == 140
+    assert plan.out_dir == proj / "run"
+
+
+def test_a_file_that_is_no_spectral_csv_is_not_echoed(tmp_path) -> None:
+    from tunespec.core.errors import InputError
+
+    secret = _secret_file(tmp_path)
+    env = tmp_path / "environ"
+    env.write_bytes(b"HOME=/root\x00SECRET=hunter2\x00")
+    for path in (secret, env):
+        with pytest.raises(InputError) as info:
+            read_spectra_csv(path)
+        text = str(info.value)
+        assert "not a spectral CSV header" in text and "wavelength_nm" in text
+        assert "root" not in text.replace(str(tmp_path), "")
+        assert "hunter2" not in text
+
+
+@pytest.mark.parametrize("out", ["../elsewhere", "/tmp/x-tunespec-out"])
+def test_a_config_out_outside_its_folder_is_refused(tmp_path, capsys, out) -> None:
+    proj = tmp_path / "proj"
+    proj.mkdir()
+    cfg = proj / "run.toml"
+    cfg.write_text(f'out = "{out}"\n')
+    rc = main(["run", str(cfg)])
+    err = _one_line(capsys, rc, 2)
+    assert "out:" in err and "--out" in err
+    assert not (tmp_path / "elsewhere").exists()
+
+
+def test_out_on_the_command_line_may_be_anywhere(tmp_path) -> None:
+    from tunespec.app.pipeline.plan import load_config, plan_from_config
+
+    proj = tmp_path / "proj"
+    proj.mkdir()
+    cfg = proj / "run.toml"
+    cfg.write_text('out = "../elsewhere"\n')
+    plan = plan_from_config(load_config(cfg), out=tmp_path / "chosen")
+    assert plan.out_dir == tmp_path / "chosen"
+
+
+# -- a scheduler address in a file needs the command line ---------------------------
+def test_a_scheduler_address_in_a_config_needs_confirmation(tmp_path, capsys) -> None:
+    from tunespec.app.pipeline.plan import load_config, plan_from_config
+
+    cfg = tmp_path / "run.toml"
+    cfg.write_text('out = "m"\nscheduler = "tcp://203.0.113.9:8786"\n')
+    rc = main(["run", str(cfg)])
+    err = _one_line(capsys, rc, 2)
+    assert str(cfg) in err and "scheduler:" in err
+    assert "--scheduler tcp://203.0.113.9:8786" in err
+    assert not (tmp_path / "m").exists()  # nothing captured, nothing connected
+    confirmed = plan_from_config(load_config(cfg), scheduler="tcp://203.0.113.9:8786")
+    assert confirmed.scheduler == "tcp://203.0.113.9:8786"
+    # the command line's choice replaces the file's
+    local = plan_from_config(load_config(cfg), scheduler="threads")
+    assert local.scheduler == "threads"
+
+
+@pytest.mark.parametrize("value", ["threads", "sync", "processes"])
+def test_a_local_scheduler_in_a_config_needs_nothing(tmp_path, value) -> None:
+    from tunespec.app.pipeline.plan import load_config, plan_from_config
+
+    cfg = tmp_path / "run.toml"
+    cfg.write_text(f'scheduler = "{value}"\n')
+    assert plan_from_config(load_config(cfg)).scheduler == value
