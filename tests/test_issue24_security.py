@@ -284,3 +284,129 @@ def test_a_local_scheduler_in_a_config_needs_nothing(tmp_path, value) -> None:
     cfg = tmp_path / "run.toml"
     cfg.write_text(f'scheduler = "{value}"\n')
     assert plan_from_config(load_config(cfg)).scheduler == value
+
+
+# -- a session's files stay inside it; process checks them by default ----------------
+SG_LAYOUT_PATH = "layouts/colorchecker_sg.json"
+
+
+@pytest.fixture(scope="module")
+def captured(tmp_path_factory) -> Path:
+    from tunespec.core.datasets import resource_path
+
+    out = tmp_path_factory.mktemp("cap") / "s"
+    args = ["capture", "--layout", str(resource_path(SG_LAYOUT_PATH)), "--out"]
+    args += [str(out), "--resolution", "384x256", "--channels", "LED450,LED540"]
+    assert main([*args, "--exposure", "2", "-q"]) == 0
+    return out
+
+
+def _session_copy(captured: Path, tmp_path: Path) -> Path:
+    import shutil
+
+    dst = tmp_path / "s"
+    shutil.copytree(captured, dst)
+    return dst
+
+
+def _process(session: Path, tmp_path: Path, *extra: str) -> int:
+    return main(["process", str(session), "-o", str(tmp_path / "r.csv"), *extra])
+
+
+def test_process_works_on_the_session_as_captured(captured, tmp_path) -> None:
+    s = _session_copy(captured, tmp_path)
+    assert _process(s, tmp_path, "-q") == 0
+    assert read_responses_csv(tmp_path / "r.csv").rgb.shape[:2] == (140, 2)
+
+
+def test_process_refuses_a_linked_spd_and_does_not_echo_it(
+    captured, tmp_path, capsys
+) -> None:
+    s = _session_copy(captured, tmp_path)
+    secret = _secret_file(tmp_path)
+    spd = s / "frames" / "target_LED450.spd.csv"
+    spd.unlink()
+    spd.symlink_to(secret)
+    for extra in ((), ("--no-verify",)):
+        rc = _process(s, tmp_path, *extra)
+        err = _one_line(capsys, rc, 2)
+        assert "frames/target_LED450.spd.csv is a link" in err, err
+        assert "root:" not in err
+    assert not (tmp_path / "r.csv").exists()
+
+
+def test_process_refuses_a_linked_frames_folder(captured, tmp_path, capsys) -> None:
+    import shutil
+
+    s = _session_copy(captured, tmp_path)
+    moved = tmp_path / "elsewhere_frames"
+    shutil.move(s / "frames", moved)
+    (s / "frames").symlink_to(moved)
+    rc = _process(s, tmp_path, "--no-verify")
+    err = _one_line(capsys, rc, 2)
+    assert "is a link" in err and "frames/" in err
+
+
+def test_process_verifies_checksums_by_default(captured, tmp_path, capsys) -> None:
+    s = _session_copy(captured, tmp_path)
+    spd = s / "frames" / "target_LED540.spd.csv"
+    lines = spd.read_text().splitlines()
+    wl, value = lines[100].split(",")
+    lines[100] = f"{wl},{float(value) * 1.01!r}"  # one value 1 % off
+    spd.write_text("\n".join(lines) + "\n")
+    rc = _process(s, tmp_path)
+    err = _one_line(capsys, rc, 2)
+    assert "target_LED540.spd.csv fails its checksum" in err
+    assert _process(s, tmp_path, "--no-verify", "-q") == 0
+    assert _process(s, tmp_path, "--verify") == 2  # the old flag: accepted, a no-op
+
+
+def _rewrite_spd(path: Path, edit) -> None:
+    lines = path.read_text().splitlines()
+    path.write_text("\n".join(edit(lines)) + "\n")
+
+
+@pytest.mark.parametrize(
+    ("edit", "expected"),
+    [
+        (lambda ls: ls[: len(ls) // 2], "cut short"),  # cut at a line boundary
+        (
+            lambda ls: (
+                [ls[0]]
+                + [
+                    f"{float(a) / 1000:g},{b}"
+                    for a, b in (x.split(",") for x in ls[1:])
+                ]
+            ),
+            "expected nm, not µm",
+        ),
+        (lambda ls: [ls[0]] + [x.split(",")[0] + ",0" for x in ls[1:]], "zero"),
+    ],
+    ids=["cut", "micrometres", "zeros"],
+)
+def test_process_refuses_an_implausible_spd(
+    captured, tmp_path, capsys, edit, expected
+) -> None:
+    s = _session_copy(captured, tmp_path)
+    spd = s / "frames" / "target_LED450.spd.csv"
+    _rewrite_spd(spd, edit)
+    rc = _process(s, tmp_path, "--no-verify")
+    err = _one_line(capsys, rc, 2)
+    assert str(spd) in err and expected in err
+    assert not (tmp_path / "r.csv").exists()
+
+
+def test_a_measurement_reference_path_stays_in_its_folder(tmp_path) -> None:
+    from tunespec.app.pipeline.folder import MeasurementFolder, measurement_reference
+
+    secret = _secret_file(tmp_path)
+    folder = MeasurementFolder.at(tmp_path / "m")
+    (folder.root / "refs").mkdir(parents=True)
+    (folder.root / "refs" / "ref.csv").write_text("x")
+    (folder.root / "link.csv").symlink_to(secret)
+    inside = measurement_reference(folder, "refs/ref.csv")
+    assert inside == (folder.root / "refs" / "ref.csv").resolve()
+    for value in (str(secret), "../outside/shadow", "link.csv", 5, ""):
+        assert measurement_reference(folder, value) is None, value
+    # the operator's own choice on this computer (remembered in user settings)
+    assert measurement_reference(folder, str(secret), allowed=str(secret)) == secret

@@ -182,7 +182,16 @@ def _add_process(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
         action="store_true",
         help="leave out channels with missing frames",
     )
-    p.add_argument("--verify", action="store_true", help="check file checksums first")
+    p.add_argument(
+        "--no-verify",
+        dest="verify",
+        action="store_false",
+        help="skip checking every raw and SPD file against its checksum (checked "
+        "by default)",
+    )
+    p.add_argument(
+        "--verify", action="store_true", default=True, help=argparse.SUPPRESS
+    )  # the default now; kept so older scripts still run
     add_output_options(p)
     p.set_defaults(func=cmd_process, output_files=("output", "illuminants_out"))
 

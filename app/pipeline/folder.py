@@ -341,6 +341,30 @@ def read_measurement_doc(folder: MeasurementFolder) -> dict[str, Any]:
     return doc
 
 
+def measurement_reference(
+    folder: MeasurementFolder, value: Any, *, allowed: Any = None
+) -> Path | None:
+    """The reference file ``measurement.json`` names (``reference_path``), held to
+    the rule of files named in project files: inside the measurement folder (a
+    relative path, no link out), or the file the operator chose on this computer
+    (``allowed``, the front end's own remembered choice). Anything else is not read:
+    a folder received from someone else cannot make TuneSpec open ``/etc/shadow``.
+    """
+    from tunespec.core.limits import contained_path
+
+    if not value or not isinstance(value, str):
+        return None
+    if allowed and str(allowed) == value:
+        return Path(value)
+    try:
+        found = contained_path(
+            value, "reference_path", bases=(folder.root,), path=folder.measurement_path
+        )
+    except InputError:
+        return None
+    return found[0]
+
+
 # -- warnings ----------------------------------------------------------------------------
 def read_capture_warnings(session_dir: str | PathLike[str]) -> tuple[str, ...]:
     """Every warning the captures of the session at ``session_dir`` raised so far."""

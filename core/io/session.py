@@ -889,8 +889,39 @@ class Session:
         return [f for f in self.frames if f.status == "ok" and kind in (None, f.kind)]
 
     def path_of(self, record: FrameRecord) -> Path:
-        """Absolute path of a frame's raw file."""
-        return self.root / record.file
+        """Absolute path of a frame's raw file (inside the session, no link).
+
+        Raises
+        ------
+        InputError
+            The file, or ``frames/``, is a link (possibly out of the session).
+        """
+        return self.inside(record.file)
+
+    def inside(self, rel: str) -> Path:
+        """``root / rel`` when it is a path inside the session with no link on the
+        way (``frames/`` or the file itself a link would let a session received
+        from someone else read any file); the session folder itself may be a link.
+
+        Raises
+        ------
+        InputError
+            Naming the manifest and the file.
+        """
+        path = self.root / rel
+        parts = PurePosixPath(rel).parts
+        try:
+            real = path.resolve()
+            expected = self.root.resolve().joinpath(*parts)
+        except (OSError, RuntimeError):
+            real, expected = path, None
+        if ".." in parts or PurePosixPath(rel).is_absolute() or real != expected:
+            raise InputError(
+                f"{rel} is a link (or leaves the session folder): frames are read "
+                "only from files inside the session",
+                path=self.manifest_path,
+            )
+        return path
 
     def plan(self) -> list[FrameSpec]:
         """The frames this session needs (:func:`plan_frames` of its settings)."""
@@ -911,6 +942,8 @@ class Session:
             return self._problem(record, checksums)
         except OSError as exc:  # a folder where a file was, a link loop, ...
             return f"files of frame {record.id} cannot be read ({exc.strerror})"
+        except InputError as exc:  # a link out of the session
+            return exc.message
 
     def _problem(self, record: FrameRecord, checksums: bool) -> str:
         path = self.path_of(record)
@@ -920,7 +953,7 @@ class Session:
             return f"raw file {record.file} fails its checksum"
         if record.spd_file is None:
             return ""
-        spd = self.root / record.spd_file
+        spd = self.inside(record.spd_file)
         if not spd.is_file():
             return f"SPD file {record.spd_file} is missing"
         if not checksums:
@@ -1095,7 +1128,7 @@ class Session:
         """
         if record.spd_file is None:
             raise InputError(f"frame {record.id!r} has no measured SPD")
-        return read_spectra_csv(self.root / record.spd_file)
+        return read_spectra_csv(self.inside(record.spd_file))
 
     def _put(self, record: FrameRecord) -> None:
         m = self._edited()
