@@ -236,9 +236,42 @@ def read_sensitivity_meta(sensitivity_csv: str | PathLike[str]) -> dict[str, Any
             or not np.all(np.isfinite(values))
         ):
             raise InputError("covariance: expected a finite square matrix", path=path)
+        problem = covariance_problem(cov["values"], values)
+        if problem:
+            raise InputError(f"covariance: {problem}", path=path)
         out["covariance"] = values
         out["covariance_wavelength_nm"] = wl
     return out
+
+
+#: Largest magnitude of a calibration covariance entry (sensitivities of peak ~1-10
+#: and log gains: variances far below 1).
+MAX_COVARIANCE = 1e6
+
+
+def covariance_problem(raw: Any, values: NDArray[np.float64]) -> str:
+    """What makes a covariance matrix read from a file impossible ("" if nothing):
+    booleans (JSON ``true`` reads as 1), entries beyond :data:`MAX_COVARIANCE`, a
+    negative variance, asymmetry, or a negative eigenvalue beyond rounding (not
+    positive semi-definite: a sign flipped)."""
+    if any(isinstance(v, bool) for row in raw for v in row):
+        return "expected numbers, found true/false"
+    if values.size == 0:
+        return "empty matrix"
+    big = float(np.max(np.abs(values)))
+    if big > MAX_COVARIANCE:
+        return f"entry {big:g} beyond any calibration's (at most {MAX_COVARIANCE:g})"
+    diag = np.diag(values)
+    if np.any(diag < 0):
+        k = int(np.argmin(diag))
+        return f"negative variance {diag[k]:g} at row {k + 1}"
+    tol = 1e-6 * max(big, 1e-300)
+    if float(np.max(np.abs(values - values.T))) > tol:
+        return "not symmetric"
+    lowest = float(np.linalg.eigvalsh(values)[0])
+    if lowest < -tol:
+        return f"not positive semi-definite (eigenvalue {lowest:.3g}): not a covariance"
+    return ""
 
 
 def read_spd_shift(sensitivity_csv: str | PathLike[str]) -> float:

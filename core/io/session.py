@@ -659,6 +659,7 @@ def _inside_session(rel: str) -> bool:
     p = PurePosixPath(rel.replace("\\", "/"))
     return (
         0 < len(rel) <= 1024
+        and not any(c in rel for c in "\x00\n\r")
         and all(len(part.encode()) <= 255 for part in p.parts)
         and not p.is_absolute()
         and not PureWindowsPath(rel).anchor
