@@ -410,3 +410,74 @@ def test_a_measurement_reference_path_stays_in_its_folder(tmp_path) -> None:
         assert measurement_reference(folder, value) is None, value
     # the operator's own choice on this computer (remembered in user settings)
     assert measurement_reference(folder, str(secret), allowed=str(secret)) == secret
+
+
+# -- disk full: exit 4, the right folder, nothing truncated, nothing left ---------------
+def _fsync_fills_the_disk(monkeypatch) -> None:
+    """Every fsync (after the data went into a temporary file) finds the disk full."""
+    real = os.fsync
+
+    def full(fd: int) -> None:
+        real(fd)
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(os, "fsync", full)
+
+
+def _disk_full_line(capsys, rc: int, folder: Path) -> None:
+    err = _one_line(capsys, rc, EXIT_DISK_FULL)
+    assert f"disk full: {folder}: no space left" in err, err
+    assert "--resume" not in err
+
+
+def test_disk_full_in_process_names_the_output_folder(
+    captured, tmp_path, monkeypatch, capsys
+) -> None:
+    s = _session_copy(captured, tmp_path)
+    out = tmp_path / "out"
+    out.mkdir()
+    _fsync_fills_the_disk(monkeypatch)
+    rc = main(["process", str(s), "-o", str(out / "r.csv"), "--no-verify"])
+    _disk_full_line(capsys, rc, out)
+    assert os.listdir(out) == []
+
+
+def test_disk_full_in_export_cgats_and_report(tmp_path, monkeypatch, capsys) -> None:
+    sg = tmp_path / "sg.csv"
+    write_spectra_csv(load_colorchecker_sg(), sg)
+    out = tmp_path / "out"
+    _fsync_fills_the_disk(monkeypatch)
+    rc = main(["export-cgats", "--reflectances", str(sg), "-o", str(out / "x.ti3")])
+    _disk_full_line(capsys, rc, out)
+    rc = main(["report", "-o", str(out / "rep"), "--reflectances", str(sg)])
+    _disk_full_line(capsys, rc, out / "rep")
+    assert [p.name for p in out.rglob("*") if p.is_file()] == []
+
+
+@pytest.mark.slow
+def test_disk_full_in_estimate_image_leaves_no_work_folder(
+    captured, tmp_path, monkeypatch, capsys
+) -> None:
+    import tunespec.core.io.image_formats as fmt
+    from tunespec.core.datasets import load_camera
+
+    s = _session_copy(captured, tmp_path)
+    cam = tmp_path / "cam.csv"
+    write_spectra_csv(load_camera(), cam)
+    out = tmp_path / "img"
+    real = fmt.os.pwrite
+    calls = {"n": 0}
+
+    def full_after_some(fd: int, data, offset: int) -> int:
+        calls["n"] += 1
+        if calls["n"] > 2:  # the response stack partly written, then full
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(fd, data, offset)
+
+    monkeypatch.setattr(fmt.os, "pwrite", full_after_some)
+    rc = main(["estimate-image", str(s), "--sensitivities", str(cam), "--out",
+               str(out), "-q"])  # fmt: skip
+    _disk_full_line(capsys, rc, out)
+    assert calls["n"] > 2
+    assert not (out / ".work").exists()
+    assert sorted(p.name for p in out.iterdir()) == []
