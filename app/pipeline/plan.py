@@ -257,7 +257,8 @@ def load_config(path: str | PathLike[str]) -> dict[str, Any]:
             bad = set(value) - allowed
             if bad:
                 raise InputError(
-                    f"{key}: unknown key(s) {', '.join(sorted(bad))} (known: "
+                    f"{key}: unknown key(s) {', '.join(map(shown, sorted(bad)[:8]))} "
+                    "(known: "
                     f"{', '.join(sorted(allowed))})",
                     path=path,
                 )

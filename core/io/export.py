@@ -57,7 +57,7 @@ from tunespec.core.atomic import atomic_open, atomic_write_text
 from tunespec.core.colorimetry import lab_d50, xyz_d50
 from tunespec.core.errors import InputError, check_names, read_json
 from tunespec.core.io.cgats import CgatsTable, ti3_table, write_cgats
-from tunespec.core.limits import dumps_json
+from tunespec.core.limits import dumps_json, shown
 from tunespec.core.responses import Responses, write_responses_csv
 from tunespec.core.spectra import Grid, Spectra, write_spectra_csv
 
@@ -553,7 +553,7 @@ def _responses_rgb(
         illuminant = responses.illuminants[0]
     if illuminant not in responses.illuminants:
         raise InputError(
-            f"illuminant {illuminant!r} not in the responses "
+            f"illuminant {shown(illuminant)} not in the responses "
             f"({', '.join(responses.illuminants)})"
         )
     check_names(names, responses.patches, "{n} patch(es) have no responses: {names}")
