@@ -481,3 +481,32 @@ def test_disk_full_in_estimate_image_leaves_no_work_folder(
     assert calls["n"] > 2
     assert not (out / ".work").exists()
     assert sorted(p.name for p in out.iterdir()) == []
+
+
+def test_results_that_are_links_are_not_read(tmp_path) -> None:
+    from tunespec.app.pipeline.folder import (
+        read_exports_index,
+        read_processed,
+        write_exports_index,
+    )
+    from tunespec.core.datasets import resource_path
+    from tunespec.core.layout import TargetLayout
+
+    out = tmp_path / "export"
+    out.mkdir()
+    sg = out / "reflectances.csv"
+    write_spectra_csv(load_colorchecker_sg(), sg)
+    write_exports_index(out, {"reflectances_csv": sg})
+    assert read_exports_index(out) == {"reflectances_csv": sg}
+    secret = _secret_file(tmp_path)
+    sg.unlink()
+    sg.symlink_to(secret)
+    assert read_exports_index(out) is None  # done again: the link is replaced
+    sg.unlink()
+    write_spectra_csv(load_colorchecker_sg(), sg)
+    (out / "exports.json").write_text('{"x": "../outside/shadow"}')
+    assert read_exports_index(out) is None
+    layout = TargetLayout.load(resource_path(SG_LAYOUT_PATH))
+    (out / "responses.csv").symlink_to(secret)
+    (out / "illuminants.csv").write_text("x")
+    assert read_processed(out, layout) is None

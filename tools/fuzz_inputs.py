@@ -625,25 +625,32 @@ def run_command(argv: list[str], work: Path) -> tuple[int, str]:
     return rc, err.getvalue()
 
 
+def _shown_argv(argv: list[str]) -> str:
+    return " ".join(
+        a if len(a) <= 60 else a[:40] + f"...({len(a)} chars)" for a in argv
+    )
+
+
 def _classify_command(
     argv: list[str], work: Path, check: Callable[[], str]
 ) -> tuple[str, str]:
+    cmd = _shown_argv(argv)
     try:
         rc, err = run_command(argv, work)
     except _Hang:
-        return "hang", " ".join(argv)
+        return "hang", cmd
     except Exception:
-        return "traceback", f"{' '.join(argv)}\n{traceback.format_exc(limit=-3)}"
+        return "traceback", f"{cmd}\n{traceback.format_exc(limit=-3)}"
     last = err.strip().splitlines()[-1] if err.strip() else ""
     if "Traceback" in err or rc not in (0, 2, 3, 4):
-        return "traceback", f"exit {rc}: {' '.join(argv)}: {err[-600:]}"
+        return "traceback", f"exit {rc}: {cmd}: {err[-600:]}"
     if rc != 0:
         if len(last) > 2000:
-            return "traceback", f"huge message: {' '.join(argv)}: {last[:200]!r}"
+            return "traceback", f"huge message: {cmd}: {last[:200]!r}"
         return "refused", ""
     problem = check()
     if problem:
-        return "accepted_bad", f"{' '.join(argv)}: {problem}"
+        return "accepted_bad", f"{cmd}: {problem}"
     return "accepted", ""
 
 

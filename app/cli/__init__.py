@@ -15,6 +15,7 @@ import argparse
 import errno
 import sys
 from collections.abc import Sequence
+from typing import NoReturn
 
 from tunespec.app.cli import (
     core_cmds,
@@ -85,6 +86,15 @@ class _VersionAction(argparse.Action):
         parser.exit()
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse, its error line cut as every other error (argparse quotes a bad
+    value whole: a 5,000-digit number filled the terminal). Subcommands' parsers
+    are of this class too (``add_subparsers`` takes the parent's)."""
+
+    def error(self, message: str) -> NoReturn:
+        super().error(_line(message))
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``tunespec`` parser with every subcommand.
 
@@ -92,7 +102,7 @@ def build_parser() -> argparse.ArgumentParser:
     ``--help``, ``--version`` and argument errors answer at once (no scipy,
     colour-science or matplotlib).
     """
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="tunespec",
         description="Spectral reflectance from an RGB camera and a tunable LED source.",
     )
