@@ -435,11 +435,12 @@ def colour_rendering(spd: Spectra) -> tuple[float, float]:
     if not (
         step.size
         and np.allclose(step, step[0], rtol=0.0, atol=1e-6)
-        and step[0] >= 1.0
+        and 1.0 <= step[0] <= 5.0
         and abs(step[0] - round(step[0])) < 1e-6
     ):
-        # colour-science needs a regular grid of whole nm: a line missing from a
-        # file, or a grid finer than 1 nm, is resampled to 1 nm first
+        # colour-science needs a regular grid of whole nm, at most 5 nm for TM-30:
+        # a line missing from a file, a grid finer than 1 nm or coarser than 5 nm
+        # is resampled to 1 nm first
         grid = Grid(float(math.ceil(wl[0])), float(math.floor(wl[-1])), 1.0)
         spd = spd.resample(grid, average=True)
     sd = colour.SpectralDistribution(spd.values[0], spd.wavelength_nm)

@@ -54,7 +54,7 @@ def _d50_mix() -> Spectra:
     return Spectra(leds.wavelength_nm, leds.values.sum(axis=0)[None], ("mix",))
 
 
-def test_colour_rendering_takes_an_irregular_or_very_fine_grid() -> None:
+def test_colour_rendering_takes_an_irregular_fine_or_coarse_grid() -> None:
     mix = _d50_mix()
     ra, rf = colour_rendering(mix)
     keep = np.ones(mix.wavelength_nm.size, bool)
@@ -63,7 +63,10 @@ def test_colour_rendering_takes_an_irregular_or_very_fine_grid() -> None:
     fine_wl = np.arange(360.0, 780.0, 0.0175)
     fine_v = np.interp(fine_wl, mix.wavelength_nm, mix.values[0])[None]
     fine = Spectra(fine_wl, fine_v, ("mix",))
-    for spd in (gap, fine):
+    coarse_wl = np.arange(360.0, 781.0, 10.0)
+    coarse_v = np.interp(coarse_wl, mix.wavelength_nm, mix.values[0])[None]
+    coarse = Spectra(coarse_wl, coarse_v, ("mix",))  # TM-30 wants <= 5 nm
+    for spd in (gap, fine, coarse):
         ra2, rf2 = colour_rendering(spd)
         assert ra2 == pytest.approx(ra, abs=0.5) and rf2 == pytest.approx(rf, abs=0.5)
 
