@@ -38,6 +38,7 @@ class DiskFullError(TuneSpecError):
 
     ``str(err)`` names the folder, the free space and (when known) about how much
     more is needed, on one line. Whatever was written before stays consistent.
+    ``resume``: the command can continue where it stopped (``--resume``, a capture).
     """
 
     def __init__(
@@ -46,6 +47,7 @@ class DiskFullError(TuneSpecError):
         *,
         needed_bytes: int | None = None,
         free_bytes: int | None = None,
+        resume: bool = False,
     ) -> None:
         import shutil
 
@@ -63,9 +65,10 @@ class DiskFullError(TuneSpecError):
             if needed_bytes is None
             else f"; about {_mb(needed_bytes)} more is needed"
         )
+        again = "continue with --resume" if resume else "run the command again"
         super().__init__(
             f"{self.folder}: no space left on the disk{free}{need}; free some space "
-            "and run the command again (a capture continues with --resume)"
+            f"and {again}"
         )
 
     @classmethod

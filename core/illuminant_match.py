@@ -68,6 +68,10 @@ MIN_MATCH_RANGE_NM = (400.0, 700.0)
 #: Delta u'v' up to which the chromaticity counts as pinned (numerically exact is
 #: about 1e-13; the target's own JND is about 0.001-0.004).
 PINNED_DUV = 1e-5
+#: Most LED spectra a match takes (the CAL1 has 22; the optimiser's work grows with
+#: the square of their number) and most reflectances whose metamerism it weighs.
+MAX_MATCH_LEDS = 64
+MAX_MATCH_REFLECTANCES = 2000
 #: Weight of the white's rows in the linear start (relative to one reflectance).
 _WHITE_WEIGHT = 30.0
 
@@ -362,6 +366,16 @@ def match_illuminant(
     """
     if len(target) != 1:
         raise InputError(f"expected one target spectrum, got {len(target)}")
+    if len(leds) > MAX_MATCH_LEDS:
+        raise InputError(
+            f"{len(leds)} LED spectra, at most {MAX_MATCH_LEDS}: one column per "
+            "channel of the light source (--illuminants)"
+        )
+    if len(reflectances) > MAX_MATCH_REFLECTANCES:
+        raise InputError(
+            f"{len(reflectances)} reflectances, at most {MAX_MATCH_REFLECTANCES} "
+            "(--reflectances)"
+        )
     ub = _upper_bounds(max_level, len(leds))
     grid = matching_grid(leds, target, reflectances)
     L = leds.resample(grid, average=True).values
@@ -416,6 +430,19 @@ def colour_rendering(spd: Spectra) -> tuple[float, float]:
     test samples' range (the ends held, as its default extrapolator does).
     """
     colour = _colour()
+    wl = spd.wavelength_nm
+    step = np.diff(wl)
+    if not (
+        step.size
+        and np.allclose(step, step[0], rtol=0.0, atol=1e-6)
+        and 1.0 <= step[0] <= 5.0
+        and abs(step[0] - round(step[0])) < 1e-6
+    ):
+        # colour-science needs a regular grid of whole nm, at most 5 nm for TM-30:
+        # a line missing from a file, a grid finer than 1 nm or coarser than 5 nm
+        # is resampled to 1 nm first
+        grid = Grid(float(math.ceil(wl[0])), float(math.floor(wl[-1])), 1.0)
+        spd = spd.resample(grid, average=True)
     sd = colour.SpectralDistribution(spd.values[0], spd.wavelength_nm)
     with _quiet(), colour.utilities.domain_range_scale("reference"):
         ra = float(colour.colour_rendering_index(sd))

@@ -73,7 +73,7 @@ from tunespec.core.image import (
     scratch,
     srgb8_from_xyz_d50,
 )
-from tunespec.core.io.image_formats import ImageOutputs, pwrite_all
+from tunespec.core.io.image_formats import ImageOutputs, pwrite_all, write_array
 from tunespec.core.io.raw import load_raw
 from tunespec.core.io.session import Session, find_darks, frames_by_channel
 from tunespec.core.metering import suppress_meter_floor
@@ -390,7 +390,7 @@ def prepare_darks(job: ImageJob, index: int) -> str:
         for k in range(3):
             acc[k] = smooth_dark(acc[k])
     path = job.work_path(f"dark_{index}.f32")
-    acc.tofile(path)
+    write_array(path, acc)
     return str(path)
 
 
@@ -709,7 +709,7 @@ def setup_estimation(
     phi = cv2.resize(
         results[brightest].flat_grid, (w, h), interpolation=cv2.INTER_LINEAR
     ).astype(np.float32)
-    phi.tofile(job.work_path(PHI))
+    write_array(job.work_path(PHI), phi)
     bank = build_wiener_bank(
         F, prior.values, white, noise, grid.wavelength_nm,
         phi_range=(float(phi.min()), float(phi.max())),

@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from tunespec.core.atomic import atomic_write_text
 from tunespec.core.errors import InputError, read_json
 from tunespec.core.limits import dumps_json, valid_name, valid_number
 
@@ -353,7 +354,7 @@ class TargetLayout:
             raise InputError(f"bad layout: {exc}", path=source) from None
 
     def save(self, path: str | PathLike[str]) -> None:
-        Path(path).write_text(dumps_json(self.to_dict()), encoding="utf-8")
+        atomic_write_text(path, dumps_json(self.to_dict()))
 
     @classmethod
     def load(cls, path: str | PathLike[str]) -> TargetLayout:

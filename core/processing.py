@@ -692,7 +692,7 @@ def process_session(
     window_px: int = FLAT_WINDOW_PX,
     channels: Sequence[str] | None = None,
     allow_incomplete: bool = False,
-    verify: bool = False,
+    verify: bool = True,
     loader: Loader | None = None,
     progress: ProgressFn | None = None,
     should_stop: StopFn | None = None,
@@ -719,7 +719,8 @@ def process_session(
     allow_incomplete
         Skip channels with missing frames (with a warning) instead of failing.
     verify
-        Check every raw file's SHA-256 against the manifest first.
+        Check every raw file's and SPD's SHA-256 against the manifest first
+        (default; ``--no-verify`` skips it).
     loader
         Reads a raw file; default :func:`tunespec.core.io.raw.load_raw`.
     progress, should_stop
@@ -762,6 +763,7 @@ def process_session(
         allow_incomplete=allow_incomplete,
         verify=verify,
     )
+    spds = check_spds(session, {c: targets[c][0] for c in use})
     dark_ids = {
         d.id
         for c in use
@@ -783,7 +785,7 @@ def process_session(
     for c in [first, *[c for c in use if c != first]]:
         acc.add(session, c, reader.pixels(whites[c]), reader.pixels(targets[c]))
         ref = targets[c][0]
-        acc.add_spd(c, suppress_meter_floor(session.read_spd(ref)), ref.exposure_s)
+        acc.add_spd(c, suppress_meter_floor(spds[c]), ref.exposure_s)
     warnings.extend(acc.warnings())
     n_px = rois.n_pixels
     n_patch = layout.n_patches
@@ -802,6 +804,59 @@ def process_session(
             "flat_fields_borrowed": acc.n_borrowed,
         },
     )
+
+
+#: Wavelengths every measured SPD must cover at least (the estimation grid's).
+SPD_MIN_COVERAGE_NM = (400.0, 700.0)
+
+
+def check_spds(session: Session, refs: dict[str, FrameRecord]) -> dict[str, Spectra]:
+    """The SPDs measured around ``refs`` (channel -> frame), each checked: not zero
+    everywhere, covering at least :data:`SPD_MIN_COVERAGE_NM` (an SPD in µm does
+    not) and the range the session's other SPDs cover (a file cut short).
+
+    Raises
+    ------
+    InputError
+        One line naming the SPD file and what is wrong.
+    """
+    spds = {c: session.read_spd(rec) for c, rec in refs.items()}
+    where = {c: session.root / str(rec.spd_file) for c, rec in refs.items()}
+    for c, spd in spds.items():
+        if not np.any(spd.values > 0):
+            raise InputError(
+                "the measured SPD is zero everywhere: the light was not measured "
+                f"(take the frame again: tunespec capture ... --retake {refs[c].id})",
+                path=where[c],
+            )
+        if float(spd.wavelength_nm[-1]) < 100:
+            raise InputError(
+                f"wavelengths {float(spd.wavelength_nm[0]):g}-"
+                f"{float(spd.wavelength_nm[-1]):g}: expected nm, not µm",
+                path=where[c],
+            )
+    if not spds:
+        return spds
+    lo = min(float(s.wavelength_nm[0]) for s in spds.values())
+    hi = max(float(s.wavelength_nm[-1]) for s in spds.values())
+    want_a, want_b = SPD_MIN_COVERAGE_NM
+    for c, spd in spds.items():
+        wl = spd.wavelength_nm
+        a, b = float(wl[0]), float(wl[-1])
+        step = float(np.max(np.diff(wl))) if wl.size > 1 else 0.0
+        if a > lo + step or b < hi - step:
+            raise InputError(
+                f"the SPD covers {a:g}-{b:g} nm where the session's others cover "
+                f"{lo:g}-{hi:g} nm: the file is cut short",
+                path=where[c],
+            )
+        if a > want_a or b < want_b:
+            raise InputError(
+                f"the SPD covers {a:g}-{b:g} nm, expected at least {want_a:g}-"
+                f"{want_b:g} nm",
+                path=where[c],
+            )
+    return spds
 
 
 def _session_rois(
@@ -852,6 +907,20 @@ def _usable_channels(
         elif allow_incomplete:
             warnings.append(f"channel {c}: frames missing, left out")
         else:
+            why = next(
+                (
+                    p
+                    for r in (*whites.get(c, ()), *targets.get(c, ()))
+                    if (p := session.problem(r, checksums=verify))
+                ),
+                "",
+            )
+            if why:
+                raise InputError(
+                    f"channel {c}: {why}; take it again (tunespec capture ... "
+                    "--resume)",
+                    path=session.manifest_path,
+                )
             raise InputError(
                 f"channel {c}: frames missing or marked bad; resume the capture "
                 "(tunespec capture ... --resume) or pass allow_incomplete",

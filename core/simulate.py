@@ -85,7 +85,7 @@ class NoiseModel:
     flat_field_residual: float = 0.003
 
     def __post_init__(self) -> None:
-        if not (self.full_well_e > 0 and self.read_noise_e >= 0):
+        if not (0 < self.full_well_e < np.inf and 0 <= self.read_noise_e < np.inf):
             raise InputError("noise model: need full_well_e > 0 and read_noise_e >= 0")
         if not (self.n_pixels >= 2 and self.flat_field_residual >= 0):
             raise InputError(

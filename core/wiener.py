@@ -467,8 +467,10 @@ def _noise_variance(
     shape = responses.rgb.shape
     if noise_std is not None:
         level = float(noise_std)
-        if not (np.isfinite(level) and level >= 0.0):
-            raise InputError(f"noise_std={noise_std!r}: expected a finite value >= 0")
+        if not (np.isfinite(level) and 0.0 <= level <= 1e6):  # level**2 stays finite
+            raise InputError(
+                f"noise_std={noise_std!r}: expected a finite value in [0, 1e6]"
+            )
         var = np.full(shape, level**2)
     elif responses.rgb_std is not None:
         _check_responses_finite(responses, responses.rgb_std, "rgb_std")

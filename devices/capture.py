@@ -497,7 +497,7 @@ def capture(
                 raise
             # the manifest lists only what was committed before; resume goes on
             raise DiskFullError(
-                session.root, needed_bytes=bytes_needed(session, camera)
+                session.root, needed_bytes=bytes_needed(session, camera), resume=True
             ) from None
 
 

@@ -63,6 +63,12 @@ DEFAULT_SIM_RESOLUTION = (1536, 1024)
 PromptFn = Callable[[str], None]
 
 
+#: Largest simulated image, checked before anything is allocated (a 100 MP
+#: medium-format sensor is 11648x8736).
+MAX_RESOLUTION_SIDE_PX = 12_000
+MAX_RESOLUTION_PX = 110_000_000
+
+
 def parse_resolution(text: str) -> tuple[int, int]:
     """``"WxH"`` -> ``(W, H)`` in pixels.
 
@@ -79,6 +85,12 @@ def parse_resolution(text: str) -> tuple[int, int]:
         ) from None
     if w < 64 or h < 64 or w % 2 or h % 2:
         raise InputError(f"bad resolution {shown(text)}: even, at least 64x64")
+    if max(w, h) > MAX_RESOLUTION_SIDE_PX or w * h > MAX_RESOLUTION_PX:
+        raise InputError(
+            f"bad resolution {shown(text)}: at most {MAX_RESOLUTION_SIDE_PX} pixels a "
+            f"side and {MAX_RESOLUTION_PX // 1_000_000} megapixels (the 5D Mark III "
+            "has 5760x3840)"
+        )
     return w, h
 
 

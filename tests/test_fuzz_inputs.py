@@ -42,3 +42,12 @@ def test_fuzz_every_input_kind_seeded() -> None:
 @pytest.mark.slow
 def test_fuzz_every_input_kind_longer() -> None:
     _check(3000, seed=7)
+
+
+@pytest.mark.slow
+def test_fuzz_whole_commands_seeded() -> None:
+    """Issue 24: commands with damaged files and hostile options, in-process."""
+    counts, bugs = fuzz_inputs.fuzz(120, seed=24, kinds=fuzz_inputs.COMMAND_KINDS)
+    shown = "\n".join(f"{k} case {i}: {o}: {d[:400]}" for k, i, o, d in bugs[:5])
+    assert not bugs, f"{len(bugs)} bug(s):\n{shown}"
+    assert counts["commands:refused"] > 0 and counts["commands:accepted"] > 0

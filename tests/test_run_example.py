@@ -110,7 +110,9 @@ def test_the_scheduler_reaches_the_plan(tmp_path, value) -> None:
     text = 'out = "m"\n' + ("" if value is None else f'scheduler = "{value}"\n')
     path = tmp_path / "run.toml"
     path.write_text(text + "[export]\nimages = true\n", encoding="utf-8")
-    plan = plan_from_config(load_config(path))
+    # an address in a file needs the command line's confirmation (issue 24)
+    confirm = value if value and "://" in value else None
+    plan = plan_from_config(load_config(path), scheduler=confirm)
     assert plan.scheduler == value and plan.images
 
 
@@ -130,7 +132,8 @@ def test_a_run_computes_the_images_on_the_configured_cluster(tmp_path) -> None:
             "[export]\nreport = false\nimages = true\n",
             encoding="utf-8",
         )
-        assert main(["run", str(path), "-q"]) == 0
+        confirm = ["--scheduler", cluster.scheduler_address]
+        assert main(["run", str(path), "-q", *confirm]) == 0
         ran = set(cluster.scheduler.task_prefixes)
     images = tmp_path / "m" / "export" / "images"
     prov = json.loads((images / "provenance.json").read_text())

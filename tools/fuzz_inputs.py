@@ -15,8 +15,13 @@ to the reader and classifies the outcome:
 
 Kinds: spectral CSV, responses CSV, CGATS, session manifest, target layout, run
 configuration (TOML and JSON), session folders (damaged files, links out of the
-folder). Run ``python tools/fuzz_inputs.py --cases 10000`` (prints the counts; exit
-status 1 if any bug was found). The test suite runs a small seeded part of it.
+folder), and ``commands``: whole commands (estimate, calibrate, evaluate,
+simulate-responses, the exports, report, match-illuminant, gonio-plan, capture) run
+in-process with a damaged input file, a hostile option value, files swapped or
+replaced, or an option dropped or repeated; exit 0 must write standard JSON and no
+nan/inf. Run ``python tools/fuzz_inputs.py --cases 10000`` (every kind; prints the
+counts; exit status 1 if any bug was found). The test suite runs a small seeded
+part of it.
 """
 
 from __future__ import annotations
@@ -57,6 +62,9 @@ from tunespec.core.spectra import (
 from tunespec.devices.registry import layout_reflectances
 
 KINDS = ("spectra", "responses", "cgats", "manifest", "layout", "config", "session")
+#: Whole commands run in-process with mutated options and input files (slower: not
+#: in the default :data:`KINDS`; ``--kinds`` picks them, ``all`` means both).
+COMMAND_KINDS = ("commands",)
 OUTCOMES = ("refused", "accepted", "traceback", "hang", "accepted_bad")
 BUGS = ("traceback", "hang", "accepted_bad")
 
@@ -80,6 +88,11 @@ _NUMBER = re.compile(rb"-?\d+(?:\.\d+)?(?:[eE][-+]?\d+)?")
 
 class _Hang(Exception):
     pass
+
+
+#: Seconds a whole command may take before it counts as a hang (a calibration or a
+#: report on the small seeds takes a few).
+COMMAND_TIME_LIMIT_S = 60.0
 
 
 # -- seed files ------------------------------------------------------------------------
@@ -245,7 +258,12 @@ def must_refuse(kind: str, path: tuple[Any, ...], value: Any) -> bool:
                 return value != []
             return not isinstance(value, str) or not value.strip()
         if key == "meta":
-            return not isinstance(value, str) if len(path) == 2 else True
+            if len(path) == 1:  # {} or an object of texts is a valid meta
+                return not (
+                    isinstance(value, dict)
+                    and all(isinstance(v, str) for v in value.values())
+                )
+            return not isinstance(value, str)
         if key == "format":
             return True
         if key == "name":
@@ -422,11 +440,228 @@ def session_case(folder: Path, rng: random.Random) -> str:
     return ""
 
 
+# -- whole commands (issue 24: the audit's command targets) ----------------------------
+def make_command_seeds(folder: Path) -> dict[str, Path]:
+    """Small valid inputs for the commands: 24 SG patches under 6 LEDs on a 10 nm
+    grid, their simulated responses and a smooth calibration from them."""
+    from tunespec.app.cli import main as cli
+    from tunespec.core.datasets import (
+        load_camera,
+        load_colorchecker_sg,
+        load_led_set,
+        resource_path,
+    )
+
+    folder.mkdir(parents=True, exist_ok=True)
+    sg = load_colorchecker_sg()
+    write_spectra_csv(sg.select(sg.names[:24]), folder / "chart.csv")
+    write_spectra_csv(sg.select(sg.names[60:72]), folder / "sample.csv")
+    leds = load_led_set()
+    write_spectra_csv(leds.select(leds.names[1:22:4]), folder / "leds.csv")
+    write_spectra_csv(load_camera(), folder / "camera.csv")
+    shutil.copy(
+        resource_path("layouts", "colorchecker_sg.json"), folder / "layout.json"
+    )
+    quiet = ["-q"]
+    with contextlib.redirect_stdout(None), contextlib.redirect_stderr(None):
+        for argv in (
+            ["simulate-responses", "--sensitivities", "camera.csv", "--illuminants",
+             "leds.csv", "--reflectances", "chart.csv", "--exposure-target", "0.8",
+             "--illuminants-out", "illum.csv", "-o", "responses.csv"],
+            ["simulate-responses", "--sensitivities", "camera.csv", "--illuminants",
+             "illum.csv", "--reflectances", "sample.csv", "-o", "sample_resp.csv"],
+            ["calibrate", "--responses", "responses.csv", "--illuminants",
+             "illum.csv", "--reflectances", "chart.csv", "--method", "smooth",
+             "--grid", "400:700:10", "-o", "sens.csv", *quiet],
+            ["estimate", "--responses", "sample_resp.csv", "--illuminants",
+             "illum.csv", "--sensitivities", "sens.csv", "--grid", "400:700:10",
+             "-o", "est.csv", *quiet],
+            ["export-rawtoaces", "--sensitivities", "sens.csv", "-o", "sens.json",
+             *quiet],
+            ["export-cgats", "--reflectances", "chart.csv", "-o", "chart.ti3", *quiet],
+        ):  # fmt: skip
+            with _cwd(folder):
+                rc = cli(argv)
+            if rc != 0:
+                raise RuntimeError(f"seed command failed: {argv}")
+    return {p.name: p for p in folder.iterdir() if p.is_file()}
+
+
+@contextlib.contextmanager
+def _cwd(folder: Path) -> Any:
+    old = os.getcwd()
+    os.chdir(folder)
+    try:
+        yield
+    finally:
+        os.chdir(old)
+
+
+#: (command line, weight): input files by name (copied into the case's folder),
+#: ``@out`` an output name. Weights keep the slow ones (report, match-illuminant,
+#: capture) rarer.
+COMMAND_TARGETS: list[tuple[list[str], int]] = [
+    (["estimate", "--responses", "sample_resp.csv", "--illuminants", "illum.csv",
+      "--sensitivities", "sens.csv", "--grid", "400:700:10", "--noise-std", "0.01",
+      "-o", "@out.csv"], 6),
+    (["estimate", "--responses", "sample_resp.csv", "--illuminants", "illum.csv",
+      "--sensitivities", "sens.json", "--prior", "chart.csv", "--spd-shift-nm", "0",
+      "-o", "@out.csv"], 4),
+    (["calibrate", "--responses", "responses.csv", "--illuminants", "illum.csv",
+      "--reflectances", "chart.csv", "--method", "smooth", "--grid", "400:700:10",
+      "--hold-out-every", "4", "-o", "@out.csv", "--stats", "@stats.json"], 4),
+    (["calibrate", "--responses", "responses.csv", "--illuminants", "illum.csv",
+      "--reflectances", "chart.ti3", "--method", "pca", "--components", "3",
+      "--grid", "400:700:10", "-o", "@out.csv"], 2),
+    (["evaluate", "--estimated", "est.csv", "--reference", "sample.csv",
+      "--grid", "400:700:10", "--stats", "@stats.json"], 4),
+    (["simulate-responses", "--sensitivities", "camera.csv", "--illuminants",
+      "illum.csv", "--reflectances", "chart.csv", "--full-well-e", "67000",
+      "--read-noise-e", "30", "--n-pixels", "400", "--flat-field-residual",
+      "0.003", "-o", "@out.csv"], 5),
+    (["export-cgats", "--reflectances", "est.csv", "--responses",
+      "sample_resp.csv", "--illuminant", "LED540", "-o", "@out.ti3"], 3),
+    (["export-rawtoaces", "--sensitivities", "sens.csv", "--manufacturer", "X",
+      "--model", "Y", "-o", "@out.json"], 3),
+    (["export-camera", "--responses", "responses.csv", "--illuminants", "illum.csv",
+      "--reflectances", "chart.csv", "--sensitivities", "sens.csv", "-o",
+      "@outdir"], 1),
+    (["gonio-plan", "-o", "@plan.json", "--theta-i", "45", "--theta-r", "0,30",
+      "--phi-r", "0", "--spectral", "30", "--hdr-from", "60"], 3),
+    (["match-illuminant", "--illuminants", "leds.csv", "--reflectances",
+      "sample.csv", "--max-level", "1", "-o", "@levels.json"], 1),
+    (["report", "-o", "@rep", "--reflectances", "est.csv", "--reference",
+      "sample.csv", "--sensitivities", "sens.csv"], 1),
+    (["capture", "--layout", "layout.json", "--resolution", "128x96", "--channels",
+      "LED450", "--exposure", "1", "--darks", "1", "--out", "@session", "-q"], 1),
+]  # fmt: skip
+
+#: Option values a user (or a fuzzer) types.
+HOSTILE_OPTIONS = [
+    *HOSTILE_NUMBERS[:22], "1e300", "-1e300", "0.0175", "400:700:0.0175",
+    "700:400:10", "400:700:-5", "100000x100000", "3x3", "../../etc/passwd",
+    "/etc/passwd", "/proc/self/environ", "", " ", "a" * 300, "LED999", "A1,A1",
+    "tcp://203.0.113.9:8786", "-", "--", "D50", "bayes", "1,0.125", "0,0,0",
+]  # fmt: skip
+
+
+def command_case(
+    seeds: dict[str, Path], rng: random.Random, work: Path
+) -> tuple[list[str], Callable[[], str]]:
+    """A mutated command line (files copied into ``work``) and the check of what
+    it wrote when it exits 0."""
+    targets = [t for t, w in COMMAND_TARGETS for _ in range(w)]
+    argv = list(rng.choice(targets))
+    for name, path in seeds.items():
+        shutil.copy(path, work / name)
+    files = [i for i, a in enumerate(argv) if a in seeds]
+    values = [i for i, a in enumerate(argv) if i > 0 and argv[i - 1].startswith("--")
+              and not a.startswith("@") and a not in seeds]  # fmt: skip
+    op = rng.randrange(6)
+    if op in (0, 1) and files:  # a damaged input file
+        f = work / argv[rng.choice(files)]
+        f.write_bytes(mutate_bytes(f.read_bytes(), rng))
+    elif op == 2 and values:  # a hostile option value
+        argv[rng.choice(values)] = rng.choice(HOSTILE_OPTIONS)
+    elif op == 3 and len(files) >= 2:  # two input files swapped
+        a, b = rng.sample(files, 2)
+        argv[a], argv[b] = argv[b], argv[a]
+    elif op == 4 and files:  # another kind of file, a folder, a missing one
+        i = rng.choice(files)
+        argv[i] = rng.choice([*seeds, ".", "missing.csv", "sens.csv.meta.json"])
+    else:  # an option dropped, or a value given twice
+        i = rng.randrange(1, len(argv))
+        if rng.random() < 0.5:
+            del argv[i]
+        else:
+            argv.insert(i, argv[i])
+    outputs = [work / a[1:] for a in argv if a.startswith("@")]
+    argv = [str(work / a[1:]) if a.startswith("@") else a for a in argv]
+
+    def check() -> str:
+        for out in outputs:
+            for f in [out] if out.is_file() else sorted(out.rglob("*")):
+                if not f.is_file() or f.suffix not in (".csv", ".json", ".ti3"):
+                    continue
+                text = f.read_text(encoding="utf-8", errors="replace")
+                if f.suffix == ".json" and not _std_json_text(text):
+                    return f"exit 0 with a non-standard JSON {f.name}"
+                cells = re.split(r"[,\s]+", text.lower())
+                if f.suffix != ".json" and _NON_FINITE & set(cells):
+                    return f"exit 0 with nan/inf written to {f.name}"
+        return ""
+
+    return argv, check
+
+
+_NON_FINITE = {"nan", "-nan", "inf", "-inf", "+inf", "infinity", "-infinity"}
+
+
+def _std_json_text(text: str) -> bool:
+    try:
+        json.loads(text, parse_constant=_bad_constant)
+    except ValueError:
+        return False
+    return True
+
+
+def _bad_constant(name: str) -> Any:
+    raise ValueError(name)
+
+
+def run_command(argv: list[str], work: Path) -> tuple[int, str]:
+    """``tunespec ARGV`` in-process in ``work``: (exit status, stderr)."""
+    import io
+
+    from tunespec.app.cli import main as cli
+
+    err = io.StringIO()
+    with _cwd(work), contextlib.redirect_stdout(io.StringIO()), \
+            contextlib.redirect_stderr(err):  # fmt: skip
+        try:
+            rc = cli(argv)
+        except SystemExit as exc:  # argparse: usage and one error line, status 2
+            rc = exc.code if isinstance(exc.code, int) else 2
+    return rc, err.getvalue()
+
+
+def _shown_argv(argv: list[str]) -> str:
+    return " ".join(
+        a if len(a) <= 60 else a[:40] + f"...({len(a)} chars)" for a in argv
+    )
+
+
+def _classify_command(
+    argv: list[str], work: Path, check: Callable[[], str]
+) -> tuple[str, str]:
+    cmd = _shown_argv(argv)
+    try:
+        rc, err = run_command(argv, work)
+    except _Hang:
+        return "hang", cmd
+    except Exception:
+        return "traceback", f"{cmd}\n{traceback.format_exc(limit=-3)}"
+    last = err.strip().splitlines()[-1] if err.strip() else ""
+    if "Traceback" in err or rc not in (0, 2, 3, 4):
+        return "traceback", f"exit {rc}: {cmd}: {err[-600:]}"
+    if rc != 0:
+        if len(last) > 2000:
+            return "traceback", f"huge message: {cmd}: {last[:200]!r}"
+        return "refused", ""
+    problem = check()
+    if problem:
+        return "accepted_bad", f"{cmd}: {problem}"
+    return "accepted", ""
+
+
 # -- the loop --------------------------------------------------------------------------
 def run_one(
     kind: str, seeds: dict[str, Path], rng: random.Random, work: Path
 ) -> tuple[str, str]:
     """One case of ``kind``: (outcome, detail)."""
+    if kind == "commands":
+        argv, check = command_case(seeds["commands"], rng, work)  # type: ignore[arg-type]
+        return _classify_command(argv, work, check)
     if kind == "session":
         folder = work / "session"
         shutil.copytree(seeds["session"], folder, symlinks=True)
@@ -496,7 +731,9 @@ def fuzz(
         raise _Hang
 
     with tempfile.TemporaryDirectory(prefix="tunespec-fuzz-") as tmp:
-        seeds = make_seeds(Path(tmp) / "seeds")
+        seeds: dict[str, Any] = make_seeds(Path(tmp) / "seeds")
+        if "commands" in kinds:
+            seeds["commands"] = make_command_seeds(Path(tmp) / "command_seeds")
         old = signal.signal(signal.SIGALRM, on_alarm) if use_alarm else None
         try:
             for i in range(n_cases):
@@ -504,8 +741,10 @@ def fuzz(
                 rng = random.Random(f"{seed}:{i}")
                 work = Path(tmp) / f"case{i}"
                 work.mkdir()
-                if use_alarm:
-                    signal.setitimer(signal.ITIMER_REAL, time_limit_s)
+                if use_alarm:  # a whole command gets more time than a reader
+                    limit = max(time_limit_s, COMMAND_TIME_LIMIT_S) if kind in (
+                        COMMAND_KINDS) else time_limit_s  # fmt: skip
+                    signal.setitimer(signal.ITIMER_REAL, limit)
                 try:
                     outcome, detail = run_one(kind, seeds, rng, work)
                 except _Hang:
@@ -530,10 +769,17 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--cases", type=int, default=10_000)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--kinds", default=",".join(KINDS))
+    parser.add_argument(
+        "--kinds",
+        default="all",
+        help="comma-separated, of: " + ", ".join(KINDS + COMMAND_KINDS) + " (all: "
+        "every one)",
+    )
     parser.add_argument("--time-limit", type=float, default=5.0, help="s per case")
     args = parser.parse_args(argv)
-    kinds = tuple(args.kinds.split(","))
+    kinds = (
+        KINDS + COMMAND_KINDS if args.kinds == "all" else tuple(args.kinds.split(","))
+    )
     t0 = time.perf_counter()
     counts, bugs = fuzz(
         args.cases,

@@ -15,6 +15,7 @@ import argparse
 import errno
 import sys
 from collections.abc import Sequence
+from typing import NoReturn
 
 from tunespec.app.cli import (
     core_cmds,
@@ -85,6 +86,15 @@ class _VersionAction(argparse.Action):
         parser.exit()
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse, its error line cut as every other error (argparse quotes a bad
+    value whole: a 5,000-digit number filled the terminal). Subcommands' parsers
+    are of this class too (``add_subparsers`` takes the parent's)."""
+
+    def error(self, message: str) -> NoReturn:
+        super().error(_line(message))
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``tunespec`` parser with every subcommand.
 
@@ -92,7 +102,7 @@ def build_parser() -> argparse.ArgumentParser:
     ``--help``, ``--version`` and argument errors answer at once (no scipy,
     colour-science or matplotlib).
     """
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="tunespec",
         description="Spectral reflectance from an RGB camera and a tunable LED source.",
     )
@@ -134,13 +144,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         check_outputs(args)
         return int(args.func(args) or 0)
     except DiskFullError as exc:
-        print(f"tunespec {args.command}: disk full: {exc}", file=sys.stderr)
+        print(f"tunespec {args.command}: disk full: {_line(exc)}", file=sys.stderr)
         return EXIT_DISK_FULL
     except TuneSpecError as exc:
-        print(f"tunespec {args.command}: error: {exc}", file=sys.stderr)
+        print(f"tunespec {args.command}: error: {_line(exc)}", file=sys.stderr)
         return EXIT_INPUT
     except DeviceError as exc:
-        print(f"tunespec {args.command}: device error: {exc}", file=sys.stderr)
+        print(f"tunespec {args.command}: device error: {_line(exc)}", file=sys.stderr)
         return EXIT_DEVICE
     except (Cancelled, KeyboardInterrupt):
         print(f"tunespec {args.command}: cancelled", file=sys.stderr)
@@ -150,16 +160,29 @@ def main(argv: Sequence[str] | None = None) -> int:
         # writing, a permission changed meanwhile) still ends in one line
         if exc.errno == errno.ENOSPC:
             err = DiskFullError.from_os_error(exc)
-            print(f"tunespec {args.command}: disk full: {err}", file=sys.stderr)
+            print(f"tunespec {args.command}: disk full: {_line(err)}", file=sys.stderr)
             return EXIT_DISK_FULL
         where = f"{exc.filename}: " if exc.filename else ""
         print(
-            f"tunespec {args.command}: error: {where}{exc.strerror or exc}",
+            f"tunespec {args.command}: error: {_line(where + str(exc.strerror or exc))}",
             file=sys.stderr,
         )
         return EXIT_INPUT
     finally:
         close_progress()
+
+
+#: Longest error line printed: a value typed (or read) with thousands of characters
+#: is cut in the middle rather than flooding the terminal.
+MAX_ERROR_CHARS = 600
+
+
+def _line(exc: object) -> str:
+    """An error as one line of at most :data:`MAX_ERROR_CHARS` characters."""
+    text = " ".join(str(exc).splitlines())
+    if len(text) <= MAX_ERROR_CHARS:
+        return text
+    return text[: MAX_ERROR_CHARS - 160] + " ... " + text[-150:]
 
 
 def check_outputs(args: argparse.Namespace) -> None:

@@ -22,9 +22,12 @@ from tunespec.core.io.export import read_sensitivity_meta, write_sensitivities_c
 from tunespec.core.io.responses_csv import read_responses_csv, write_responses_csv
 from tunespec.core.io.spectral import read_spectral
 from tunespec.core.io.spectral_csv import write_spectra_csv
-from tunespec.core.limits import dumps_json
+from tunespec.core.limits import dumps_json, valid_number
 from tunespec.core.responses import Responses
 from tunespec.core.spectra import CALIBRATION_MAX_STEP_NM, Grid, Spectra
+
+#: Largest --noise-std (responses are in full-scale units, 0..1).
+MAX_NOISE_STD = 10.0
 
 #: What the spectral options accept (any of these, found from the content).
 SPECTRAL_FORMATS = (
@@ -213,8 +216,9 @@ def _add_simulate_responses(
 
 def _write_json(path: Path | None, data: dict[str, Any]) -> None:
     if path is not None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(dumps_json(data), encoding="utf-8")
+        from tunespec.core.atomic import atomic_write_text
+
+        atomic_write_text(path, dumps_json(data))
 
 
 def _check_names(
@@ -336,6 +340,8 @@ def _prior(path: Path | None) -> Spectra:
 
 
 def cmd_estimate(args: argparse.Namespace) -> int:
+    if args.noise_std is not None:  # checked before anything is read
+        valid_number(args.noise_std, "--noise-std", lo=0.0, hi=MAX_NOISE_STD)
     out = Console(args)
     responses = read_responses_csv(args.responses)
     reported = read_spectral(args.illuminants, kind="illuminant")
@@ -439,6 +445,11 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 def cmd_simulate(args: argparse.Namespace) -> int:
     from tunespec.core.simulate import NoiseModel, scale_to_exposure, simulate_responses
 
+    # the noise options, checked before anything is read (inf wrote nan, exit 0)
+    valid_number(args.full_well_e, "--full-well-e", lo=0.0, hi=1e9, lo_open=True)
+    valid_number(args.read_noise_e, "--read-noise-e", lo=0.0, hi=1e6)
+    valid_number(args.n_pixels, "--n-pixels", lo=2, hi=1e9, integer=True)
+    valid_number(args.flat_field_residual, "--flat-field-residual", lo=0.0, hi=1.0)
     out = Console(args)
     sens_in = absolute_sensitivities(args.sensitivities)
     illum_in = read_spectral(args.illuminants, kind="illuminant")

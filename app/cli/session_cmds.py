@@ -10,6 +10,7 @@ from tunespec.app.cli.common import (
     Console,
     add_bench_options,
     add_output_options,
+    add_scheduler_option,
     resolution_arg,
     seed_arg,
 )
@@ -181,7 +182,16 @@ def _add_process(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
         action="store_true",
         help="leave out channels with missing frames",
     )
-    p.add_argument("--verify", action="store_true", help="check file checksums first")
+    p.add_argument(
+        "--no-verify",
+        dest="verify",
+        action="store_false",
+        help="skip checking every raw and SPD file against its checksum (checked "
+        "by default)",
+    )
+    p.add_argument(
+        "--verify", action="store_true", default=True, help=argparse.SUPPRESS
+    )  # the default now; kept so older scripts still run
     add_output_options(p)
     p.set_defaults(func=cmd_process, output_files=("output", "illuminants_out"))
 
@@ -203,8 +213,22 @@ def _add_run(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="print an example configuration with every key and its default "
         "(it runs on the simulated bench as it is) and exit",
     )
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="the measurement folder (default: the configuration's out, which must "
+        "stay inside the configuration's folder)",
+    )
+    add_scheduler_option(
+        p,
+        "where the Dask steps compute, replacing the configuration's scheduler; a "
+        "dask.distributed address in the configuration is used only when given here "
+        "too",
+    )
     add_output_options(p)
-    p.set_defaults(func=cmd_run)
+    p.set_defaults(func=cmd_run, output_dirs=("out",))
 
 
 def _print_result(out: Console, result: object, wall_s: float) -> None:
@@ -405,6 +429,11 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     out = Console(args)
     t0 = time.perf_counter()
-    result = run_config(args.config, progress=out.progress("run"))
+    result = run_config(
+        args.config,
+        progress=out.progress("run"),
+        out=args.out,
+        scheduler=args.scheduler,
+    )
     _print_result(out, result, time.perf_counter() - t0)
     return 0

@@ -341,6 +341,30 @@ def read_measurement_doc(folder: MeasurementFolder) -> dict[str, Any]:
     return doc
 
 
+def measurement_reference(
+    folder: MeasurementFolder, value: Any, *, allowed: Any = None
+) -> Path | None:
+    """The reference file ``measurement.json`` names (``reference_path``), held to
+    the rule of files named in project files: inside the measurement folder (a
+    relative path, no link out), or the file the operator chose on this computer
+    (``allowed``, the front end's own remembered choice). Anything else is not read:
+    a folder received from someone else cannot make TuneSpec open ``/etc/shadow``.
+    """
+    from tunespec.core.limits import contained_path
+
+    if not value or not isinstance(value, str):
+        return None
+    if allowed and str(allowed) == value:
+        return Path(value)
+    try:
+        found = contained_path(
+            value, "reference_path", bases=(folder.root,), path=folder.measurement_path
+        )
+    except InputError:
+        return None
+    return found[0]
+
+
 # -- warnings ----------------------------------------------------------------------------
 def read_capture_warnings(session_dir: str | PathLike[str]) -> tuple[str, ...]:
     """Every warning the captures of the session at ``session_dir`` raised so far."""
@@ -415,6 +439,30 @@ def _is_current(doc: dict[str, object], session_root: Path, what: str) -> bool:
     return False
 
 
+def own_file(folder: Path, name: str) -> Path:
+    """``folder / name``, a result file of the measurement folder: a plain name, and
+    neither it nor ``folder`` a link (a folder received from someone else could
+    point a result at any file; the writers replace such links).
+
+    Raises
+    ------
+    InputError
+        Naming the file.
+    """
+    path = Path(folder) / name
+    if (
+        not name
+        or Path(name).name != name
+        or name in (".", "..")
+        or path.is_symlink()
+        or Path(folder).is_symlink()
+    ):
+        raise InputError(
+            "a link or a path out of the measurement folder: not read", path=path
+        )
+    return path
+
+
 def write_calibration(
     out_dir: Path, result: CalibrationResult, fingerprint: str | None = None
 ) -> None:
@@ -447,11 +495,13 @@ def read_calibration(folder: Path, chart_root: Path) -> CalibrationResult | None
     from tunespec.core.stats import STAT_ROWS, PredictionStats
 
     try:
-        doc = read_json(folder / "calibration.json")
+        doc = read_json(own_file(folder, "calibration.json"))
         if not _is_current(doc, chart_root, "calibration"):
             return None
-        sensitivity = read_spectra_csv(folder / "sensitivity.csv", allow_negative=True)
-        side = read_sensitivity_meta(folder / "sensitivity.csv")
+        own_file(folder, "sensitivity.csv.meta.json")
+        csv = own_file(folder, "sensitivity.csv")
+        sensitivity = read_spectra_csv(csv, allow_negative=True)
+        side = read_sensitivity_meta(csv)
         extra = {"spd_shift_nm": repr(side.get("spd_shift_nm", 0.0))}
         if "led_correction" in side:
             extra["led_correction"] = json.dumps(side["led_correction"])
@@ -506,12 +556,12 @@ def read_estimate(folder: Path, sample_root: Path) -> EstimateResult | None:
     from tunespec.app.pipeline.steps import evaluate  # scipy-free, but heavy
 
     try:
-        doc = read_json(folder / "estimate.json")
+        doc = read_json(own_file(folder, "estimate.json"))
         if not _is_current(doc, sample_root, "estimate"):
             return None
-        reflectance = read_spectra_csv(folder / "reflectance.csv")
+        reflectance = read_spectra_csv(own_file(folder, "reflectance.csv"))
         reference = None
-        if (folder / "reference.csv").is_file():
+        if own_file(folder, "reference.csv").is_file():
             reference = read_spectra_csv(folder / "reference.csv")
         table2 = (
             None
@@ -548,8 +598,8 @@ def read_exports_index(out_dir: Path) -> dict[str, Path] | None:
     if not index.is_file():
         return None
     try:
-        doc = read_json(index)
-        paths = {str(k): Path(out_dir) / str(v) for k, v in doc.items()}
+        doc = read_json(own_file(Path(out_dir), EXPORTS_INDEX_FILE))
+        paths = {str(k): own_file(Path(out_dir), str(v)) for k, v in doc.items()}
     except (InputError, AttributeError, TypeError) as exc:
         log.warning("no usable exports in %s: %s", out_dir, exc)
         return None
@@ -579,7 +629,12 @@ def read_processed(
     from tunespec.core.processing import ProcessedSession
     from tunespec.core.responses import read_responses_csv
 
-    responses_csv, illuminants_csv = (result_dir / n for n in PROCESSED_FILES)
+    try:
+        responses_csv, illuminants_csv = (
+            own_file(result_dir, n) for n in PROCESSED_FILES
+        )
+    except InputError:
+        return None  # done again, and the links replaced
     if not (responses_csv.is_file() and illuminants_csv.is_file()):
         return None
     return ProcessedSession(

@@ -396,9 +396,42 @@ def estimate_images(
     """
     grid = settings.grid or _default_grid()
     cal = _load_calibration(sensitivities, grid)
-    with connect(scheduler) as sched, _scratch_released():
+    with connect(scheduler) as sched, _scratch_released(), _disk_full(out_dir):
         graph = session_graph(session_dir, cal, out_dir, settings)
         return compute([graph], sched, progress, should_stop)[0]
+
+
+def _is_disk_full(exc: BaseException) -> bool:
+    import errno
+
+    return isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT)
+
+
+@contextlib.contextmanager
+def _disk_full(*out_dirs: str | PathLike[str]) -> Iterator[None]:
+    """A full disk while images are written: the work folder and the unfinished
+    images are removed and one :class:`DiskFullError` names the output folder."""
+    from tunespec.core.errors import DiskFullError
+    from tunespec.core.io.image_formats import remove_partial_outputs
+
+    try:
+        yield
+    except (OSError, DiskFullError) as exc:
+        if not (isinstance(exc, DiskFullError) or _is_disk_full(exc)):
+            raise
+        for out in out_dirs:
+            shutil.rmtree(Path(out) / WORK_DIR, ignore_errors=True)
+            remove_partial_outputs(out)
+        failed = Path(
+            getattr(exc, "folder", None)
+            or getattr(exc, "filename", None)
+            or out_dirs[0]
+        )
+        where = next(
+            (Path(o) for o in out_dirs if Path(o) in (failed, *failed.parents)),
+            Path(out_dirs[0]),
+        )
+        raise DiskFullError(where) from None
 
 
 @contextlib.contextmanager
@@ -489,8 +522,9 @@ def batch_images(
             def sub(f: float, base: float = base, n: int = len(part)) -> None:
                 report(progress, base + f * n / len(todo))
 
-            graphs = [session_graph(s, cal, out, settings) for s, out in part]
-            compute(graphs, sched, sub, should_stop)
+            with _disk_full(*(out for _, out in part)):
+                graphs = [session_graph(s, cal, out, settings) for s, out in part]
+                compute(graphs, sched, sub, should_stop)
             done.extend(str(s) for s, _ in part)
     report(progress, 1.0)
     return {"done": done, "skipped": skipped, "calibration_sha256": cal.sha256}

@@ -23,6 +23,7 @@ from tunespec.core.io.spectral import read_spectral
 from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import (
     check_output_dir,
+    contained_path,
     loads_json,
     loads_toml,
     read_text,
@@ -256,7 +257,8 @@ def load_config(path: str | PathLike[str]) -> dict[str, Any]:
             bad = set(value) - allowed
             if bad:
                 raise InputError(
-                    f"{key}: unknown key(s) {', '.join(sorted(bad))} (known: "
+                    f"{key}: unknown key(s) {', '.join(map(shown, sorted(bad)[:8]))} "
+                    "(known: "
                     f"{', '.join(sorted(allowed))})",
                     path=path,
                 )
@@ -270,18 +272,27 @@ def example_config() -> str:
     return read_text(resource_path("examples", "run.toml"))
 
 
-def plan_from_config(config: Mapping[str, Any] | str | PathLike[str]) -> Plan:
+def plan_from_config(
+    config: Mapping[str, Any] | str | PathLike[str],
+    *,
+    out: str | PathLike[str] | None = None,
+    scheduler: str | None = None,
+) -> Plan:
     """The :class:`Plan` of a configuration (a file or what :func:`load_config` read).
 
-    Paths in the configuration are relative to its file. Every value is checked
-    (:func:`check_config`) before anything is read.
+    Paths in the configuration are relative to its file and stay inside its folder
+    (or the shipped resources): a configuration received from someone else cannot
+    make TuneSpec read or write elsewhere. ``out`` and ``scheduler`` are the command
+    line's (``--out``, ``--scheduler``): they replace the file's, and a scheduler
+    address in the file is used only when the command line confirms it. Every value
+    is checked (:func:`check_config`) before anything is read.
     """
     cfg = dict(config) if isinstance(config, Mapping) else load_config(config)
     base = Path(cfg.get("_path", ".")).parent if "_path" in cfg else Path(".")
-    check_config(cfg)
+    check_config(cfg, out=out, scheduler=scheduler)
 
-    def rel(p: str | None) -> Path | None:
-        return None if p is None else (base / p)
+    def rel(p: str | None, key: str = "") -> Path | None:
+        return None if p is None else config_file(cfg, p, key)
 
     bench_cfg = cfg.get("bench", {})
     cap = cfg.get("capture", {})
@@ -290,21 +301,21 @@ def plan_from_config(config: Mapping[str, Any] | str | PathLike[str]) -> Plan:
     est_cfg = cfg.get("estimate", {})
     est_grid = Grid.parse(est_cfg["grid"]) if "grid" in est_cfg else ESTIMATION_GRID
     chart_cfg, sample_cfg = cfg.get("chart", {}), cfg.get("sample", {})
-    chart_path = rel(chart_cfg.get("layout"))
-    sample_path = rel(sample_cfg.get("layout"))
+    chart_path = rel(chart_cfg.get("layout"), "chart.layout")
+    sample_path = rel(sample_cfg.get("layout"), "sample.layout")
     c_layout = TargetLayout.load(chart_path) if chart_path else chart_layout()
     s_layout = TargetLayout.load(sample_path) if sample_path else sample_layout()
 
-    def spectra(p: str | None) -> Spectra | None:
-        q = rel(p)
+    def spectra(p: str | None, key: str) -> Spectra | None:
+        q = rel(p, key)
         # reflectances, references and priors: any format, percent detected
         return None if q is None else read_spectral(q, grid, kind="reflectance")
 
-    c_refl = spectra(chart_cfg.get("reflectances"))
+    c_refl = spectra(chart_cfg.get("reflectances"), "chart.reflectances")
     if c_refl is None and chart_path is not None:
         c_refl = layout_reflectances(c_layout, chart_path, grid)
-    s_refl = spectra(sample_cfg.get("reflectances"))
-    reference = spectra(sample_cfg.get("reference"))
+    s_refl = spectra(sample_cfg.get("reflectances"), "sample.reflectances")
+    reference = spectra(sample_cfg.get("reference"), "sample.reference")
     light = str(bench_cfg.get("light", "sim"))
     if reference is None and sample_path is None and light.startswith("sim"):
         reference = sample_reference(grid)
@@ -326,7 +337,7 @@ def plan_from_config(config: Mapping[str, Any] | str | PathLike[str]) -> Plan:
             path=src,
         )
     return Plan(
-        base / str(cfg.get("out", "run")),
+        Path(out) if out is not None else base / str(cfg.get("out", "run")),
         light=light,
         camera=bench_cfg.get("camera"),
         resolution=None if res is None else parse_resolution(res),
@@ -342,25 +353,69 @@ def plan_from_config(config: Mapping[str, Any] | str | PathLike[str]) -> Plan:
         exposure=exposure,
         iso=_cfg_int(cap.get("iso", 100), "capture.iso", src),
         method=cal_cfg.get("method"),
-        prior=spectra(est_cfg.get("prior")),
+        prior=spectra(est_cfg.get("prior"), "estimate.prior"),
         grid=grid,
         estimation_grid=est_grid,
         report=cfg.get("export", {}).get("report", True),
         images=cfg.get("export", {}).get("images", False),
-        scheduler=cfg.get("scheduler"),
+        scheduler=scheduler if scheduler is not None else cfg.get("scheduler"),
         input_files=tuple(
             p
             for p in (
                 Path(src) if src else None,
                 chart_path,
                 sample_path,
-                rel(chart_cfg.get("reflectances")),
-                rel(sample_cfg.get("reflectances")),
-                rel(sample_cfg.get("reference")),
-                rel(est_cfg.get("prior")),
+                rel(chart_cfg.get("reflectances"), "chart.reflectances"),
+                rel(sample_cfg.get("reflectances"), "sample.reflectances"),
+                rel(sample_cfg.get("reference"), "sample.reference"),
+                rel(est_cfg.get("prior"), "estimate.prior"),
             )
             if p is not None
         ),
+    )
+
+
+def config_file(cfg: Mapping[str, Any], value: str, key: str) -> Path:
+    """A file named in a configuration: relative to the configuration's folder and
+    inside it, or inside the shipped resources (``resources/``); links are
+    resolved first, so a link out of the folder is refused too.
+
+    A configuration given as a mapping without its file (by a program) resolves
+    against the current folder, unchecked.
+
+    Raises
+    ------
+    InputError
+        Naming the configuration and ``key``: an absolute path, or one leaving the
+        folder (``..``, a link).
+    """
+    src = cfg.get("_path")
+    if src is None:
+        return Path(value)
+    base = Path(src).parent
+
+    def inside(root: Path) -> Path | None:
+        try:
+            return contained_path(value, key, bases=(root,), path=src)[0]
+        except InputError:
+            return None
+
+    local = inside(base)
+    if local is not None and local.exists():
+        return local
+    if local is None and not Path(value).is_absolute() and (base / value).is_symlink():
+        shipped = None  # a link beside the configuration that leads out of it
+    else:
+        shipped = inside(resource_path())
+    if shipped is not None and shipped.exists():
+        return shipped
+    if local is not None:
+        return local  # not found: named as the configuration's folder's file
+    raise InputError(
+        f"{key}: {shown(value)} is outside the configuration's folder: paths in "
+        "a configuration are relative to its folder and stay inside it (copy "
+        "the file beside the configuration)",
+        path=src,
     )
 
 
@@ -388,8 +443,17 @@ _CONFIG_STRINGS = {
 }
 
 
-def check_config(cfg: Mapping[str, Any]) -> None:
+def check_config(
+    cfg: Mapping[str, Any],
+    *,
+    out: str | PathLike[str] | None = None,
+    scheduler: str | None = None,
+) -> None:
     """Check every value of a configuration before anything runs.
+
+    ``out`` and ``scheduler``: the command line's, as :func:`plan_from_config`
+    takes them (the file's ``out`` must stay inside its folder unless the command
+    line gives ``--out``; the file's scheduler address needs ``--scheduler``).
 
     Raises
     ------
@@ -409,14 +473,27 @@ def check_config(cfg: Mapping[str, Any]) -> None:
                 raise InputError(
                     f"{section}.{key}: expected a string, got {shown(value)}", path=src
                 )
-    out = cfg.get("out", "run")
-    if not isinstance(out, str | PathLike):
-        raise InputError(f"out: expected a folder name, got {shown(out)}", path=src)
+    cfg_out = cfg.get("out", "run")
+    if not isinstance(cfg_out, str | PathLike):
+        raise InputError(f"out: expected a folder name, got {shown(cfg_out)}", path=src)
     base = Path(src).parent if src else Path(".")
-    try:
-        check_output_dir(base / out, "out")
-    except InputError as exc:
-        raise InputError(exc.message, path=src) from None
+    if out is not None:
+        check_output_dir(out, "--out")
+    else:
+        if src is not None:
+            try:
+                contained_path(str(cfg_out), "out", bases=(base,), path=src)
+            except InputError:
+                raise InputError(
+                    f"out: {shown(str(cfg_out))} is outside the configuration's "
+                    "folder; name a folder inside it, or give --out on the command "
+                    "line",
+                    path=src,
+                ) from None
+        try:
+            check_output_dir(base / cfg_out, "out")
+        except InputError as exc:
+            raise InputError(exc.message, path=src) from None
     # every value checked before anything is captured (a typo must not cost a chart)
     bench = cfg.get("bench", {})
     valid_seed(bench.get("seed", 0), "bench.seed", path=src)
@@ -477,7 +554,19 @@ def check_config(cfg: Mapping[str, Any]) -> None:
             raise InputError(
                 f"export.{key}: expected true or false, got {shown(flag)}", path=src
             )
-    check_scheduler(cfg.get("scheduler"), "scheduler", path=src)
+    from tunespec.app.pipeline.engine import LOCAL_SCHEDULERS
+
+    address = check_scheduler(cfg.get("scheduler"), "scheduler", path=src)
+    if scheduler is not None:
+        check_scheduler(scheduler, "--scheduler")
+    elif src is not None and address is not None and address not in LOCAL_SCHEDULERS:
+        # a shared configuration must not send the session's data to any host
+        raise InputError(
+            f"scheduler: {shown(address)} sends the measurement to that host; "
+            f"confirm it on the command line with --scheduler {address} (or "
+            'set scheduler = "threads")',
+            path=src,
+        )
 
 
 #: A ``dask.distributed`` scheduler's address: ``tcp://HOST:PORT`` (or ``tls://``,

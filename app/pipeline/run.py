@@ -641,10 +641,13 @@ def run_config(
     should_stop: StopFn | None = None,
     prompt: Callable[[str], None] | None = None,
     on_frame: FrameCallback | None = None,
+    out: str | PathLike[str] | None = None,
+    scheduler: str | None = None,
 ) -> RunResult:
-    """``run(plan_from_config(config))`` (``tunespec run CONFIG``)."""
+    """``run(plan_from_config(config))`` (``tunespec run CONFIG``); ``out`` and
+    ``scheduler`` are the command line's ``--out`` and ``--scheduler``."""
     return run(
-        plan_from_config(config),
+        plan_from_config(config, out=out, scheduler=scheduler),
         progress=progress,
         should_stop=should_stop,
         prompt=prompt,

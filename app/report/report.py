@@ -1673,8 +1673,14 @@ def _write_pdf(
         meta["CreationDate"] = report.created
     from matplotlib import rc_context
 
+    from tunespec.core.atomic import atomic_open
+
     # TrueType fonts embedded (not Type 3): sharp in print, text searchable
-    with rc_context({"pdf.fonttype": 42}), PdfPages(path, metadata=meta) as pdf:
+    with (
+        atomic_open(path, "wb") as fh,
+        rc_context({"pdf.fonttype": 42}),
+        PdfPages(fh, metadata=meta) as pdf,
+    ):
         pdf.savefig(_summary_page(report))
         for _, fig in figures:
             pdf.savefig(fig)
@@ -1718,6 +1724,8 @@ def write_report(
     figures = report_figures(report)
     html_path = out / f"{stem}.html"
     pdf_path = out / f"{stem}.pdf"
-    html_path.write_text(render_html(report, figures), encoding="utf-8")
+    from tunespec.core.atomic import atomic_write_text
+
+    atomic_write_text(html_path, render_html(report, figures))
     _write_pdf(pdf_path, report, figures)
     return html_path, pdf_path

@@ -71,6 +71,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from tunespec.core.atomic import atomic_write_text
 from tunespec.core.errors import InputError
 from tunespec.core.limits import MAX_COLUMNS, MAX_ROWS, MAX_VALUE, read_bytes, shown
 from tunespec.core.spectra import Spectra
@@ -526,8 +527,7 @@ def format_cgats(table: CgatsTable) -> str:
 def write_cgats(table: CgatsTable, path: str | PathLike[str]) -> Path:
     """Write ``table`` to ``path`` (UTF-8, ``\\n`` line ends); returns the path."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(format_cgats(table), encoding="utf-8", newline="\n")
+    atomic_write_text(path, format_cgats(table))
     return path
 
 

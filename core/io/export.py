@@ -53,10 +53,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from tunespec.core.atomic import atomic_open, atomic_write_text
 from tunespec.core.colorimetry import lab_d50, xyz_d50
 from tunespec.core.errors import InputError, check_names, read_json
 from tunespec.core.io.cgats import CgatsTable, ti3_table, write_cgats
-from tunespec.core.limits import dumps_json
+from tunespec.core.limits import dumps_json, shown
 from tunespec.core.responses import Responses, write_responses_csv
 from tunespec.core.spectra import Grid, Spectra, write_spectra_csv
 
@@ -161,7 +162,7 @@ def write_sensitivity_meta(
             "wavelength_nm": [float(x) for x in wl],
             "values": [[float(f"{v:.7g}") for v in row] for row in covariance],
         }
-    path.write_text(dumps_json(doc), encoding="utf-8")
+    atomic_write_text(path, dumps_json(doc))
     return path
 
 
@@ -197,7 +198,7 @@ def write_colorimetry_csv(
     for j, name in enumerate(names):
         vals = [*unc.xyz[j], *unc.lab[j], *unc.xyz_std[j], *unc.lab_std[j]]
         rows.append((name, *(f"{float(v):.6g}" for v in vals)))
-    with path.open("w", newline="", encoding="utf-8") as fh:
+    with atomic_open(path, newline="") as fh:
         csv.writer(fh).writerows(rows)
     return path
 
@@ -239,9 +240,42 @@ def read_sensitivity_meta(sensitivity_csv: str | PathLike[str]) -> dict[str, Any
             or not np.all(np.isfinite(values))
         ):
             raise InputError("covariance: expected a finite square matrix", path=path)
+        problem = covariance_problem(cov["values"], values)
+        if problem:
+            raise InputError(f"covariance: {problem}", path=path)
         out["covariance"] = values
         out["covariance_wavelength_nm"] = wl
     return out
+
+
+#: Largest magnitude of a calibration covariance entry (sensitivities of peak ~1-10
+#: and log gains: variances far below 1).
+MAX_COVARIANCE = 1e6
+
+
+def covariance_problem(raw: Any, values: NDArray[np.float64]) -> str:
+    """What makes a covariance matrix read from a file impossible ("" if nothing):
+    booleans (JSON ``true`` reads as 1), entries beyond :data:`MAX_COVARIANCE`, a
+    negative variance, asymmetry, or a negative eigenvalue beyond rounding (not
+    positive semi-definite: a sign flipped)."""
+    if any(isinstance(v, bool) for row in raw for v in row):
+        return "expected numbers, found true/false"
+    if values.size == 0:
+        return "empty matrix"
+    big = float(np.max(np.abs(values)))
+    if big > MAX_COVARIANCE:
+        return f"entry {big:g} beyond any calibration's (at most {MAX_COVARIANCE:g})"
+    diag = np.diag(values)
+    if np.any(diag < 0):
+        k = int(np.argmin(diag))
+        return f"negative variance {diag[k]:g} at row {k + 1}"
+    tol = 1e-6 * max(big, 1e-300)
+    if float(np.max(np.abs(values - values.T))) > tol:
+        return "not symmetric"
+    lowest = float(np.linalg.eigvalsh(values)[0])
+    if lowest < -tol:
+        return f"not positive semi-definite (eigenvalue {lowest:.3g}): not a covariance"
+    return ""
 
 
 def read_spd_shift(sensitivity_csv: str | PathLike[str]) -> float:
@@ -428,13 +462,12 @@ def write_sensitivity_json(
     doc = sensitivity_rawtoaces_document(sensitivity, **header)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(dumps_json(doc, indent=4), encoding="utf-8")
+    atomic_write_text(path, dumps_json(doc, indent=4))
     return path
 
 
 def _write_rows(path: Path, header: list[str], rows: list[list[str]]) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open("w", newline="", encoding="utf-8") as fh:
+    with atomic_open(path, newline="") as fh:
         w = csv.writer(fh, lineterminator="\n")
         w.writerow(header)
         w.writerows(rows)
@@ -524,7 +557,7 @@ def _responses_rgb(
         illuminant = responses.illuminants[0]
     if illuminant not in responses.illuminants:
         raise InputError(
-            f"illuminant {illuminant!r} not in the responses "
+            f"illuminant {shown(illuminant)} not in the responses "
             f"({', '.join(responses.illuminants)})"
         )
     check_names(names, responses.patches, "{n} patch(es) have no responses: {names}")
@@ -904,7 +937,7 @@ def write_camera_transforms(
         "transforms": [t.as_dict() for t in transforms],
     }
     json_path, csv_path = Path(json_path), Path(csv_path)
-    json_path.write_text(dumps_json(doc), encoding="utf-8")
+    atomic_write_text(json_path, dumps_json(doc))
     header = ["kind", "illuminant"]
     header += [f"m{i}{j}" for i in (1, 2, 3) for j in (1, 2, 3)]
     header += ["wb_r", "wb_g", "wb_b"]

@@ -48,6 +48,8 @@ __all__ = [
     "open_image_outputs",
     "pwrite_all",
     "read_provenance",
+    "remove_partial_outputs",
+    "write_array",
 ]
 
 CUBE_HDR = "cube.hdr"
@@ -114,6 +116,8 @@ class ImageOutputs:
             raise InputError(f"images of {cols}x{rows} px and {wl.size} bands: empty")
         out = Path(folder)
         out.mkdir(parents=True, exist_ok=True)
+        # the folder is rewritten: no longer finished until the new provenance
+        (out / PROVENANCE).unlink(missing_ok=True)
         summary = _header_summary(provenance)
         envi.create_image(
             str(out / CUBE_HDR),
@@ -221,6 +225,26 @@ class ImageOutputs:
         path = self.folder / PROVENANCE
         atomic_write_text(path, dumps_json(provenance))
         return path
+
+
+def remove_partial_outputs(folder: str | PathLike[str]) -> None:
+    """Remove the image files of an unfinished folder (no ``provenance.json``), so
+    that a failed run (a full disk) leaves no truncated images behind."""
+    import shutil
+
+    out = Path(folder)
+    if (out / PROVENANCE).exists():
+        return
+    for name in (CUBE_HDR, CUBE_IMG, XYZ_TIF, LAB_TIF, UNC_TIF, SRGB_PNG):
+        (out / name).unlink(missing_ok=True)
+    shutil.rmtree(out / CUBE_ZARR, ignore_errors=True)
+
+
+def write_array(path: str | PathLike[str], data: NDArray[Any]) -> None:
+    """An array's raw bytes as a new file (a full disk raises ``ENOSPC``, where
+    ``ndarray.tofile`` raises an ``OSError`` without an error number)."""
+    with open(path, "wb") as fh:
+        fh.write(memoryview(np.ascontiguousarray(data)).cast("B"))
 
 
 def pwrite_all(path: str | PathLike[str], offset: int, data: NDArray[Any]) -> None:

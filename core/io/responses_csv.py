@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from tunespec.core.atomic import atomic_open
 from tunespec.core.errors import InputError, read_text
 from tunespec.core.limits import csv_rows, shown, valid_name, valid_number
 from tunespec.core.responses import CHANNELS, Responses
@@ -128,8 +129,6 @@ def read_responses_csv(path: str | PathLike[str]) -> Responses:
 
 def write_responses_csv(responses: Responses, path: str | PathLike[str]) -> None:
     """Write ``responses`` in long format (one row per patch and illuminant)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     header = ["patch", "illuminant", *CHANNELS]
     if responses.rgb_std is not None:
         header += list(_STD)
@@ -137,7 +136,7 @@ def write_responses_csv(responses: Responses, path: str | PathLike[str]) -> None
         header.append("n_pixels")
     if responses.saturated is not None:
         header.append("saturated")
-    with path.open("w", newline="", encoding="utf-8") as fh:
+    with atomic_open(path, newline="") as fh:
         w = csv.writer(fh, lineterminator="\n")
         w.writerow(header)
         for a, p in enumerate(responses.patches):

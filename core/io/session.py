@@ -41,7 +41,6 @@ import hashlib
 import json
 import math
 import os
-import secrets
 import socket
 import threading
 from collections.abc import Iterable, Mapping, Sequence
@@ -51,6 +50,12 @@ from os import PathLike
 from pathlib import Path, PurePosixPath, PureWindowsPath
 from typing import Any
 
+from tunespec.core.atomic import (
+    atomic_write_bytes,
+    atomic_write_text,
+    create_temp_file,
+    fsync_dir,
+)
 from tunespec.core.errors import InputError, read_json
 from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import MAX_NAME_CHARS, dumps_json, shown, valid_number
@@ -94,73 +99,8 @@ EXPOSURE_MODES = ("fixed", "auto")
 EXPOSURE_RTOL = 1e-6
 
 
-# -- atomic file helpers ---------------------------------------------------------------
-def _fsync_dir(folder: Path) -> None:
-    """Make a rename inside ``folder`` durable (a no-op where folders cannot be opened)."""
-    try:
-        fd = os.open(folder, os.O_RDONLY)
-    except OSError:  # e.g. Windows
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
-
-
-def create_temp_file(folder: Path, prefix: str, suffix: str = ".tmp") -> Path:
-    """Create a new, empty, uniquely named file in ``folder``; returns its path.
-
-    Unlike ``tempfile.mkstemp`` (always 0600) the file gets the permissions any
-    newly created file gets, ``0666`` less the process's umask, so an output written
-    through a temporary file and a rename looks like every other output (0644
-    under the usual umask 022).
-    """
-    for _ in range(100):
-        path = folder / f"{prefix}{secrets.token_hex(4)}{suffix}"
-        try:
-            fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
-        except FileExistsError:
-            continue
-        os.close(fd)
-        return path
-    raise FileExistsError(f"no free temporary name in {folder}")  # pragma: no cover
-
-
-def atomic_write_bytes(
-    path: str | PathLike[str],
-    data: bytes | Sequence[bytes | memoryview],
-    suffix: str = ".tmp",
-) -> None:
-    """Write ``data`` (bytes, or chunks written one after the other) to ``path``
-    atomically: temporary file (``suffix`` after its name), fsync, ``os.replace``.
-
-    A reader (or a process started after a crash) sees either the old content or the
-    new one, never a partial file. The file's permissions are those of a plain
-    ``open(path, "w")`` (the umask's), see :func:`create_temp_file`.
-    """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = create_temp_file(path.parent, f".{path.name}.", suffix)
-    chunks = [data] if isinstance(data, bytes | bytearray | memoryview) else data
-    try:
-        with open(tmp, "wb") as fh:
-            for chunk in chunks:
-                fh.write(chunk)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
-    _fsync_dir(path.parent)
-
-
-def atomic_write_text(path: str | PathLike[str], text: str) -> None:
-    """:func:`atomic_write_bytes` for UTF-8 text."""
-    atomic_write_bytes(path, text.encode("utf-8"))
+# -- atomic file helpers (the one writer: tunespec.core.atomic) -------------------------
+_fsync_dir = fsync_dir
 
 
 def sha256_file(path: str | PathLike[str], *, chunk_bytes: int = 1 << 20) -> str:
@@ -719,6 +659,7 @@ def _inside_session(rel: str) -> bool:
     p = PurePosixPath(rel.replace("\\", "/"))
     return (
         0 < len(rel) <= 1024
+        and not any(c in rel for c in "\x00\n\r")
         and all(len(part.encode()) <= 255 for part in p.parts)
         and not p.is_absolute()
         and not PureWindowsPath(rel).anchor
@@ -949,8 +890,39 @@ class Session:
         return [f for f in self.frames if f.status == "ok" and kind in (None, f.kind)]
 
     def path_of(self, record: FrameRecord) -> Path:
-        """Absolute path of a frame's raw file."""
-        return self.root / record.file
+        """Absolute path of a frame's raw file (inside the session, no link).
+
+        Raises
+        ------
+        InputError
+            The file, or ``frames/``, is a link (possibly out of the session).
+        """
+        return self.inside(record.file)
+
+    def inside(self, rel: str) -> Path:
+        """``root / rel`` when it is a path inside the session with no link on the
+        way (``frames/`` or the file itself a link would let a session received
+        from someone else read any file); the session folder itself may be a link.
+
+        Raises
+        ------
+        InputError
+            Naming the manifest and the file.
+        """
+        path = self.root / rel
+        parts = PurePosixPath(rel).parts
+        try:
+            real = path.resolve()
+            expected = self.root.resolve().joinpath(*parts)
+        except (OSError, RuntimeError):
+            real, expected = path, None
+        if ".." in parts or PurePosixPath(rel).is_absolute() or real != expected:
+            raise InputError(
+                f"{rel} is a link (or leaves the session folder): frames are read "
+                "only from files inside the session",
+                path=self.manifest_path,
+            )
+        return path
 
     def plan(self) -> list[FrameSpec]:
         """The frames this session needs (:func:`plan_frames` of its settings)."""
@@ -971,6 +943,8 @@ class Session:
             return self._problem(record, checksums)
         except OSError as exc:  # a folder where a file was, a link loop, ...
             return f"files of frame {record.id} cannot be read ({exc.strerror})"
+        except InputError as exc:  # a link out of the session
+            return exc.message
 
     def _problem(self, record: FrameRecord, checksums: bool) -> str:
         path = self.path_of(record)
@@ -980,7 +954,7 @@ class Session:
             return f"raw file {record.file} fails its checksum"
         if record.spd_file is None:
             return ""
-        spd = self.root / record.spd_file
+        spd = self.inside(record.spd_file)
         if not spd.is_file():
             return f"SPD file {record.spd_file} is missing"
         if not checksums:
@@ -1155,7 +1129,7 @@ class Session:
         """
         if record.spd_file is None:
             raise InputError(f"frame {record.id!r} has no measured SPD")
-        return read_spectra_csv(self.root / record.spd_file)
+        return read_spectra_csv(self.inside(record.spd_file))
 
     def _put(self, record: FrameRecord) -> None:
         m = self._edited()

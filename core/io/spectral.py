@@ -40,6 +40,7 @@ rawtoaces-data camera schema (``resources/cameras/SOURCE.md``); colour-science
 
 from __future__ import annotations
 
+import math
 import re
 from os import PathLike
 from pathlib import Path
@@ -48,7 +49,13 @@ from typing import Any
 import numpy as np
 
 from tunespec.core.errors import InputError
-from tunespec.core.limits import MAX_REFLECTANCE, MAX_VALUE, loads_json, read_bytes
+from tunespec.core.limits import (
+    MAX_REFLECTANCE,
+    MAX_VALUE,
+    loads_json,
+    read_bytes,
+    shown,
+)
 from tunespec.core.spectra import Grid, Spectra
 
 __all__ = [
@@ -99,6 +106,27 @@ def _decode(raw: bytes) -> str:
         return raw.decode("latin-1")
 
 
+#: Largest value of a rawtoaces-data JSON (sensitivities normalised to peak 1, or
+#: relative units near it).
+MAX_RAWTOACES_VALUE = 1e6
+
+
+def _bad_json_values(row: Any) -> str | None:
+    """What is wrong with one wavelength's values in a rawtoaces JSON (or None):
+    JSON ``true`` would read as 1, and sensitivities are never negative."""
+    if not isinstance(row, list):
+        return f"expected a list of numbers, got {shown(row)}"
+    for v in row:
+        if isinstance(v, bool) or not isinstance(v, int | float):
+            return f"expected numbers, got {shown(v)}"
+        if not (0 <= v <= MAX_RAWTOACES_VALUE):  # NaN fails too
+            return (
+                f"value {v:g} outside 0..{MAX_RAWTOACES_VALUE:g} (sensitivities are "
+                "not negative; rawtoaces data are normalised to peak 1)"
+            )
+    return None
+
+
 def rawtoaces_spectra(doc: Any, *, source: str | None = None) -> Spectra:
     """Spectra of a rawtoaces-data JSON document (``spectral_data.data.main``).
 
@@ -115,8 +143,16 @@ def rawtoaces_spectra(doc: Any, *, source: str | None = None) -> Spectra:
         spectral = doc["spectral_data"]
         main = spectral["data"]["main"]
         index = (spectral.get("index") or {}).get("main") or ["R", "G", "B"]
+        for k, row in main.items():
+            bad = _bad_json_values(row)
+            if bad is not None:
+                raise InputError(
+                    f"spectral_data.data.main[{shown(k)}]: {bad}", path=source
+                )
         wl = np.array([float(k) for k in main])
         vals = np.array([main[k] for k in main], dtype=np.float64).T
+    except InputError:
+        raise
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise InputError(
             f"not a rawtoaces-data JSON file (spectral_data.data.main: {exc})",
@@ -143,6 +179,16 @@ def rawtoaces_spectra(doc: Any, *, source: str | None = None) -> Spectra:
         "units": str(spectral.get("units", "") or ""),
     }
     if m := _SCALE_NOTE.search(comments):
+        try:
+            scale = float(m.group(1))
+        except ValueError:
+            scale = math.nan
+        if not 0 < scale <= MAX_VALUE:
+            raise InputError(
+                f"header.comments: absolute scale {shown(m.group(1))}, expected a "
+                f"number in (0, {MAX_VALUE:g}]",
+                path=source,
+            )
         meta["absolute_scale"] = m.group(1)
     if m := _ZERO_NOTE.search(comments):
         meta["not_estimated_nm"] = m.group(1)

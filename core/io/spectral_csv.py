@@ -33,10 +33,10 @@ import math
 import re
 from collections import Counter
 from os import PathLike
-from pathlib import Path
 
 import numpy as np
 
+from tunespec.core.atomic import atomic_open
 from tunespec.core.errors import InputError
 from tunespec.core.limits import (
     MAX_VALUE,
@@ -126,7 +126,11 @@ def parse_spectra_csv(
     header = [h.strip().lstrip("\ufeff") for h in header]
     while header and not header[-1] and all(not r[-1].strip() for _, r in numbered):
         header.pop()  # a trailing separator on every line
-    numbered = [(n, r[: len(header)]) for n, r in numbered]
+    # a trailing separator is dropped; an extra value is a row too long (_data_rows)
+    numbered = [
+        (n, r if any(c.strip() for c in r[len(header) :]) else r[: len(header)])
+        for n, r in numbered
+    ]
     opts = (delim != ",", allow_negative, max_value, path)
     if not header[0] or is_wavelength_header(header[0]):
         return _by_columns(header, numbered, line0, opts)
@@ -134,9 +138,9 @@ def parse_spectra_csv(
     if sum(w is not None for w in spectral) >= 2:
         return _by_rows(header, spectral, numbered, line0, opts)
     raise InputError(
-        f"first column header is {shown(header[0])}; expected one naming the "
-        "wavelengths (wavelength_nm, nm, lambda) or a header of wavelengths "
-        "(name,380,390,...)",
+        # the line itself is not echoed: the file may be anything (a path typo)
+        "not a spectral CSV header: expected a first column naming the wavelengths "
+        "(wavelength_nm, nm, lambda) or a header of wavelengths (name,380,390,...)",
         path=path,
         line=line0,
     )
@@ -274,9 +278,7 @@ def write_spectra_csv(
     spectra: Spectra, path: str | PathLike[str], *, header: str = "wavelength_nm"
 ) -> None:
     """Write ``spectra`` as a spectral CSV (full float precision, round-trips exactly)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open("w", newline="", encoding="utf-8") as fh:
+    with atomic_open(path, newline="") as fh:
         w = csv.writer(fh, lineterminator="\n")
         w.writerow([header, *spectra.names])
         for i, wl in enumerate(spectra.wavelength_nm):

@@ -61,6 +61,7 @@ __all__ = [
     "encode_error",
     "encode_reply",
     "encode_request",
+    "spectrum_problem",
 ]
 
 # --- link settings (assumed; PROTOCOL.md "check on the bench") -------------------------
@@ -460,6 +461,62 @@ def _decode_spectrum(text: str) -> MeasuredSpectrum:
     if not np.all(np.isfinite(values)):
         raise ValueError("non-finite spectral value")
     return MeasuredSpectrum(start_nm, step_nm, values)
+
+
+#: Largest spectral radiance a reply may hold, W sr^-1 m^-2 nm^-1 (the sun's disk
+#: is about 2e4 at 500 nm; an LED light source is far below).
+MAX_RADIANCE = 1e6
+#: Wavelengths a spectroradiometer's reply must cover at least, nm.
+SPD_MIN_COVERAGE_NM = (400.0, 700.0)
+#: A visible-range spectroradiometer's grid: start, end within, step at most, nm.
+SPD_GRID_LIMITS_NM = (200.0, 2000.0, 50.0)
+#: Negative samples allowed (meter noise): this many noise sd, plus this fraction of
+#: the peak, plus this absolute radiance.
+SPD_NEGATIVE_NOISE_SD = 6.0
+SPD_NEGATIVE_PEAK_FRACTION = 0.01
+SPD_NEGATIVE_FLOOR = 1e-6
+
+
+def spectrum_problem(spectrum: MeasuredSpectrum) -> str:
+    """What makes a decoded ``MEAS:SPD?`` reply impossible ("" if nothing): a grid
+    no visible spectroradiometer has, too short a range, absurd values, or values
+    negative beyond the meter's noise (nothing measured)."""
+    from tunespec.core.metering import meter_noise_sd
+
+    v = spectrum.values
+    wl = spectrum.wavelength_nm
+    a, b = float(wl[0]), float(wl[-1])
+    lo, hi, max_step = SPD_GRID_LIMITS_NM
+    if a < lo or b > hi or spectrum.step_nm > max_step:
+        return (
+            f"wavelengths {a:g}-{b:g} nm in steps of {spectrum.step_nm:g} nm: not a "
+            f"visible spectroradiometer's grid (within {lo:g}-{hi:g} nm, steps of at "
+            f"most {max_step:g} nm)"
+        )
+    want_a, want_b = SPD_MIN_COVERAGE_NM
+    if a > want_a or b < want_b:
+        return (
+            f"a spectrum of {a:g}-{b:g} nm ({v.size} values), expected at least "
+            f"{want_a:g}-{want_b:g} nm: cut short"
+        )
+    k = int(np.argmax(np.abs(v)))
+    if abs(v[k]) > MAX_RADIANCE:
+        return f"value {v[k]:g} at {wl[k]:g} nm: no light source is that bright"
+    peak = float(v.max())
+    if not peak > 0:
+        return "no value above zero: no light was measured"
+    allowed = (
+        SPD_NEGATIVE_NOISE_SD * meter_noise_sd(v)
+        + SPD_NEGATIVE_PEAK_FRACTION * peak
+        + SPD_NEGATIVE_FLOOR
+    )
+    k = int(np.argmin(v))
+    if v[k] < -allowed:
+        return (
+            f"value {v[k]:g} at {wl[k]:g} nm is negative beyond the meter's noise "
+            f"(at most -{allowed:.2g} here)"
+        )
+    return ""
 
 
 def _decode_status(text: str) -> dict[str, str]:

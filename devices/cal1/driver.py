@@ -45,6 +45,7 @@ from tunespec.devices.cal1.commands import (
     decode_reply,
     encode_request,
     error_info,
+    spectrum_problem,
 )
 from tunespec.devices.cal1.transport import SerialTransport, Transport
 from tunespec.devices.protocols import (
@@ -269,6 +270,16 @@ class Cal1LightSource(ClosesOnExit):
         self._ensure_identified()
         spectrum = self._exchange("measure_spd")
         assert isinstance(spectrum, MeasuredSpectrum)
+        problem = spectrum_problem(spectrum)
+        if problem:
+            v = spectrum.values
+            reply = f"{spectrum.start_nm:g},{spectrum.step_nm:g},{v.size},{v[0]:g},..."
+            exc = DeviceProtocolError(
+                f"{self._name}: impossible reply {reply} to MEAS:SPD?: {problem}. "
+                "Check the spectroradiometer (its cap, its calibration) and measure "
+                "again."
+            )
+            raise DeviceProtocolError(str(exc) + self._switch_off_after_failure(exc))
         ident = self.identity
         return Spectra(
             spectrum.wavelength_nm,

@@ -671,5 +671,7 @@ class SimCamera:
             "camera": t["camera"],
             "absolute_sensitivity_unit": t["absolute_sensitivity"].meta["unit"],
         }
-        paths[4].write_text(dumps_json(doc), encoding="utf-8")
+        from tunespec.core.atomic import atomic_write_text
+
+        atomic_write_text(paths[4], dumps_json(doc))
         return paths

@@ -225,11 +225,11 @@ def test_all_off() -> None:
 
 
 def test_measure_spd_builds_a_spectrum_with_the_long_timeout() -> None:
-    reply = b"380,5,3,1.000000e-03,2.500000e-03,0.000000e+00\n"
+    reply = b"380,50,9,1.000000e-03,2.500000e-03" + b",0.000000e+00" * 7 + b"\n"
     with FakeTransport([IDN, (b"MEAS:SPD?\n", reply)]) as fake:
         spd = make_driver(fake).measure_spd()
-    np.testing.assert_array_equal(spd.wavelength_nm, [380.0, 385.0, 390.0])
-    np.testing.assert_array_equal(spd.values, [[1e-3, 2.5e-3, 0.0]])
+    np.testing.assert_array_equal(spd.wavelength_nm, np.arange(380.0, 781.0, 50.0))
+    np.testing.assert_array_equal(spd.values, [[1e-3, 2.5e-3, *[0.0] * 7]])
     assert spd.names == ("measured",)
     assert spd.meta["unit"] == "W sr^-1 m^-2 nm^-1"
     assert spd.meta["device"] == "Image Engineering CAL1 SN042"

@@ -43,6 +43,7 @@ from tunespec.app.pipeline.folder import (
     EstimateResult,
     ExportResult,
     MeasurementFolder,
+    measurement_reference,
     read_calibration,
     read_capture_warnings,
     read_estimate,
@@ -301,8 +302,15 @@ class Measurement(QObject):
         self.capture_options = CaptureOptions.from_dict(doc.get("capture", {}))
         self.method = doc.get("method", self.method)
         self.threshold = float(doc.get("threshold_rgb_mean", self.threshold))
+        # a reference outside the folder only from a measurement made or opened on
+        # this computer before, or the operator's own last choice
         ref = doc.get("reference_path")
-        self.reference_path = Path(ref) if ref else None
+        known = str(folder.resolve()) in self.settings.get("session/recent").split("\n")
+        self.reference_path = measurement_reference(
+            MeasurementFolder(folder),
+            ref,
+            allowed=ref if known else self.settings.get("estimate/reference_path"),
+        )
         self.forget_all()
         self.settings.remember_measurement(folder)
         self.folder_changed.emit(folder)
