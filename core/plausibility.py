@@ -11,12 +11,15 @@ bad value in a file (a typo, mixed units) cannot be overridden: the file is wron
 The checks and the quantities they rest on:
 
 - **Units of a reflectance file** (:func:`reflectance_unit`): percent or factor 0..1,
-  decided by the 90th percentile of all values (a single typo cannot change it); one
-  value that breaks the unit found is refused with its line and column.
+  decided spectrum by spectrum (:func:`percent_spectra`: a single typo cannot
+  change it); one value that breaks the unit found is refused with its line and
+  column, percent spectra among factor ones too. (Factor spectra among percent ones
+  read as blacks below 1 %, which charts have: the calibration's fit shows them.)
 - **Wavelength coverage** (:func:`check_coverage`): Eq. 1 integrates over the
   visible range; a step needs its inputs to cover :data:`NEEDED_RANGE_NM`.
-- **Calibration grid** (:func:`check_calibration_grid`): coarser than
-  :data:`~tunespec.core.spectra.CALIBRATION_MAX_STEP_NM` misplaces LED light.
+- **Calibration grid** (:func:`calibration_grid_warning`): coarser than
+  :data:`~tunespec.core.spectra.CALIBRATION_MAX_STEP_NM` misplaces LED light (a
+  warning: a coarse grid is a valid, faster choice).
 - **Prior size** (:func:`check_prior_size`): the Wiener prior's covariance (Eq. 5)
   has rank ``n - 1``; reflectance spectra need about six dimensions.
 - **Responses** (:func:`check_responses`): a mean response below a few noise
@@ -46,6 +49,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tunespec.core.errors import InputError
+from tunespec.core.responses import Responses
+from tunespec.core.spectra import Spectra
 
 __all__ = [
     "FRACTION_PERCENTILE",
@@ -58,23 +63,26 @@ __all__ = [
     "SIGNAL_RANGE",
     "Checks",
     "Implausible",
+    "calibration_fit_warning",
+    "calibration_grid_warning",
     "check_absolute_sensitivities",
-    "check_calibration_grid",
     "check_coverage",
+    "check_estimate_inputs",
     "check_prior_size",
     "check_responses",
     "check_signal_scale",
     "check_spd_shift",
+    "percent_spectra",
     "reflectance_unit",
+    "white_response",
 ]
 
 #: The wavelength range (nm) every step needs its spectral inputs to cover: Eq. 1
 #: over the visible range, and CIE colorimetry (ASTM E308 accepts 400-700 nm).
 NEEDED_RANGE_NM = (400.0, 700.0)
-#: The percentile of a reflectance file's values that decides its unit (percent if
-#: above :data:`PERCENT_BULK`): one typo, or a few fluorescent values, cannot move it.
+#: The percentile of a reflectance file's values its messages quote.
 FRACTION_PERCENTILE = 90.0
-#: The bulk of a factor file lies below this; of a percent file far above it.
+#: A factor spectrum has its median below this; a percent one far above it.
 PERCENT_BULK = 1.5
 #: Largest reflectance factor of a non-fluorescent surface (a little above 1 for
 #: measurement noise); above it a value is either fluorescence (a smooth band) or a
@@ -95,11 +103,13 @@ NEGATIVE_FLOOR = 0.002
 MAX_SATURATED_SHARE = 0.2
 #: The brightest patch's response under a light, as a fraction of what a perfect
 #: white gives by Eq. 1 (median over the lights): below ``SIGNAL_RANGE[0]`` nothing
-#: in the sample reflects more than 1 %, above ``SIGNAL_RANGE[1]`` the sample
+#: in the sample reflects more than 2 %, above ``SIGNAL_RANGE[1]`` the sample
 #: reflects more than a white (a scale mistake in one of the three inputs). One
-#: light off the others by more than :data:`SIGNAL_SPREAD` is named.
-SIGNAL_RANGE = (0.01, 1.5)
-SIGNAL_SPREAD = 5.0
+#: light off the others by more than :data:`SIGNAL_SPREAD` is named (the demo's
+#: lights agree within 15 %). A scale mistake that makes the sample look darker,
+#: but not below 2 %, cannot be told from a darker sample.
+SIGNAL_RANGE = (0.02, 1.5)
+SIGNAL_SPREAD = 2.0
 
 
 class Implausible(InputError):
@@ -155,6 +165,28 @@ class Checks:
 
 
 # -- units of a reflectance file ---------------------------------------------------
+def percent_spectra(
+    values: NDArray[np.float64],
+) -> tuple[bool, NDArray[np.bool_], NDArray[np.bool_]]:
+    """Whether reflectance data are in percent, judged spectrum by spectrum.
+
+    A spectrum whose median exceeds :data:`PERCENT_BULK` is percent (no factor
+    spectrum has most of its values above 1.5); one whose largest value is at most
+    :data:`MAX_PLAUSIBLE_FRACTION` fits factors (or a percent black below 1 %). The
+    data are percent when the first outnumber the second: a single typed value
+    moves neither count, and a chart's few blacks do not outvote its patches.
+
+    Returns ``(percent, percent_like, factor_like)`` (the last two per spectrum).
+    """
+    v = np.atleast_2d(np.asarray(values, dtype=np.float64))
+    percent_like = np.median(v, axis=1) > PERCENT_BULK
+    factor_like = v.max(axis=1, initial=0.0) <= MAX_PLAUSIBLE_FRACTION
+    percent = bool(percent_like.any()) and int(percent_like.sum()) >= int(
+        factor_like.sum()
+    )
+    return percent, percent_like, factor_like
+
+
 def reflectance_unit(
     values: NDArray[np.float64],
     names: Sequence[str],
@@ -166,63 +198,47 @@ def reflectance_unit(
 ) -> float:
     """What a reflectance file's values are divided by: 100 (percent) or 1.
 
-    The unit is decided by the :data:`FRACTION_PERCENTILE` th percentile of all
-    values, or taken from the file (``declared_percent``: CGATS ``SPEC_nnn`` fields
-    are percent), and then checked against the bulk.
+    The unit is decided spectrum by spectrum (:func:`percent_spectra`), or taken
+    from the file (``declared_percent``: CGATS ``SPEC_nnn`` fields are percent) and
+    checked against the values.
 
     Raises
     ------
     InputError
         A value that breaks the unit (a spike above :data:`MAX_PLAUSIBLE_FRACTION`,
         or above :data:`MAX_FLUORESCENT_FRACTION`), named by line and column when
-        ``locate(spectrum, wavelength_index)`` can say; a spectrum in the other
-        unit (mixed percent and fractions); a declared unit the values contradict.
+        ``locate(spectrum, wavelength_index)`` can say; spectra in percent among
+        more in factors (mixed units); a declared unit the values contradict.
     """
     v = np.asarray(values, dtype=np.float64)
     if v.size == 0:
         return 1.0
+    percent, percent_like, factor_like = percent_spectra(v)
     bulk = float(np.percentile(v, FRACTION_PERCENTILE))
-    percent = bulk > PERCENT_BULK
-    if declared_percent is not None:
-        if declared_percent and not percent and bulk > 0:
+    if declared_percent:
+        if bool(factor_like.all()):
             raise InputError(
-                f"spectral fields in percent by the format, but 90 % of the values are "
-                f"at most {bulk:.3g} ({bulk:.3g} %, darker than any black): factors "
-                "0..1 written as percent? write them x100",
+                "spectral fields in percent by the format, but every value is at "
+                f"most {float(v.max()):.3g} (below {100 * MAX_PLAUSIBLE_FRACTION / 100:g} "
+                "%, darker than any black): factors 0..1 written as percent? write "
+                "them x100",
                 path=source,
             )
-        percent = declared_percent
-    scale = 100.0 if percent else 1.0
-    f = v / scale
-    _check_mixed(f, names, percent, bulk, source)
-    if bulk / scale <= MAX_PLAUSIBLE_FRACTION:  # else the whole file is out of range
-        _check_spikes(f, names, wavelength_nm, percent, bulk, source, locate)
-    return scale
-
-
-def _check_mixed(
-    f: NDArray[np.float64],
-    names: Sequence[str],
-    percent: bool,
-    bulk: float,
-    source: str | None,
-) -> None:
-    """A spectrum in percent in a file of factors (its median above
-    :data:`PERCENT_BULK`). The other way round cannot be told from the values: a
-    spectrum of factors in a percent file reads as a black below 1 % (the SG's own
-    blacks are), and the calibration's fit (Table 1) shows it."""
-    if percent:
-        return
-    odd = np.median(f, axis=1) > PERCENT_BULK
-    if np.any(odd):
-        bad = [names[k] for k in np.flatnonzero(odd)]
+        percent = True
+    elif percent_like.any() and not percent:
+        bad = [names[k] for k in np.flatnonzero(percent_like)]
         raise InputError(
             f"mixed units: {len(bad)} spectrum(s) ({', '.join(bad[:5])}"
-            f"{' ...' if len(bad) > 5 else ''}) look like percent in a file of "
-            f"factors 0..1 (90 % of its values at most {bulk:.3g}); write every "
-            "spectrum in one unit",
+            f"{' ...' if len(bad) > 5 else ''}) look like percent (median above "
+            f"{PERCENT_BULK:g}) among {int(factor_like.sum())} in factors 0..1 (at "
+            f"most {MAX_PLAUSIBLE_FRACTION:g}); write every spectrum in one unit",
             path=source,
         )
+    scale = 100.0 if percent else 1.0
+    f = v / scale
+    if float(np.median(f)) <= MAX_PLAUSIBLE_FRACTION:  # else all out of range
+        _check_spikes(f, names, wavelength_nm, percent, bulk, source, locate)
+    return scale
 
 
 def _check_spikes(
@@ -297,16 +313,18 @@ def check_coverage(
         )
 
 
-def check_calibration_grid(step_nm: float, max_step_nm: float) -> None:
-    """A calibration grid no coarser than ``max_step_nm``."""
-    if step_nm > max_step_nm + 1e-9:
-        raise Implausible(
-            "grid",
-            f"--grid step {step_nm:g} nm is {step_nm / max_step_nm:.3g}x coarser than "
-            f"calibration needs (at most {max_step_nm:g} nm: coarser steps misplace "
-            "light inside each LED's band, Table 1 several times worse); give a "
-            f"{max_step_nm:g} nm step or leave --grid out",
-        )
+def calibration_grid_warning(step_nm: float, max_step_nm: float) -> str:
+    """A warning line for a calibration grid coarser than ``max_step_nm`` (given
+    with ``--grid``), else ``""``. A warning, not a refusal: a coarse grid is a
+    valid (faster) choice with a known cost."""
+    if step_nm <= max_step_nm + 1e-9:
+        return ""
+    return (
+        f"--grid step {step_nm:g} nm is {step_nm / max_step_nm:.3g}x coarser than "
+        f"calibration needs (at most {max_step_nm:g} nm: coarser steps misplace "
+        "light inside each LED's band and Table 1 gets several times worse); give a "
+        f"{max_step_nm:g} nm step or leave --grid out"
+    )
 
 
 def check_prior_size(n_spectra: int, path: object = None) -> None:
@@ -433,3 +451,65 @@ def check_absolute_sensitivities(values: NDArray[np.float64], path: object) -> N
             "'tunespec calibrate' wrote",
             path=str(path),
         )
+
+
+def white_response(illuminants: Spectra, sensitivity: Spectra) -> NDArray[np.float64]:
+    """Eq. 1 for a perfect white (reflectance 1) under each light, (n_i, 3).
+
+    ``illuminants`` and ``sensitivity`` on one grid (as
+    :func:`tunespec.core.wiener.on_integration_grid` gives them)."""
+    from tunespec.core.forward_model import render_rgb
+
+    ones = np.ones((1, illuminants.wavelength_nm.size))
+    return render_rgb(
+        ones, illuminants.values, sensitivity.values, illuminants.step_nm
+    )[0]
+
+
+def check_estimate_inputs(
+    checks: Checks,
+    responses: Responses,
+    illuminants: Spectra,
+    sensitivity: Spectra,
+    *,
+    responses_path: object = None,
+) -> None:
+    """The checks of a reflectance estimate (Eq. 5-6) on its inputs: responses
+    (:func:`check_responses`) and their scale against Eq. 1
+    (:func:`check_signal_scale`). ``illuminants`` (named as the responses'
+    lights) and ``sensitivity`` on one grid."""
+    checks(
+        check_responses,
+        responses.rgb,
+        responses.patches,
+        responses.illuminants,
+        rgb_std=responses.rgb_std,
+        saturated=responses.saturated,
+        path=responses_path,
+    )
+    lights = illuminants.select(list(responses.illuminants))
+    checks(
+        check_signal_scale,
+        responses.rgb,
+        white_response(lights, sensitivity),
+        responses.illuminants,
+    )
+
+
+#: Table 1's mean RGB RMS over the mean response above which a calibration's fit is
+#: suspect (the demo: 0.2 %).
+MAX_FIT_RMS_SHARE = 0.05
+
+
+def calibration_fit_warning(rgb_rms_mean: float, rgb: NDArray[np.float64]) -> str:
+    """A warning line when the calibration's fit (Table 1) is poor for its signal,
+    else ``""``: a chart file that does not match the chart photographed (another
+    chart, patches in another order, a unit mistake) fits no sensitivities."""
+    level = float(np.mean(np.abs(rgb)))
+    if level <= 0 or rgb_rms_mean <= MAX_FIT_RMS_SHARE * level:
+        return ""
+    return (
+        f"Table 1's mean RGB RMS {rgb_rms_mean:.3g} is {rgb_rms_mean / level:.0%} of "
+        f"the mean response (a good fit: under {MAX_FIT_RMS_SHARE:.0%}): does "
+        "--reflectances match the chart photographed (patch names, order, units)?"
+    )

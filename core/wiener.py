@@ -468,7 +468,7 @@ def _noise_variance(
     if noise_std is not None:
         level = float(noise_std)
         if not (np.isfinite(level) and level >= 0.0):
-            raise InputError(f"noise_std={noise_std!r}: expected a finite value >= 0")
+            raise InputError(f"--noise-std {noise_std!r}: expected a finite value >= 0")
         var = np.full(shape, level**2)
     elif responses.rgb_std is not None:
         _check_responses_finite(responses, responses.rgb_std, "rgb_std")
@@ -482,7 +482,7 @@ def _noise_variance(
     else:
         raise InputError(
             "no noise level: the responses carry no per-pixel standard deviations "
-            "(R_std, G_std, B_std); pass noise_std=..."
+            "(R_std, G_std, B_std); give one level with --noise-std"
         )
     if noise_from == "mean":
         n_pix = responses.n_pixels

@@ -445,9 +445,9 @@ class CgatsTable:
         scale
             What the file's values are divided by: 100 for percent, 1 for factors.
             ``None`` decides: Argyll's ``SPEC_nnn`` fields are percent (``spec2cie``
-            normalises by 100), other names are percent when the bulk of the values
-            (90th percentile) exceeds 1.5, so that one typo cannot decide the unit
-            (:func:`tunespec.core.plausibility.reflectance_unit` checks the rest).
+            normalises by 100), other names are percent when most spectra have
+            their median above 1.5, so that one typo cannot decide the unit
+            (:func:`tunespec.core.plausibility.percent_spectra`).
             Percent text is converted exactly (decimal point moved), so a spectrum
             written by :func:`ti3_table` reads back bit for bit.
 
@@ -472,11 +472,11 @@ class CgatsTable:
             if all(f.upper().startswith("SPEC_") for f, _ in spec):
                 scale, declared = 100.0, True
             else:
-                from tunespec.core.plausibility import FRACTION_PERCENTILE, PERCENT_BULK
+                from tunespec.core.plausibility import percent_spectra
 
-                raw = [float(r[j]) for r in self.rows for j in idx]
-                bulk = float(np.percentile(raw, FRACTION_PERCENTILE)) if raw else 0.0
-                scale = 100.0 if bulk > PERCENT_BULK else 1.0
+                raw = [[float(r[j]) for j in idx] for r in self.rows]
+                percent = bool(raw) and percent_spectra(np.array(raw))[0]
+                scale = 100.0 if percent else 1.0
         if scale == 100.0:
             values = [[_from_percent(r[j]) for j in idx] for r in self.rows]
         else:

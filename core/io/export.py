@@ -153,6 +153,8 @@ def write_sensitivity_meta(
     }
     if "led_correction" in sensitivity.meta:
         doc["led_correction"] = json.loads(sensitivity.meta["led_correction"])
+    if "forced" in sensitivity.meta:  # plausibility checks overridden (--force)
+        doc["forced"] = json.loads(sensitivity.meta["forced"])
     if covariance is not None:
         doc["covariance"] = {
             "parameters": "s_R, s_G, s_B at wavelength_nm, then log gain and "

@@ -13,9 +13,9 @@ whatever the file is called. Each *kind* of data then gets its own checks:
 
 ``reflectance``
     factors 0..1; a file in percent is detected (CGATS ``SPEC_nnn`` fields are
-    percent by definition; anything else is percent when the bulk of its values,
-    the 90th percentile, exceeds 1.5, which no reflectance factor of a
-    non-fluorescent surface does) and divided by 100, and ``meta["note"]`` says so
+    percent by definition; anything else is percent when most of its spectra have
+    their median above 1.5, which no reflectance factor of a non-fluorescent
+    surface has) and divided by 100, and ``meta["note"]`` says so
     for the command to report. A value that breaks the unit (a typo such as 3.0 in
     a file of factors) or a spectrum in the other unit is refused with its line
     (:mod:`tunespec.core.plausibility`).
@@ -197,7 +197,7 @@ def to_reflectance_factor(
         values above :data:`~tunespec.core.limits.MAX_REFLECTANCE` after the
         conversion.
     """
-    from tunespec.core.plausibility import PERCENT_BULK, reflectance_unit
+    from tunespec.core.plausibility import reflectance_unit
 
     meta = dict(spectra.meta)
     given = float(meta.get("spectral_scale", "1") or 1)
@@ -217,7 +217,7 @@ def to_reflectance_factor(
         meta["spectral_scale"] = "100"
         meta["note"] = (
             f"reflectances in percent (largest value {float(raw.max()):.4g}, 90 % of "
-            f"the values up to {bulk:.4g}, above {PERCENT_BULK:g}): divided by 100"
+            f"the values up to {bulk:.4g}): divided by 100"
         )
     elif scale == 100.0:
         meta["spectral_scale"] = "100"
