@@ -355,7 +355,7 @@ def _case(inputs: Inputs, rng: random.Random, d: Path) -> tuple[str, str, list[s
                               resp.n_pixels, s)  # fmt: skip
 
         p = edited_responses(x.responses, d / "r.csv", sat)
-        return f"{share:.0%} saturated", "estimate", ["--responses", p, *est[2:]]
+        return f"saturated share {share:.0%}", "estimate", ["--responses", p, *est[2:]]
     if kind == 8:
         what = rng.choice(["side file", "prior 3", "spd shift", "cgats sens", "swap"])
         if what == "side file":
@@ -509,6 +509,16 @@ def classify(inputs: Inputs, command: str, argv: list[str], d: Path,
     return "accepted", ""
 
 
+def family(label: str) -> str:
+    """A case's mutation without its numbers (``"prior 450-650 nm"`` -> ``"prior
+    range"``), for the counts."""
+    import re
+
+    out = re.sub(r" ?-?[\d.]+(e[-+]?\d+)?-[\d.]+ nm", " range", label)
+    out = re.sub(r" x?-?[\d./]+(e[-+]?\d+)?%?", "", out)
+    return out.strip()
+
+
 def fuzz_semantic(
     n_cases: int,
     *,
@@ -535,7 +545,7 @@ def fuzz_semantic(
             label, command, argv = _case(inputs, rng, d)
             outcome, detail = classify(inputs, command, argv, d, time_limit_s)
             counts[outcome] += 1
-            counts[f"{label.split(' x')[0]}:{outcome}"] += 1
+            counts[f"{family(label)}:{outcome}"] += 1
             if outcome in BUGS:
                 bugs.append((i, label, outcome, detail))
             if report is not None and (i + 1) % 500 == 0:
