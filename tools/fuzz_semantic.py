@@ -412,11 +412,8 @@ def _case(inputs: Inputs, rng: random.Random, d: Path) -> tuple[str, str, list[s
             p = truncated_spectra(x.chart, d / "c.csv", lo, hi, "reflectance")
             return f"chart {lo}-{hi} nm", "calibrate", [*cal[:4], "--reflectances", p]
         if what == "hold":
-            return (
-                "--hold-out-every 0/1/-3",
-                "calibrate",
-                [*cal, "--hold-out-every", rng.choice([0, 1, -3])],
-            )
+            n = rng.choice([0, 1, -3])
+            return f"--hold-out-every {n}", "calibrate", [*cal, "--hold-out-every", n]
         if what == "saturated":
             p = edited_responses(x.chart_responses, d / "cr.csv", lambda r: type(r)(
                 r.patches, r.illuminants, r.rgb, r.rgb_std, r.n_pixels,
