@@ -358,3 +358,13 @@ def test_the_demos_files_give_no_warning(tmp_path, capsys) -> None:
     assert code == 0 and lines == [], lines
     code, lines = _run([*_est(x), "-o", str(tmp_path / "e.csv")], capsys)
     assert code == 0 and lines == [], lines
+
+
+def test_config_force_key_is_checked() -> None:
+    """``force = true`` (top level of run.toml) is the configuration's --force."""
+    from tunespec.app.pipeline.plan import check_config
+    from tunespec.core.errors import InputError
+
+    check_config({"force": True})
+    with pytest.raises(InputError, match="force: expected true or false"):
+        check_config({"force": "yes"})

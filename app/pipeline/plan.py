@@ -131,6 +131,10 @@ class Plan:
     input_files
         The files the plan was read from (configuration, layouts, spectra): the
         report lists them with their SHA-256.
+    force
+        Accept inputs the plausibility checks refuse (``force = true``, a top-level
+        key of the configuration; :mod:`tunespec.core.plausibility`): each override
+        is listed in the estimate's warnings.
     chart_choice
         Charts (keys of :data:`tunespec.app.pipeline.chart_choice.CHARTS`) each
         calibrated on a fresh simulated bench of the same seed for the report's
@@ -161,6 +165,7 @@ class Plan:
     scheduler: str | None = None
     input_files: tuple[Path, ...] = ()
     chart_choice: tuple[str, ...] = ()
+    force: bool = False
 
 
 #: The charts ``tunespec demo`` compares for the report (24 vs 140 patches).
@@ -236,6 +241,7 @@ def load_config(path: str | PathLike[str]) -> dict[str, Any]:
     known = {
         "out": None,
         "scheduler": None,
+        "force": None,
         "bench": {"light", "camera", "resolution", "seed"},
         "capture": {"exposure", "brackets", "repeats", "darks", "iso"},
         "chart": {"layout", "reflectances"},
@@ -348,6 +354,7 @@ def plan_from_config(config: Mapping[str, Any] | str | PathLike[str]) -> Plan:
         report=cfg.get("export", {}).get("report", True),
         images=cfg.get("export", {}).get("images", False),
         scheduler=cfg.get("scheduler"),
+        force=cfg.get("force", False),
         input_files=tuple(
             p
             for p in (
@@ -478,6 +485,10 @@ def check_config(cfg: Mapping[str, Any]) -> None:
                 f"export.{key}: expected true or false, got {shown(flag)}", path=src
             )
     check_scheduler(cfg.get("scheduler"), "scheduler", path=src)
+    if not isinstance(cfg.get("force", False), bool):
+        raise InputError(
+            f"force: expected true or false, got {shown(cfg.get('force'))}", path=src
+        )
 
 
 #: A ``dask.distributed`` scheduler's address: ``tcp://HOST:PORT`` (or ``tls://``,
