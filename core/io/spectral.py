@@ -292,6 +292,11 @@ def _as_sensitivity(spectra: Spectra, source: str) -> Spectra:
         wl, values = wl[keep], values[:, keep]
     if meta.get("units") == "relative":
         meta["relative"] = "1"
+    if meta.get("spectral_scale") == "100":
+        meta["note"] = (
+            "sensitivities in CGATS SPEC_ fields, percent by the format: divided by "
+            "100 (estimate checks the result against the responses)"
+        )
     return Spectra(wl, values, ("R", "G", "B"), meta)
 
 
