@@ -430,12 +430,19 @@ def check_signal_scale(
     off = (ratio > median * SIGNAL_SPREAD) | (ratio < median / SIGNAL_SPREAD)
     if np.any(off):
         k = int(np.argmax(np.abs(np.log(ratio / median))))
+        n_off = int(np.sum(off))
+        cause = (
+            "its spectrum in --illuminants is on another scale, or its responses are "
+            "not its own"
+            if n_off < 3
+            else "the lights of --illuminants, the responses' lights or the "
+            "sensitivities' channels do not match each other (another order?)"
+        )
         raise Implausible(
             "signal",
             f"light {names[k]}: its responses are {ratio[k] / median:.3g}x those the "
-            f"other lights' give against Eq. 1 ({int(np.sum(off))} light(s) off by "
-            f"more than {SIGNAL_SPREAD:g}x): its spectrum in --illuminants is on "
-            "another scale, or its responses are not its own",
+            f"other lights' give against Eq. 1 ({n_off} light(s) off by more than "
+            f"{SIGNAL_SPREAD:g}x): {cause}",
         )
     return median
 

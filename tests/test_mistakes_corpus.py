@@ -115,6 +115,15 @@ def _shuffled_chart(x, d):
     return _cal(x, reflectances=d / "other_chart.csv", method="pca")
 
 
+def _rewritten(src, dst, change):
+    """``src``'s spectra with ``(wavelength_nm, values) = change(...)``; a
+    sensitivities file keeps its side file."""
+    s = read_spectral(src)
+    w, v = change(s.wavelength_nm, s.values)
+    write_spectra_csv(Spectra(w, v, s.names, {}), dst)
+    return fs.with_side_file(src, dst)
+
+
 def _copy(src, dst):
     shutil.copyfile(src, dst)
     return dst
@@ -232,6 +241,28 @@ CASES: list[tuple[str, Callable, str, str]] = [
         x, prior=x.sensitivities), "refused", "in a file of fractions"),
     ("--reflectances given the sample's reference", lambda x, d: _cal(
         x, reflectances=x.reference), "refused", "not columns here"),
+    ("sensitivities' R and B swapped", lambda x, d: _est(x, sensitivities=_rewritten(
+        x.sensitivities, d / "s.csv", lambda w, v: (w, v[::-1]))), "refused",
+     "do not match each other"),
+    ("responses' R and B swapped", lambda x, d: _est(x, responses=fs.edited_responses(
+        x.responses, d / "r.csv", lambda r: type(r)(
+            r.patches, r.illuminants, r.rgb[..., ::-1], r.rgb_std[..., ::-1],
+            r.n_pixels, r.saturated))), "refused", "do not match each other"),
+    ("illuminant columns in another order", lambda x, d: _est(x, illuminants=_rewritten(
+        x.illuminants, d / "i.csv", lambda w, v: (w, v[np.random.default_rng(0)
+                                                      .permutation(len(v))]))),
+     "refused", "do not match each other"),
+    ("illuminants 10 nm off", lambda x, d: _est(x, illuminants=_rewritten(
+        x.illuminants, d / "i.csv", lambda w, v: (w + 10, v))), "refused",
+     "off by more than 2x"),
+    ("illuminant wavelengths in um", lambda x, d: _est(x, illuminants=_rewritten(
+        x.illuminants, d / "i.csv", lambda w, v: (w / 1000, v))), "refused",
+     "0.38-0.73 nm"),
+    ("responses in 16-bit counts", lambda x, d: _est(x, responses=fs.scaled_responses(
+        x.responses, d / "r.csv", 65535.0)), "refused", "perfect white"),
+    ("responses in percent of full scale", lambda x, d: _est(
+        x, responses=fs.scaled_responses(x.responses, d / "r.csv", 100.0)), "refused",
+     "x100?"),
     ("another chart under the same names", _shuffled_chart, "flagged",
      "does --reflectances match"),
     # options out of range

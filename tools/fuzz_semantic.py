@@ -150,6 +150,8 @@ def mean_de00(estimated: Path, reference: Path) -> float:
     ref = read_spectral(reference, kind="reflectance")
     grid = Grid(400.0, 700.0, 5.0)
     names = [n for n in ref.names if n in est.names]
+    if not names:  # another target's patches: nothing to compare with
+        return 0.0
     stats = reflectance_stats(est.select(names).resample(grid),
                               ref.select(names).resample(grid))  # fmt: skip
     return float(stats.as_dict()["average"]["delta_e00"])
