@@ -923,7 +923,7 @@ def _usable_channels(
                 )
             raise InputError(
                 f"channel {c}: frames missing or marked bad; resume the capture "
-                "(tunespec capture ... --resume) or pass allow_incomplete",
+                "(tunespec capture ... --resume) or pass --allow-incomplete to leave it out",
                 path=session.manifest_path,
             )
     if dark_missing and not allow_incomplete:

@@ -469,7 +469,7 @@ def _noise_variance(
         level = float(noise_std)
         if not (np.isfinite(level) and 0.0 <= level <= 1e6):  # level**2 stays finite
             raise InputError(
-                f"noise_std={noise_std!r}: expected a finite value in [0, 1e6]"
+                f"--noise-std {noise_std!r}: expected a finite value in [0, 1e6]"
             )
         var = np.full(shape, level**2)
     elif responses.rgb_std is not None:
@@ -484,7 +484,7 @@ def _noise_variance(
     else:
         raise InputError(
             "no noise level: the responses carry no per-pixel standard deviations "
-            "(R_std, G_std, B_std); pass noise_std=..."
+            "(R_std, G_std, B_std); give one level with --noise-std"
         )
     if noise_from == "mean":
         n_pix = responses.n_pixels

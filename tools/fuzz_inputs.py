@@ -776,7 +776,21 @@ def main(argv: list[str] | None = None) -> int:
         "every one)",
     )
     parser.add_argument("--time-limit", type=float, default=5.0, help="s per case")
+    parser.add_argument(
+        "--semantic",
+        action="store_true",
+        help="mutate meaning instead of syntax (tools/fuzz_semantic.py): scales, "
+        "units, typos, truncated ranges, dropped side files, swapped arguments",
+    )
+    parser.add_argument(
+        "--source",
+        choices=("sim", "demo"),
+        default="sim",
+        help="--semantic: the good files from a simulated bench or tunespec demo",
+    )
     args = parser.parse_args(argv)
+    if args.semantic:
+        return _main_semantic(args)
     kinds = (
         KINDS + COMMAND_KINDS if args.kinds == "all" else tuple(args.kinds.split(","))
     )
@@ -795,6 +809,40 @@ def main(argv: list[str] | None = None) -> int:
     print("per kind:")
     for k in kinds:
         print(f"  {k:<10} " + " ".join(f"{o}={counts[f'{k}:{o}']}" for o in OUTCOMES))
+    return 1 if bugs else 0
+
+
+def _main_semantic(args: argparse.Namespace) -> int:
+    """``--semantic``: :func:`fuzz_semantic.fuzz_semantic`, its counts printed."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from fuzz_semantic import OUTCOMES as SEMANTIC_OUTCOMES
+    from fuzz_semantic import fuzz_semantic
+
+    t0 = time.perf_counter()
+    counts, bugs = fuzz_semantic(
+        args.cases,
+        seed=args.seed,
+        source=args.source,
+        time_limit_s=max(args.time_limit, 60.0),
+        report=lambda m: print(m, file=sys.stderr),
+    )
+    wall_s = time.perf_counter() - t0
+    print(
+        f"{args.cases} semantic cases (seed {args.seed}, {args.source}) in {wall_s:.0f} s"
+    )
+    for o in SEMANTIC_OUTCOMES:
+        print(f"  {o:<15} {counts[o]}")
+    print("per mutation:")
+    labels = sorted({k.split(":")[0] for k in counts if ":" in k})
+    for label in labels:
+        row = " ".join(
+            f"{o}={counts[f'{label}:{o}']}"
+            for o in SEMANTIC_OUTCOMES
+            if counts[f"{label}:{o}"]
+        )
+        print(f"  {label:<36} {row}")
+    for i, label, outcome, detail in bugs[:20]:
+        print(f"  bug: case {i}: {label}: {outcome}: {detail[:300]}")
     return 1 if bugs else 0
 
 

@@ -197,7 +197,38 @@ def check_outputs(args: argparse.Namespace) -> None:
         value = getattr(args, attr, None)
         if value is not None:
             check_output_file(value, "--" + attr.replace("_", "-"))
+    _outputs_are_not_inputs(args)
     for attr in getattr(args, "output_dirs", ()):
         value = getattr(args, attr, None)
         if value is not None:
             check_output_dir(value, "--" + attr.replace("_", "-"))
+
+
+def _outputs_are_not_inputs(args: argparse.Namespace) -> None:
+    """An output file that is also one of the command's input files is refused
+    (``-o`` equal to ``--responses`` would overwrite the measurement)."""
+    import os
+    from pathlib import Path
+
+    from tunespec.core.errors import InputError
+
+    outputs = set(getattr(args, "output_files", ())) | set(
+        getattr(args, "output_dirs", ())
+    )
+    inputs = {
+        k: os.path.realpath(v)
+        for k, v in vars(args).items()
+        if isinstance(v, Path) and k not in outputs
+    }
+    for attr in getattr(args, "output_files", ()):
+        value = getattr(args, attr, None)
+        if value is None:
+            continue
+        real = os.path.realpath(value)
+        for k, v in inputs.items():
+            if v == real:
+                flag = "-o" if attr == "output" else "--" + attr.replace("_", "-")
+                raise InputError(
+                    f"{flag} {value} is also --{k.replace('_', '-')}: writing it would "
+                    "overwrite an input; choose another output file"
+                )

@@ -27,12 +27,14 @@ __all__ = [
     "TerminalProgress",
     "absolute_sensitivities",
     "add_bench_options",
+    "add_force_option",
     "add_grid_option",
     "add_output_options",
     "add_scheduler_option",
     "add_sensitivities_option",
     "close_progress",
     "grid_arg",
+    "plausibility_checks",
     "progress_bar",
     "resolution_arg",
     "resolve_grid",
@@ -149,6 +151,25 @@ def add_output_options(parser: argparse.ArgumentParser) -> None:
         help="print one JSON object with the numbers on stdout instead of the text "
         "(progress and notes go to stderr)",
     )
+
+
+def add_force_option(parser: argparse.ArgumentParser) -> None:
+    """``--force``: accept inputs the plausibility checks refuse
+    (:mod:`tunespec.core.plausibility`); each override is a warning and is listed in
+    the outputs' metadata (``forced``)."""
+    parser.add_argument(
+        "--force",
+        action="store_true",
+        help="accept inputs that look implausible (a scale, coverage or size "
+        "mistake); each override is warned about and recorded in the outputs",
+    )
+
+
+def plausibility_checks(args: argparse.Namespace, out: Console) -> Any:
+    """The :class:`~tunespec.core.plausibility.Checks` of a command (``--force``)."""
+    from tunespec.core.plausibility import Checks
+
+    return Checks(force=bool(getattr(args, "force", False)), warn=out.warn)
 
 
 class Console:

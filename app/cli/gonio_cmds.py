@@ -100,8 +100,11 @@ def _add_gonio_plan(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 def cmd_gonio_plan(args: argparse.Namespace) -> int:
     """Run ``gonio-plan``."""
     from tunespec.app.pipeline.gonio import GeometryStep, GonioPlan
+    from tunespec.core.limits import valid_number
     from tunespec.devices.goniometer import Geometry
 
+    valid_number(args.hdr_from, "--hdr-from", lo=0.0, hi=90.0)
+    valid_number(args.theta_i, "--theta-i", lo=0.0, hi=90.0)
     views = [(t, args.phi_r) for t in args.theta_r]
     for text in args.off_plane:
         try:
@@ -245,6 +248,11 @@ def _start_plan(args: argparse.Namespace, *, needs: tuple[str, ...] = ()) -> Non
     from tunespec.app.pipeline.gonio import GonioPlan
 
     started = (args.out / "plan.json").exists()
+    if args.resume and not started:
+        raise InputError(
+            f"--resume: no gonio session in {args.out} (no plan.json); leave --resume "
+            "out to start one"
+        )
     if started and not args.resume:
         raise InputError(
             f"{args.out} holds a gonio session already: add --resume to continue it, "

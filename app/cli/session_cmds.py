@@ -36,6 +36,15 @@ def _exposure(text: str) -> str | float:
     return value
 
 
+def _seconds(text: str) -> float:
+    """argparse type: a duration in seconds, finite and above 0 (checked before any
+    device opens)."""
+    value = _exposure(text)
+    if value == "auto" or not float(value) < 1e6:
+        raise argparse.ArgumentTypeError(f"expected seconds above 0, got {text!r}")
+    return float(value)
+
+
 def _floats(text: str) -> tuple[float, ...]:
     try:
         return tuple(float(v) for v in text.split(","))
@@ -118,7 +127,7 @@ def _add_capture(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
     )
     p.add_argument(
         "--max-exposure",
-        type=float,
+        type=_seconds,
         default=30.0,
         metavar="S",
         help="longest exposure auto may choose (30 s)",
@@ -252,9 +261,29 @@ def _print_result(out: Console, result: object, wall_s: float) -> None:
     )
 
 
+def _demo_seed_matches(args: argparse.Namespace) -> None:
+    """A demo folder is resumed with its own seed: another ``--seed`` is refused
+    (it would return the first seed's tables)."""
+    from tunespec.core.limits import read_json
+
+    truth = args.out / "truth" / "truth.json"
+    if not truth.is_file():
+        return
+    doc = read_json(truth)
+    camera = doc.get("camera") if isinstance(doc, dict) else None
+    seed = camera.get("seed") if isinstance(camera, dict) else None
+    if isinstance(seed, int) and seed != args.seed:
+        raise InputError(
+            f"{args.out} holds a demo of seed {seed}; running it again resumes that "
+            f"demo, not --seed {args.seed}: choose another --out (or --seed {seed})",
+            path=args.out,
+        )
+
+
 def cmd_demo(args: argparse.Namespace) -> int:
     from tunespec.app.pipeline.run import run_demo
 
+    _demo_seed_matches(args)
     out = Console(args)
     t0 = time.perf_counter()
     result = run_demo(

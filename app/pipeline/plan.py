@@ -132,6 +132,10 @@ class Plan:
     input_files
         The files the plan was read from (configuration, layouts, spectra): the
         report lists them with their SHA-256.
+    force
+        Accept inputs the plausibility checks refuse (``force = true``, a top-level
+        key of the configuration; :mod:`tunespec.core.plausibility`): each override
+        is listed in the estimate's warnings.
     chart_choice
         Charts (keys of :data:`tunespec.app.pipeline.chart_choice.CHARTS`) each
         calibrated on a fresh simulated bench of the same seed for the report's
@@ -162,6 +166,7 @@ class Plan:
     scheduler: str | None = None
     input_files: tuple[Path, ...] = ()
     chart_choice: tuple[str, ...] = ()
+    force: bool = False
 
 
 #: The charts ``tunespec demo`` compares for the report (24 vs 140 patches).
@@ -237,6 +242,7 @@ def load_config(path: str | PathLike[str]) -> dict[str, Any]:
     known = {
         "out": None,
         "scheduler": None,
+        "force": None,
         "bench": {"light", "camera", "resolution", "seed"},
         "capture": {"exposure", "brackets", "repeats", "darks", "iso"},
         "chart": {"layout", "reflectances"},
@@ -359,6 +365,7 @@ def plan_from_config(
         report=cfg.get("export", {}).get("report", True),
         images=cfg.get("export", {}).get("images", False),
         scheduler=scheduler if scheduler is not None else cfg.get("scheduler"),
+        force=cfg.get("force", False),
         input_files=tuple(
             p
             for p in (
@@ -566,6 +573,10 @@ def check_config(
             f"confirm it on the command line with --scheduler {address} (or "
             'set scheduler = "threads")',
             path=src,
+        )
+    if not isinstance(cfg.get("force", False), bool):
+        raise InputError(
+            f"force: expected true or false, got {shown(cfg.get('force'))}", path=src
         )
 
 

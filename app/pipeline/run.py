@@ -292,7 +292,9 @@ def _write_results(
     if plan.reference is not None:
         names = [n for n in est.reflectance.names if n in plan.reference.names]
         reference = plan.reference.select(names) if names else None
-    est_warnings = step_warnings(folder.sample_dir, sample)
+    est_warnings = step_warnings(folder.sample_dir, sample) + tuple(
+        f"accepted with force = true: {f}" for f in est.forced
+    )
     est_result = EstimateResult.from_step(
         est, sample, reference=reference, warnings=est_warnings
     )
@@ -382,6 +384,8 @@ def _estimate(
 ) -> Estimation:
     """The estimate step of ``plan`` on the processed sample (closed form: no
     progress to report)."""
+    from tunespec.core.plausibility import Checks
+
     return estimate(
         sample,
         cal.sensitivity,
@@ -389,6 +393,7 @@ def _estimate(
         reference=plan.reference,
         grid=plan.estimation_grid,
         calibration=cal.estimate,
+        checks=Checks(force=plan.force, force_hint="force = true in the configuration"),
     )
 
 

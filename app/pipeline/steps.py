@@ -57,6 +57,7 @@ from tunespec.devices.registry import Bench, sim_scene
 if TYPE_CHECKING:
     # the estimators import scipy (a third of a second): imported where they run,
     # so that loading a configuration (and failing on it) answers at once
+    from tunespec.core.plausibility import Checks
     from tunespec.core.sensitivity import SensitivityEstimate
     from tunespec.core.stats import CalibrationReport, PredictionStats
     from tunespec.core.uncertainty import ReflectanceUncertainty
@@ -115,6 +116,8 @@ class Estimation:
     wiener: WienerEstimate
     table2: ReflectanceStats | None = None
     uncertainty: ReflectanceUncertainty | None = None
+    #: Plausibility checks overridden (``force = true``), one line each.
+    forced: tuple[str, ...] = ()
 
     @property
     def reflectance(self) -> Spectra:
@@ -389,6 +392,7 @@ def estimate(
     grid: Grid = ESTIMATION_GRID,
     spd_shift_nm: float | None = None,
     calibration: SensitivityEstimate | None = None,
+    checks: Checks | None = None,
 ) -> Estimation:
     """Wiener reflectances of the sample (Eq. 5-6; prior default: the SG) and Table 2.
 
@@ -399,7 +403,10 @@ def estimate(
     its common shift; :func:`~tunespec.core.sensitivity.correct_illuminants_from_meta`).
     With ``calibration`` carrying a covariance, the standard uncertainties of the
     reflectances and their CIELAB are computed too (:mod:`tunespec.core.uncertainty`).
+    ``checks`` (default: refuse, no override) runs the plausibility checks of the
+    responses against Eq. 1 first (:func:`tunespec.core.plausibility.check_estimate_inputs`).
     """
+    from tunespec.core.plausibility import Checks, check_estimate_inputs
     from tunespec.core.sensitivity import correct_illuminants_from_meta
     from tunespec.core.uncertainty import reflectance_uncertainty
     from tunespec.core.wiener import on_integration_grid, wiener_reflectance
@@ -409,6 +416,8 @@ def estimate(
         sample.illuminants, sensitivity.meta, spd_shift_nm
     )
     illum_fine, sens_fine, _ = on_integration_grid(illuminants, sensitivity, grid)
+    checks = checks if checks is not None else Checks()
+    check_estimate_inputs(checks, sample.responses, illum_fine, sens_fine)
     est = wiener_reflectance(
         sample.responses, illum_fine, sens_fine, prior.resample(grid)
     )
@@ -418,7 +427,7 @@ def estimate(
         unc = reflectance_uncertainty(
             est, sample.responses, sample.illuminants, calibration
         )
-    return Estimation(est, table2, unc)
+    return Estimation(est, table2, unc, tuple(checks.overridden))
 
 
 def evaluate(estimated: Spectra, reference: Spectra) -> ReflectanceStats:

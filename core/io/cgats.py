@@ -446,7 +446,9 @@ class CgatsTable:
         scale
             What the file's values are divided by: 100 for percent, 1 for factors.
             ``None`` decides: Argyll's ``SPEC_nnn`` fields are percent (``spec2cie``
-            normalises by 100), other names are percent if any value exceeds 1.5.
+            normalises by 100), other names are percent when most spectra have
+            their median above 1.5, so that one typo cannot decide the unit
+            (:func:`tunespec.core.plausibility.percent_spectra`).
             Percent text is converted exactly (decimal point moved), so a spectrum
             written by :func:`ti3_table` reads back bit for bit.
 
@@ -466,17 +468,23 @@ class CgatsTable:
                 path=self.source,
             )
         idx = [self._index(f) for f, _ in spec]
+        declared = False
         if scale is None:
             if all(f.upper().startswith("SPEC_") for f, _ in spec):
-                scale = 100.0
+                scale, declared = 100.0, True
             else:
-                peak = max((float(r[j]) for r in self.rows for j in idx), default=0.0)
-                scale = 100.0 if peak > 1.5 else 1.0
+                from tunespec.core.plausibility import percent_spectra
+
+                raw = [[float(r[j]) for j in idx] for r in self.rows]
+                percent = bool(raw) and percent_spectra(np.array(raw))[0]
+                scale = 100.0 if percent else 1.0
         if scale == 100.0:
             values = [[_from_percent(r[j]) for j in idx] for r in self.rows]
         else:
             values = [[float(r[j]) / scale for j in idx] for r in self.rows]
         meta = {"spectral_scale": f"{scale:g}", "cgats_id": self.file_id}
+        if declared:
+            meta["spectral_scale_declared"] = "1"
         if self.source is not None:
             meta["source"] = self.source
         arr = np.array(values, dtype=np.float64).reshape(len(self.rows), len(idx))

@@ -155,6 +155,8 @@ def write_sensitivity_meta(
     for key in ("led_correction", "excess_variance"):
         if key in sensitivity.meta:
             doc[key] = json.loads(sensitivity.meta[key])
+    if "forced" in sensitivity.meta:  # plausibility checks overridden (--force)
+        doc["forced"] = json.loads(sensitivity.meta["forced"])
     if covariance is not None:
         doc["covariance"] = {
             "parameters": "s_R, s_G, s_B at wavelength_nm, then log gain and "

@@ -49,6 +49,16 @@ def read_responses_csv(path: str | PathLike[str]) -> Responses:
     required = ["patch", "illuminant", *CHANNELS]
     missing = [c for c in required if c not in header]
     if missing:
+        joined = " ".join(header)
+        sep = next((d for d in (";", "\t", "|") if d in joined), None)
+        if sep is not None and len(header) == 1:
+            raise InputError(
+                f"the columns are separated by {sep!r} (header "
+                f"{shown(joined[:60])}); a responses CSV uses commas: "
+                "patch,illuminant,R,G,B",
+                path=path,
+                line=header_line,
+            )
         raise InputError(
             f"missing column(s) {', '.join(missing)}; expected patch,illuminant,R,G,B",
             path=path,

@@ -13,9 +13,12 @@ whatever the file is called. Each *kind* of data then gets its own checks:
 
 ``reflectance``
     factors 0..1; a file in percent is detected (CGATS ``SPEC_nnn`` fields are
-    percent by definition; anything else is percent when its largest value exceeds
-    1.5, which no reflectance factor of a non-fluorescent surface does) and divided
-    by 100, and ``meta["note"]`` says so for the command to report.
+    percent by definition; anything else is percent when most of its spectra have
+    their median above 1.5, which no reflectance factor of a non-fluorescent
+    surface has) and divided by 100, and ``meta["note"]`` says so
+    for the command to report. A value that breaks the unit (a typo such as 3.0 in
+    a file of factors) or a spectrum in the other unit is refused with its line
+    (:mod:`tunespec.core.plausibility`).
 ``sensitivity``
     channels ``R, G, B`` (also ``red, green, blue``, any case). A rawtoaces JSON
     that TuneSpec wrote is normalised to peak 1 with the absolute scale in its
@@ -42,6 +45,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Callable
 from os import PathLike
 from pathlib import Path
 from typing import Any
@@ -68,9 +72,6 @@ __all__ = [
 
 #: The kinds of spectral data :func:`read_spectral` checks.
 KINDS = ("reflectance", "illuminant", "sensitivity", "spectra")
-
-#: Largest value of a reflectance factor in 0..1 notation; above it a file is percent.
-PERCENT_THRESHOLD = 1.5
 
 _CGATS_MARK = re.compile(r"^\s*BEGIN_DATA_FORMAT\b", re.MULTILINE)
 _SCALE_NOTE = re.compile(r"multiply by ([0-9.eE+-]+) for the absolute scale")
@@ -222,30 +223,54 @@ def _parse(
     )
 
 
-def to_reflectance_factor(spectra: Spectra, *, source: str | None = None) -> Spectra:
+def to_reflectance_factor(
+    spectra: Spectra,
+    *,
+    source: str | None = None,
+    locate: Callable[[int, int], tuple[int | None, int | None]] | None = None,
+) -> Spectra:
     """Reflectances as factors 0..1: percent detected and divided by 100.
 
-    A CGATS file says its scale (``meta["spectral_scale"]``); otherwise the data are
-    percent when their largest value exceeds :data:`PERCENT_THRESHOLD`.
-    ``meta["note"]`` reports a conversion.
+    The unit comes from the bulk of the values, never from one maximum
+    (:func:`tunespec.core.plausibility.reflectance_unit`): a CGATS file with
+    ``SPEC_nnn`` fields declares percent and is checked against its values; a
+    value that breaks the unit found (a typo) or a spectrum in the other unit is
+    refused, named by line and column where ``locate(spectrum, wavelength_index)``
+    can say. ``meta["note"]`` reports a conversion.
 
     Raises
     ------
     InputError
-        Negative values, or values above :data:`~tunespec.core.limits.MAX_REFLECTANCE`
-        after the conversion.
+        Negative values, a value or a spectrum that breaks the file's unit, or
+        values above :data:`~tunespec.core.limits.MAX_REFLECTANCE` after the
+        conversion.
     """
+    from tunespec.core.plausibility import reflectance_unit
+
     meta = dict(spectra.meta)
-    values = spectra.values
-    peak = float(values.max(initial=0.0))
-    if "spectral_scale" not in meta and peak > PERCENT_THRESHOLD:
-        values = values / 100.0
+    given = float(meta.get("spectral_scale", "1") or 1)
+    raw = spectra.values * given
+    declared = True if meta.get("spectral_scale_declared") else None
+    scale = reflectance_unit(
+        raw,
+        spectra.names,
+        spectra.wavelength_nm,
+        declared_percent=declared,
+        source=source,
+        locate=locate,
+    )
+    values = spectra.values if scale == given else raw / scale
+    if scale == 100.0 and "spectral_scale" not in meta:
+        bulk = float(np.percentile(raw, 90))
         meta["spectral_scale"] = "100"
         meta["note"] = (
-            f"reflectances in percent (largest value {peak:.4g}): divided by 100"
+            f"reflectances in percent (largest value {float(raw.max()):.4g}, 90 % of "
+            f"the values up to {bulk:.4g}): divided by 100"
         )
-    elif meta.get("spectral_scale") == "100":
+    elif scale == 100.0:
+        meta["spectral_scale"] = "100"
         meta["note"] = "reflectances in percent (CGATS): divided by 100"
+    meta.pop("spectral_scale_declared", None)
     if float(values.max(initial=0.0)) > MAX_REFLECTANCE:
         raise InputError(
             f"reflectance factor {float(values.max()):.4g} out of range (at most "
@@ -253,6 +278,39 @@ def to_reflectance_factor(spectra: Spectra, *, source: str | None = None) -> Spe
             path=source,
         )
     return Spectra(spectra.wavelength_nm, values, spectra.names, meta)
+
+
+def _locator(
+    text: str, fmt: str, spectra: Spectra
+) -> Callable[[int, int], tuple[int | None, int | None]]:
+    """``(spectrum, wavelength index) -> (line, column)`` of a value in ``text``,
+    for the messages of :func:`to_reflectance_factor` (best effort)."""
+
+    def locate(k: int, j: int) -> tuple[int | None, int | None]:
+        try:
+            if fmt == "cgats":
+                lines = text.splitlines()
+                start = next(
+                    n for n, ln in enumerate(lines) if ln.strip() == "BEGIN_DATA"
+                )
+                data = [
+                    n + 1
+                    for n in range(start + 1, len(lines))
+                    if lines[n].strip() and not lines[n].lstrip().startswith("#")
+                ]
+                return data[k], None
+            if fmt == "csv":
+                from tunespec.core.io.spectral_csv import numbered_rows
+
+                rows = numbered_rows(text)
+                if spectra.meta.get("format", "").endswith("(wavelengths down)"):
+                    return rows[1 + j][0], k + 2
+                return rows[1 + k][0], None
+        except (StopIteration, IndexError, InputError):
+            pass
+        return None, None
+
+    return locate
 
 
 def _as_sensitivity(spectra: Spectra, source: str) -> Spectra:
@@ -282,6 +340,11 @@ def _as_sensitivity(spectra: Spectra, source: str) -> Spectra:
         wl, values = wl[keep], values[:, keep]
     if meta.get("units") == "relative":
         meta["relative"] = "1"
+    if meta.get("spectral_scale") == "100":
+        meta["note"] = (
+            "sensitivities in CGATS SPEC_ fields, percent by the format: divided by "
+            "100 (estimate checks the result against the responses)"
+        )
     return Spectra(wl, values, ("R", "G", "B"), meta)
 
 
@@ -326,9 +389,12 @@ def read_spectral(
     path = Path(path)
     source = str(path)
     text = _decode(read_bytes(path))
-    spectra = _parse(text, detect_format(text), source, allow_negative, max_value)
+    fmt = detect_format(text)
+    spectra = _parse(text, fmt, source, allow_negative, max_value)
     if kind == "reflectance":
-        spectra = to_reflectance_factor(spectra, source=source)
+        spectra = to_reflectance_factor(
+            spectra, source=source, locate=_locator(text, fmt, spectra)
+        )
     elif kind == "sensitivity":
         spectra = _as_sensitivity(spectra, source)
     elif kind == "illuminant":

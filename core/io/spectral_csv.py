@@ -49,6 +49,7 @@ from tunespec.core.spectra import Spectra
 
 __all__ = [
     "is_wavelength_header",
+    "numbered_rows",
     "parse_spectra_csv",
     "write_spectra_csv",
 ]
@@ -116,10 +117,7 @@ def parse_spectra_csv(
         With the file, the line and what was expected.
     """
     path = None if source is None else str(source)
-    lines = [ln if not ln.lstrip().startswith("#") else "" for ln in text.splitlines()]
-    first = next((ln for ln in lines if ln.strip()), "")
-    delim = _delimiter(first)
-    numbered = csv_rows("\n".join(lines), path=path, delimiter=delim)
+    numbered, delim = _numbered(text, path)
     if not numbered:
         raise InputError("empty file, expected a spectral CSV", path=path)
     line0, header = numbered[0]
@@ -144,6 +142,21 @@ def parse_spectra_csv(
         path=path,
         line=line0,
     )
+
+
+def _numbered(text: str, path: str | None) -> tuple[list[tuple[int, list[str]]], str]:
+    """The rows of ``text`` with their line numbers (comments blanked), and the
+    separator."""
+    lines = [ln if not ln.lstrip().startswith("#") else "" for ln in text.splitlines()]
+    first = next((ln for ln in lines if ln.strip()), "")
+    delim = _delimiter(first)
+    return csv_rows("\n".join(lines), path=path, delimiter=delim), delim
+
+
+def numbered_rows(text: str) -> list[tuple[int, list[str]]]:
+    """``(line number, cells)`` of each row of spectral CSV text, as
+    :func:`parse_spectra_csv` reads them (for messages naming a value's line)."""
+    return _numbered(text, None)[0]
 
 
 def _check_value(

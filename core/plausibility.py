@@ -1,0 +1,522 @@
+"""Plausibility of inputs that parse: scale, units, coverage and cross-checks.
+
+:mod:`tunespec.core.limits` refuses files that cannot be read; this module refuses
+files that read well but cannot mean what they claim, before they become a confident
+wrong number (issue 24). Each check looks at the whole of the data (a distribution,
+never one maximum) or at two inputs against each other, and raises
+:class:`Implausible` with one line: what is implausible, by how much, and what to do.
+A command may let the user override a check (``--force``); the checks that name one
+bad value in a file (a typo, mixed units) cannot be overridden: the file is wrong.
+
+The checks and the quantities they rest on:
+
+- **Units of a reflectance file** (:func:`reflectance_unit`): percent or factor 0..1,
+  decided spectrum by spectrum (:func:`percent_spectra`: a single typo cannot
+  change it); one value that breaks the unit found is refused with its line and
+  column, percent spectra among factor ones too. (Factor spectra among percent ones
+  read as blacks below 1 %, which charts have: the calibration's fit shows them.)
+- **Wavelength coverage** (:func:`check_coverage`): Eq. 1 integrates over the
+  visible range; a step needs its inputs to cover :data:`NEEDED_RANGE_NM`.
+- **Calibration grid** (:func:`calibration_grid_warning`): coarser than
+  :data:`~tunespec.core.spectra.CALIBRATION_MAX_STEP_NM` misplaces LED light (a
+  warning: a coarse grid is a valid, faster choice).
+- **Prior size** (:func:`check_prior_size`): the Wiener prior's covariance (Eq. 5)
+  has rank ``n - 1``; reflectance spectra need about six dimensions.
+- **Responses** (:func:`check_responses`): a mean response below a few noise
+  standard deviations under zero, or a saturated share above
+  :data:`MAX_SATURATED_SHARE`.
+- **Expected signal** (:func:`check_signal_scale`): Eq. 1 with a perfect white
+  bounds what any non-fluorescent patch can give; the brightest patch under each
+  light must reach a plausible fraction of it (responses x100, illuminants x1e6,
+  sensitivities on another scale are caught).
+- **Relative sensitivities** (:func:`check_absolute_sensitivities`): a CSV whose
+  peak is exactly 1 is normalised, not on the calibration's absolute scale.
+- **Spectroradiometer shift** (:func:`check_spd_shift`): a few nm at most.
+
+References
+----------
+The paper (Eq. 1, 5-6); ArgyllCMS and i1Profiler refuse charts that do not match, as
+this module refuses inputs that do not match each other.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from os import PathLike
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tunespec.core.errors import InputError
+from tunespec.core.responses import Responses
+from tunespec.core.spectra import Spectra
+
+__all__ = [
+    "FRACTION_PERCENTILE",
+    "MAX_PLAUSIBLE_FRACTION",
+    "MAX_SATURATED_SHARE",
+    "MAX_SPD_SHIFT_NM",
+    "MIN_PRIOR_SPECTRA",
+    "NEEDED_RANGE_NM",
+    "NEGATIVE_SIGMAS",
+    "SIGNAL_RANGE",
+    "Checks",
+    "Implausible",
+    "calibration_fit_warning",
+    "calibration_grid_warning",
+    "check_absolute_sensitivities",
+    "check_coverage",
+    "check_estimate_inputs",
+    "check_prior_size",
+    "check_responses",
+    "check_signal_scale",
+    "check_spd_shift",
+    "percent_spectra",
+    "reflectance_unit",
+    "white_response",
+]
+
+#: The wavelength range (nm) every step needs its spectral inputs to cover: Eq. 1
+#: over the visible range, and CIE colorimetry (ASTM E308 accepts 400-700 nm).
+NEEDED_RANGE_NM = (400.0, 700.0)
+#: The percentile of a reflectance file's values its messages quote.
+FRACTION_PERCENTILE = 90.0
+#: A factor spectrum has its median below this; a percent one far above it.
+PERCENT_BULK = 1.5
+#: Largest reflectance factor of a non-fluorescent surface (a little above 1 for
+#: measurement noise); above it a value is either fluorescence (a smooth band) or a
+#: typo (a single spike).
+MAX_PLAUSIBLE_FRACTION = 1.05
+#: Largest fluorescent reflectance factor accepted (limits.MAX_REFLECTANCE says 3).
+MAX_FLUORESCENT_FRACTION = 3.0
+#: Largest spectroradiometer wavelength shift (nm) a user may ask to undo.
+MAX_SPD_SHIFT_NM = 5.0
+#: Fewest prior spectra: reflectances have about six significant dimensions and the
+#: covariance of ``n`` spectra has rank ``n - 1``.
+MIN_PRIOR_SPECTRA = 6
+#: A mean response below ``-NEGATIVE_SIGMAS`` per-pixel standard deviations (and
+#: :data:`NEGATIVE_FLOOR`) cannot come from a dark-subtracted photo.
+NEGATIVE_SIGMAS = 5.0
+NEGATIVE_FLOOR = 0.002
+#: Largest share of saturated patch/light pairs a step accepts.
+MAX_SATURATED_SHARE = 0.2
+#: The brightest patch's response under a light, as a fraction of what a perfect
+#: white gives by Eq. 1 (median over the lights): below ``SIGNAL_RANGE[0]`` nothing
+#: in the sample reflects more than 2 %, above ``SIGNAL_RANGE[1]`` the sample
+#: reflects more than a white (a scale mistake in one of the three inputs). One
+#: light off the others by more than :data:`SIGNAL_SPREAD` is named (the demo's
+#: lights agree within 15 %). A scale mistake that makes the sample look darker,
+#: but not below 2 %, cannot be told from a darker sample.
+SIGNAL_RANGE = (0.02, 1.5)
+SIGNAL_SPREAD = 2.0
+
+
+class Implausible(InputError):
+    """An input that parses but cannot be what it claims (exit 2).
+
+    ``check`` names the check (``"signal"``, ``"coverage"``, ...), for the
+    provenance of an override; the message ends with what to do.
+    """
+
+    def __init__(
+        self,
+        check: str,
+        message: str,
+        *,
+        path: str | PathLike[str] | None = None,
+        line: int | None = None,
+    ) -> None:
+        self.check = check
+        super().__init__(message, path=path, line=line)
+
+
+@dataclass
+class Checks:
+    """Run plausibility checks, honouring an override.
+
+    ``force``: an :class:`Implausible` becomes a warning (``warn``) and is recorded
+    in :attr:`overridden` (what the outputs' provenance lists); without it the
+    first one is raised. The hint of a refusal names ``force_hint`` (the CLI flag or
+    the config key).
+    """
+
+    force: bool = False
+    warn: Callable[[str], None] | None = None
+    force_hint: str = "--force"
+    overridden: list[str] = field(default_factory=list)
+
+    def __call__(
+        self, check: Callable[..., object], *args: object, **kw: object
+    ) -> None:
+        try:
+            check(*args, **kw)
+        except Implausible as exc:
+            if not self.force:
+                raise Implausible(
+                    exc.check,
+                    f"{exc.message}; {self.force_hint} to accept",
+                    path=exc.path,
+                    line=exc.line,
+                ) from None
+            self.overridden.append(str(exc))
+            if self.warn is not None:
+                self.warn(f"accepted with {self.force_hint}: {exc}")
+
+
+# -- units of a reflectance file ---------------------------------------------------
+def percent_spectra(
+    values: NDArray[np.float64],
+) -> tuple[bool, NDArray[np.bool_], NDArray[np.bool_]]:
+    """Whether reflectance data are in percent, judged spectrum by spectrum.
+
+    A spectrum whose median exceeds :data:`PERCENT_BULK` is percent (no factor
+    spectrum has most of its values above 1.5); one whose largest value is at most
+    :data:`MAX_PLAUSIBLE_FRACTION` fits factors (or a percent black below 1 %). The
+    data are percent when the first outnumber the second: a single typed value
+    moves neither count, and a chart's few blacks do not outvote its patches.
+
+    Returns ``(percent, percent_like, factor_like)`` (the last two per spectrum).
+    """
+    v = np.atleast_2d(np.asarray(values, dtype=np.float64))
+    percent_like = np.median(v, axis=1) > PERCENT_BULK
+    factor_like = v.max(axis=1, initial=0.0) <= MAX_PLAUSIBLE_FRACTION
+    percent = bool(percent_like.any()) and int(percent_like.sum()) >= int(
+        factor_like.sum()
+    )
+    return percent, percent_like, factor_like
+
+
+def reflectance_unit(
+    values: NDArray[np.float64],
+    names: Sequence[str],
+    wavelength_nm: NDArray[np.float64],
+    *,
+    declared_percent: bool | None = None,
+    source: str | None = None,
+    locate: Callable[[int, int], tuple[int | None, int | None]] | None = None,
+) -> float:
+    """What a reflectance file's values are divided by: 100 (percent) or 1.
+
+    The unit is decided spectrum by spectrum (:func:`percent_spectra`), or taken
+    from the file (``declared_percent``: CGATS ``SPEC_nnn`` fields are percent) and
+    checked against the values.
+
+    Raises
+    ------
+    InputError
+        A value that breaks the unit (a spike above :data:`MAX_PLAUSIBLE_FRACTION`,
+        or above :data:`MAX_FLUORESCENT_FRACTION`), named by line and column when
+        ``locate(spectrum, wavelength_index)`` can say; spectra in percent among
+        more in factors (mixed units); a declared unit the values contradict.
+    """
+    v = np.asarray(values, dtype=np.float64)
+    if v.size == 0:
+        return 1.0
+    percent, percent_like, factor_like = percent_spectra(v)
+    bulk = float(np.percentile(v, FRACTION_PERCENTILE))
+    if declared_percent:
+        if bool(factor_like.all()):
+            raise InputError(
+                "spectral fields in percent by the format, but every value is at "
+                f"most {float(v.max()):.3g} (below {100 * MAX_PLAUSIBLE_FRACTION / 100:g} "
+                "%, darker than any black): factors 0..1 written as percent? write "
+                "them x100",
+                path=source,
+            )
+        percent = True
+    elif percent_like.any() and not percent:
+        bad = [names[k] for k in np.flatnonzero(percent_like)]
+        raise InputError(
+            f"mixed units: {len(bad)} spectrum(s) ({', '.join(bad[:5])}"
+            f"{' ...' if len(bad) > 5 else ''}) look like percent (median above "
+            f"{PERCENT_BULK:g}) among {int(factor_like.sum())} in factors 0..1 (at "
+            f"most {MAX_PLAUSIBLE_FRACTION:g}); write every spectrum in one unit",
+            path=source,
+        )
+    scale = 100.0 if percent else 1.0
+    f = v / scale
+    if float(np.median(f)) <= MAX_PLAUSIBLE_FRACTION:  # else all out of range
+        _check_spikes(f, names, wavelength_nm, percent, bulk, source, locate)
+    return scale
+
+
+def _check_spikes(
+    f: NDArray[np.float64],
+    names: Sequence[str],
+    wavelength_nm: NDArray[np.float64],
+    percent: bool,
+    bulk: float,
+    source: str | None,
+    locate: Callable[[int, int], tuple[int | None, int | None]] | None,
+) -> None:
+    """A value above a plausible reflectance that is a lone spike (or beyond
+    fluorescence): a typo."""
+    high = f > MAX_PLAUSIBLE_FRACTION
+    if not np.any(high):
+        return
+    left = np.concatenate([f[:, :1], f[:, :-1]], axis=1)
+    right = np.concatenate([f[:, 1:], f[:, -1:]], axis=1)
+    spike = high & (np.maximum(left, right) < 0.5 * f)
+    bad = spike | (f > MAX_FLUORESCENT_FRACTION)
+    if not np.any(bad):
+        return  # a smooth band above 1: fluorescence
+    k, j = (int(x) for x in np.argwhere(bad)[0])
+    shown = f[k, j] * (100.0 if percent else 1.0)
+    unit = (
+        f"percent (0..{100 * MAX_PLAUSIBLE_FRACTION:g})"
+        if percent
+        else f"fractions (0..{MAX_PLAUSIBLE_FRACTION:g})"
+    )
+    line, column = (None, None)
+    if locate is not None:
+        line, column = locate(k, j)
+    where = f"column {column}: " if column else ""
+    more = int(np.sum(bad)) - 1
+    raise InputError(
+        f"{shown:.4g} in a file of {unit}: a typo? ({where}{names[k]} at "
+        f"{wavelength_nm[j]:g} nm; 90 % of the values are at most {bulk:.3g}"
+        f"{f'; {more} more such value(s)' if more else ''})",
+        path=source,
+        line=line,
+    )
+
+
+# -- coverage, grids, sizes --------------------------------------------------------
+def check_coverage(
+    inputs: Sequence[tuple[str, NDArray[np.float64]]],
+    step: str,
+    needed_nm: tuple[float, float] = NEEDED_RANGE_NM,
+    *,
+    grid_nm: NDArray[np.float64] | None = None,
+) -> None:
+    """Every input (a label and its wavelengths) covers ``needed_nm``, and so does
+    the working grid when given (``--grid`` narrower than the data)."""
+    lo, hi = needed_nm
+    for label, wl in inputs:
+        if wl.size and (wl[0] > lo + 1e-6 or wl[-1] < hi - 1e-6):
+            raise Implausible(
+                "coverage",
+                f"{label} covers {wl[0]:g}-{wl[-1]:g} nm; {step} needs at least "
+                f"{lo:g}-{hi:g} nm (Eq. 1 over the visible range): give data over the "
+                "whole range",
+            )
+    if (
+        grid_nm is not None
+        and grid_nm.size
+        and (grid_nm[0] > lo + 1e-6 or grid_nm[-1] < hi - 1e-6)
+    ):
+        raise Implausible(
+            "coverage",
+            f"--grid {grid_nm[0]:g}-{grid_nm[-1]:g} nm; {step} needs at least "
+            f"{lo:g}-{hi:g} nm: widen --grid",
+        )
+
+
+def calibration_grid_warning(step_nm: float, max_step_nm: float) -> str:
+    """A warning line for a calibration grid coarser than ``max_step_nm`` (given
+    with ``--grid``), else ``""``. A warning, not a refusal: a coarse grid is a
+    valid (faster) choice with a known cost."""
+    if step_nm <= max_step_nm + 1e-9:
+        return ""
+    return (
+        f"--grid step {step_nm:g} nm is {step_nm / max_step_nm:.3g}x coarser than "
+        f"calibration needs (at most {max_step_nm:g} nm: coarser steps misplace "
+        "light inside each LED's band and Table 1 gets several times worse); give a "
+        f"{max_step_nm:g} nm step or leave --grid out"
+    )
+
+
+def check_prior_size(n_spectra: int, path: object = None) -> None:
+    """Enough prior spectra for a covariance of reflectance's dimensions."""
+    if n_spectra < MIN_PRIOR_SPECTRA:
+        raise Implausible(
+            "prior",
+            f"--prior has {n_spectra} spectra; its covariance (Eq. 5) needs at least "
+            f"{MIN_PRIOR_SPECTRA} (reflectances have about six dimensions, and "
+            f"{n_spectra} spectra span {max(n_spectra - 1, 0)}): give a larger prior "
+            "or leave --prior out (the ColorChecker SG)",
+            path=None if path is None else str(path),
+        )
+
+
+def check_spd_shift(shift_nm: float | None) -> None:
+    """``--spd-shift-nm`` within what a spectroradiometer gets wrong."""
+    if shift_nm is not None and abs(shift_nm) > MAX_SPD_SHIFT_NM:
+        raise Implausible(
+            "spd_shift",
+            f"--spd-shift-nm {shift_nm:g}: a spectroradiometer's wavelength error is "
+            f"a few nm (at most {MAX_SPD_SHIFT_NM:g} accepted); give the shift in nm "
+            "or leave it out (calibrate fits it)",
+        )
+
+
+def check_responses(
+    rgb: NDArray[np.float64],
+    patches: Sequence[str],
+    illuminants: Sequence[str],
+    *,
+    rgb_std: NDArray[np.float64] | None = None,
+    saturated: NDArray[np.float64] | None = None,
+    path: object = None,
+) -> None:
+    """Responses a dark-subtracted photo can give: no mean far below zero, and not
+    mostly saturated."""
+    where = None if path is None else str(path)
+    sigma = np.zeros_like(rgb) if rgb_std is None else np.nan_to_num(rgb_std)
+    floor = -(NEGATIVE_SIGMAS * sigma + NEGATIVE_FLOOR)
+    low = rgb < floor
+    if np.any(low):
+        p, i, c = (int(x) for x in np.argwhere(low)[0])
+        raise Implausible(
+            "negative",
+            f"patch {patches[p]} under {illuminants[i]}: response "
+            f"{rgb[p, i, c]:.4g} ({'RGB'[c]}) is {NEGATIVE_SIGMAS:g} noise standard "
+            f"deviations below zero, which a dark-subtracted photo cannot give "
+            f"({int(np.sum(low))} such value(s)); check the responses file",
+            path=where,
+        )
+    if saturated is not None and saturated.size:
+        share = float(np.mean(saturated > 0))
+        if share > MAX_SATURATED_SHARE:
+            raise Implausible(
+                "saturated",
+                f"{share:.0%} of the patch/light pairs are saturated (at most "
+                f"{MAX_SATURATED_SHARE:.0%} accepted): the responses carry no "
+                "measurement there; capture again with shorter exposures",
+                path=where,
+            )
+
+
+def check_signal_scale(
+    rgb: NDArray[np.float64],
+    white: NDArray[np.float64],
+    illuminants: Sequence[str],
+    *,
+    labels: str = "--responses, --illuminants and --sensitivities",
+) -> float:
+    """The responses against Eq. 1's prediction for a perfect white.
+
+    ``rgb`` (n_p, n_i, 3); ``white`` (n_i, 3) = Eq. 1 with reflectance 1. Under each
+    light the channel with the most signal is compared: the brightest patch's
+    response over the white's. Returns the median ratio over the lights.
+    """
+    dominant = np.argmax(white, axis=1)
+    idx = np.arange(white.shape[0])
+    w = white[idx, dominant]
+    usable = w > 1e-3 * float(np.max(w, initial=0.0))
+    if not np.any(usable):
+        raise Implausible(
+            "signal",
+            f"Eq. 1 predicts no signal from {labels} (sensitivities and illuminants "
+            "do not overlap)",
+        )
+    brightest = np.max(rgb[:, idx, dominant], axis=0)
+    ratio = brightest[usable] / w[usable]
+    names = [n for n, u in zip(illuminants, usable, strict=True) if u]
+    median = float(np.median(ratio))
+    lo, hi = SIGNAL_RANGE
+    if not lo <= median <= hi:
+        factor = median if median > hi else 1.0 / max(median, 1e-300)
+        side = "more" if median > hi else "less"
+        raise Implausible(
+            "signal",
+            f"the responses are {median:.3g}x what a perfect white gives by Eq. 1 "
+            f"(brightest patch, median over {len(ratio)} lights; plausible "
+            f"{lo:g}-{hi:g}): about {factor:.3g}x {side} signal than {labels} "
+            "predict; one of them is on another scale (x100? relative "
+            "sensitivities? another exposure?)",
+        )
+    off = (ratio > median * SIGNAL_SPREAD) | (ratio < median / SIGNAL_SPREAD)
+    if np.any(off):
+        k = int(np.argmax(np.abs(np.log(ratio / median))))
+        n_off = int(np.sum(off))
+        cause = (
+            "its spectrum in --illuminants is on another scale, or its responses are "
+            "not its own"
+            if n_off < 3
+            else "the lights of --illuminants, the responses' lights or the "
+            "sensitivities' channels do not match each other (another order?)"
+        )
+        raise Implausible(
+            "signal",
+            f"light {names[k]}: its responses are {ratio[k] / median:.3g}x those the "
+            f"other lights' give against Eq. 1 ({n_off} light(s) off by more than "
+            f"{SIGNAL_SPREAD:g}x): {cause}",
+        )
+    return median
+
+
+def check_absolute_sensitivities(values: NDArray[np.float64], path: object) -> None:
+    """Sensitivities whose peak is exactly 1 are normalised (relative units)."""
+    peak = float(np.max(values, initial=0.0))
+    if abs(peak - 1.0) < 1e-9:
+        raise Implausible(
+            "relative",
+            "sensitivities normalised to peak 1 (relative units): Eq. 1 needs the "
+            "calibration's absolute scale; give the sensitivities CSV that "
+            "'tunespec calibrate' wrote",
+            path=str(path),
+        )
+
+
+def white_response(illuminants: Spectra, sensitivity: Spectra) -> NDArray[np.float64]:
+    """Eq. 1 for a perfect white (reflectance 1) under each light, (n_i, 3).
+
+    ``illuminants`` and ``sensitivity`` on one grid (as
+    :func:`tunespec.core.wiener.on_integration_grid` gives them)."""
+    from tunespec.core.forward_model import render_rgb
+
+    ones = np.ones((1, illuminants.wavelength_nm.size))
+    return render_rgb(
+        ones, illuminants.values, sensitivity.values, illuminants.step_nm
+    )[0]
+
+
+def check_estimate_inputs(
+    checks: Checks,
+    responses: Responses,
+    illuminants: Spectra,
+    sensitivity: Spectra,
+    *,
+    responses_path: object = None,
+) -> None:
+    """The checks of a reflectance estimate (Eq. 5-6) on its inputs: responses
+    (:func:`check_responses`) and their scale against Eq. 1
+    (:func:`check_signal_scale`). ``illuminants`` (named as the responses'
+    lights) and ``sensitivity`` on one grid."""
+    checks(
+        check_responses,
+        responses.rgb,
+        responses.patches,
+        responses.illuminants,
+        rgb_std=responses.rgb_std,
+        saturated=responses.saturated,
+        path=responses_path,
+    )
+    lights = illuminants.select(list(responses.illuminants))
+    checks(
+        check_signal_scale,
+        responses.rgb,
+        white_response(lights, sensitivity),
+        responses.illuminants,
+    )
+
+
+#: Table 1's mean RGB RMS over the mean response above which a calibration's fit is
+#: suspect (the demo: 0.2 %).
+MAX_FIT_RMS_SHARE = 0.05
+
+
+def calibration_fit_warning(rgb_rms_mean: float, rgb: NDArray[np.float64]) -> str:
+    """A warning line when the calibration's fit (Table 1) is poor for its signal,
+    else ``""``: a chart file that does not match the chart photographed (another
+    chart, patches in another order, a unit mistake) fits no sensitivities."""
+    level = float(np.mean(np.abs(rgb)))
+    if level <= 0 or rgb_rms_mean <= MAX_FIT_RMS_SHARE * level:
+        return ""
+    return (
+        f"Table 1's mean RGB RMS {rgb_rms_mean:.3g} is {rgb_rms_mean / level:.0%} of "
+        f"the mean response (a good fit: under {MAX_FIT_RMS_SHARE:.0%}): does "
+        "--reflectances match the chart photographed (patch names, order, units)?"
+    )
