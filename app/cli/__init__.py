@@ -20,6 +20,7 @@ from tunespec.app.cli import (
     core_cmds,
     device_cmds,
     export_cmds,
+    extract_cmds,
     gonio_cmds,
     image_cmds,
     session_cmds,
@@ -63,6 +64,7 @@ COMMAND_MODULES = (
     export_cmds,
     gonio_cmds,
     image_cmds,
+    extract_cmds,
 )
 
 
