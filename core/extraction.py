@@ -33,11 +33,13 @@ from numpy.typing import ArrayLike, NDArray
 
 from tunespec.core.errors import InputError
 from tunespec.core.io.raw import quad_mask
+from tunespec.core.responses import Responses
 
 __all__ = [
     "ExtractionCheck",
     "PatchStatistics",
     "check_extraction",
+    "check_responses",
     "outline_offset",
     "patch_statistics",
 ]
@@ -233,7 +235,7 @@ def check_extraction(
             f"outline's (limit {MAX_OUTLINE_OFFSET})"
         )
     elif not np.isfinite(outline_offset_sides):
-        notes.append("outline fit not measured (too few patch squares seen)")
+        notes.append("outline fit not measured (fewer than 4 patch squares matched)")
     if reference_xyz is None:
         notes.append("no reference data: rank, correlation and colour fit not checked")
         return ExtractionCheck(tuple(problems), metrics, tuple(notes))
@@ -264,6 +266,39 @@ def check_extraction(
     if inv:
         problems.append(f"neutral patches out of order: {', '.join(inv[:4])}")
     return ExtractionCheck(tuple(problems), metrics, tuple(notes))
+
+
+def check_responses(
+    responses: Responses,
+    illuminant: str,
+    *,
+    reference_xyz: ArrayLike | None = None,
+) -> ExtractionCheck:
+    """:func:`check_extraction` of processed responses under one illuminant.
+
+    For a session's dark-corrected, flat-fielded responses (no pixels at hand):
+    the pixel noise is not known, so the whole ROI spread counts as non-uniformity
+    (a broadband LED's frames have a noise far below the limit), and the outline
+    fit is not measured (the corner finder has its own residual).
+
+    Parameters
+    ----------
+    responses
+        With ``rgb_std`` (else the uniformity test is skipped).
+    illuminant
+        The illuminant (channel) to check: a broadband one.
+    """
+    i = responses.illuminants.index(illuminant)
+    n = len(responses.patches)
+    std = responses.rgb_std[:, i] if responses.rgb_std is not None else np.zeros((n, 3))
+    n_px = (
+        responses.n_pixels[:, i].astype(np.int64)
+        if responses.n_pixels is not None
+        else np.ones(n, dtype=np.int64)
+    )
+    sat = responses.saturated[:, i] if responses.saturated is not None else np.zeros(n)
+    stats = PatchStatistics(responses.rgb[:, i], std, np.zeros((n, 3)), n_px, n_px, sat)
+    return check_extraction(responses.patches, stats, reference_xyz=reference_xyz)
 
 
 def _neutral_inversions(

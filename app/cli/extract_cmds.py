@@ -43,6 +43,11 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="the chart's reference reflectances (any spectral format; default the "
         "layout's own) for the consistency check",
     )
+    p.add_argument(
+        "--names",
+        type=Path,
+        help="name map CSV (their name,patch) for --reflectances named otherwise",
+    )
     p.add_argument("--illuminant", help="illuminant name in the CSV (default: stem)")
     p.add_argument(
         "--save-layout",
@@ -75,37 +80,22 @@ def corners_arg(text: str) -> list[list[float]]:
     return [values[k : k + 2] for k in range(0, 8, 2)]
 
 
-def _reflectances(args: argparse.Namespace, layout: object) -> object:
-    """--reflectances, else the layout's own (None where it names none)."""
-    from tunespec.core.io.spectral import read_spectral
-
-    if args.reflectances is not None:
-        return read_spectral(args.reflectances, kind="reflectance")
-    from tunespec.devices.registry import layout_reflectances
-
-    try:
-        return layout_reflectances(layout, _layout_file(args.layout))  # type: ignore[arg-type]
-    except InputError:
-        return None
-
-
-def _layout_file(spec: str) -> Path | None:
-    p = Path(spec)
-    return p if p.is_file() else None
-
-
 def cmd_extract(args: argparse.Namespace) -> int:
-    from tunespec.app.pipeline.extract import extract_chart, write_extraction
+    from tunespec.app.pipeline.extract import (
+        extract_chart,
+        layout_reference,
+        write_extraction,
+    )
     from tunespec.core.layout import TargetLayout
 
     layout = TargetLayout.load(args.layout)
     corners = corners_arg(args.corners) if args.corners else None
-    refl = _reflectances(args, layout)
+    refl = layout_reference(layout, args.reflectances, args.layout, args.names)
     ex = extract_chart(
         args.image,
         layout,
         corners_px=corners,
-        reflectances=refl,  # type: ignore[arg-type]
+        reflectances=refl,
         illuminant=args.illuminant,
         force=args.force,
         preview=args.preview,

@@ -368,8 +368,77 @@ def write_extraction(extraction: Extraction, path: str | PathLike[str]) -> Path:
     path = Path(path)
     write_responses_csv(extraction.responses, path)
     if extraction.forced:
-        flag = "FORCED: " + extraction.check.summary().replace('"', "'")
-        lines = path.read_text(encoding="utf-8").splitlines()
-        out = [lines[0] + ",quality"] + [f'{ln},"{flag}"' for ln in lines[1:]]
-        path.write_text("\n".join(out) + "\n", encoding="utf-8")
+        flag_forced_csv(path, extraction.check)
     return path
+
+
+def flag_forced_csv(path: str | PathLike[str], check: ExtractionCheck) -> None:
+    """Add a ``quality`` column ("FORCED: <problems>") to a written responses CSV."""
+    path = Path(path)
+    flag = "FORCED: " + check.summary().replace('"', "'")
+    lines = path.read_text(encoding="utf-8").splitlines()
+    out = [lines[0] + ",quality"] + [f'{ln},"{flag}"' for ln in lines[1:]]
+    path.write_text("\n".join(out) + "\n", encoding="utf-8")
+
+
+def layout_reference_xyz(
+    layout: TargetLayout,
+    reflectances: str | PathLike[str] | None = None,
+    layout_file: str | PathLike[str] | None = None,
+    names: str | PathLike[str] | None = None,
+) -> NDArray | None:
+    """Reference XYZ for the extraction check: ``reflectances`` (a file, any
+    spectral format) or the layout's own ``meta.reflectances``; None when neither
+    gives data (the check then skips its reference tests)."""
+    refl = layout_reference(layout, reflectances, layout_file, names)
+    return reference_xyz(layout, refl)
+
+
+def layout_reference(
+    layout: TargetLayout,
+    reflectances: str | PathLike[str] | None = None,
+    layout_file: str | PathLike[str] | None = None,
+    names: str | PathLike[str] | None = None,
+) -> Spectra | None:
+    """The chart's reference reflectances: the file given (its names mapped by the
+    name map ``names``, :mod:`tunespec.core.io.name_map`), else the layout's own
+    (None when the layout names none that exists)."""
+    from tunespec.core.io.spectral import read_spectral
+
+    if reflectances is not None:
+        refl = read_spectral(reflectances, kind="reflectance")
+        if names is not None:
+            from tunespec.core.io.name_map import read_name_map, rename_spectra
+
+            refl = rename_spectra(refl, read_name_map(names), source=str(reflectances))
+        return refl
+    from tunespec.devices.registry import layout_reflectances
+
+    where = Path(layout_file) if layout_file is not None else None
+    try:
+        return layout_reflectances(
+            layout, where if where is not None and where.is_file() else None
+        )
+    except InputError:
+        return None
+
+
+def session_preview(
+    session: object, processed: object, path: str | PathLike[str]
+) -> Path:
+    """Preview PNG of a processed session: its broadband target frame, the outline
+    and the ROIs (red when the extraction check failed)."""
+    from tunespec.core.extraction import ExtractionCheck
+    from tunespec.core.io.raw import full_to_plane_px
+    from tunespec.core.io.session import frames_by_channel
+    from tunespec.core.processing import _detection_channel
+
+    targets = frames_by_channel(session.frames, "target")  # type: ignore[attr-defined]
+    names = [c for c in processed.responses.illuminants if c in targets]  # type: ignore[attr-defined]
+    channel = _detection_channel(names)
+    rec = targets[channel][0]
+    img = read_linear_image(session.path_of(rec))  # type: ignore[attr-defined]
+    layout = processed.layout  # type: ignore[attr-defined]
+    corners = full_to_plane_px(np.asarray(layout.corners_px))
+    check = processed.check or ExtractionCheck(())  # type: ignore[attr-defined]
+    return write_preview(img, layout.with_corners(None), corners, check, path)

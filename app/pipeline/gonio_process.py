@@ -118,6 +118,31 @@ def _roi_pixels(
     return out
 
 
+def _check_geometry(
+    frame: NDArray[np.float64],
+    layout: TargetLayout,
+    corners: NDArray[np.float64],
+    index: int,
+    position: Any,
+) -> None:
+    """The extraction check (ROI uniformity) of one geometry's mix frame; an
+    InputError naming the geometry when the ROIs do not sit on the patches."""
+    from tunespec.core.extraction import check_extraction, patch_statistics
+
+    stats = patch_statistics(frame, layout.with_corners(corners).roi_quads_px())
+    check = check_extraction(layout.patch_names, stats)
+    if not check.ok:
+        where = ", ".join(
+            f"{k} {position[k]:g}"
+            for k in ("theta_i", "theta_r")
+            if isinstance(position, dict) and isinstance(position.get(k), int | float)
+        )
+        raise InputError(
+            f"geometry {index + 1} ({where}): patch extraction refused: "
+            f"{check.summary()}"
+        )
+
+
 def _load(gdir: Path, name: str, k: int) -> NDArray[np.float64]:
     path = gdir / f"{name}_e{k}.npy"
     if not path.exists():
@@ -145,8 +170,9 @@ def _process_geometry(gdir: Path, index: int, plan: GonioPlan, layout: TargetLay
         except InputError:
             if k == 0:
                 raise
-    rois = _roi_pixels(layout, corners, frame.shape[1:])
     position = read_json(gdir / "position.json")
+    _check_geometry(frame, layout, corners, index, position)
+    rois = _roi_pixels(layout, corners, frame.shape[1:])
     exposures = read_json(gdir / "exposure.json")
     cos_i = math.cos(math.radians(abs(float(position["theta_i"]))))
     names = [MIX] + (leds if step.spectral else [])
