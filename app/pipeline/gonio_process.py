@@ -118,6 +118,10 @@ def _roi_pixels(
     return out
 
 
+#: The extraction check's uniformity limit at a gonio geometry (see _check_geometry).
+GONIO_MAX_EXCESS_SPREAD = 0.35
+
+
 def _check_geometry(
     frame: NDArray[np.float64],
     layout: TargetLayout,
@@ -130,7 +134,11 @@ def _check_geometry(
     from tunespec.core.extraction import check_extraction, patch_statistics
 
     stats = patch_statistics(frame, layout.with_corners(corners).roi_quads_px())
-    check = check_extraction(layout.patch_names, stats)
+    # near the specular direction a glossy patch has a gradient across it (12 % on
+    # the demo's 45/50 geometry); an ROI across a patch edge spreads far more
+    check = check_extraction(
+        layout.patch_names, stats, max_excess_spread=GONIO_MAX_EXCESS_SPREAD
+    )
     if not check.ok:
         where = ", ".join(
             f"{k} {position[k]:g}"
