@@ -159,7 +159,8 @@ class ExtractionCheck:
         ``y_correlation``, ``colour_residual``, ``neutral_inversions``,
         ``outline_offset`` (NaN where not measured).
     notes
-        Tests that could not run, and why (no reference, too few patches seen).
+        Tests that could not run, and why (no reference, too few patches seen);
+        patches wholly outside the image (a partial view of a chart).
     """
 
     problems: tuple[str, ...]
@@ -206,12 +207,17 @@ def check_extraction(
     metrics: dict[str, float | str] = {}
     mean, std, noise = stats.mean, stats.std, stats.noise
     names = list(names)
-    seen = np.all(np.isfinite(mean), axis=1)
-    partial = (stats.n_pixels < 0.9 * stats.n_expected) & (stats.n_expected > 0)
-    if (~seen).any() or partial.any():
-        out = [names[i] for i in np.nonzero(~seen | partial)[0]]
+    seen = np.all(np.isfinite(mean), axis=1) & (stats.n_pixels > 0)
+    partial = seen & (stats.n_pixels < 0.9 * stats.n_expected)
+    if partial.any():
+        out = [names[i] for i in np.nonzero(partial)[0]]
         problems.append(
             f"{len(out)} ROI(s) reach outside the image ({', '.join(out[:6])})"
+        )
+    if (~seen).any():
+        out = [names[i] for i in np.nonzero(~seen)[0]]
+        notes.append(
+            f"{len(out)} patch(es) outside the image, left out ({', '.join(out[:6])})"
         )
     if seen.sum() == 0:
         return ExtractionCheck(tuple(problems), metrics, tuple(notes))
@@ -219,8 +225,8 @@ def check_extraction(
     level = np.maximum(g, LEVEL_FLOOR * np.nanmax(g[seen]))
     noise_ok = np.where(np.isfinite(noise), noise, 0.0)
     excess = np.sqrt(np.maximum(std**2 - noise_ok**2, 0.0))
-    rel = np.nanmax(excess, axis=1) / np.where(level > 0, level, np.nan)
-    rel = np.where(seen, rel, np.nan)
+    excess = np.where(np.isfinite(excess), excess, 0.0).max(axis=1)
+    rel = np.where(seen & (level > 0), excess / np.where(level > 0, level, 1.0), np.nan)
     if np.isfinite(rel).any():
         worst = int(np.nanargmax(rel))
         metrics["worst_excess_spread"] = float(rel[worst])

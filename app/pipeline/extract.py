@@ -47,6 +47,8 @@ __all__ = [
 ]
 
 RAW_TIFF_SUFFIXES = (".tif", ".tiff")
+#: Fewest patches inside the image for a partial view to be written.
+MIN_PATCHES_SEEN = 4
 
 
 @dataclass(frozen=True, eq=False)
@@ -159,7 +161,9 @@ class Extraction:
     Parameters
     ----------
     responses
-        One illuminant (the image's name), all the layout's patches.
+        One illuminant (the image's name), the layout's patches in the image
+        (those wholly outside a partial view are left out, and listed in
+        ``check.notes``).
     layout
         The layout with ``corners_px`` in the file's pixel coordinates.
     method
@@ -298,14 +302,19 @@ def extract_chart(
             "--corners to set the outline, --force to keep it",
             path=img.path,
         )
-    n_seen = np.where(stats.n_pixels > 0, stats.n_pixels, 0)
+    # a partial view: the patches wholly outside the image are left out
+    seen = np.nonzero(stats.n_pixels > 0)[0]
+    if len(seen) < MIN_PATCHES_SEEN:
+        raise InputError(
+            f"only {len(seen)} of the chart's patches lie in the image", path=img.path
+        )
     responses = Responses(
-        layout.patch_names,
+        tuple(layout.patch_names[i] for i in seen),
         (name,),
-        np.where(np.isfinite(stats.mean), stats.mean, 0.0)[:, None, :],
-        np.where(np.isfinite(stats.std), stats.std, 0.0)[:, None, :],
-        n_seen.astype(np.float64)[:, None],
-        stats.saturated[:, None],
+        stats.mean[seen, None, :],
+        np.where(np.isfinite(stats.std), stats.std, 0.0)[seen, None, :],
+        stats.n_pixels[seen].astype(np.float64)[:, None],
+        stats.saturated[seen, None],
     )
     placed = layout.with_corners(img.to_file_px(corners))
     return Extraction(
