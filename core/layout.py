@@ -41,7 +41,13 @@ from tunespec.core.atomic import atomic_write_text
 from tunespec.core.errors import InputError, read_json
 from tunespec.core.limits import dumps_json, valid_name, valid_number
 
-__all__ = ["PatchGrid", "TargetLayout", "apply_homography", "homography_from_corners"]
+__all__ = [
+    "PatchGrid",
+    "TargetLayout",
+    "apply_homography",
+    "homography_from_corners",
+    "shipped_layout_names",
+]
 
 LAYOUT_VERSION = 2
 #: Limits of a layout file: patches per side and in all, sizes in mm, corners in px.
@@ -358,11 +364,48 @@ class TargetLayout:
 
     @classmethod
     def load(cls, path: str | PathLike[str]) -> TargetLayout:
-        path = Path(path)
+        """A layout from a file: TuneSpec JSON, an ArgyllCMS ``.cht`` template, or
+        the stem of a shipped layout (``"colorchecker_24"``).
+
+        A name with no folder and no suffix that is not a file here is looked up in
+        the shipped ``resources/layouts``; a ``.cht`` file is read as an Argyll
+        template (:func:`tunespec.core.io.cht.read_cht`).
+        """
+        path = _shipped_layout(path)
+        if path.suffix.lower() == ".cht":
+            from tunespec.core.io.cht import read_cht
+
+            return read_cht(path).to_layout()
         d = read_json(path)
         if not isinstance(d, dict):
             raise InputError("expected a JSON object", path=path)
         return cls.from_dict(d, source=str(path))
+
+
+def shipped_layout_names() -> list[str]:
+    """Stems of the shipped layouts (``--layout colorchecker_24``)."""
+    from importlib import resources
+
+    folder = resources.files("tunespec.resources").joinpath("layouts")
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".json"))
+
+
+def _shipped_layout(path: str | PathLike[str]) -> Path:
+    """``path`` itself, or the shipped layout a bare stem names."""
+    p = Path(path)
+    text = str(path)
+    if p.exists() or p.suffix or "/" in text or "\\" in text:
+        return p
+    if text in shipped_layout_names():
+        from importlib import resources
+
+        ref = resources.files("tunespec.resources").joinpath("layouts", f"{text}.json")
+        return Path(str(ref))
+    raise InputError(
+        f"layout not found (a file, or a shipped layout: "
+        f"{', '.join(shipped_layout_names())})",
+        path=p,
+    )
 
 
 def _checked_fields(d: Mapping[str, Any], source: str | None) -> dict[str, Any]:

@@ -52,6 +52,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tunespec.core.errors import InputError
+from tunespec.core.extraction import ExtractionCheck, check_responses
 from tunespec.core.io.raw import (
     RawFrame,
     full_to_plane_px,
@@ -290,6 +291,8 @@ class ProcessedSession:
     corner_residual_px : float
         RMS distance of the detected edge points from the fitted sides, mosaic
         pixels (NaN unless the corners were found automatically).
+    check : ExtractionCheck or None
+        The extraction check, once run (:meth:`checked`).
     """
 
     responses: Responses
@@ -300,6 +303,19 @@ class ProcessedSession:
     warnings: tuple[str, ...] = ()
     corner_residual_px: float = float("nan")
     stats: dict[str, Any] = field(default_factory=dict)
+    check: ExtractionCheck | None = None
+
+    def checked(self, reference_xyz: ArrayLike | None = None) -> ProcessedSession:
+        """A copy with :attr:`check`: :func:`tunespec.core.extraction.
+        check_responses` of the broadband channel (white LEDs first), with the
+        chart's reference XYZ (layout order) if given; a failed check also adds a
+        warning."""
+        channel = _detection_channel(self.responses.illuminants)
+        check = check_responses(self.responses, channel, reference_xyz=reference_xyz)
+        warnings = self.warnings
+        if not check.ok:
+            warnings = (*warnings, f"patch extraction check failed: {check.summary()}")
+        return replace(self, check=check, warnings=warnings)
 
 
 @dataclass

@@ -126,6 +126,11 @@ def open_light_source(
     )
 
 
+#: A layout's ``meta.reflectances`` that starts so names no file: the chart's data
+#: are the user's (a batch-specific IT8.7/2 reference).
+SUPPLY_YOUR_OWN = "supply your own"
+
+
 def layout_reflectances(
     layout: TargetLayout,
     layout_path: str | Path | None = None,
@@ -147,6 +152,14 @@ def layout_reflectances(
         raise InputError(
             f"layout {layout.name!r} names no reflectances (meta.reflectances); the "
             "simulated camera needs them"
+        )
+    if ref.strip().lower().startswith(SUPPLY_YOUR_OWN):
+        raise InputError(
+            f"layout {layout.name!r} ships no reference data ("
+            f"{ref.strip()[len(SUPPLY_YOUR_OWN) :].strip(' :')}): give the chart's "
+            "reflectances (--reflectances FILE, or reflectances = in the run "
+            "configuration's [chart])",
+            path=layout_path,
         )
     bases = [resource_path()]
     if layout_path is not None:

@@ -39,3 +39,9 @@ RTOL_NOISE_STATS = 0.05
 ATOL_SPLINE_SHIFT = 2e-3
 #: Published values given to 2 decimals.
 ATOL_PUBLISHED_2DP = 5e-3
+#: Automatic chart finding on a real frame vs. corners set by hand (issue 25: 1 %;
+#: measured 0.75 % at worst, A4 R, on tests/data/tinydng_colorchart.dng).
+RTOL_AUTO_VS_HAND = 0.01
+#: The same frame turned 90 degrees and tilted, as a linear TIFF: chromaticities
+#: (issue 25: 3 %).
+RTOL_TURNED_CHROMATICITY = 0.03

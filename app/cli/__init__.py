@@ -21,6 +21,7 @@ from tunespec.app.cli import (
     core_cmds,
     device_cmds,
     export_cmds,
+    extract_cmds,
     gonio_cmds,
     image_cmds,
     session_cmds,
@@ -64,6 +65,7 @@ COMMAND_MODULES = (
     export_cmds,
     gonio_cmds,
     image_cmds,
+    extract_cmds,
 )
 
 

@@ -77,6 +77,12 @@ def _add_calibrate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> 
         help="chart reflectances, 0-1 or percent (detected): " + SPECTRAL_FORMATS,
     )
     p.add_argument(
+        "--names",
+        type=Path,
+        help="name map CSV (their name,patch) for reflectances named otherwise, e.g. "
+        "resources/charts/colorchecker_24_colour_science_names.csv",
+    )
+    p.add_argument(
         "--method",
         choices=METHOD_CHOICES,
         default="bayes",
@@ -271,6 +277,12 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     responses = read_responses_csv(args.responses)
     illum_in = read_spectral(args.illuminants, kind="illuminant")
     refl_in = read_spectral(args.reflectances, kind="reflectance")
+    if args.names is not None:
+        from tunespec.core.io.name_map import read_name_map, rename_spectra
+
+        refl_in = rename_spectra(
+            refl_in, read_name_map(args.names), source=str(args.reflectances)
+        )
     out.inputs(illum_in, refl_in)
     grid = resolve_grid(
         args,

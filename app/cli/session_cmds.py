@@ -201,8 +201,31 @@ def _add_process(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
     p.add_argument(
         "--verify", action="store_true", default=True, help=argparse.SUPPRESS
     )  # the default now; kept so older scripts still run
+    p.add_argument(
+        "--reflectances",
+        type=Path,
+        default=None,
+        help="the chart's reference reflectances for the extraction check (default "
+        "the layout's own, if it names a file)",
+    )
+    p.add_argument(
+        "--names",
+        type=Path,
+        default=None,
+        help="name map CSV (their name,patch) for --reflectances named otherwise",
+    )
+    p.add_argument(
+        "--preview", type=Path, default=None, help="PNG of the outline and the ROIs"
+    )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="keep an extraction that fails the check (flagged in the CSV)",
+    )
     add_output_options(p)
-    p.set_defaults(func=cmd_process, output_files=("output", "illuminants_out"))
+    p.set_defaults(
+        func=cmd_process, output_files=("output", "illuminants_out", "preview")
+    )
 
 
 def _add_run(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -411,6 +434,19 @@ def cmd_process(args: argparse.Namespace) -> int:
     out = Console(args)
     session = Session.open(args.session)
     layout = TargetLayout.load(args.layout) if args.layout else None
+    from tunespec.app.pipeline.extract import (
+        flag_forced_csv,
+        layout_reference_xyz,
+        session_preview,
+    )
+    from tunespec.app.pipeline.steps import refuse_failed_check
+
+    use = layout or session.layout
+    ref = (
+        layout_reference_xyz(use, args.reflectances, args.layout, args.names)
+        if use is not None
+        else None
+    )
     processed = process_session(
         session,
         layout=layout,
@@ -419,8 +455,13 @@ def cmd_process(args: argparse.Namespace) -> int:
         allow_incomplete=args.allow_incomplete,
         verify=args.verify,
         progress=out.progress("processing"),
-    )
+    ).checked(ref)
+    if args.preview is not None:
+        session_preview(session, processed, args.preview)
+    refuse_failed_check(processed, session.root, force=args.force)
     write_processed(processed, args.output, illum)
+    if processed.check is not None and not processed.check.ok:
+        flag_forced_csv(args.output, processed.check)
     for w in processed.warnings:
         out.warn(w)
     r = processed.responses

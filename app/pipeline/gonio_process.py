@@ -118,6 +118,39 @@ def _roi_pixels(
     return out
 
 
+#: The extraction check's uniformity limit at a gonio geometry (see _check_geometry).
+GONIO_MAX_EXCESS_SPREAD = 0.35
+
+
+def _check_geometry(
+    frame: NDArray[np.float64],
+    layout: TargetLayout,
+    corners: NDArray[np.float64],
+    index: int,
+    position: Any,
+) -> None:
+    """The extraction check (ROI uniformity) of one geometry's mix frame; an
+    InputError naming the geometry when the ROIs do not sit on the patches."""
+    from tunespec.core.extraction import check_extraction, patch_statistics
+
+    stats = patch_statistics(frame, layout.with_corners(corners).roi_quads_px())
+    # near the specular direction a glossy patch has a gradient across it (12 % on
+    # the demo's 45/50 geometry); an ROI across a patch edge spreads far more
+    check = check_extraction(
+        layout.patch_names, stats, max_excess_spread=GONIO_MAX_EXCESS_SPREAD
+    )
+    if not check.ok:
+        where = ", ".join(
+            f"{k} {position[k]:g}"
+            for k in ("theta_i", "theta_r")
+            if isinstance(position, dict) and isinstance(position.get(k), int | float)
+        )
+        raise InputError(
+            f"geometry {index + 1} ({where}): patch extraction refused: "
+            f"{check.summary()}"
+        )
+
+
 def _load(gdir: Path, name: str, k: int) -> NDArray[np.float64]:
     path = gdir / f"{name}_e{k}.npy"
     if not path.exists():
@@ -145,8 +178,9 @@ def _process_geometry(gdir: Path, index: int, plan: GonioPlan, layout: TargetLay
         except InputError:
             if k == 0:
                 raise
-    rois = _roi_pixels(layout, corners, frame.shape[1:])
     position = read_json(gdir / "position.json")
+    _check_geometry(frame, layout, corners, index, position)
+    rois = _roi_pixels(layout, corners, frame.shape[1:])
     exposures = read_json(gdir / "exposure.json")
     cos_i = math.cos(math.radians(abs(float(position["theta_i"]))))
     names = [MIX] + (leds if step.spectral else [])

@@ -251,17 +251,42 @@ def process(
     out_dir: str | PathLike[str] | None = None,
     progress: ProgressFn | None = None,
     should_stop: StopFn | None = None,
+    force: bool = False,
+    reference_xyz: Any = None,
     **kwargs: Any,
 ) -> ProcessedSession:
     """:func:`tunespec.core.processing.process_session`; with ``out_dir``, also write
-    the ``responses.csv`` and ``illuminants.csv`` that calibrate/estimate read."""
+    the ``responses.csv`` and ``illuminants.csv`` that calibrate/estimate read.
+
+    A session whose patch extraction fails its check
+    (:func:`tunespec.core.extraction.check_extraction`: ROIs across patch edges,
+    patches out of the reference's order, with ``reference_xyz``: the chart's
+    reference XYZ in layout order) is refused with an ``InputError``; ``force``
+    keeps it (the failure stays in ``ProcessedSession.warnings``).
+    """
     processed = process_session(
         session, progress=progress, should_stop=should_stop, **kwargs
-    )
+    ).checked(reference_xyz)
+    refuse_failed_check(processed, session.root, force=force)
     if out_dir is not None:
         out = Path(out_dir)
         write_processed(processed, out / "responses.csv", out / "illuminants.csv")
     return processed
+
+
+def refuse_failed_check(
+    processed: ProcessedSession, where: str | PathLike[str], *, force: bool = False
+) -> None:
+    """InputError when ``processed.check`` failed, unless ``force``."""
+    check = processed.check
+    if check is None or check.ok or force:
+        return
+    raise InputError(
+        f"patch extraction refused (layout {processed.layout.name!r}, corners "
+        f"{processed.corners_source}): {check.summary()}; check the chart's layout "
+        "and corners (--layout, --corners), or --force to keep it",
+        path=where,
+    )
 
 
 def calibrate(
@@ -297,16 +322,34 @@ def calibrate(
     illum = chart.illuminants.resample(grid, average=True)
     if method is not None:
         options["method"] = method
+    responses = _with_reference(chart.responses, refl)
     est = estimate_camera_sensitivity(
-        chart.responses,
+        responses,
         illum,
         refl,
         progress=progress,
         should_stop=should_stop,
         **options,
     )
-    rep = calibration_report(est, chart.responses, illum, refl)
-    return Calibration(est, rep, table1_by_patch(est, chart.responses, illum, refl))
+    rep = calibration_report(est, responses, illum, refl)
+    return Calibration(est, rep, table1_by_patch(est, responses, illum, refl))
+
+
+def _with_reference(responses: Any, refl: Spectra) -> Any:
+    """The responses of the patches with reference data (a Passport's creative
+    panel has none in the shipped ColorChecker data); all of them when every patch
+    has, and an InputError naming the first missing ones when fewer than half do."""
+    have = [p for p in responses.patches if p in refl.names]
+    if len(have) == len(responses.patches):
+        return responses
+    if 2 * len(have) < len(responses.patches):
+        missing = [p for p in responses.patches if p not in refl.names]
+        raise InputError(
+            f"{len(missing)} of {len(responses.patches)} patches have no reference "
+            f"data ({', '.join(missing[:6])} ...): give the chart's reflectances "
+            "(--reflectances, or reflectances = in the configuration's [chart])"
+        )
+    return responses.subset(have)
 
 
 def table1_by_patch(

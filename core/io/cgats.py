@@ -401,12 +401,28 @@ class CgatsTable:
 
     @property
     def sample_names(self) -> tuple[str, ...]:
-        """One name per set: ``SAMPLE_NAME`` if unique, else ``SAMPLE_ID``, else 1..n."""
-        for name in ("SAMPLE_NAME", "SAMPLE_ID"):
+        """One name per set: the first of ``SAMPLE_NAME``, ``SAMPLE_ID`` (unless it
+        only counts 1, 2, ...), ``SAMPLE_LOC`` and ``SAMPLE_ID`` that names every
+        set once, else 1..n.
+
+        An Argyll ``txt2ti3`` file numbers its sets in ``SAMPLE_ID`` and names
+        them by the chart's patch in ``SAMPLE_LOC`` (``A1`` ...): the patch names.
+        """
+        columns = {}
+        for name in ("SAMPLE_NAME", "SAMPLE_ID", "SAMPLE_LOC"):
             if name in self.fields:
                 values = self.text_column(name)
                 if all(values) and len(set(values)) == len(values):
-                    return values
+                    columns[name] = values
+        counting = "SAMPLE_ID" in columns and all(
+            v.isdigit() for v in columns["SAMPLE_ID"]
+        )
+        order = ["SAMPLE_NAME", "SAMPLE_LOC", "SAMPLE_ID"]
+        if not counting:
+            order = ["SAMPLE_NAME", "SAMPLE_ID", "SAMPLE_LOC"]
+        for name in order:
+            if name in columns:
+                return columns[name]
         return tuple(str(i + 1) for i in range(len(self.rows)))
 
     def spectral_fields(self) -> list[tuple[str, float]]:

@@ -213,6 +213,11 @@ def _parse(
                 path=source,
             )
         spectra.meta["format"] = f"CGATS ({table.file_id})"
+        from tunespec.core.io.spectral_csv import ZERO_TOLERANCE
+
+        tiny = np.abs(spectra.values) <= ZERO_TOLERANCE
+        if tiny.any():
+            spectra = spectra.with_values(np.where(tiny, 0.0, spectra.values))
         if not allow_negative and np.any(spectra.values < 0):
             raise InputError("negative spectral values", path=source)
         return spectra

@@ -55,6 +55,9 @@ __all__ = [
 ]
 
 #: First-column headers that name the wavelength axis.
+#: Values within this of zero read as zero (float round-off, not a negative value).
+ZERO_TOLERANCE = 1e-12
+
 _WAVELENGTH_HEADER = re.compile(
     r"^\s*(wavelengths?|wave_?length_?nm|lambda|λ|wl|nm)\b.*$|.*wavelength.*",
     re.IGNORECASE,
@@ -181,11 +184,13 @@ def _numbers(row: list[str], cols: list[str], lineno: int, opts: tuple) -> list[
     out = []
     for cell, col in zip(row, cols, strict=True):
         try:
-            out.append(_number(cell, decimal_comma))
+            v = _number(cell, decimal_comma)
         except ValueError:
             raise InputError(
                 f"{shown(col)}: not a number: {shown(cell)}", path=path, line=lineno
             ) from None
+        # round-off of another tool's arithmetic (colour-science writes -2e-19)
+        out.append(0.0 if abs(v) <= ZERO_TOLERANCE else v)
     return out
 
 
