@@ -7,6 +7,7 @@ window holds no measurement logic of its own.
 
 from __future__ import annotations
 
+import contextlib
 import gc
 import logging
 import math
@@ -52,6 +53,8 @@ from tunespec.app.gui.workers import (
     DeviceController,
     Throttle,
     Worker,
+    collect_on_gui_thread,
+    gc_paused,
     one_blas_thread,
     start_process_server,
 )
@@ -91,6 +94,8 @@ class MainWindow(QMainWindow):
         parent: QWidget | None = None,
     ) -> None:
         super().__init__(parent)
+        # threads run Python from here on: Qt objects must die on this thread only
+        collect_on_gui_thread()
         if not isinstance(settings, AppSettings):
             settings = AppSettings(settings)
         self.settings = settings
@@ -554,18 +559,16 @@ def _preload_pipeline() -> None:
     global _GC_FROZEN
     freeze = not _GC_FROZEN
     _GC_FROZEN = True
-    if freeze:
-        gc.disable()
-    try:
+    # gc_paused, not gc.enable() after: this is a pool thread, and the collector
+    # must stay with the GUI thread while ours run (workers._GuiThreadCollector)
+    with gc_paused() if freeze else contextlib.nullcontext():
         for name in PIPELINE_MODULES:
             try:
                 importlib.import_module(name)
             except ImportError as exc:
                 log.debug("not preloaded: %s", exc)
-    finally:
         if freeze:
             gc.freeze()
-            gc.enable()
     one_blas_thread()  # again: scipy brings its own OpenBLAS
     start_process_server()  # the numerics' processes (it imports on its own)
 

@@ -18,6 +18,8 @@ slots always run on the GUI thread.
 
 from __future__ import annotations
 
+import contextlib
+import gc
 import logging
 import multiprocessing
 import os
@@ -27,7 +29,7 @@ import tempfile
 import threading
 import time
 import weakref
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
@@ -35,6 +37,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 from PySide6.QtCore import (
+    QCoreApplication,
     QObject,
     QRunnable,
     QThread,
@@ -56,9 +59,12 @@ __all__ = [
     "Throttle",
     "Worker",
     "WorkerSignals",
+    "collect_on_gui_thread",
+    "gc_paused",
     "lower_priority",
     "one_blas_thread",
     "process_context",
+    "restore_automatic_collection",
     "running_threads",
     "start_process_server",
 ]
@@ -74,10 +80,132 @@ def running_threads() -> list[QThread]:
     return [t for t in list(_THREADS) if t.isRunning()]
 
 
+class _GuiThreadCollector(QObject):
+    """Python's cycle collector, run on the GUI thread only.
+
+    CPython collects cycles in whichever thread happens to allocate when a
+    generation's count passes its threshold. A cycle holding a Qt object (a widget,
+    a :class:`Throttle` and its timer, a page of a closed window) then has its C++
+    object deleted on the device thread, a pool thread or a library's own thread
+    (zarr's ``zarr_io``) while the GUI thread uses it: the segmentation faults of
+    issue 27, the device thread reading a spectra file (allocating) while the main
+    thread crashed in its event loop. (Reproduced: 50 widgets in cycles collected
+    by a second thread crash the event loop at once.) So while the GUI is in use
+    the automatic collection is off and this object collects on a GUI-thread timer
+    instead, with CPython's own thresholds (pyqtgraph's ``GarbageCollector`` does
+    the same).
+    """
+
+    #: How often the counts are checked (ms).
+    PERIOD_MS = 250
+
+    _instance: ClassVar[_GuiThreadCollector | None] = None
+
+    def __init__(self, app: QCoreApplication) -> None:
+        super().__init__(app)
+        self._timer = QTimer(self)
+        self._timer.setInterval(self.PERIOD_MS)
+        self._timer.timeout.connect(self._on_timer_timeout)
+
+    @classmethod
+    def instance(cls) -> _GuiThreadCollector | None:
+        """The collector of the running application (made on its thread), or None
+        where there is no application or this is not its thread."""
+        app = QCoreApplication.instance()
+        if app is None or QThread.currentThread() is not app.thread():
+            return None
+        me = cls._instance
+        try:
+            if me is not None and me.parent() is app:
+                return me
+        except RuntimeError:  # the application it belonged to is gone
+            pass
+        cls._instance = me = cls(app)
+        return me
+
+    @property
+    def active(self) -> bool:
+        """Whether it collects (and the automatic collection is off)."""
+        return self._timer.isActive()
+
+    def start(self) -> None:
+        """Collect on the GUI thread only from now on."""
+        global _GC_HELD
+        _GC_HELD = True
+        gc.disable()
+        if not self._timer.isActive():
+            self._timer.start()
+
+    def stop(self) -> None:
+        """Back to CPython's automatic collection."""
+        global _GC_HELD
+        self._timer.stop()
+        _GC_HELD = False
+        if not _GC_PAUSES:
+            gc.enable()
+
+    def collect(self) -> int:
+        """Collect the generations whose counts passed their thresholds (as CPython
+        would have); returns the number of unreachable objects found."""
+        (n0, n1, n2), (t0, t1, t2) = gc.get_count(), gc.get_threshold()
+        if n0 <= t0 or _GC_PAUSES:
+            return 0
+        generation = 2 if n1 > t1 and n2 > t2 else 1 if n1 > t1 else 0
+        return gc.collect(generation)
+
+    @Slot()
+    def _on_timer_timeout(self) -> None:
+        self.collect()
+
+
+#: Open :func:`gc_paused` blocks (no collection at all while one is open).
+_GC_PAUSES: list[object] = []
+#: Whether :class:`_GuiThreadCollector` keeps the automatic collection off.
+_GC_HELD = False
+
+
+@contextlib.contextmanager
+def gc_paused() -> Iterator[None]:
+    """``with gc_paused(): ...`` runs with the cycle collector off, then leaves it
+    as the rest of the program wants it (on, unless the GUI's own collector holds
+    it off), whatever thread it ends on."""
+    token = object()
+    _GC_PAUSES.append(token)
+    gc.disable()
+    try:
+        yield
+    finally:
+        _GC_PAUSES.remove(token)
+        if not _GC_PAUSES and not _GC_HELD:
+            gc.enable()
+
+
+def collect_on_gui_thread() -> _GuiThreadCollector | None:
+    """From now on collect cycles on the GUI thread only (call on the GUI thread,
+    before starting anything that runs Python on another thread). Returns the
+    collector, None without an application."""
+    collector = _GuiThreadCollector.instance()
+    if collector is not None:
+        collector.start()
+    return collector
+
+
+def restore_automatic_collection() -> None:
+    """Collect now and go back to CPython's automatic collection (GUI thread, once
+    no thread of ours runs: the tests call it after each test)."""
+    collector = _GuiThreadCollector.instance()
+    if collector is not None and collector.active:
+        gc.collect()
+        collector.stop()
+
+
 class WorkerSignals(QObject):
     """Signals of a :class:`Worker` or :class:`DeviceJob`.
 
-    Created on the GUI thread, so connections to GUI slots are queued.
+    Created on the GUI thread, so connections to GUI slots are queued. The job's
+    thread may drop the last Python reference to the job; so that this object is
+    never deleted there (while the GUI thread still delivers its signals), the
+    application owns it and the GUI thread deletes it after :attr:`finished`.
     """
 
     started = Signal()
@@ -89,6 +217,17 @@ class WorkerSignals(QObject):
     returned = Signal(object)
     errored = Signal(object)
     finished = Signal()
+    #: Sent after :attr:`finished`: the job will send nothing more.
+    _released = Signal()
+
+    def __init__(self) -> None:
+        app = QCoreApplication.instance()
+        on_gui = app is not None and QThread.currentThread() is app.thread()
+        super().__init__(app if on_gui else None)
+        if on_gui:
+            # queued to the GUI thread behind every signal the job sent before, so
+            # their slots have all run (deleting it earlier drops them)
+            self._released.connect(self.deleteLater)
 
 
 class _Job:
@@ -121,6 +260,7 @@ class _Job:
             self.signals.returned.emit(result)
         finally:
             self.signals.finished.emit()
+            self.signals._released.emit()
 
 
 class Worker(QRunnable, _Job):
@@ -156,6 +296,7 @@ class Worker(QRunnable, _Job):
     def start(self) -> Worker:
         """Queue the worker on the global pool; returns ``self`` for chaining."""
         Worker._alive.add(self)
+        collect_on_gui_thread()
         self.signals.finished.connect(lambda: Worker._alive.discard(self))
         QThreadPool.globalInstance().start(self)
         return self
@@ -644,6 +785,9 @@ class DeviceController(QObject):
         self._status_requested.connect(self._on_status_requested)
         self._job_submitted.connect(self._on_job_submitted)
         _THREADS.add(self._thread)
+        # the device thread runs Python from now on: cycles are collected on the
+        # GUI thread only (see _GuiThreadCollector)
+        collect_on_gui_thread()
         self._thread.start()
         self.is_open = False  # GUI-side view, updated from the signals
         self.devices_opened.connect(self._on_self_devices_opened)

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import gc
 import os
+import threading
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 
@@ -18,10 +20,29 @@ from PySide6.QtCore import QSettings, QThreadPool
 
 from tunespec.app.gui import workers
 
+#: Collections of Python's cycle collector started on a thread other than the main
+#: one: (thread name, generation). Such a collection may delete Qt objects there
+#: (issue 27's segmentation faults); the GUI's collector keeps them on the GUI thread.
+_OFF_THREAD_COLLECTIONS: list[tuple[str, int]] = []
+
+
+def _watch_collections(phase: str, info: dict) -> None:
+    if phase == "start" and threading.current_thread() is not threading.main_thread():
+        _OFF_THREAD_COLLECTIONS.append(
+            (threading.current_thread().name, info["generation"])
+        )
+
+
+gc.callbacks.append(_watch_collections)
+
 
 @pytest.fixture(autouse=True)
 def _no_leaked_threads(qapp) -> Iterator[None]:
-    """Fail a test that leaves a device thread or a pool worker running (napari)."""
+    """Fail a test that leaves a device thread or a pool worker running (napari),
+    or whose threads collected Python's garbage (where Qt objects may die)."""
+    _OFF_THREAD_COLLECTIONS.clear()
+    # as in the application: any thread may run Python (zarr's, the pool's)
+    workers.collect_on_gui_thread()
     yield
     pool = QThreadPool.globalInstance()
     leaked_pool = pool.activeThreadCount()
@@ -32,9 +53,14 @@ def _no_leaked_threads(qapp) -> Iterator[None]:
         thread.quit()
         thread.wait(10_000)
     alive = workers.Worker.active_count()
+    # back to automatic collection for what runs next (nothing of ours runs now)
+    workers.restore_automatic_collection()
+    off_thread = list(_OFF_THREAD_COLLECTIONS)
+    assert not off_thread, f"garbage collected off the GUI thread: {off_thread}"
     assert not leaked_pool, f"{leaked_pool} pool worker(s) still running after the test"
     assert not leaked_threads, f"device thread(s) left running: {leaked_threads}"
     assert not alive, f"{alive} Worker(s) never finished"
+    assert gc.isenabled(), "the GUI's collector still holds gc off"
 
 
 @pytest.fixture(autouse=True)

@@ -1,17 +1,23 @@
 """Python ``logging`` shown in a widget.
 
 :class:`QtLogHandler` is a :class:`logging.Handler` that may be called from any
-thread; it forwards formatted records through a Qt signal, so the text is appended
-on the GUI thread. :class:`LogPanel` shows them with a level filter.
+thread; it only queues the formatted records, and :class:`LogPanel` appends them on
+the GUI thread (at once for records of the GUI thread, every
+:attr:`LogPanel.POLL_MS` for the others). No Qt object is touched off the GUI
+thread: a signal object the handler emitted on could die with the window while the
+device thread logs (issue 27).
 """
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import logging
+import threading
+from collections.abc import Callable
 from functools import partial
 
-from PySide6.QtCore import QObject, Signal, Slot
+from PySide6.QtCore import QTimer, Slot
 from PySide6.QtGui import QColor, QTextCharFormat, QTextCursor
 from PySide6.QtWidgets import (
     QComboBox,
@@ -34,16 +40,26 @@ _COLOURS = {
 }
 
 
-class _Bridge(QObject):
-    record_emitted = Signal(int, str)
-
-
 class QtLogHandler(logging.Handler):
-    """A logging handler emitting ``record_emitted(levelno, text)`` (thread-safe)."""
+    """A logging handler queueing ``(levelno, text)`` for the GUI (thread-safe).
 
-    def __init__(self, level: int = logging.DEBUG) -> None:
+    Parameters
+    ----------
+    level
+        The lowest level queued.
+    max_records
+        Older records not yet shown are dropped beyond this.
+    """
+
+    def __init__(self, level: int = logging.DEBUG, max_records: int = 5000) -> None:
         super().__init__(level)
-        self.bridge = _Bridge()
+        self.pending: collections.deque[tuple[int, str]] = collections.deque(
+            maxlen=max_records
+        )
+        #: Called (on the thread that made the handler) after a record of that
+        #: thread was queued: shows it at once.
+        self.on_own_thread: Callable[[], None] | None = None
+        self._thread_id = threading.get_ident()
         self.setFormatter(
             logging.Formatter(
                 "%(asctime)s %(levelname)-7s %(name)s: %(message)s", "%H:%M:%S"
@@ -51,14 +67,27 @@ class QtLogHandler(logging.Handler):
         )
 
     def emit(self, record: logging.LogRecord) -> None:
-        """Format and forward one record."""
-        # the bridge may already be deleted with the window
-        with contextlib.suppress(RuntimeError):
-            self.bridge.record_emitted.emit(record.levelno, self.format(record))
+        """Format and queue one record."""
+        self.pending.append((record.levelno, self.format(record)))
+        sink = self.on_own_thread
+        if sink is not None and threading.get_ident() == self._thread_id:
+            # the widget may already be deleted with the window
+            with contextlib.suppress(RuntimeError):
+                sink()
+
+    def take(self) -> list[tuple[int, str]]:
+        """The records queued since the last call, oldest first."""
+        out = []
+        with contextlib.suppress(IndexError):
+            while True:
+                out.append(self.pending.popleft())
+        return out
 
 
 class LogPanel(QWidget):
     """The log of this session, newest at the bottom.
+
+    Records logged on other threads appear within :attr:`POLL_MS`.
 
     Parameters
     ----------
@@ -68,6 +97,9 @@ class LogPanel(QWidget):
     max_lines
         Older lines are dropped beyond this.
     """
+
+    #: How often records of other threads are shown (ms).
+    POLL_MS = 100
 
     def __init__(
         self,
@@ -98,8 +130,12 @@ class LogPanel(QWidget):
         layout.addLayout(top)
         layout.addWidget(self.text)
 
-        self.handler = QtLogHandler()
-        self.handler.bridge.record_emitted.connect(self._on_handler_record_emitted)
+        self.handler = QtLogHandler(max_records=max_lines)
+        self.handler.on_own_thread = self._show_pending
+        self._poll_timer = QTimer(self)
+        self._poll_timer.setInterval(self.POLL_MS)
+        self._poll_timer.timeout.connect(self._on_poll_timer_timeout)
+        self._poll_timer.start()
         self._logger.addHandler(self.handler)
         if self._logger.level == logging.NOTSET or self._logger.level > logging.INFO:
             self._logger.setLevel(logging.INFO)
@@ -111,6 +147,8 @@ class LogPanel(QWidget):
     def detach(self) -> None:
         """Remove the handler from the logger (call before the widget goes away)."""
         self._logger.removeHandler(self.handler)
+        self.handler.on_own_thread = None
+        self._poll_timer.stop()
 
     @property
     def min_level(self) -> int:
@@ -131,12 +169,17 @@ class LogPanel(QWidget):
         cursor.insertText(text, fmt)
         self.text.ensureCursorVisible()
 
-    @Slot(int, str)
-    def _on_handler_record_emitted(self, level: int, text: str) -> None:
-        self._records.append((level, text))
+    def _show_pending(self) -> None:
+        """Append the records queued by the handler (GUI thread)."""
+        for level, text in self.handler.take():
+            self._records.append((level, text))
+            if level >= self.min_level:
+                self._append(level, text)
         del self._records[: -self._max_lines]
-        if level >= self.min_level:
-            self._append(level, text)
+
+    @Slot()
+    def _on_poll_timer_timeout(self) -> None:
+        self._show_pending()
 
     @Slot(int)
     def _on_level_combo_changed(self, _index: int) -> None:

@@ -48,6 +48,11 @@ class ImageView(QWidget):
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
+        from tunespec.app.gui.workers import collect_on_gui_thread
+
+        # zarr reads through a thread of its own (zarr_io) that must not collect
+        # this view's Qt objects
+        collect_on_gui_thread()
         self.image: Any = None
         self.worker: Any = None
         self.layer_combo = QComboBox()
