@@ -4,12 +4,23 @@ One folder per session (:class:`ImageOutputs`)::
 
     cube.hdr, cube.img   ENVI, float32, band-interleaved by pixel, wavelengths in nm
                          (Spectral Python ``spectral.open_image``, ENVI, GDAL)
-    cube.zarr/           the same cube as a chunked Zarr array (rows, cols, bands),
-                         attribute ``wavelength_nm``; for big data and parallel writes
-    xyz.tif, lab.tif     CIE XYZ (D50, Y of the white 100) and CIELAB (ICC D50 white),
-                         float32 (rows, cols, 3) TIFFs (tifffile)
-    uncertainty.tif      float32 (rows, cols, 2): u(L*) and the RMS over wavelength of
-                         the spectrum's standard uncertainty (k = 1)
+    cube.zarr/           the same cube as a Zarr v3 group that xarray opens as a
+                         labelled data set (``xarray.open_zarr``): ``reflectance``
+                         with named dimensions (``y``, ``x``, ``wavelength``), the
+                         ``wavelength`` coordinate in nm, CF-style attributes
+                         (``units``, ``long_name``) and the provenance in the
+                         group's attributes; chunked by row blocks for parallel writes
+    xyz.tif              CIE XYZ (D50, Y of the white 100), float32 (rows, cols, 3),
+                         photometric RGB (TIFF tag 262 = 2) whose three samples are
+                         X, Y, Z as the ImageDescription's ``samples`` says (TIFF has
+                         no XYZ photometric but LogLuv's, an encoding)
+    lab.tif              CIELAB (ICC D50 white), photometric CIELab (262 = 8) with
+                         IEEE float samples (339 = 3) holding L* (0-100), a*, b*
+                         unscaled (not TIFF 6's 8/16-bit integer encoding)
+    uncertainty.tif      float32 (rows, cols, 2), photometric MINISBLACK with one
+                         unspecified extra sample (338 = 0): u(L*) and the RMS over
+                         wavelength of the spectrum's standard uncertainty (k = 1),
+                         named in the ImageDescription's ``samples``
     srgb.png             8-bit sRGB preview
     provenance.json      session, calibration, grid, noise model, software version;
                          written last, so its presence means the folder is complete
@@ -29,6 +40,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass
 from os import PathLike
 from pathlib import Path
@@ -42,12 +54,14 @@ from tunespec.core.limits import dumps_json
 
 __all__ = [
     "CUBE_HDR",
+    "IMAGE_FORMATS",
     "PROVENANCE",
     "ImageOutputs",
     "SpectralImage",
     "open_image_outputs",
     "pwrite_all",
     "read_provenance",
+    "valid_formats",
 ]
 
 CUBE_HDR = "cube.hdr"
@@ -60,6 +74,20 @@ SRGB_PNG = "srgb.png"
 PROVENANCE = "provenance.json"
 #: Columns of a Zarr chunk (rows are the block height).
 ZARR_CHUNK_COLS = 512
+#: The cube's array in ``cube.zarr`` and its dimension names (xarray's).
+ZARR_CUBE = "reflectance"
+ZARR_DIMENSIONS = ("y", "x", "wavelength")
+#: What ``--formats`` chooses from: the ENVI cube, the Zarr cube, the colour TIFFs.
+IMAGE_FORMATS = ("envi", "zarr", "tiff")
+#: The TIFFs: file, photometric, extra samples, quantity, sample names.
+_TIFF_LAYOUT = (
+    (XYZ_TIF, "rgb", None, "CIE XYZ, D50, CIE 1931 2 degree, Y(white) = 100; "
+     "photometric RGB holds X, Y, Z", ("X", "Y", "Z")),
+    (LAB_TIF, "cielab", None, "CIELAB, ICC D50 white; float L* (0-100), a*, b*",
+     ("L*", "a*", "b*")),
+    (UNC_TIF, "minisblack", ["unspecified"], "standard uncertainty (k=1): u(L*), "
+     "RMS u(reflectance)", ("u(L*)", "RMS u(reflectance)")),
+)  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -78,6 +106,9 @@ class ImageOutputs:
         Rows per block (Zarr chunk height); blocks start at multiples of it.
     offsets
         Byte offset of the pixel data in each raw-addressed file.
+    formats
+        The formats written, a subset of :data:`IMAGE_FORMATS` (the sRGB preview
+        and ``provenance.json`` always are).
     """
 
     folder: Path
@@ -85,6 +116,7 @@ class ImageOutputs:
     n_bands: int
     block_rows: int
     offsets: dict[str, int]
+    formats: tuple[str, ...] = IMAGE_FORMATS
 
     @classmethod
     def create(
@@ -95,78 +127,31 @@ class ImageOutputs:
         *,
         block_rows: int,
         provenance: dict[str, Any],
+        formats: Sequence[str] = IMAGE_FORMATS,
     ) -> ImageOutputs:
         """Create every output file at full size (contents to be written by blocks).
 
         Raises
         ------
         InputError
-            An empty shape or grid.
+            An empty shape or grid, an unknown format.
         """
-        import spectral.io.envi as envi
-        import tifffile
-        import zarr
-        from zarr.codecs import BloscCodec
-
         rows, cols = (int(v) for v in shape)
         wl = np.asarray(wavelength_nm, dtype=np.float64)
         if rows < 1 or cols < 1 or wl.size < 1 or block_rows < 1:
             raise InputError(f"images of {cols}x{rows} px and {wl.size} bands: empty")
+        chosen = valid_formats(formats)
         out = Path(folder)
         out.mkdir(parents=True, exist_ok=True)
-        summary = _header_summary(provenance)
-        envi.create_image(
-            str(out / CUBE_HDR),
-            {
-                "description": "TuneSpec per-pixel reflectance factor (Eq. 5); "
-                + summary,
-                "wavelength": [f"{v:g}" for v in wl],
-                "wavelength units": "nm",
-                "data ignore value": "nan",
-                "band names": [f"{v:g} nm" for v in wl],
-            },
-            shape=(rows, cols, wl.size),
-            dtype=np.float32,
-            interleave="bip",
-            byteorder=0,
-            force=True,
-        )
-        zarr.create_array(
-            store=str(out / CUBE_ZARR),
-            shape=(rows, cols, wl.size),
-            chunks=(block_rows, min(cols, ZARR_CHUNK_COLS), wl.size),
-            dtype="float32",
-            compressors=BloscCodec(cname="lz4", clevel=5, shuffle="bitshuffle"),
-            fill_value=float("nan"),
-            attributes={
-                "wavelength_nm": wl.tolist(),
-                "dimensions": ["row", "col", "wavelength"],
-                "quantity": "reflectance factor",
-                "provenance": provenance,
-            },
-            overwrite=True,
-        )
-        offsets = {}
-        for name, samples, what in (
-            (XYZ_TIF, 3, "CIE XYZ, D50, CIE 1931 2 degree, Y(white) = 100"),
-            (LAB_TIF, 3, "CIELAB, ICC D50 white"),
-            (UNC_TIF, 2, "standard uncertainty (k=1): u(L*), RMS u(reflectance)"),
-        ):
-            tifffile.imwrite(
-                out / name,
-                shape=(rows, cols, samples),
-                dtype="float32",
-                photometric="minisblack",
-                planarconfig="contig",
-                metadata={"quantity": what, **_flat(provenance)},
-            )
-            with tifffile.TiffFile(out / name) as tif:
-                page = tif.pages[0]
-                if not page.is_contiguous:  # pragma: no cover - tifffile does for this
-                    raise InputError("tifffile wrote a non-contiguous image", path=name)
-                offsets[name] = int(page.dataoffsets[0])
-        offsets[CUBE_IMG] = 0
-        return cls(out, (rows, cols), int(wl.size), int(block_rows), offsets)
+        offsets: dict[str, int] = {}
+        if "envi" in chosen:
+            _create_envi(out, (rows, cols), wl, provenance)
+            offsets[CUBE_IMG] = 0
+        if "zarr" in chosen:
+            _create_zarr(out, (rows, cols), wl, block_rows, provenance)
+        if "tiff" in chosen:
+            offsets.update(_create_tiffs(out, (rows, cols), provenance))
+        return cls(out, (rows, cols), int(wl.size), int(block_rows), offsets, chosen)
 
     def write_rows(
         self,
@@ -184,8 +169,6 @@ class ImageOutputs:
         xyz, lab : (r, cols, 3)
         uncertainty : (r, cols, 2)
         """
-        import zarr
-
         r, cols, n_bands = cube.shape
         if row0 % self.block_rows or cols != self.shape[1] or n_bands != self.n_bands:
             raise InputError(
@@ -194,13 +177,18 @@ class ImageOutputs:
             )
         # ENVI BIP: each pixel's bands in turn, rows one after the other
         bip = np.ascontiguousarray(cube, dtype="<f4")
-        self._pwrite(CUBE_IMG, row0 * n_bands * cols * 4, bip)
-        arr = zarr.open_array(str(self.folder / CUBE_ZARR), mode="r+")
-        arr[row0 : row0 + r] = bip
-        for name, data in ((XYZ_TIF, xyz), (LAB_TIF, lab), (UNC_TIF, uncertainty)):
-            samples = data.shape[2]
-            pix = np.ascontiguousarray(data, dtype="<f4")
-            self._pwrite(name, self.offsets[name] + row0 * cols * samples * 4, pix)
+        if "envi" in self.formats:
+            self._pwrite(CUBE_IMG, row0 * n_bands * cols * 4, bip)
+        if "zarr" in self.formats:
+            import zarr
+
+            arr = zarr.open_array(str(self.folder / CUBE_ZARR / ZARR_CUBE), mode="r+")
+            arr[row0 : row0 + r] = bip
+        if "tiff" in self.formats:
+            for name, data in ((XYZ_TIF, xyz), (LAB_TIF, lab), (UNC_TIF, uncertainty)):
+                samples = data.shape[2]
+                pix = np.ascontiguousarray(data, dtype="<f4")
+                self._pwrite(name, self.offsets[name] + row0 * cols * samples * 4, pix)
 
     def _pwrite(self, name: str, offset: int, data: NDArray[Any]) -> None:
         pwrite_all(self.folder / name, offset, data)
@@ -221,6 +209,155 @@ class ImageOutputs:
         path = self.folder / PROVENANCE
         atomic_write_text(path, dumps_json(provenance))
         return path
+
+
+def valid_formats(formats: Sequence[str] | str) -> tuple[str, ...]:
+    """The image formats asked for (``"envi,zarr"`` or a sequence), checked, in the
+    order of :data:`IMAGE_FORMATS`.
+
+    Raises
+    ------
+    InputError
+        An unknown or no format.
+    """
+    names = formats.split(",") if isinstance(formats, str) else list(formats)
+    names = [n.strip().lower() for n in names if n.strip()]
+    unknown = [n for n in names if n not in IMAGE_FORMATS]
+    if unknown or not names:
+        raise InputError(
+            f"--formats: expected a comma-separated list of "
+            f"{', '.join(IMAGE_FORMATS)}, got {','.join(names) or 'nothing'!r}"
+        )
+    return tuple(f for f in IMAGE_FORMATS if f in names)
+
+
+def _create_envi(
+    out: Path, shape: tuple[int, int], wl: NDArray[np.float64], prov: dict[str, Any]
+) -> None:
+    import spectral.io.envi as envi
+
+    envi.create_image(
+        str(out / CUBE_HDR),
+        {
+            "description": "TuneSpec per-pixel reflectance factor (Eq. 5); "
+            + _header_summary(prov),
+            "wavelength": [f"{v:g}" for v in wl],
+            "wavelength units": "nm",
+            "data ignore value": "nan",
+            "band names": [f"{v:g} nm" for v in wl],
+        },
+        shape=(*shape, wl.size),
+        dtype=np.float32,
+        interleave="bip",
+        byteorder=0,
+        force=True,
+    )
+
+
+def _create_zarr(
+    out: Path,
+    shape: tuple[int, int],
+    wl: NDArray[np.float64],
+    block_rows: int,
+    prov: dict[str, Any],
+) -> None:
+    """The Zarr v3 group xarray reads as a labelled data set (dimension names in
+    each array's metadata, the wavelength coordinate as an array of its own,
+    consolidated metadata so ``xarray.open_zarr`` opens it without a warning)."""
+    import shutil
+    import warnings
+
+    import zarr
+    from zarr.codecs import BloscCodec
+
+    path = out / CUBE_ZARR
+    if path.exists():
+        shutil.rmtree(path)
+    rows, cols = shape
+    group = zarr.open_group(
+        str(path),
+        mode="w",
+        zarr_format=3,
+        attributes={
+            "title": "TuneSpec per-pixel reflectance factor",
+            "source": prov.get("software", "tunespec"),
+            "history": f"{prov.get('started_utc', '')} tunespec estimate-image "
+            f"{prov.get('session', '')}".strip(),
+            "references": "Trichromatic Reflectance Capture Using a Tunable Light "
+            "Source, Eq. 5 (Wiener estimation per 2x2 Bayer superpixel)",
+            "provenance": prov,
+        },
+    )
+    group.create_array(
+        ZARR_CUBE,
+        shape=(rows, cols, wl.size),
+        chunks=(block_rows, min(cols, ZARR_CHUNK_COLS), wl.size),
+        dtype="float32",
+        compressors=BloscCodec(cname="lz4", clevel=5, shuffle="bitshuffle"),
+        fill_value=float("nan"),
+        dimension_names=ZARR_DIMENSIONS,
+        attributes={
+            "units": "1",
+            "long_name": "reflectance factor",
+            "quantity": "reflectance factor (perfect diffuser = 1)",
+            "wavelength_nm": wl.tolist(),
+        },
+    )
+    coord = group.create_array(
+        "wavelength",
+        shape=(wl.size,),
+        dtype="float64",
+        dimension_names=("wavelength",),
+        attributes={
+            "units": "nm",
+            "long_name": "wavelength",
+            "standard_name": "radiation_wavelength",
+        },
+    )
+    coord[:] = wl
+    for name, n in (("y", rows), ("x", cols)):
+        axis = group.create_array(
+            name,
+            shape=(n,),
+            dtype="int32",
+            dimension_names=(name,),
+            attributes={
+                "units": "1",
+                "long_name": f"{'row' if name == 'y' else 'column'} of 2x2 Bayer "
+                "superpixels (rectified: of the target plane)",
+            },
+        )
+        axis[:] = np.arange(n, dtype=np.int32)
+    with warnings.catch_warnings():
+        # zarr-python's consolidated metadata, which xarray reads for v3 stores
+        warnings.filterwarnings("ignore", message="Consolidated metadata")
+        zarr.consolidate_metadata(str(path))
+
+
+def _create_tiffs(
+    out: Path, shape: tuple[int, int], prov: dict[str, Any]
+) -> dict[str, int]:
+    """The colour TIFFs, created at full size; their pixel data offsets."""
+    import tifffile
+
+    offsets = {}
+    for name, photometric, extra, what, samples in _TIFF_LAYOUT:
+        kwargs: dict[str, Any] = {"extrasamples": extra} if extra else {}
+        tifffile.imwrite(
+            out / name,
+            shape=(*shape, len(samples)),
+            dtype="float32",
+            photometric=photometric,
+            planarconfig="contig",
+            metadata={"quantity": what, "samples": list(samples), **_flat(prov)},
+            **kwargs,
+        )
+        with tifffile.TiffFile(out / name) as tif:
+            page = tif.pages[0]
+            if not page.is_contiguous:  # pragma: no cover - tifffile does for this
+                raise InputError("tifffile wrote a non-contiguous image", path=name)
+            offsets[name] = int(page.dataoffsets[0])
+    return offsets
 
 
 def pwrite_all(path: str | PathLike[str], offset: int, data: NDArray[Any]) -> None:
@@ -336,10 +473,21 @@ def open_image_outputs(folder: str | PathLike[str]) -> SpectralImage:
             path=out,
         )
     try:
-        envi = spectral.open_image(str(out / CUBE_HDR))
-        cube = envi.open_memmap(writable=False)
-        wl = np.asarray(envi.bands.centers, dtype=np.float64)
+        if (out / CUBE_HDR).is_file():
+            envi = spectral.open_image(str(out / CUBE_HDR))
+            cube = envi.open_memmap(writable=False)
+            wl = np.asarray(envi.bands.centers, dtype=np.float64)
+        else:  # written with --formats zarr,tiff: the Zarr cube, read lazily
+            import zarr
+
+            group = zarr.open_group(str(out / CUBE_ZARR), mode="r")
+            cube = group[ZARR_CUBE]
+            wl = np.asarray(group["wavelength"][:], dtype=np.float64)
         maps = [tifffile.memmap(out / n, mode="r") for n in (LAB_TIF, XYZ_TIF, UNC_TIF)]
-    except (OSError, ValueError) as exc:
-        raise InputError(f"cannot open the images: {exc}", path=out) from None
+    except (OSError, ValueError, KeyError) as exc:
+        raise InputError(
+            f"cannot open the images (the viewer needs the TIFFs and a cube: "
+            f"estimate-image --formats with tiff and envi or zarr): {exc}",
+            path=out,
+        ) from None
     return SpectralImage(out, wl, cube, maps[0], maps[1], maps[2], prov)
