@@ -7,6 +7,7 @@ import json
 import numpy as np
 import pytest
 
+from tests.helpers import without_progress
 from tunespec.app.cli import main
 from tunespec.app.pipeline.gonio import GonioPlan, default_plan, frame_names
 from tunespec.app.pipeline.gonio_bench import open_gonio_bench, run_gonio_demo
@@ -213,8 +214,8 @@ def test_cli_kill_and_resume(tmp_path, capsys):
     out = tmp_path / "g"
     args = ["gonio-demo", "--out", str(out), "--geometries", "4", "--seed", "2"]
     assert main([*args, "--fail-after-moves", "3"]) == 3
-    err = capsys.readouterr().err
-    assert "continue with --resume" in err and len(err.strip().splitlines()) == 1
+    err = without_progress(capsys.readouterr().err)
+    assert "continue with --resume" in err and len(err.splitlines()) == 1
     assert main(args) == 2  # the folder holds a session: --resume is required
     assert main([*args, "--resume"]) == 0
     assert "4 geometries (2 spectral)" in capsys.readouterr().out
