@@ -109,3 +109,30 @@ def test_formats_choose_the_files(tmp_path) -> None:
     with pytest.raises(InputError, match="--formats: expected"):
         ImageOutputs.create(tmp_path / "x", (2, 2), WL, block_rows=1,
                             provenance={}, formats=("envi", "hdf5"))  # fmt: skip
+
+
+def test_zarr_chunks_written_whole_are_what_zarr_writes(tmp_path) -> None:
+    """The cube's chunk files (written directly, one file each) hold the bytes
+    zarr-python writes for the same array, edge chunks padded with NaN."""
+    import zarr
+
+    rng = np.random.default_rng(3)
+    rows, cols, wl = 5, 1030, WL[:3]  # edge chunks in both directions
+    cube = rng.uniform(0, 1, (rows, cols, wl.size)).astype(np.float32)
+    out = ImageOutputs.create(tmp_path / "ours", (rows, cols), wl, block_rows=2,
+                              provenance=PROV, formats=("zarr",))  # fmt: skip
+    for r0 in (4, 0, 2):
+        sl = slice(r0, r0 + 2)
+        out.write_rows(r0, cube[sl], cube[sl, :, :3], cube[sl, :, :3], cube[sl, :, :2])
+    ours = zarr.open_group(str(tmp_path / "ours" / "cube.zarr"), mode="r")
+    np.testing.assert_array_equal(ours["reflectance"][:], cube)
+    ref = zarr.open_array(str(tmp_path / "ours" / "cube.zarr" / "reflectance"))
+    theirs = zarr.create_array(
+        store=str(tmp_path / "theirs.zarr"), shape=ref.shape, chunks=ref.chunks,
+        dtype="float32", compressors=None, fill_value=float("nan"),
+    )  # fmt: skip
+    theirs[:] = cube
+    chunk = ("c", "2", "2", "0")  # the corner chunk: 1 of 2 rows, 6 of 512 columns
+    mine = (tmp_path / "ours" / "cube.zarr" / "reflectance").joinpath(*chunk)
+    assert mine.read_bytes() == (tmp_path / "theirs.zarr").joinpath(*chunk).read_bytes()
+    assert len(list((tmp_path / "ours" / "cube.zarr" / "reflectance").rglob("0"))) >= 9
