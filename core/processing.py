@@ -780,16 +780,8 @@ def process_session(
 
     # -- per channel: darks, brackets, Eq. 2, statistics ------------------------------
     acc = _ChannelStats.empty(layout, use, _RoiGeometry.of(rois, layout.n_patches))
-    order = [first, *[c for c in use if c != first]]
-    # the next frame decodes on another thread while this one is gathered
-    reader.prefetch(_read_order(frames, order, whites, targets))
-    try:
-        for c in order:
-            acc.add(session, c, reader.pixels(whites[c]), reader.pixels(targets[c]))
-            ref = targets[c][0]
-            acc.add_spd(c, suppress_meter_floor(session.read_spd(ref)), ref.exposure_s)
-    finally:
-        reader.close()
+    _collect(session, acc, [first, *[c for c in use if c != first]], whites, targets,
+             reader)  # fmt: skip
     warnings.extend(acc.warnings())
     n_px = rois.n_pixels
     n_patch = layout.n_patches
@@ -808,6 +800,26 @@ def process_session(
             "flat_fields_borrowed": acc.n_borrowed,
         },
     )
+
+
+def _collect(
+    session: Session,
+    acc: _ChannelStats,
+    order: Sequence[str],
+    whites: dict[str, list[FrameRecord]],
+    targets: dict[str, list[FrameRecord]],
+    reader: _FrameReader,
+) -> None:
+    """Every channel's statistics into ``acc``, in ``order``; the next frame decodes
+    on another thread while this one is gathered."""
+    reader.prefetch(_read_order(session.frames, order, whites, targets))
+    try:
+        for c in order:
+            acc.add(session, c, reader.pixels(whites[c]), reader.pixels(targets[c]))
+            ref = targets[c][0]
+            acc.add_spd(c, suppress_meter_floor(session.read_spd(ref)), ref.exposure_s)
+    finally:
+        reader.close()
 
 
 def _read_order(
