@@ -4,6 +4,7 @@ Usage::
 
     python benchmarks/bench_image.py [--resolution 5760x3840] [--repeat 1]
                                      [--work DIR] [--fresh] [--workers N]
+                                     [--formats envi,zarr,tiff] [--before SOURCE]
 
 The first run captures a session on the simulated bench (the ColorChecker SG with a
 CMY halftone and measured-reflectance strokes beside it; one dark frame, then a
@@ -14,8 +15,8 @@ CFA DNGs) into ``--work`` (kept for later runs). Then, side by side in one run:
   (page-cached), the least any raw pipeline must do;
 - **images**: ``tunespec estimate-image`` of the session
   (:func:`tunespec.app.pipeline.image.estimate_images`, Dask's local threaded
-  scheduler) in a child process, which reports its wall time and its peak resident
-  set size (goal: at most 1.5x the decode time, under 2 GB);
+  scheduler, ``--formats``) in a child process, which reports its wall time and its
+  peak resident set size (goal: at most 1.5x the decode + write floor, under 2 GB);
 - **Wiener stage vs. matrix product**: the per-pixel Eq. 5 of one block (with one
   BLAS thread, as the pipeline's tasks run it)
   (:data:`~tunespec.core.image_session.BLOCK_PIXELS` pixels as rows, 66
@@ -23,7 +24,8 @@ CFA DNGs) into ``--work`` (kept for later runs). Then, side by side in one run:
   against ``numpy.matmul`` of the same float32 shapes in one product, on this machine (goal: the stage at >= 50 % of the product's
   throughput);
 - **write floor**: writing as many bytes as the outputs hold into a fresh file, with
-  no computing: what the page cache of this machine charges for the outputs alone;
+  no computing, right after each estimate-image run: what the page cache of this
+  machine charges for the outputs alone;
 - **binning error**: binned vs. exact per-pixel solutions (own ``K_e`` per pixel) of
   noisy pixels of the 190 training reflectances, RMS and CIEDE2000.
 """
@@ -32,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import tempfile
@@ -40,6 +43,7 @@ from pathlib import Path
 
 from raw_session import decode_all, session_paths
 
+DEFAULT_FORMATS = "envi,zarr,tiff"
 GOAL_RATIO = 1.5
 GOAL_PEAK_BYTES = 2e9
 GOAL_MATMUL_FRACTION = 0.5
@@ -61,8 +65,20 @@ bench.close()
 """
 
 
-def _images(work: Path, out: Path, workers: int | None) -> dict[str, float]:
-    """``tunespec estimate-image`` in a child process: wall time, CPU, peak RSS."""
+def _images(
+    work: Path,
+    out: Path,
+    workers: int | None,
+    formats: str,
+    source: Path | None = None,
+) -> dict[str, float]:
+    """``tunespec estimate-image`` in a child process: wall time, CPU, peak RSS.
+
+    ``source``: run the TuneSpec of that tree instead (``SOURCE/tunespec/core``
+    ...: ``git archive COMMIT core app devices resources`` unpacked into
+    ``SOURCE/tunespec``), for a before/after comparison in one run.
+    """
+    extra = [] if formats == DEFAULT_FORMATS else ["--formats", formats]
     code = f"""
 import json, resource, shutil, sys, time
 import dask
@@ -73,7 +89,7 @@ if {workers!r}:
 t0 = time.perf_counter()
 code = main(["estimate-image", {str(work / "session")!r}, "--sensitivities",
              {str(work / "truth" / "truth_sensitivity_absolute.csv")!r},
-             "--out", {str(out)!r}, "--quiet"])
+             "--out", {str(out)!r}, "--quiet", *{extra!r}])
 wall = time.perf_counter() - t0
 assert code == 0, code
 ru = resource.getrusage(resource.RUSAGE_SELF)
@@ -81,9 +97,13 @@ rss = ru.ru_maxrss * (1 if sys.platform == "darwin" else 1024)
 print(json.dumps({{"wall_s": wall, "peak_rss_bytes": rss, "user_s": ru.ru_utime,
                   "sys_s": ru.ru_stime}}))
 """
+    env = dict(os.environ)
+    if source is not None:
+        env["PYTHONPATH"] = str(source)
     done = subprocess.run(
-        [sys.executable, "-c", code], check=True, capture_output=True, text=True
-    )
+        [sys.executable, "-c", code], check=True, capture_output=True, text=True,
+        env=env,
+    )  # fmt: skip
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
@@ -235,6 +255,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--work", type=Path, default=None)
     parser.add_argument("--fresh", action="store_true", help="capture again")
     parser.add_argument("--workers", type=int, default=None, help="Dask threads")
+    parser.add_argument(
+        "--formats", default=DEFAULT_FORMATS, help="estimate-image --formats"
+    )
+    parser.add_argument(
+        "--before",
+        type=Path,
+        default=None,
+        metavar="SOURCE",
+        help="also time the estimate-image of this source tree (SOURCE/tunespec/"
+        "core, ...: an earlier commit's 'git archive COMMIT core app devices "
+        "resources' unpacked into SOURCE/tunespec), alternating with this one",
+    )
     args = parser.parse_args(argv)
     work = (
         args.work or Path(tempfile.gettempdir()) / f"tunespec-image-{args.resolution}"
@@ -247,13 +279,21 @@ def main(argv: list[str] | None = None) -> int:
         code=_capture_code(work, args.resolution),
     )
     decode_all(paths)  # warm the page cache and the decoder
-    decode, images = [], []
+    decode, images, floors, before = [], [], [], []
     for _ in range(args.repeat):
         decode.append(decode_all(paths))
-        images.append(_images(work, work / "images", args.workers))
+        if args.before is not None:
+            before.append(
+                _images(work, work / "images", args.workers, DEFAULT_FORMATS,
+                        args.before)
+            )  # fmt: skip
+            floors.append(_write_floor(work, _output_bytes(work / "images")))
+        images.append(_images(work, work / "images", args.workers, args.formats))
+        floors.append(_write_floor(work, _output_bytes(work / "images")))
     d, d_cpu = min(decode)
+    floor = min(floors)
     best = min(images, key=lambda r: r["wall_s"])
-    ratio = best["wall_s"] / d
+    ratio = best["wall_s"] / (d + floor)
     peak = max(r["peak_rss_bytes"] for r in images)
     cpu = best["user_s"] + best["sys_s"]
     print(f"rawpy decode of the {len(paths)} files : {d:7.2f} s  (CPU {d_cpu:.2f} s)")
@@ -262,19 +302,27 @@ def main(argv: list[str] | None = None) -> int:
         f"{cpu:.2f} s: user {best['user_s']:.2f}, system {best['sys_s']:.2f}; "
         f"CPU ratio {cpu / d_cpu:.1f})"
     )
+    n_out = _output_bytes(work / "images")
     print(
-        f"ratio images / decode: {ratio:.2f}  (goal <= {GOAL_RATIO}: "
-        f"{'met' if ratio <= GOAL_RATIO else 'NOT met'})"
+        f"writing the outputs' {n_out / 1e9:.2f} GB alone (no computing): {floor:.2f} s "
+        f"= {floor / d:.2f} x the decode"
+    )
+    if before:
+        b = min(before, key=lambda r: r["wall_s"])
+        print(
+            f"before ({args.before}): {b['wall_s']:.2f} s (CPU user {b['user_s']:.2f}, "
+            f"system {b['sys_s']:.2f}) -> ratio to decode + write "
+            f"{b['wall_s'] / (d + floor):.2f}; now / before "
+            f"{best['wall_s'] / b['wall_s']:.2f}"
+        )
+    print(
+        f"ratio images / (decode + write): {ratio:.2f}  (goal <= {GOAL_RATIO}: "
+        f"{'met' if ratio <= GOAL_RATIO else 'NOT met'}); images / decode "
+        f"{best['wall_s'] / d:.2f}; formats {args.formats}"
     )
     print(
         f"peak RSS of estimate-image: {peak / 1e6:.0f} MB  (goal < "
         f"{GOAL_PEAK_BYTES / 1e9:.0f} GB: {'met' if peak < GOAL_PEAK_BYTES else 'NOT met'})"
-    )
-    n_out = _output_bytes(work / "images")
-    floor = _write_floor(work, n_out)
-    print(
-        f"writing the outputs' {n_out / 1e9:.2f} GB alone (no computing): {floor:.2f} s "
-        f"= {floor / d:.2f} x the decode"
     )
     w = _wiener_vs_matmul()
     print(

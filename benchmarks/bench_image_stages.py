@@ -108,7 +108,10 @@ def run_stages(session_dir: Path, sensitivities: Path, out: Path) -> np.ndarray:
     shape = job.plane_shape
     rows = st.block_rows_for(shape[1])
     prov = pim._provenance(session, job, cal, settings, None, shape)
-    outputs = stage("create outputs", pim._create_outputs, out, shape, bank, rows, prov)
+    outputs = stage(
+        "create outputs", pim._create_outputs, out, shape, bank, rows, prov,
+        settings.formats,
+    )  # fmt: skip
 
     def block(r0: int) -> Any:
         r1 = min(r0 + rows, shape[0])

@@ -39,7 +39,7 @@ from numpy.typing import ArrayLike, NDArray
 from tunespec.core.colorimetry import astm_e308_weights_d50
 from tunespec.core.errors import InputError
 
-__all__ = ["FusedSpectra", "fuse_patch", "material_prior"]
+__all__ = ["FusedSpectra", "fuse_patch", "fused_covariance", "material_prior"]
 
 #: Relative ridge of the correction covariance (keeps it positive definite).
 _EPS = 1e-6
@@ -135,14 +135,81 @@ def fuse_patch(
     a, b = lsq_linear(A, c * w, bounds=([0.0, -np.inf], [np.inf, np.inf])).x
     b = max(b, -a * float(rho.min()))
     R0 = a * rho + b
-    C = B @ B.T
-    C += _EPS * np.trace(C) / rho.size * np.eye(rho.size)
-    CW = C @ W
+    CW = _correction_cov(B) @ W
     resid = W.T @ R0 - target
     R = R0 - CW @ np.linalg.solve(W.T @ CW, resid)
     if R.min() < 0.0:
         R = _nonnegative(R0, B, W, target)
     return FusedSpectra(R, R0, (float(a), float(b)), resid)
+
+
+def _correction_gain(
+    B: NDArray[np.float64], W: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """``G = C W (W^T C W)^-1`` (n_wl, 3): how the fused spectrum moves with the
+    measured XYZ (``R = R0 + G (XYZ - W^T R0)``)."""
+    CW = _correction_cov(B) @ W
+    return CW @ np.linalg.inv(W.T @ CW)
+
+
+def _correction_cov(B: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``C = B B^T + eps I``, the metric of the smallest correction."""
+    C = B @ B.T
+    C += _EPS * np.trace(C) / B.shape[0] * np.eye(B.shape[0])
+    return C
+
+
+def fused_covariance(
+    spectral: ArrayLike,
+    wavelength_nm: ArrayLike,
+    xyz_cov: ArrayLike,
+    prior_cov: ArrayLike,
+) -> NDArray[np.float64]:
+    """Covariance of a fused spectrum (:func:`fuse_patch`), first order.
+
+    The fused spectrum is ``R = P R0 + G XYZ`` with ``G = C W (W^T C W)^-1`` and
+    ``P = I - G W^T``: the measured XYZ sets what the D50 colour matching functions
+    see, the prior spectrum ``R0 = a rho_hat + b`` the rest. So (GUM, law of
+    propagation, the two inputs independent)::
+
+        cov(R) = G cov(XYZ) G^T + P cov(R0) P^T
+
+    and ``W^T cov(R) W = cov(XYZ)`` exactly: the fused spectrum's colour is as
+    uncertain as the single shot's.
+
+    Parameters
+    ----------
+    spectral : (n_s, n_wl)
+        The patch's spectral estimates (as given to :func:`fuse_patch`).
+    wavelength_nm : (n_wl,)
+    xyz_cov : (3, 3)
+        Covariance of the measured XYZ (white Y = 100).
+    prior_cov : (n_wl, n_wl) or (n_wl,)
+        Covariance (or variances) of the prior spectrum ``R0``: ``a^2`` times that
+        of ``rho_hat``, the spectral estimate it is built from.
+
+    Returns
+    -------
+    (n_wl, n_wl)
+
+    References
+    ----------
+    JCGM 100:2008 (GUM), section 5.
+    """
+    W = astm_e308_weights_d50(wavelength_nm)
+    _, B = material_prior(spectral)
+    G = _correction_gain(B, W)
+    P = np.eye(G.shape[0]) - G @ W.T
+    K0 = np.asarray(prior_cov, dtype=np.float64)
+    if K0.ndim == 1:
+        K0 = np.diag(K0)
+    Kx = np.asarray(xyz_cov, dtype=np.float64)
+    if K0.shape != (G.shape[0],) * 2 or Kx.shape != (3, 3):
+        raise InputError(
+            f"fusion covariance: XYZ (3, 3) and prior ({G.shape[0]},) or "
+            f"({G.shape[0]}, {G.shape[0]}) expected"
+        )
+    return G @ Kx @ G.T + P @ K0 @ P.T
 
 
 #: XYZ (white Y = 100) the non-negative correction must reproduce to.

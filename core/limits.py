@@ -461,17 +461,21 @@ def check_output_file(path: str | PathLike[str], what: str = "output") -> Path:
     Raises
     ------
     InputError
-        ``path`` is an existing folder, its parent is a file, or the name is too long.
+        ``path`` is an existing folder, its parent is a file, it or its nearest
+        existing folder is not writable, or the name is too long.
     """
     p = Path(path)
     try:
         if p.is_dir():
             raise InputError(f"{what}: is a folder, expected a file name", path=p)
+        if p.exists() and not os.access(p, os.W_OK):
+            raise InputError(f"{what}: the file is not writable", path=p)
         parent = p.parent
         for q in (parent, *parent.parents):
             if q.exists():
                 if not q.is_dir():
                     raise InputError(f"{what}: {q} is a file, not a folder", path=p)
+                _check_writable_dir(q, what, p)
                 break
     except OSError as exc:
         raise InputError(f"{what}: {_os_problem(exc)}", path=p) from None
@@ -486,7 +490,8 @@ def check_output_dir(path: str | PathLike[str], what: str = "output folder") -> 
     Raises
     ------
     InputError
-        ``path`` (or a parent) is an existing file, or the name is too long.
+        ``path`` (or a parent) is an existing file, the nearest existing folder is
+        not writable, or the name is too long.
     """
     p = Path(path)
     try:
@@ -496,12 +501,19 @@ def check_output_dir(path: str | PathLike[str], what: str = "output folder") -> 
                     raise InputError(
                         f"{what}: {q} is a file, expected a folder", path=p
                     )
+                _check_writable_dir(q, what, p)
                 break
     except OSError as exc:
         raise InputError(f"{what}: {_os_problem(exc)}", path=p) from None
     if any(len(part.encode()) > 255 for part in p.parts):
         raise InputError(f"{what}: file name too long", path=p)
     return p
+
+
+def _check_writable_dir(folder: Path, what: str, path: Path) -> None:
+    """The nearest existing folder of an output must take new entries."""
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise InputError(f"{what}: {folder} is not writable", path=path)
 
 
 def _finite_or_none(value: Any) -> Any:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 from tunespec.core.datasets import load_camera, load_colorchecker_sg, load_led_set
@@ -21,3 +22,14 @@ def write_shipped_spectra(folder: Path) -> Path:
     ):
         write_spectra_csv(spectra, folder / name)
     return folder
+
+
+#: A plain progress line on stderr when it is not a terminal ("capturing: 40% (1.2 s)").
+_PROGRESS_LINE = re.compile(r"^.+: \d+% \(\d+\.\d s\)$")
+
+
+def without_progress(stderr: str) -> str:
+    """``stderr`` without its progress lines (they share stderr with the one error
+    line, so that stdout holds the results alone)."""
+    lines = stderr.strip().splitlines()
+    return "\n".join(line for line in lines if not _PROGRESS_LINE.match(line))

@@ -44,6 +44,10 @@ def test_json_and_csv_sensitivities_give_identical_estimates(calibrated, capsys)
     assert main(["export-rawtoaces", "--sensitivities", str(d / "S.csv"),
                  "-o", str(d / "S.json"), "-q"]) == 0  # fmt: skip
     assert (d / "S.json.meta.json").is_file()  # the LED corrections travel along
+    assert json.loads((d / "S.json").read_text())["header"]["license"] == "CC-BY-4.0"
+    assert main(["export-rawtoaces", "--sensitivities", str(d / "S.csv"), "-o",
+                 str(d / "T.json"), "-q", "--license", "CC0-1.0"]) == 0  # fmt: skip
+    assert json.loads((d / "T.json").read_text())["header"]["license"] == "CC0-1.0"
     capsys.readouterr()
     # one noise level: skips the uncertainty (seconds); the LED corrections of the
     # calibration's side file still apply to both
@@ -110,7 +114,9 @@ def test_progress_plain_lines_in_a_log_and_a_bar_on_a_terminal(capsys) -> None:
     log = TerminalProgress("work")  # pytest's stdout/stderr are not terminals
     for k in range(101):
         log(k / 100)
-    out = capsys.readouterr().out.splitlines()
+    cap = capsys.readouterr()
+    assert cap.out == ""  # stdout keeps to the results
+    out = cap.err.splitlines()
     assert out[0].startswith("work: 0%") and out[-1].startswith("work: 100%")
     assert len(out) == 11  # one line per 10 %
     bar = TerminalProgress("work", force=True)  # as on a terminal: rich draws it

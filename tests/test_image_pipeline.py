@@ -80,7 +80,7 @@ def _read(folder: Path) -> dict[str, np.ndarray]:
     return {
         "wl": np.asarray(envi.bands.centers),
         "cube": np.array(envi.open_memmap()),
-        "zarr": zarr.open_array(str(folder / "cube.zarr"), mode="r")[:],
+        "zarr": zarr.open_array(str(folder / "cube.zarr" / "reflectance"), mode="r")[:],
         "xyz": tifffile.imread(folder / "xyz.tif"),
         "lab": tifffile.imread(folder / "lab.tif"),
         "unc": tifffile.imread(folder / "uncertainty.tif"),

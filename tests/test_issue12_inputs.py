@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from tests.helpers import without_progress
 from tunespec.app.cli import EXIT_DISK_FULL, EXIT_INPUT, main
 from tunespec.app.pipeline.plan import load_config
 from tunespec.app.pipeline.run import run_config
@@ -31,7 +32,7 @@ SMALL = "384x256"
 
 
 def _one_line_error(capsys, code: int, rc: int) -> str:
-    err = capsys.readouterr().err.strip()
+    err = without_progress(capsys.readouterr().err)
     assert rc == code, err
     assert "Traceback" not in err and len(err.splitlines()) == 1, err
     return err

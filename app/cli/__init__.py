@@ -28,6 +28,7 @@ from tunespec.app.cli import (
 )
 from tunespec.app.cli.common import (
     EXIT_CANCELLED,
+    EXIT_CODES_HELP,
     EXIT_DEVICE,
     EXIT_DISK_FULL,
     EXIT_INPUT,
@@ -107,6 +108,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="tunespec",
         description="Spectral reflectance from an RGB camera and a tunable LED source.",
+        epilog=EXIT_CODES_HELP,
     )
     parser.add_argument("--version", action=_VersionAction)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)

@@ -20,6 +20,7 @@ from tunespec.core.spectra import Grid, Spectra
 
 __all__ = [
     "EXIT_CANCELLED",
+    "EXIT_CODES_HELP",
     "EXIT_DEVICE",
     "EXIT_DISK_FULL",
     "EXIT_INPUT",
@@ -46,6 +47,13 @@ EXIT_INPUT = 2
 EXIT_DEVICE = 3
 EXIT_DISK_FULL = 4
 EXIT_CANCELLED = 130
+#: The exit codes, as ``tunespec --help`` lists them.
+EXIT_CODES_HELP = (
+    "exit codes: 0 done; 2 bad input (a file, option or value: the one error line "
+    "names it); 3 device error (light source, camera, goniometer); 4 disk full; "
+    "130 interrupted (Ctrl-C or cancelled). Results go to stdout, progress, notes "
+    "and errors to stderr."
+)
 
 
 def grid_arg(text: str) -> Grid:
@@ -211,8 +219,7 @@ class Console:
         """A progress callback (none with ``--quiet``)."""
         if self.quiet:
             return None
-        # with --json, stdout holds the JSON alone
-        return progress_bar(label, lines_to=sys.stderr if self.json else None)
+        return progress_bar(label)
 
 
 def absolute_sensitivities(path: Path) -> Spectra:
@@ -269,8 +276,9 @@ class TerminalProgress:
 
     On a terminal a real progress bar on stderr (``rich``: bar, percentage, elapsed
     and remaining time); otherwise (logs, CI) a plain line at every 10 % on
-    ``lines_to`` (default stdout, so that stderr keeps to warnings and the one error
-    line), so a log shows how far the work got. :func:`close_progress` stops bars left open by an error.
+    ``lines_to`` (default stderr: stdout holds the results alone, so a table or a
+    JSON document can be piped), so a log shows how far the work got.
+    :func:`close_progress` stops bars left open by an error.
     """
 
     def __init__(
@@ -320,7 +328,7 @@ class TerminalProgress:
         if decile > self._last_decile:
             self._last_decile = decile
             elapsed = time.monotonic() - self._t0
-            stream = self._lines_to or sys.stdout
+            stream = self._lines_to or sys.stderr
             stream.write(f"{self.label}: {fraction:.0%} ({elapsed:.1f} s)\n")
             stream.flush()
 

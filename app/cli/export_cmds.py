@@ -94,6 +94,12 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         action="store_true",
         help="keep the file's wavelengths (rawtoaces reads 380-780 nm at 5 nm only)",
     )
+    p.add_argument(
+        "--license",
+        default="CC-BY-4.0",
+        metavar="SPDX",
+        help="the data's usage licence in the header (default CC-BY-4.0)",
+    )
     p.add_argument("-o", "--output", required=True, type=Path, help="JSON file")
     add_output_options(p)
     p.set_defaults(func=cmd_export_rawtoaces, output_files=("output",))
@@ -131,6 +137,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     p.add_argument("--session-id", help="session identifier shown in the report")
     add_grid_option(p, _RESAMPLE_GRID_HELP)
+    add_output_options(p)
     p.set_defaults(func=cmd_report, output_dirs=("out",))
 
 
@@ -265,6 +272,7 @@ def cmd_export_rawtoaces(args: argparse.Namespace) -> int:
         normalize=not args.absolute,
         measurement_equipment=f"TuneSpec {tunespec_version()}",
         grid=grid,
+        license=args.license,
     )
     meta = sensitivity_meta_path(args.sensitivities)
     if meta.is_file():
@@ -330,7 +338,13 @@ def cmd_report(args: argparse.Namespace) -> int:
     elif args.chart:
         data["table1"] = _table1_from_files(args, data, grid)
     html_path, pdf_path = write_report(args.out, ReportData(**data))
-    print(f"report written to {html_path} and {pdf_path}")
+    out = Console(args)
+    out.say(f"report written to {html_path} and {pdf_path}")
+    doc: dict[str, Any] = {"html": str(html_path), "pdf": str(pdf_path)}
+    for key in ("table1", "table2"):
+        if hasattr(data.get(key), "as_dict"):
+            doc[key] = data[key].as_dict()
+    out.summary(doc)
     return 0
 
 

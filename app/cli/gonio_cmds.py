@@ -19,7 +19,9 @@ from pathlib import Path
 from typing import TextIO
 
 from tunespec.app.cli.common import (
+    Console,
     add_bench_options,
+    add_output_options,
     add_scheduler_option,
     add_sensitivities_option,
     seed_arg,
@@ -94,6 +96,7 @@ def _add_gonio_plan(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     )
     p.add_argument("--hdr-from", type=float, default=25.0, help="HDR from this theta_r")
     _mix_arg(p)
+    add_output_options(p)
     p.set_defaults(func=cmd_gonio_plan, output_files=("output",))
 
 
@@ -126,7 +129,11 @@ def cmd_gonio_plan(args: argparse.Namespace) -> int:
     plan = GonioPlan(steps, mix=args.mix)
     plan.save(args.output)
     n_s = sum(s.spectral for s in steps)
-    print(f"{len(steps)} geometries ({n_s} spectral) -> {args.output}")
+    out = Console(args)
+    out.say(f"{len(steps)} geometries ({n_s} spectral) -> {args.output}")
+    out.summary(
+        {"n_geometries": len(steps), "n_spectral": n_s, "output": str(args.output)}
+    )
     return 0
 
 
@@ -140,7 +147,7 @@ def _add_gonio_demo(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         "gonio.nc, per-geometry CSVs, angles.png and summary.json (scores against "
         "the bench's truth). Killed, it resumes in the same folder with --resume.",
     )
-    p.add_argument("--out", type=Path, required=True, help="session folder")
+    p.add_argument("-o", "--out", type=Path, required=True, help="session folder")
     p.add_argument(
         "--geometries",
         type=int,
@@ -162,17 +169,18 @@ def _add_gonio_demo(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         metavar="N",
         help="(testing) the simulated goniometer fails on its N-th move",
     )
+    add_output_options(p)
     p.set_defaults(func=cmd_gonio_demo, output_dirs=("out",))
 
 
 def cmd_gonio_demo(args: argparse.Namespace) -> int:
     """Run ``gonio-demo``."""
-    from tunespec.app.cli.common import progress_bar
     from tunespec.app.pipeline.gonio_bench import run_gonio_demo
     from tunespec.core.limits import valid_number
 
     valid_number(args.geometries, "--geometries", lo=4, hi=14, integer=True)
     _start_plan(args)
+    out = Console(args)
     try:
         summary = run_gonio_demo(
             args.out,
@@ -181,7 +189,7 @@ def cmd_gonio_demo(args: argparse.Namespace) -> int:
             seed=args.seed,
             fail_after_moves=args.fail_after_moves,
             scheduler=args.scheduler,
-            progress=progress_bar("gonio session"),
+            progress=out.progress("gonio session"),
         )
     except Exception as exc:
         from tunespec.devices.protocols import DeviceError
@@ -191,7 +199,7 @@ def cmd_gonio_demo(args: argparse.Namespace) -> int:
                 f"{exc}; every frame taken is in {args.out}: continue with --resume"
             ) from exc
         raise
-    print(
+    out.say(
         f"{summary['n_geometries']} geometries ({summary['n_spectral']} spectral): "
         f"spectral RMS full captures {summary['spectral_rms_full_captures']:.4f}, "
         f"fused {summary['spectral_rms_fused']:.4f} "
@@ -201,7 +209,8 @@ def cmd_gonio_demo(args: argparse.Namespace) -> int:
         f"({summary['mix']} mix) at the single-shot-only geometries "
         f"{summary['de00_single_shot_fused_mean']:.3f}"
     )
-    print(f"data set -> {args.out / 'gonio.nc'}", file=sys.stderr)
+    out.note(f"data set -> {args.out / 'gonio.nc'}")
+    out.summary({"out": str(args.out), **summary})
     return 0
 
 
@@ -215,7 +224,7 @@ def _add_gonio_run(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> 
         "'tunespec calibrate'. Each LED is measured once with the light's "
         "spectroradiometer, the mix chosen from those. Killed, it resumes with --resume.",
     )
-    p.add_argument("--out", type=Path, required=True, help="session folder")
+    p.add_argument("-o", "--out", type=Path, required=True, help="session folder")
     p.add_argument("--plan", type=Path, help="plan JSON (gonio-plan or the GUI editor)")
     add_bench_options(p)
     p.add_argument(
@@ -237,6 +246,7 @@ def _add_gonio_run(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> 
     p.add_argument(
         "--iso", type=int, default=100, help="camera ISO, as at calibration (100)"
     )
+    add_output_options(p)
     p.set_defaults(func=cmd_gonio_run, output_dirs=("out",))
 
 
@@ -278,7 +288,7 @@ def _start_plan(args: argparse.Namespace, *, needs: tuple[str, ...] = ()) -> Non
 
 def cmd_gonio_run(args: argparse.Namespace) -> int:
     """Run ``gonio-run``."""
-    from tunespec.app.cli.common import absolute_sensitivities, progress_bar
+    from tunespec.app.cli.common import absolute_sensitivities
     from tunespec.app.pipeline.gonio_devices import run_gonio_session
     from tunespec.core.io.export import read_sensitivity_meta
     from tunespec.core.layout import TargetLayout
@@ -301,23 +311,25 @@ def cmd_gonio_run(args: argparse.Namespace) -> int:
     _start_plan(args, needs=("plan", "sensitivities"))
     if S is None:
         raise InputError(f"{args.out} has no calibration.csv yet: give --sensitivities")
+    out = Console(args)
     try:
         s = run_gonio_session(
             args.out, light=args.light, camera=args.camera, gonio=args.gonio,
             sensitivity=S, layout=layout, led_correction=corr,
             layout_path=args.layout, resolution=args.resolution, iso=args.iso,
             seed=args.seed,
-            scheduler=args.scheduler, progress=progress_bar("gonio session"),
+            scheduler=args.scheduler, progress=out.progress("gonio session"),
         )  # fmt: skip
     except DeviceError as exc:
         raise type(exc)(
             f"{exc}; every frame taken is in {args.out}: continue with --resume"
         ) from exc
-    print(
+    out.say(
         f"{s['n_geometries']} geometries ({s['n_spectral']} spectral, {s['mix']} "
         f"mix), {s['frames_taken_now']} frames taken now"
     )
-    print(f"data set -> {args.out / 'gonio.nc'}", file=sys.stderr)
+    out.note(f"data set -> {args.out / 'gonio.nc'}")
+    out.summary({"out": str(args.out), **s})
     return 0
 
 
@@ -371,6 +383,7 @@ def _add_match(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
         help="with --light: the measured SPD as spectral CSV "
         "(default OUTPUT with _measured.csv)",
     )
+    add_output_options(p)
     p.set_defaults(func=cmd_match, output_files=("output", "measured_out"))
 
 
@@ -414,25 +427,26 @@ def cmd_match(args: argparse.Namespace) -> int:
             colour_rendering(spd)
         )
     atomic_write_text(args.output, dumps_json(out))
+    con = Console(args)
     m = out["metrics"]
     if "measured_delta_uv" in m:
-        print(
+        con.say(
             f"measured by the light source: Delta u'v' {m['measured_delta_uv']:.2e}, "
             f"CIE Ra {m['measured_cri_ra']:.2f}, TM-30 Rf {m['measured_tm30_rf']:.2f}"
         )
-    print(
+    con.say(
         f"{target.names[0]} from {len(leds)} LEDs: Delta u'v' {m['delta_uv']:.2e}, "
         f"CIE Ra {m['cri_ra']:.2f}, TM-30 Rf {m['tm30_rf']:.2f}, dE00 over "
         f"{m['n_reflectances']} reflectances mean {m['mean_de00']:.3f} max "
         f"{m['max_de00']:.3f}"
     )
     if not match.pinned:
-        print(
-            f"warning: the LEDs cannot reach the chromaticity of {target.names[0]} "
-            f"(Delta u'v' {m['delta_uv']:.4f}): the best fit is written",
-            file=sys.stderr,
+        con.warn(
+            f"the LEDs cannot reach the chromaticity of {target.names[0]} "
+            f"(Delta u'v' {m['delta_uv']:.4f}): the best fit is written"
         )
-    print(f"levels -> {args.output}", file=sys.stderr)
+    con.note(f"levels -> {args.output}")
+    con.summary({"output": str(args.output), **out})
     return 0
 
 

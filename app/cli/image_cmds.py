@@ -23,8 +23,8 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="per-pixel reflectance cube, XYZ/L*a*b* and uncertainty images",
         description="Per 2x2 Bayer superpixel: dark, flat field (Eq. 2), Wiener "
         "estimation (Eq. 5) with a photon + read noise model. Writes an ENVI and a "
-        "Zarr cube, XYZ, L*a*b* (D50) and uncertainty TIFFs, an sRGB PNG and "
-        "provenance.json into OUT.",
+        "Zarr cube, XYZ, L*a*b* (D50) and uncertainty TIFFs (--formats), an sRGB "
+        "PNG and provenance.json into OUT.",
     )
     p.add_argument("session", type=Path, help="a captured session folder")
     _common(p)
@@ -54,7 +54,17 @@ def _common(p: argparse.ArgumentParser) -> None:
     add_sensitivities_option(
         p, "calibrate's sensitivities CSV (its .meta.json: LED corrections)"
     )
-    p.add_argument("--out", required=True, type=Path, help="output folder")
+    p.add_argument("-o", "--out", required=True, type=Path, help="output folder")
+    p.add_argument(
+        "--formats",
+        type=formats_arg,
+        default=("envi", "zarr", "tiff"),
+        metavar="LIST",
+        help="files to write, comma-separated from envi (cube.hdr/.img: ENVI, GDAL, "
+        "Spectral Python), zarr (cube.zarr: xarray.open_zarr, dask) and tiff "
+        "(xyz.tif, lab.tif, uncertainty.tif); default envi,zarr,tiff. The sRGB "
+        "preview and provenance.json are always written",
+    )
     p.add_argument(
         "--rectify",
         action="store_true",
@@ -100,6 +110,17 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.set_defaults(grid=None)  # None: the pipeline's estimation grid, 400:700:5
 
 
+def formats_arg(text: str) -> tuple[str, ...]:
+    """argparse type for ``--formats envi,zarr,tiff``."""
+    from tunespec.core.errors import TuneSpecError
+    from tunespec.core.io.image_formats import valid_formats
+
+    try:
+        return valid_formats(text)
+    except TuneSpecError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def noise_model_arg(text: str) -> object:
     """argparse type for ``--noise-model``: ``photon-transfer`` (None: fitted) or
     ``camera:FULL_WELL_E,READ_NOISE_E[,ISO_GAIN]`` (:class:`SensorFigures`)."""
@@ -138,6 +159,7 @@ def _settings(args: argparse.Namespace) -> object:
         clip=not args.no_clip,
         noise=args.noise_model,
         dark=args.dark,
+        formats=args.formats,
         **bins,
     )
 
@@ -157,10 +179,8 @@ def cmd_estimate_image(args: argparse.Namespace) -> int:
         progress=out.progress("estimating images"),
     )
     rows, cols = prov["shape"]
-    out.say(
-        f"{cols}x{rows} px x {len(prov['channels'])} LEDs -> {args.out} "
-        "(cube.hdr/.img, cube.zarr, xyz.tif, lab.tif, uncertainty.tif, srgb.png)"
-    )
+    files = ", ".join(v.split(" ")[0] for v in prov["files"].values())
+    out.say(f"{cols}x{rows} px x {len(prov['channels'])} LEDs -> {args.out} ({files})")
     out.summary({"out": str(args.out), **prov})
     return 0
 

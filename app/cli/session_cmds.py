@@ -76,7 +76,9 @@ def _add_demo(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "and write exports and a report; prints Tables 1 and 2 against the bench's "
         "truth. Re-running on the same folder resumes it.",
     )
-    p.add_argument("--out", type=Path, default=Path("tunespec-demo"), help="folder")
+    p.add_argument(
+        "-o", "--out", type=Path, default=Path("tunespec-demo"), help="folder"
+    )
     p.add_argument("--seed", type=seed_arg, default=0, help="simulation seed (0)")
     p.add_argument(
         "--resolution",
@@ -110,7 +112,7 @@ def _add_capture(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
     p.add_argument(
         "--layout", type=Path, help="target layout JSON (needed for a new session)"
     )
-    p.add_argument("--out", required=True, type=Path, help="session folder")
+    p.add_argument("-o", "--out", required=True, type=Path, help="session folder")
     p.add_argument("--resume", action="store_true", help="continue an existing session")
     p.add_argument(
         "--retake",

@@ -1,9 +1,11 @@
 """Outputs of a gonio session: a labelled NetCDF data set, CSV per geometry, plots.
 
 ``gonio.nc`` (xarray, NetCDF 3 through scipy): ``reflectance`` and ``u_reflectance``
-(patch x geometry x wavelength), ``XYZ``, ``u_XYZ`` and ``Lab`` (patch x geometry x
-component), with the geometry's angles, its ``spectral`` flag and the goniometer's
-read-back as coordinates. Per geometry, ``<folder>/reflectance.csv`` (spectral CSV)
+(patch x geometry x wavelength), ``XYZ``, ``u_XYZ``, ``Lab`` and ``u_Lab`` (patch x
+geometry x component), with the geometry's angles, its ``spectral`` flag and the
+goniometer's read-back as coordinates; CF-style attributes (``units``,
+``long_name`` on every variable, ``Conventions``, ``history``, ``source``) and a
+standard uncertainty (k = 1) at every geometry. Per geometry, ``<folder>/reflectance.csv`` (spectral CSV)
 and ``<folder>/colorimetry.csv`` (``patch,X,Y,Z,L,a,b,u_X,u_Y,u_Z``). ``angles.png``:
 L*, a*, b* and the reflectance factor at 550 nm against the viewing angle.
 
@@ -27,8 +29,34 @@ from tunespec.devices.goniometer import ANGLE_AXES
 __all__ = ["write_gonio_outputs"]
 
 
-def _dataset(result: GonioResult):
+#: CF ``units`` and ``long_name`` of the data set's variables and coordinates.
+_VARIABLE_ATTRS = {
+    "reflectance": ("1", "reflectance factor (perfect diffuser = 1)"),
+    "u_reflectance": ("1", "standard uncertainty (k=1) of the reflectance factor"),
+    "XYZ": ("1", "CIE XYZ tristimulus values, D50, 1931 2 deg, white Y = 100"),
+    "u_XYZ": ("1", "standard uncertainty (k=1) of XYZ (single shot)"),
+    "Lab": ("1", "CIELAB of the reflectance, D50 (ICC white)"),
+    "u_Lab": ("1", "standard uncertainty (k=1) of CIELAB"),
+    "wavelength": ("nm", "wavelength"),
+    "theta_i": ("degree", "polar angle of incidence"),
+    "phi_i": ("degree", "azimuth of incidence"),
+    "theta_r": ("degree", "polar angle of viewing"),
+    "phi_r": ("degree", "azimuth of viewing"),
+    "spectral": ("1", "1: full LED sequence captured; 0: spectra fused from the "
+                 "single shot"),
+}  # fmt: skip
+
+
+def _now() -> str:
+    from datetime import UTC, datetime
+
+    return datetime.now(UTC).isoformat(timespec="seconds").replace("+00:00", "Z")
+
+
+def _dataset(result: GonioResult, folder: Path):
     import xarray as xr
+
+    from tunespec.core.io.export import tunespec_version
 
     geoms = [s.geometry for s in result.plan.steps]
     coords = {
@@ -52,17 +80,32 @@ def _dataset(result: GonioResult):
             "XYZ": ((*pg, "component"), result.xyz),
             "u_XYZ": ((*pg, "component"), result.u_xyz),
             "Lab": ((*pg, "lab_component"), result.lab),
+            "u_Lab": ((*pg, "lab_component"), result.u_lab),
         },
         coords=coords,
         attrs={
             "title": "TuneSpec gonio session",
+            "Conventions": "CF-1.8",
+            "source": f"tunespec {tunespec_version()}",
+            "history": f"{_now()} tunespec gonio processing of {folder}",
+            "references": "Trichromatic Reflectance Capture Using a Tunable Light "
+            "Source (Eq. 1, 5); ASTM E308-15; JCGM 100:2008 (GUM)",
             "illuminant": "CIE D50, CIE 1931 2 deg, ASTM E308, white Y = 100",
             "reflectance_units": "reflectance factor (perfect diffuser = 1)",
             "angles_units": "degree",
-            "u_reflectance_note": "Wiener posterior std at spectral geometries; NaN where fused",
+            "u_reflectance_note": "standard uncertainty (k=1): the Wiener posterior "
+            "std at spectral geometries; at fused geometries the single shot's XYZ "
+            "covariance and the prior spectrum's (a^2 times the posterior variance "
+            "of the patch's least specular spectral estimate) propagated through "
+            "the fusion, first order",
         },
     )
-    ds["wavelength"].attrs["units"] = "nm"
+    for name, (units, long_name) in _VARIABLE_ATTRS.items():
+        ds[name].attrs.update(units=units, long_name=long_name)
+    for a in ANGLE_AXES:
+        ds[f"{a}_readback"].attrs.update(
+            units="degree", long_name=f"{a} read back from the goniometer"
+        )
     return ds
 
 
@@ -70,7 +113,7 @@ def write_gonio_outputs(result: GonioResult, folder: str | Path) -> list[Path]:
     """Write ``gonio.nc``, per-geometry CSVs and ``angles.png``; return the files."""
     root = Path(folder)
     out = [root / "gonio.nc"]
-    data = _dataset(result).to_netcdf(engine="scipy")
+    data = _dataset(result, root.resolve()).to_netcdf(engine="scipy")
     atomic_write_bytes(out[0], bytes(data))
     for i in range(len(result.plan.steps)):
         gdir = root / result.plan.folder(i)

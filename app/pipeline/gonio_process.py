@@ -27,9 +27,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tunespec.app.pipeline.gonio import DARK, HDR_EXPOSURES, MIX, GonioPlan
-from tunespec.core.colorimetry import xyz_to_lab_d50
+from tunespec.core.colorimetry import astm_e308_weights_d50, xyz_d50, xyz_to_lab_d50
 from tunespec.core.errors import InputError
-from tunespec.core.fusion import fuse_patch, material_prior
+from tunespec.core.fusion import fuse_patch, fused_covariance, material_prior
 from tunespec.core.hdr import HdrImage, hdr_patch_responses, merge_brackets
 from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import read_json
@@ -84,10 +84,13 @@ class GeometryData:
 class GonioResult:
     """Spectra and colorimetry of every patch at every geometry.
 
-    ``reflectance`` (n_p, n_g, n_wl); ``u_reflectance`` the Wiener posterior std at
-    spectral geometries (NaN at fused ones); ``xyz``, ``u_xyz`` (n_p, n_g, 3) the
-    single-shot XYZ (D50) and its standard uncertainty; ``lab`` of the final spectra
-    (which reproduce ``xyz`` at fused geometries); ``spectral`` (n_g,) bool.
+    ``reflectance`` (n_p, n_g, n_wl); ``u_reflectance`` its standard uncertainty:
+    the Wiener posterior std at spectral geometries, at fused ones the single
+    shot's XYZ covariance and the prior spectrum's propagated through the fusion
+    (:func:`tunespec.core.fusion.fused_covariance`); ``xyz``, ``u_xyz`` (n_p, n_g,
+    3) the single-shot XYZ (D50) and its standard uncertainty; ``lab`` of the final
+    spectra (which reproduce ``xyz`` at fused geometries) and ``u_lab`` its standard
+    uncertainty (from the spectra's, first order); ``spectral`` (n_g,) bool.
     """
 
     patches: tuple[str, ...]
@@ -100,6 +103,7 @@ class GonioResult:
     u_xyz: NDArray[np.float64]
     lab: NDArray[np.float64]
     spectral: NDArray[np.bool_]
+    u_lab: NDArray[np.float64]
 
 
 def _roi_pixels(
@@ -260,12 +264,16 @@ def process_gonio(
     R = np.full((n_p, n_g, wl.size), np.nan)
     uR = np.full_like(R, np.nan)
     wprior = _augmented(prior.resample(DEFAULT_GRID), SPECULAR_OFFSETS)
+    # the full posterior covariance per patch and spectral geometry: a spectrum's
+    # errors are strongly correlated across wavelengths, which its colour sees
+    post: dict[int, NDArray[np.float64]] = {}
     for i in spectral_idx:
         d = data[i]
         resp = d.responses.subset(illuminants=leds)
         est = wiener_reflectance(resp, d.illuminants, sensitivity, wprior, clip=False)
         # reflectance factors may exceed 1 near the specular peak: clip below only
         R[:, i], uR[:, i] = np.maximum(est.reflectance.values, 0.0), est.std
+        post[i] = _posterior_covariance(est)
     rho = np.array([material_prior(R[p, spectral_idx])[0] for p in range(n_p)])
     # the single-shot transform's prior: the sample's own body spectra with flat
     # surface reflections added (what the sample can look like at any geometry)
@@ -273,6 +281,11 @@ def process_gonio(
     session = _augmented(session, SESSION_OFFSETS)
     xyz = np.zeros((n_p, n_g, 3))
     u_xyz = np.zeros_like(xyz)
+    W = astm_e308_weights_d50(wl)
+    # the covariance of the XYZ of the final spectra (W^T cov(R) W)
+    xyz_cov_R = np.zeros((n_p, n_g, 3, 3))
+    for i in spectral_idx:
+        xyz_cov_R[:, i] = W.T @ post[i] @ W
     for i, d in enumerate(data):
         mix = d.illuminants.select([MIX])
         rgb = d.responses.rgb[:, 0, :]
@@ -283,16 +296,48 @@ def process_gonio(
         if not plan.steps[i].spectral:
             M = sensitivity.values * mix.values[0] * DEFAULT_GRID.step_nm
             for p in range(n_p):
-                f = fuse_patch(
-                    rgb[p], xyz[p, i], R[p, spectral_idx], M, wl, rgb_var=var[p]
-                )
+                spec = R[p, spectral_idx]
+                f = fuse_patch(rgb[p], xyz[p, i], spec, M, wl, rgb_var=var[p])
                 R[p, i] = f.reflectance
+                # the prior R0 = a rho_hat + b: rho_hat's posterior covariance, a^2
+                k_rho = post[spectral_idx[int(np.argmin(spec.mean(axis=1)))]][p]
+                K = fused_covariance(spec, wl, cov[p], f.coefficients[0] ** 2 * k_rho)
+                uR[p, i] = np.sqrt(np.maximum(np.diagonal(K), 0.0))
+                xyz_cov_R[p, i] = W.T @ K @ W  # = cov[p]: the single shot's
         report(progress, 0.8 + 0.2 * (i + 1) / n_g)
-    from tunespec.core.colorimetry import xyz_d50
-
-    lab = xyz_to_lab_d50(xyz_d50(R, wl))
+    lab, u_lab = _lab_with_uncertainty(R, xyz_cov_R, wl)
     return GonioResult(layout.patch_names, plan, [d.position for d in data], wl, R, uR,
-                       xyz, u_xyz, lab, np.array([s.spectral for s in plan.steps]))  # fmt: skip
+                       xyz, u_xyz, lab, np.array([s.spectral for s in plan.steps]),
+                       u_lab)  # fmt: skip
+
+
+def _posterior_covariance(est: Any) -> NDArray[np.float64]:
+    """The full Wiener posterior covariance per patch, (n_p, n_wl, n_wl):
+    ``K - K F^T (F K F^T + K_e)^-1 F K`` with each patch's own ``K_e`` (the
+    estimate's ``variance`` is its diagonal)."""
+    F, K = est.lighting, est.prior_covariance
+    FK = F @ K
+    G = FK @ F.T
+    noise = est.noise_variance.reshape(est.noise_variance.shape[0], -1)
+    A = np.repeat(G[None], noise.shape[0], axis=0)
+    idx = np.arange(G.shape[0])
+    A[:, idx, idx] += noise
+    sol = np.linalg.solve(A, np.broadcast_to(FK, (noise.shape[0], *FK.shape)))
+    out = K[None] - FK.T[None] @ sol
+    return 0.5 * (out + out.transpose(0, 2, 1))
+
+
+def _lab_with_uncertainty(
+    R: NDArray[np.float64], xyz_cov: NDArray[np.float64], wl: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """CIELAB (D50) of the spectra and its standard uncertainty, first order from
+    the covariance of their XYZ (..., 3, 3)."""
+    from tunespec.core.uncertainty import lab_covariance
+
+    xyz = xyz_d50(R, wl)
+    lab_cov = lab_covariance(xyz.reshape(-1, 3), xyz_cov.reshape(-1, 3, 3))
+    u_lab = np.sqrt(np.maximum(np.diagonal(lab_cov, axis1=-2, axis2=-1), 0.0))
+    return xyz_to_lab_d50(xyz), u_lab.reshape(xyz.shape)
 
 
 def _on_dask(

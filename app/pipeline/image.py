@@ -73,6 +73,9 @@ class ImageSettings:
         its smooth level and hot pixels only
         (:func:`tunespec.core.image_session.smooth_dark`), which removes the dark
         frame's read noise from every pixel.
+    formats
+        The files written (``--formats``): ``envi`` (cube.hdr/.img), ``zarr``
+        (cube.zarr), ``tiff`` (xyz, lab, uncertainty); default all three.
 
     Raises
     ------
@@ -88,10 +91,14 @@ class ImageSettings:
     n_phi: int = 4
     noise: Any = None
     dark: str = "pixel"
+    formats: tuple[str, ...] = ("envi", "zarr", "tiff")
 
     def __post_init__(self) -> None:
         from tunespec.core.image import NoiseModel, SensorFigures
         from tunespec.core.image_session import DARK_MODES
+        from tunespec.core.io.image_formats import valid_formats
+
+        object.__setattr__(self, "formats", valid_formats(self.formats))
 
         if self.dark not in DARK_MODES:
             raise InputError(
@@ -210,8 +217,9 @@ def session_graph(
     rows = st.block_rows_for(shape[1])
     provenance = _provenance(session, job, calibration, settings, rect, shape)
     outputs = delayed(_create_outputs, pure=True)(
-        out, shape, bank, rows, provenance, dask_key_name=f"outputs-{job.work}"
-    )
+        out, shape, bank, rows, provenance, settings.formats,
+        dask_key_name=f"outputs-{job.work}",
+    )  # fmt: skip
     blocks = [
         delayed(one_blas_thread, pure=True)(
             st.estimate_block,
@@ -244,14 +252,20 @@ def _after(func: Any) -> Any:
 
 
 def _create_outputs(
-    out: Path, shape: tuple[int, int], bank: Any, rows: int, provenance: dict[str, Any]
+    out: Path,
+    shape: tuple[int, int],
+    bank: Any,
+    rows: int,
+    provenance: dict[str, Any],
+    formats: tuple[str, ...],
 ) -> Any:
     from tunespec.core.io.image_formats import ImageOutputs
 
     prov = {**provenance, "noise_model": _noise_doc(bank)}
     return ImageOutputs.create(
-        out, shape, bank.wavelength_nm, block_rows=rows, provenance=prov
-    )
+        out, shape, bank.wavelength_nm, block_rows=rows, provenance=prov,
+        formats=formats,
+    )  # fmt: skip
 
 
 def _noise_doc(bank: Any) -> dict[str, Any]:
@@ -323,15 +337,20 @@ def _provenance(
         "settings": _settings_doc(settings, g),
         "software": f"tunespec {tunespec_version()}",
         "started_utc": _now(),
-        "files": {
-            "cube_envi": "cube.hdr",
-            "cube_zarr": "cube.zarr",
-            "xyz": "xyz.tif",
-            "lab": "lab.tif",
-            "uncertainty": "uncertainty.tif (u(L*), RMS u(reflectance); k=1)",
-            "preview": "srgb.png",
-        },
+        "files": _files_doc(settings.formats),
     }  # fmt: skip
+
+
+def _files_doc(formats: tuple[str, ...]) -> dict[str, str]:
+    files = {
+        "cube_envi": ("envi", "cube.hdr"),
+        "cube_zarr": ("zarr", "cube.zarr (xarray: reflectance (y, x, wavelength))"),
+        "xyz": ("tiff", "xyz.tif"),
+        "lab": ("tiff", "lab.tif"),
+        "uncertainty": ("tiff", "uncertainty.tif (u(L*), RMS u(reflectance); k=1)"),
+    }
+    doc = {k: name for k, (fmt, name) in files.items() if fmt in formats}
+    return {**doc, "preview": "srgb.png"}
 
 
 def _settings_doc(settings: ImageSettings, grid: Grid) -> dict[str, Any]:
@@ -359,6 +378,7 @@ def _settings_doc(settings: ImageSettings, grid: Grid) -> dict[str, Any]:
         "n_levels": settings.n_levels,
         "n_phi": settings.n_phi,
         "noise": noise_doc,
+        "formats": list(settings.formats),
     }
 
 

@@ -333,7 +333,7 @@ def sensitivity_rawtoaces_document(
     laboratory: str = "",
     measurement_equipment: str | None = None,
     comments: str = "",
-    license: str = "",
+    license: str = "CC-BY-4.0",
     unique_identifier: str | None = None,
     created: datetime | str | None = None,
     grid: Grid | None = RAWTOACES_GRID,
@@ -350,7 +350,11 @@ def sensitivity_rawtoaces_document(
         Scale to peak 1 (rawtoaces' "relative" units, like the shipped files); the
         factor that restores the absolute scale goes into ``comments``.
     description, document_creator, laboratory, measurement_equipment, comments, license
-        Header fields of the schema.
+        Header fields of the schema. ``license`` (required by the schema: "usage
+        license of the document") defaults to CC-BY-4.0, the licence under which
+        rawtoaces-data and most published sensitivity sets are shared; it is the
+        data's, not the software's (Apache-2.0), and ``export-rawtoaces --license``
+        sets another.
     unique_identifier
         A UUID; ``None`` makes a random one.
     created
@@ -414,7 +418,7 @@ def sensitivity_rawtoaces_document(
             "laboratory": laboratory,
             "document_creation_date": _iso(created),
             "comments": note,
-            "license": license,
+            "license": license or "CC-BY-4.0",
         },
         "spectral_data": {
             "units": "relative",

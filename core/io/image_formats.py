@@ -4,12 +4,23 @@ One folder per session (:class:`ImageOutputs`)::
 
     cube.hdr, cube.img   ENVI, float32, band-interleaved by pixel, wavelengths in nm
                          (Spectral Python ``spectral.open_image``, ENVI, GDAL)
-    cube.zarr/           the same cube as a chunked Zarr array (rows, cols, bands),
-                         attribute ``wavelength_nm``; for big data and parallel writes
-    xyz.tif, lab.tif     CIE XYZ (D50, Y of the white 100) and CIELAB (ICC D50 white),
-                         float32 (rows, cols, 3) TIFFs (tifffile)
-    uncertainty.tif      float32 (rows, cols, 2): u(L*) and the RMS over wavelength of
-                         the spectrum's standard uncertainty (k = 1)
+    cube.zarr/           the same cube as a Zarr v3 group that xarray opens as a
+                         labelled data set (``xarray.open_zarr``): ``reflectance``
+                         with named dimensions (``y``, ``x``, ``wavelength``), the
+                         ``wavelength`` coordinate in nm, CF-style attributes
+                         (``units``, ``long_name``) and the provenance in the
+                         group's attributes; chunked by row blocks for parallel writes
+    xyz.tif              CIE XYZ (D50, Y of the white 100), float32 (rows, cols, 3),
+                         photometric RGB (TIFF tag 262 = 2) whose three samples are
+                         X, Y, Z as the ImageDescription's ``samples`` says (TIFF has
+                         no XYZ photometric but LogLuv's, an encoding)
+    lab.tif              CIELAB (ICC D50 white), photometric CIELab (262 = 8) with
+                         IEEE float samples (339 = 3) holding L* (0-100), a*, b*
+                         unscaled (not TIFF 6's 8/16-bit integer encoding)
+    uncertainty.tif      float32 (rows, cols, 2), photometric MINISBLACK with one
+                         unspecified extra sample (338 = 0): u(L*) and the RMS over
+                         wavelength of the spectrum's standard uncertainty (k = 1),
+                         named in the ImageDescription's ``samples``
     srgb.png             8-bit sRGB preview
     provenance.json      session, calibration, grid, noise model, software version;
                          written last, so its presence means the folder is complete
@@ -29,6 +40,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass
 from os import PathLike
 from pathlib import Path
@@ -42,6 +54,7 @@ from tunespec.core.limits import dumps_json
 
 __all__ = [
     "CUBE_HDR",
+    "IMAGE_FORMATS",
     "PROVENANCE",
     "ImageOutputs",
     "SpectralImage",
@@ -49,6 +62,7 @@ __all__ = [
     "pwrite_all",
     "read_provenance",
     "remove_partial_outputs",
+    "valid_formats",
     "write_array",
 ]
 
@@ -62,6 +76,20 @@ SRGB_PNG = "srgb.png"
 PROVENANCE = "provenance.json"
 #: Columns of a Zarr chunk (rows are the block height).
 ZARR_CHUNK_COLS = 512
+#: The cube's array in ``cube.zarr`` and its dimension names (xarray's).
+ZARR_CUBE = "reflectance"
+ZARR_DIMENSIONS = ("y", "x", "wavelength")
+#: What ``--formats`` chooses from: the ENVI cube, the Zarr cube, the colour TIFFs.
+IMAGE_FORMATS = ("envi", "zarr", "tiff")
+#: The TIFFs: file, photometric, extra samples, quantity, sample names.
+_TIFF_LAYOUT = (
+    (XYZ_TIF, "rgb", None, "CIE XYZ, D50, CIE 1931 2 degree, Y(white) = 100; "
+     "photometric RGB holds X, Y, Z", ("X", "Y", "Z")),
+    (LAB_TIF, "cielab", None, "CIELAB, ICC D50 white; float L* (0-100), a*, b*",
+     ("L*", "a*", "b*")),
+    (UNC_TIF, "minisblack", ["unspecified"], "standard uncertainty (k=1): u(L*), "
+     "RMS u(reflectance)", ("u(L*)", "RMS u(reflectance)")),
+)  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -80,6 +108,9 @@ class ImageOutputs:
         Rows per block (Zarr chunk height); blocks start at multiples of it.
     offsets
         Byte offset of the pixel data in each raw-addressed file.
+    formats
+        The formats written, a subset of :data:`IMAGE_FORMATS` (the sRGB preview
+        and ``provenance.json`` always are).
     """
 
     folder: Path
@@ -87,6 +118,7 @@ class ImageOutputs:
     n_bands: int
     block_rows: int
     offsets: dict[str, int]
+    formats: tuple[str, ...] = IMAGE_FORMATS
 
     @classmethod
     def create(
@@ -97,80 +129,33 @@ class ImageOutputs:
         *,
         block_rows: int,
         provenance: dict[str, Any],
+        formats: Sequence[str] = IMAGE_FORMATS,
     ) -> ImageOutputs:
         """Create every output file at full size (contents to be written by blocks).
 
         Raises
         ------
         InputError
-            An empty shape or grid.
+            An empty shape or grid, an unknown format.
         """
-        import spectral.io.envi as envi
-        import tifffile
-        import zarr
-        from zarr.codecs import BloscCodec
-
         rows, cols = (int(v) for v in shape)
         wl = np.asarray(wavelength_nm, dtype=np.float64)
         if rows < 1 or cols < 1 or wl.size < 1 or block_rows < 1:
             raise InputError(f"images of {cols}x{rows} px and {wl.size} bands: empty")
+        chosen = valid_formats(formats)
         out = Path(folder)
         out.mkdir(parents=True, exist_ok=True)
         # the folder is rewritten: no longer finished until the new provenance
         (out / PROVENANCE).unlink(missing_ok=True)
-        summary = _header_summary(provenance)
-        envi.create_image(
-            str(out / CUBE_HDR),
-            {
-                "description": "TuneSpec per-pixel reflectance factor (Eq. 5); "
-                + summary,
-                "wavelength": [f"{v:g}" for v in wl],
-                "wavelength units": "nm",
-                "data ignore value": "nan",
-                "band names": [f"{v:g} nm" for v in wl],
-            },
-            shape=(rows, cols, wl.size),
-            dtype=np.float32,
-            interleave="bip",
-            byteorder=0,
-            force=True,
-        )
-        zarr.create_array(
-            store=str(out / CUBE_ZARR),
-            shape=(rows, cols, wl.size),
-            chunks=(block_rows, min(cols, ZARR_CHUNK_COLS), wl.size),
-            dtype="float32",
-            compressors=BloscCodec(cname="lz4", clevel=5, shuffle="bitshuffle"),
-            fill_value=float("nan"),
-            attributes={
-                "wavelength_nm": wl.tolist(),
-                "dimensions": ["row", "col", "wavelength"],
-                "quantity": "reflectance factor",
-                "provenance": provenance,
-            },
-            overwrite=True,
-        )
-        offsets = {}
-        for name, samples, what in (
-            (XYZ_TIF, 3, "CIE XYZ, D50, CIE 1931 2 degree, Y(white) = 100"),
-            (LAB_TIF, 3, "CIELAB, ICC D50 white"),
-            (UNC_TIF, 2, "standard uncertainty (k=1): u(L*), RMS u(reflectance)"),
-        ):
-            tifffile.imwrite(
-                out / name,
-                shape=(rows, cols, samples),
-                dtype="float32",
-                photometric="minisblack",
-                planarconfig="contig",
-                metadata={"quantity": what, **_flat(provenance)},
-            )
-            with tifffile.TiffFile(out / name) as tif:
-                page = tif.pages[0]
-                if not page.is_contiguous:  # pragma: no cover - tifffile does for this
-                    raise InputError("tifffile wrote a non-contiguous image", path=name)
-                offsets[name] = int(page.dataoffsets[0])
-        offsets[CUBE_IMG] = 0
-        return cls(out, (rows, cols), int(wl.size), int(block_rows), offsets)
+        offsets: dict[str, int] = {}
+        if "envi" in chosen:
+            _create_envi(out, (rows, cols), wl, provenance)
+            offsets[CUBE_IMG] = 0
+        if "zarr" in chosen:
+            _create_zarr(out, (rows, cols), wl, block_rows, provenance)
+        if "tiff" in chosen:
+            offsets.update(_create_tiffs(out, (rows, cols), provenance))
+        return cls(out, (rows, cols), int(wl.size), int(block_rows), offsets, chosen)
 
     def write_rows(
         self,
@@ -188,9 +173,7 @@ class ImageOutputs:
         xyz, lab : (r, cols, 3)
         uncertainty : (r, cols, 2)
         """
-        import zarr
-
-        r, cols, n_bands = cube.shape
+        _, cols, n_bands = cube.shape
         if row0 % self.block_rows or cols != self.shape[1] or n_bands != self.n_bands:
             raise InputError(
                 f"block at row {row0} of shape {cube.shape} does not fit the images "
@@ -198,16 +181,42 @@ class ImageOutputs:
             )
         # ENVI BIP: each pixel's bands in turn, rows one after the other
         bip = np.ascontiguousarray(cube, dtype="<f4")
-        self._pwrite(CUBE_IMG, row0 * n_bands * cols * 4, bip)
-        arr = zarr.open_array(str(self.folder / CUBE_ZARR), mode="r+")
-        arr[row0 : row0 + r] = bip
-        for name, data in ((XYZ_TIF, xyz), (LAB_TIF, lab), (UNC_TIF, uncertainty)):
-            samples = data.shape[2]
-            pix = np.ascontiguousarray(data, dtype="<f4")
-            self._pwrite(name, self.offsets[name] + row0 * cols * samples * 4, pix)
+        if "envi" in self.formats:
+            self._pwrite(CUBE_IMG, row0 * n_bands * cols * 4, bip)
+        if "zarr" in self.formats:
+            self._write_zarr_chunks(row0, bip)
+        if "tiff" in self.formats:
+            for name, data in ((XYZ_TIF, xyz), (LAB_TIF, lab), (UNC_TIF, uncertainty)):
+                samples = data.shape[2]
+                pix = np.ascontiguousarray(data, dtype="<f4")
+                self._pwrite(name, self.offsets[name] + row0 * cols * samples * 4, pix)
 
     def _pwrite(self, name: str, offset: int, data: NDArray[Any]) -> None:
         pwrite_all(self.folder / name, offset, data)
+
+    def _write_zarr_chunks(self, row0: int, bip: NDArray[np.float32]) -> None:
+        """The block's Zarr chunks, each one file written whole.
+
+        The cube's array is uncompressed (codecs: ``bytes``, little endian), so a
+        chunk file is its values in C order, edge chunks padded with the fill
+        value (NaN) to the full chunk shape, at key ``c/<row>/<col>/0`` (Zarr v3's
+        default chunk key encoding): what zarr-python writes, without its
+        per-chunk machinery (which cost more than twice the bytes' writing).
+        """
+        rows, cols = self.block_rows, min(self.shape[1], ZARR_CHUNK_COLS)
+        r = bip.shape[0]
+        base = self.folder / CUBE_ZARR / ZARR_CUBE / "c" / str(row0 // rows)
+        for j, c0 in enumerate(range(0, self.shape[1], cols)):
+            part = bip[:, c0 : c0 + cols]
+            if part.shape[:2] != (rows, cols):
+                full = np.full((rows, cols, self.n_bands), np.nan, dtype="<f4")
+                full[:r, : part.shape[1]] = part
+                part = full
+            folder = base / str(j)
+            folder.mkdir(parents=True, exist_ok=True)
+            # the chunk's rows are contiguous runs of the block: gathered by the
+            # kernel (writev), not copied here
+            _write_rows_file(folder / "0", part)
 
     def write_preview(self, srgb: NDArray[np.uint8]) -> Path:
         """The sRGB preview (rows, cols, 3) as PNG."""
@@ -245,6 +254,177 @@ def write_array(path: str | PathLike[str], data: NDArray[Any]) -> None:
     ``ndarray.tofile`` raises an ``OSError`` without an error number)."""
     with open(path, "wb") as fh:
         fh.write(memoryview(np.ascontiguousarray(data)).cast("B"))
+
+
+def valid_formats(formats: Sequence[str] | str) -> tuple[str, ...]:
+    """The image formats asked for (``"envi,zarr"`` or a sequence), checked, in the
+    order of :data:`IMAGE_FORMATS`.
+
+    Raises
+    ------
+    InputError
+        An unknown or no format.
+    """
+    names = formats.split(",") if isinstance(formats, str) else list(formats)
+    names = [n.strip().lower() for n in names if n.strip()]
+    unknown = [n for n in names if n not in IMAGE_FORMATS]
+    if unknown or not names:
+        raise InputError(
+            f"--formats: expected a comma-separated list of "
+            f"{', '.join(IMAGE_FORMATS)}, got {','.join(names) or 'nothing'!r}"
+        )
+    return tuple(f for f in IMAGE_FORMATS if f in names)
+
+
+def _create_envi(
+    out: Path, shape: tuple[int, int], wl: NDArray[np.float64], prov: dict[str, Any]
+) -> None:
+    import spectral.io.envi as envi
+
+    envi.create_image(
+        str(out / CUBE_HDR),
+        {
+            "description": "TuneSpec per-pixel reflectance factor (Eq. 5); "
+            + _header_summary(prov),
+            "wavelength": [f"{v:g}" for v in wl],
+            "wavelength units": "nm",
+            "data ignore value": "nan",
+            "band names": [f"{v:g} nm" for v in wl],
+        },
+        shape=(*shape, wl.size),
+        dtype=np.float32,
+        interleave="bip",
+        byteorder=0,
+        force=True,
+    )
+
+
+def _create_zarr(
+    out: Path,
+    shape: tuple[int, int],
+    wl: NDArray[np.float64],
+    block_rows: int,
+    prov: dict[str, Any],
+) -> None:
+    """The Zarr v3 group xarray reads as a labelled data set (dimension names in
+    each array's metadata, the wavelength coordinate as an array of its own,
+    consolidated metadata so ``xarray.open_zarr`` opens it without a warning)."""
+    import shutil
+    import warnings
+
+    import zarr
+
+    path = out / CUBE_ZARR
+    if path.exists():
+        shutil.rmtree(path)
+    rows, cols = shape
+    group = zarr.open_group(
+        str(path),
+        mode="w",
+        zarr_format=3,
+        attributes={
+            "title": "TuneSpec per-pixel reflectance factor",
+            "source": prov.get("software", "tunespec"),
+            "history": f"{prov.get('started_utc', '')} tunespec estimate-image "
+            f"{prov.get('session', '')}".strip(),
+            "references": "Trichromatic Reflectance Capture Using a Tunable Light "
+            "Source, Eq. 5 (Wiener estimation per 2x2 Bayer superpixel)",
+            "provenance": prov,
+        },
+    )
+    group.create_array(
+        ZARR_CUBE,
+        shape=(rows, cols, wl.size),
+        chunks=(block_rows, min(cols, ZARR_CHUNK_COLS), wl.size),
+        dtype="float32",
+        # uncompressed: lz4 + bitshuffle saved a fifth of the bytes for more CPU
+        # than writing them takes (see ImageOutputs._write_zarr_chunks)
+        compressors=None,
+        fill_value=float("nan"),
+        dimension_names=ZARR_DIMENSIONS,
+        attributes={
+            "units": "1",
+            "long_name": "reflectance factor",
+            "quantity": "reflectance factor (perfect diffuser = 1)",
+            "wavelength_nm": wl.tolist(),
+        },
+    )
+    coord = group.create_array(
+        "wavelength",
+        shape=(wl.size,),
+        dtype="float64",
+        dimension_names=("wavelength",),
+        attributes={
+            "units": "nm",
+            "long_name": "wavelength",
+            "standard_name": "radiation_wavelength",
+        },
+    )
+    coord[:] = wl
+    for name, n in (("y", rows), ("x", cols)):
+        axis = group.create_array(
+            name,
+            shape=(n,),
+            dtype="int32",
+            dimension_names=(name,),
+            attributes={
+                "units": "1",
+                "long_name": f"{'row' if name == 'y' else 'column'} of 2x2 Bayer "
+                "superpixels (rectified: of the target plane)",
+            },
+        )
+        axis[:] = np.arange(n, dtype=np.int32)
+    with warnings.catch_warnings():
+        # zarr-python's consolidated metadata, which xarray reads for v3 stores
+        warnings.filterwarnings("ignore", message="Consolidated metadata")
+        zarr.consolidate_metadata(str(path))
+
+
+def _create_tiffs(
+    out: Path, shape: tuple[int, int], prov: dict[str, Any]
+) -> dict[str, int]:
+    """The colour TIFFs, created at full size; their pixel data offsets."""
+    import tifffile
+
+    offsets = {}
+    for name, photometric, extra, what, samples in _TIFF_LAYOUT:
+        kwargs: dict[str, Any] = {"extrasamples": extra} if extra else {}
+        tifffile.imwrite(
+            out / name,
+            shape=(*shape, len(samples)),
+            dtype="float32",
+            photometric=photometric,
+            planarconfig="contig",
+            metadata={"quantity": what, "samples": list(samples), **_flat(prov)},
+            **kwargs,
+        )
+        with tifffile.TiffFile(out / name) as tif:
+            page = tif.pages[0]
+            if not page.is_contiguous:  # pragma: no cover - tifffile does for this
+                raise InputError("tifffile wrote a non-contiguous image", path=name)
+            offsets[name] = int(page.dataoffsets[0])
+    return offsets
+
+
+def _write_rows_file(path: Path, data: NDArray[np.float32]) -> None:
+    """A new file holding ``data`` (rows, cols, n) in C order, from its rows as
+    they lie in memory (each row contiguous), in one ``writev`` where it can."""
+    views = [memoryview(np.ascontiguousarray(row, dtype="<f4")).cast("B")
+             for row in data]  # fmt: skip
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+    try:
+        total = sum(v.nbytes for v in views)
+        done = os.writev(fd, views[:_IOV_MAX])
+        if done < total:  # a short write (a signal, a full disk) or many rows
+            rest = memoryview(b"".join(views)).cast("B")
+            while done < total:
+                done += os.pwrite(fd, rest[done:], done)
+    finally:
+        os.close(fd)
+
+
+#: Buffers one ``writev`` takes (POSIX IOV_MAX is at least 1024 on Linux).
+_IOV_MAX = 1024
 
 
 def pwrite_all(path: str | PathLike[str], offset: int, data: NDArray[Any]) -> None:
@@ -360,10 +540,21 @@ def open_image_outputs(folder: str | PathLike[str]) -> SpectralImage:
             path=out,
         )
     try:
-        envi = spectral.open_image(str(out / CUBE_HDR))
-        cube = envi.open_memmap(writable=False)
-        wl = np.asarray(envi.bands.centers, dtype=np.float64)
+        if (out / CUBE_HDR).is_file():
+            envi = spectral.open_image(str(out / CUBE_HDR))
+            cube = envi.open_memmap(writable=False)
+            wl = np.asarray(envi.bands.centers, dtype=np.float64)
+        else:  # written with --formats zarr,tiff: the Zarr cube, read lazily
+            import zarr
+
+            group = zarr.open_group(str(out / CUBE_ZARR), mode="r")
+            cube = group[ZARR_CUBE]
+            wl = np.asarray(group["wavelength"][:], dtype=np.float64)
         maps = [tifffile.memmap(out / n, mode="r") for n in (LAB_TIF, XYZ_TIF, UNC_TIF)]
-    except (OSError, ValueError) as exc:
-        raise InputError(f"cannot open the images: {exc}", path=out) from None
+    except (OSError, ValueError, KeyError) as exc:
+        raise InputError(
+            f"cannot open the images (the viewer needs the TIFFs and a cube: "
+            f"estimate-image --formats with tiff and envi or zarr): {exc}",
+            path=out,
+        ) from None
     return SpectralImage(out, wl, cube, maps[0], maps[1], maps[2], prov)

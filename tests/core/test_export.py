@@ -92,6 +92,7 @@ def test_rawtoaces_json_matches_the_shipped_schema(tmp_path: Path) -> None:
     assert set(ours["spectral_data"]) == set(ref["spectral_data"])
     assert ours["header"]["schema_version"] == "1.0.0"
     assert ours["header"]["document_creation_date"] == CREATED
+    assert ours["header"]["license"] == "CC-BY-4.0"  # required: never empty
     assert list(ours["spectral_data"]["data"]["main"])[:2] == ["380", "385"]
 
 

@@ -224,7 +224,7 @@ def test_image_outputs_round_trip(tmp_path) -> None:
     envi = spectral.open_image(str(tmp_path / "img" / "cube.hdr"))
     np.testing.assert_allclose(envi.bands.centers, wl)
     np.testing.assert_array_equal(np.array(envi.open_memmap()), cube)
-    z = zarr.open_array(str(tmp_path / "img" / "cube.zarr"), mode="r")
+    z = zarr.open_array(str(tmp_path / "img" / "cube.zarr" / "reflectance"), mode="r")
     np.testing.assert_array_equal(z[:], cube)
     assert z.attrs["wavelength_nm"] == wl.tolist()
     np.testing.assert_array_equal(tifffile.imread(tmp_path / "img" / "xyz.tif"),

@@ -7,12 +7,17 @@ import json
 import numpy as np
 import pytest
 
+from tests.helpers import without_progress
 from tunespec.app.cli import main
 from tunespec.app.pipeline.gonio import GonioPlan, default_plan, frame_names
 from tunespec.app.pipeline.gonio_bench import open_gonio_bench, run_gonio_demo
-from tunespec.core.colorimetry import xyz_d50, xyz_to_lab_d50
+from tunespec.core.colorimetry import (
+    astm_e308_weights_d50,
+    xyz_d50,
+    xyz_to_lab_d50,
+)
 from tunespec.core.errors import InputError
-from tunespec.core.fusion import fuse_patch
+from tunespec.core.fusion import fuse_patch, fused_covariance
 from tunespec.core.homography import locate_target
 from tunespec.core.layout import apply_homography
 from tunespec.core.spectra import DEFAULT_GRID, read_spectra_csv
@@ -113,6 +118,38 @@ def test_fusion_reproduces_the_measured_xyz_and_recovers_a_glossy_spectrum():
     assert np.sqrt(np.mean((f2.reflectance - truth) ** 2)) < 0.02
 
 
+def test_fused_spectrum_covariance_carries_the_xyz_covariance():
+    """cov(R) = G cov(XYZ) G^T + P cov(R0) P^T: its colour is the single shot's
+    (W^T cov W = cov(XYZ)) and, with a certain XYZ, the prior's part is invisible
+    to the colour matching functions; checked against Monte Carlo fusions."""
+    wl = DEFAULT_GRID.wavelength_nm
+    rho = 0.2 + 0.6 * np.exp(-0.5 * ((wl - 600) / 40) ** 2)
+    spectral = np.array([rho + 0.02, rho + 0.4])
+    W = astm_e308_weights_d50(wl)
+    kx = np.array([[0.04, 0.01, 0.0], [0.01, 0.09, 0.02], [0.0, 0.02, 0.25]])
+    k0 = np.full(wl.size, 1e-4)
+    K = fused_covariance(spectral, wl, kx, k0)
+    np.testing.assert_allclose(W.T @ K @ W, kx, rtol=1e-6, atol=1e-9)
+    K0 = fused_covariance(spectral, wl, np.zeros((3, 3)), k0)
+    np.testing.assert_allclose(W.T @ K0 @ W, 0.0, atol=1e-9)
+    # the prior's part, projected along the colour matching functions: of its size
+    assert 0.5e-4 < np.diagonal(K0).min() <= np.diagonal(K0).max() < 2e-4
+    # Monte Carlo: fuse noisy XYZ with the same prior (a linear map of the XYZ)
+    truth = rho + 0.3
+    M = np.random.default_rng(0).uniform(0, 1, (3, wl.size)) * 1e-3
+    xyz = xyz_d50(truth, wl)
+    rng = np.random.default_rng(1)
+    draws = rng.multivariate_normal(xyz, kx, 400)
+    fused = np.array([fuse_patch(M @ truth, x, spectral, M, wl).reflectance
+                      for x in draws])  # fmt: skip
+    Kx_only = fused_covariance(spectral, wl, kx, np.zeros(wl.size))
+    np.testing.assert_allclose(
+        fused.std(axis=0), np.sqrt(np.diagonal(Kx_only)), rtol=0.15
+    )
+    with pytest.raises(InputError):
+        fused_covariance(spectral, wl, np.eye(2), k0)
+
+
 @pytest.mark.slow
 def test_fourteen_geometry_session_end_to_end(tmp_path):
     import xarray as xr
@@ -131,8 +168,20 @@ def test_fourteen_geometry_session_end_to_end(tmp_path):
         lab = xyz_to_lab_d50(ds.XYZ.values[:, fused])
         assert ds.Lab.values[:, fused] == pytest.approx(lab, abs=1e-3)  # XYZ reproduced
         assert ds.reflectance.values.min() >= 0.0
-        assert np.isnan(ds.u_reflectance.values[:, fused]).all()
-        assert np.isfinite(ds.u_reflectance.values[:, ~fused]).all()
+        # a standard uncertainty at every geometry (issue 28: NaN at 11 of 14)
+        u = ds.u_reflectance.values
+        assert np.isfinite(u).all() and (u > 0).all()
+        assert np.isfinite(ds.u_Lab.values).all() and (ds.u_Lab.values > 0).all()
+        # fused spectra are as uncertain in colour as the single shot's XYZ: u(L*)
+        # is dL*/dY u(Y) (L* = 116 (Y/100)^(1/3) - 16, Y/100 > 0.008856 here)
+        Y, u_Y = ds.XYZ.values[:, fused, 1], ds.u_XYZ.values[:, fused, 1]
+        assert Y.min() > 0.9
+        dL_dY = 116.0 / 300.0 * (Y / 100.0) ** (-2.0 / 3.0)
+        np.testing.assert_allclose(ds.u_Lab.values[:, fused, 0], dL_dY * u_Y, rtol=1e-4)
+        assert ds.u_reflectance.attrs["units"] == "1"
+        assert ds.wavelength.attrs["units"] == "nm"
+        assert ds.theta_r.attrs["units"] == "degree"
+        assert "tunespec" in ds.attrs["history"] and ds.attrs["Conventions"]
     plan = GonioPlan.load(tmp_path / "plan.json")
     refl = read_spectra_csv(tmp_path / plan.folder(5) / "reflectance.csv")
     assert len(refl) == 8 and (tmp_path / "angles.png").stat().st_size > 10_000
@@ -165,8 +214,8 @@ def test_cli_kill_and_resume(tmp_path, capsys):
     out = tmp_path / "g"
     args = ["gonio-demo", "--out", str(out), "--geometries", "4", "--seed", "2"]
     assert main([*args, "--fail-after-moves", "3"]) == 3
-    err = capsys.readouterr().err
-    assert "continue with --resume" in err and len(err.strip().splitlines()) == 1
+    err = without_progress(capsys.readouterr().err)
+    assert "continue with --resume" in err and len(err.splitlines()) == 1
     assert main(args) == 2  # the folder holds a session: --resume is required
     assert main([*args, "--resume"]) == 0
     assert "4 geometries (2 spectral)" in capsys.readouterr().out

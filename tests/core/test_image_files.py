@@ -1,0 +1,138 @@
+"""The image outputs open in other tools as what they are (issue 28): xarray reads
+the Zarr cube as a labelled data set, the TIFFs carry the photometric and extra
+sample tags of what they hold (tifffile's tag reading, and libtiff's tiffinfo where
+installed)."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+
+from tunespec.core.errors import InputError
+from tunespec.core.io.image_formats import ImageOutputs, open_image_outputs
+
+ROWS, COLS = 9, 7
+WL = np.arange(400.0, 440.0, 5.0)
+PROV = {"session": "/data/s1", "software": "tunespec 0.test", "started_utc": "T0"}
+
+
+def _write(folder, formats=("envi", "zarr", "tiff")):
+    rng = np.random.default_rng(8)
+    cube = rng.uniform(0, 1, (ROWS, COLS, WL.size)).astype(np.float32)
+    xyz = rng.uniform(0, 100, (ROWS, COLS, 3)).astype(np.float32)
+    lab = rng.uniform(-50, 100, (ROWS, COLS, 3)).astype(np.float32)
+    unc = rng.uniform(0, 1, (ROWS, COLS, 2)).astype(np.float32)
+    out = ImageOutputs.create(folder, (ROWS, COLS), WL, block_rows=4,
+                              provenance=PROV, formats=formats)  # fmt: skip
+    for r0 in (0, 4, 8):
+        sl = slice(r0, r0 + 4)
+        out.write_rows(r0, cube[sl], xyz[sl], lab[sl], unc[sl])
+    out.write_provenance(PROV)
+    return cube, xyz, lab, unc
+
+
+def test_xarray_opens_the_zarr_cube_labelled(tmp_path) -> None:
+    import xarray as xr
+
+    cube, *_ = _write(tmp_path / "img")
+    ds = xr.open_zarr(tmp_path / "img" / "cube.zarr")
+    da = ds["reflectance"]
+    assert da.dims == ("y", "x", "wavelength")
+    np.testing.assert_array_equal(da["wavelength"].values, WL)
+    assert da["wavelength"].attrs["units"] == "nm"
+    assert da.attrs["units"] == "1" and da.attrs["long_name"] == "reflectance factor"
+    np.testing.assert_array_equal(da.values, cube)
+    # label-based selection works: the 420 nm band
+    np.testing.assert_array_equal(da.sel(wavelength=420.0).values, cube[:, :, 4])
+    assert ds.attrs["provenance"]["session"] == "/data/s1"
+    assert "estimate-image" in ds.attrs["history"]
+    np.testing.assert_array_equal(ds["y"].values, np.arange(ROWS))
+
+
+def test_tiff_tags_say_what_the_images_hold(tmp_path) -> None:
+    import json
+
+    import tifffile
+
+    _, xyz, lab, unc = _write(tmp_path / "img")
+    want = {
+        "xyz.tif": (2, (), ["X", "Y", "Z"], xyz),  # RGB: three colour samples
+        "lab.tif": (8, (), ["L*", "a*", "b*"], lab),  # CIELab
+        "uncertainty.tif": (1, (0,), ["u(L*)", "RMS u(reflectance)"], unc),
+    }
+    for name, (photometric, extra, samples, data) in want.items():
+        with tifffile.TiffFile(tmp_path / "img" / name) as tif:
+            page = tif.pages[0]
+            tags = page.tags
+            assert tags["PhotometricInterpretation"].value == photometric, name
+            assert tuple(int(v) for v in page.extrasamples) == extra, name
+            assert tags["SampleFormat"].value in (3, (3,) * page.samplesperpixel)
+            assert tags["BitsPerSample"].value in (32, (32,) * page.samplesperpixel)
+            doc = json.loads(page.description)
+            assert doc["samples"] == samples
+            np.testing.assert_array_equal(page.asarray(), data)
+
+
+@pytest.mark.skipif(shutil.which("tiffinfo") is None, reason="libtiff-tools absent")
+def test_tiffinfo_reads_the_photometrics(tmp_path) -> None:
+    _write(tmp_path / "img")
+    text = {
+        n: subprocess.run(
+            ["tiffinfo", str(tmp_path / "img" / n)], capture_output=True, text=True
+        ).stdout
+        for n in ("xyz.tif", "lab.tif", "uncertainty.tif")
+    }
+    assert "Photometric Interpretation: RGB color" in text["xyz.tif"]
+    assert "Photometric Interpretation: CIE L*a*b*" in text["lab.tif"]
+    assert "Photometric Interpretation: min-is-black" in text["uncertainty.tif"]
+    assert "Extra Samples: 1<unspecified>" in text["uncertainty.tif"]
+    assert "Sample Format: IEEE floating point" in text["lab.tif"]
+
+
+def test_formats_choose_the_files(tmp_path) -> None:
+    cube, *_ = _write(tmp_path / "z", formats=("zarr", "tiff"))
+    names = {p.name for p in (tmp_path / "z").iterdir()}
+    assert "cube.hdr" not in names and "cube.img" not in names
+    assert {"cube.zarr", "xyz.tif", "lab.tif", "uncertainty.tif"} <= names
+    img = open_image_outputs(tmp_path / "z")  # the Zarr cube stands in for ENVI
+    np.testing.assert_array_equal(np.asarray(img.cube[2:5, 1:3]), cube[2:5, 1:3])
+    np.testing.assert_array_equal(img.wavelength_nm, WL)
+    _write(tmp_path / "e", formats=("envi",))
+    assert {p.name for p in (tmp_path / "e").iterdir()} == {
+        "cube.hdr", "cube.img", "provenance.json",
+    }  # fmt: skip
+    with pytest.raises(InputError, match="--formats"):
+        open_image_outputs(tmp_path / "e")
+    with pytest.raises(InputError, match="--formats: expected"):
+        ImageOutputs.create(tmp_path / "x", (2, 2), WL, block_rows=1,
+                            provenance={}, formats=("envi", "hdf5"))  # fmt: skip
+
+
+def test_zarr_chunks_written_whole_are_what_zarr_writes(tmp_path) -> None:
+    """The cube's chunk files (written directly, one file each) hold the bytes
+    zarr-python writes for the same array, edge chunks padded with NaN."""
+    import zarr
+
+    rng = np.random.default_rng(3)
+    rows, cols, wl = 5, 1030, WL[:3]  # edge chunks in both directions
+    cube = rng.uniform(0, 1, (rows, cols, wl.size)).astype(np.float32)
+    out = ImageOutputs.create(tmp_path / "ours", (rows, cols), wl, block_rows=2,
+                              provenance=PROV, formats=("zarr",))  # fmt: skip
+    for r0 in (4, 0, 2):
+        sl = slice(r0, r0 + 2)
+        out.write_rows(r0, cube[sl], cube[sl, :, :3], cube[sl, :, :3], cube[sl, :, :2])
+    ours = zarr.open_group(str(tmp_path / "ours" / "cube.zarr"), mode="r")
+    np.testing.assert_array_equal(ours["reflectance"][:], cube)
+    ref = zarr.open_array(str(tmp_path / "ours" / "cube.zarr" / "reflectance"))
+    theirs = zarr.create_array(
+        store=str(tmp_path / "theirs.zarr"), shape=ref.shape, chunks=ref.chunks,
+        dtype="float32", compressors=None, fill_value=float("nan"),
+    )  # fmt: skip
+    theirs[:] = cube
+    chunk = ("c", "2", "2", "0")  # the corner chunk: 1 of 2 rows, 6 of 512 columns
+    mine = (tmp_path / "ours" / "cube.zarr" / "reflectance").joinpath(*chunk)
+    assert mine.read_bytes() == (tmp_path / "theirs.zarr").joinpath(*chunk).read_bytes()
+    assert len(list((tmp_path / "ours" / "cube.zarr" / "reflectance").rglob("0"))) >= 9
