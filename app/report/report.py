@@ -449,6 +449,40 @@ def _self_check(report: ReportData) -> dict[str, Any] | None:
     return dict(c) if isinstance(c, Mapping) else c.as_dict()
 
 
+def _self_check_findings(checked: Mapping[str, Any]) -> list[str]:
+    """Each check that flagged, in a few words (the warnings say more)."""
+
+    def chi(d: Mapping[str, Any]) -> str:
+        values = ", ".join(f"{c} {d['reduced'][c]:.1f}" for c in d["flagged"])
+        return f"reduced chi-square {values} over {d['limit']:.1f}"
+
+    out = []
+    fitted = checked["residual_chi_square"]
+    if fitted.get("flagged"):
+        out.append(f"calibration residuals beyond the noise model ({chi(fitted)})")
+    held = checked.get("held_out")
+    if held is None:
+        out.append("no prediction of left-out patches was made")
+    elif held["chi_square"].get("flagged"):
+        out.append(
+            f"left-out patches' residuals beyond the noise model ({chi(held['chi_square'])})"
+        )
+    if checked.get("implausible_leds"):
+        out.append(
+            f"implausible LED corrections ({', '.join(checked['implausible_leds'])})"
+        )
+    limit = checked.get("limits", {}).get("meter_noise_fraction")
+    noise = checked.get("meter_noise_fraction", {})
+    if limit is not None and noise and max(noise.values()) > limit:
+        out.append(
+            f"noisy light readings ({100 * max(noise.values()):.2f} % of the peak)"
+        )
+    named = len(out) - (held is None)  # the findings of the checks listed here
+    if checked.get("warnings") and not named:
+        out += [str(w) for w in checked["warnings"]]  # a check this list lacks
+    return out
+
+
 #: The verdict's three outcomes.
 VERDICTS = ("PASS", "PASS with warnings", "FAIL")
 
@@ -479,13 +513,11 @@ def verdict(report: ReportData) -> tuple[str, str] | None:
         return ("PASS" if ok else "FAIL"), why
     over = [] if ok else [f"Table 1 RGB mean error {mean:.4f}"]
     within = [f"Table 1 RGB mean error {mean:.4f}"] if ok else []
-    findings = [str(w) for w in checked.get("warnings", ())]
+    findings = _self_check_findings(checked)
     held = checked.get("held_out")
-    if held is None:
-        findings.append("no prediction of left-out patches was made")
-    else:
+    if held is not None:
         held_mean = float(held["prediction"]["RGB"]["mean"])
-        text = f"left-out patches' (1 in {held['every']}) {held_mean:.4f}"
+        text = f"left-out patches' (1 in {held['every']}) RGB mean {held_mean:.4f}"
         (within if held_mean <= limit else over).append(text)
     if over:
         why = f"{' and '.join(over)} over the threshold {limit:.4f}"
@@ -537,6 +569,16 @@ def _key_numbers(report: ReportData) -> _Table:
     if held is not None:
         d = _as_dict(held)
         rows.append(("Held-aside RGB mean error", f"{d['RGB']['mean']:.4f}", "-"))
+    checked = _self_check(report)
+    if checked is not None and checked.get("held_out") is not None:
+        h = checked["held_out"]
+        rows.append(
+            (
+                f"Left-out patches' RGB mean error (1 in {h['every']}, self-check)",
+                f"{h['prediction']['RGB']['mean']:.4f}",
+                "-",
+            )
+        )
     if report.table2 is not None:
         d = _as_dict(report.table2)
         de, rms = PAPER_TABLE2_AVERAGE
