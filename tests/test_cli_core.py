@@ -80,6 +80,13 @@ def test_simulate_calibrate_estimate_evaluate(files, capsys) -> None:
     # Simulated at the 5D Mark III's noise: the paper's Table 1 level (0.24 % mean RGB)
     assert stats["training"]["RGB"]["mean"] < 0.0024
     assert stats["held_out"]["RGB"]["mean"] < 0.0030
+    # the self-check predicts the calibration's own held-aside patches (no second fit)
+    checked = stats["self_check"]
+    assert "Self-check:" in out and checked["passed"] is True
+    assert checked["held_out"]["prediction"] == stats["held_out"]
+    assert checked["held_out"]["every"] == 5
+    assert min(checked["residual_chi_square"]["reduced"].values()) > 0.8
+    assert max(checked["residual_chi_square"]["reduced"].values()) < 1.3
     meta = json.loads((d / "S.csv.meta.json").read_text())
     # simulate-responses writes the true SPDs: the fitted shift is near zero
     assert abs(meta["spd_shift_nm"]) < 0.3

@@ -123,6 +123,15 @@ def _add_calibrate(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> 
         metavar="N",
         help="fit without every N-th patch (N >= 2) and report Table 1 on them too",
     )
+    p.add_argument(
+        "--self-check",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="check the residuals against the noise model, the LED corrections, the "
+        "light's reading noise, and predict the patches a second calibration leaves "
+        "out (1 in 5, or those of --hold-out-every); findings are warnings (default "
+        "on; about doubles the time without --hold-out-every)",
+    )
     add_grid_option(p)
     add_force_option(p)
     add_output_options(p)
@@ -358,6 +367,19 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     )
     if fit_warning:
         out.warn(fit_warning)
+    checked = None
+    if args.self_check:
+        checked = _self_check(
+            est,
+            fit,
+            (responses, illuminants, reflectances, illum_in),
+            held,
+            args,
+            kwargs,
+        )
+        out.say(checked.format_text())
+        for w in checked.warnings:
+            out.warn(f"self-check: {w}")
     out.say(f"sensitivities written to {args.output}")
     stats = {
         "method": est.method,
@@ -368,9 +390,45 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     }
     if checks.overridden:
         stats["forced"] = list(checks.overridden)
+    if checked is not None:
+        stats["self_check"] = checked.as_dict()
     _write_json(args.stats, stats)
     out.summary({**stats, "output": str(args.output)})
     return 0
+
+
+def _self_check(
+    est: Any,
+    fit: Responses,
+    chart: tuple[Responses, Spectra, Spectra, Spectra],
+    held: tuple[str, ...],
+    args: argparse.Namespace,
+    kwargs: dict[str, Any],
+) -> Any:
+    """The calibration's self-check (``core.selfcheck``): with ``--hold-out-every``
+    the calibration's own held-aside patches are the left-out ones, else a second
+    calibration leaves out 1 in 5."""
+    from tunespec.core.selfcheck import held_out_of, self_check
+    from tunespec.core.sensitivity import estimate_camera_sensitivity
+
+    responses, illuminants, reflectances, reported = chart
+    held_out = None
+    if held:
+        held_out = held_out_of(
+            est, responses, illuminants, reflectances, held, args.hold_out_every
+        )
+    refit = {**kwargs, "method": est.method}
+    return self_check(
+        est,
+        fit,
+        illuminants,
+        reflectances,
+        reported_illuminants=reported,
+        fit=lambda r: estimate_camera_sensitivity(
+            r, illuminants, reflectances, **refit
+        ),
+        held_out=held_out,
+    )
 
 
 def _print_calibration(out: Console, est: Any, report: Any) -> None:

@@ -65,6 +65,7 @@ __all__ = [
     "read_estimate",
     "read_exports_index",
     "read_measurement_doc",
+    "self_check_dict",
     "session_fingerprint",
     "step_warnings",
     "write_calibration",
@@ -110,9 +111,12 @@ class CalibrationResult:
     excluded_patches
         Patches left out of the fit (saturated).
     warnings
-        Processing notes.
+        Processing notes and the self-check's findings (``self-check: ...``).
     elapsed_s
         Wall time of processing and estimation.
+    self_check
+        The self-check's ``as_dict()`` (:mod:`tunespec.core.selfcheck`), or ``None``
+        when it did not run.
     calibration, chart
         ``pipeline.Calibration`` and the processed chart session; ``None`` when the
         result was restored from disk (the export step recomputes them).
@@ -128,6 +132,7 @@ class CalibrationResult:
     elapsed_s: float = 0.0
     calibration: Any = None
     chart: Any = None
+    self_check: Mapping[str, Any] | None = None
 
     @classmethod
     def from_step(
@@ -140,7 +145,9 @@ class CalibrationResult:
         elapsed_s: float = 0.0,
     ) -> CalibrationResult:
         """The result of the calibrate step: ``cal`` (``steps.Calibration``) of the
-        processed ``chart``."""
+        processed ``chart``; the self-check's findings join ``warnings``."""
+        checked = self_check_dict(getattr(cal, "self_check", None))
+        found = () if checked is None else tuple(checked.get("warnings", ()))
         return cls(
             sensitivity=cal.sensitivity,
             table1=cal.table1,
@@ -148,11 +155,22 @@ class CalibrationResult:
             method=str(cal.estimate.method),
             layout=chart.layout,
             excluded_patches=tuple(cal.estimate.excluded_patches),
-            warnings=warnings,
+            warnings=(*warnings, *(f"self-check: {w}" for w in found)),
             elapsed_s=elapsed_s,
             calibration=cal,
             chart=chart,
+            self_check=checked,
         )
+
+    @property
+    def verdict(self) -> str:
+        """``"PASS"``, ``"FAIL"`` (Table 1 over the threshold) or ``"PASS with
+        warnings"`` (the self-check found something, see :attr:`warnings`)."""
+        if not self.passed:
+            return "FAIL"
+        if self.self_check is not None and not self.self_check.get("passed", True):
+            return "PASS with warnings"
+        return "PASS"
 
     @property
     def rgb_mean(self) -> float:
@@ -416,6 +434,17 @@ def step_warnings(
     return tuple(dict.fromkeys((*capture, *found, *excluded)))
 
 
+def self_check_dict(check: Any) -> dict[str, Any] | None:
+    """A calibration's self-check as its JSON form: a
+    :class:`~tunespec.core.selfcheck.SelfCheck`'s ``as_dict()``, a mapping (read
+    back from ``calibration.json``) as it is, anything else ``None``."""
+    if check is None:
+        return None
+    if isinstance(check, Mapping):
+        return dict(check)
+    return check.as_dict() if hasattr(check, "as_dict") else None
+
+
 # -- one writer and one reader per result ----------------------------------------------
 def session_fingerprint(session_root: Path) -> str | None:
     """The session's :meth:`~tunespec.core.io.session.Session.fingerprint` (None: none)."""
@@ -487,6 +516,8 @@ def write_calibration(
         "warnings": list(result.warnings),
         "session_fingerprint": fingerprint,
     }
+    if result.self_check is not None:
+        doc["self_check"] = dict(result.self_check)
     # written last: its presence marks the step done
     atomic_write_text(out_dir / "calibration.json", dumps_json(doc, indent=1))
 
@@ -526,6 +557,7 @@ def read_calibration(folder: Path, chart_root: Path) -> CalibrationResult | None
             layout=TargetLayout.from_dict(doc["layout"]),
             excluded_patches=tuple(doc.get("excluded_patches", ())),
             warnings=tuple(doc.get("warnings", ())),
+            self_check=self_check_dict(doc.get("self_check")),
         )
     except (OSError, ValueError, KeyError, InputError) as exc:
         log.warning("no usable calibration in %s: %s", folder, exc)
@@ -684,4 +716,4 @@ def restore_calibration_steps(
     illum = chart.illuminants.resample(work, average=True)
     report = calibration_report(est, chart.responses, illum, refl)
     per_patch = table1_by_patch(est, chart.responses, illum, refl)
-    return chart, Calibration(est, report, per_patch)
+    return chart, Calibration(est, report, per_patch, self_check=result.self_check)

@@ -27,6 +27,7 @@ from tunespec.app.pipeline.folder import (
     CalibrationResult,
     EstimateResult,
     MeasurementFolder,
+    self_check_dict,
     session_fingerprint,
     step_warnings,
     write_calibration,
@@ -126,6 +127,9 @@ class RunResult:
             "timings_s": {k: round(v, 3) for k, v in self.timings_s.items()},
             "warnings": list(self.warnings),
         }
+        checked = self_check_dict(self.calibration.self_check)
+        if checked is not None:
+            out["self_check"] = checked
         if self.table2 is not None:
             out["table2_delta_e00_mean"] = self.table2.mean_delta_e00
             out["table2_delta_e00_max"] = self.table2.max_delta_e00
@@ -138,6 +142,9 @@ class RunResult:
         """Table 1 and Table 2 as the terminal shows them."""
         chart = self.chart.layout.name
         parts = [self.table1.format_table(f"Table 1 - {chart}, RGB prediction")]
+        checked = self.calibration.self_check
+        if checked is not None and hasattr(checked, "format_text"):
+            parts.append(checked.format_text())
         if self.table2 is not None:
             parts.append(
                 "Table 2 - sample target vs. reference (CIEDE2000 D50, spectral RMS)\n"
@@ -288,6 +295,7 @@ def _write_results(
     write_calibration(
         folder.calibration_dir, cal_result, session_fingerprint(folder.chart_dir)
     )
+    cal_warnings = cal_result.warnings  # with the self-check's findings
     reference = None
     if plan.reference is not None:
         names = [n for n in est.reflectance.names if n in plan.reference.names]
@@ -374,6 +382,7 @@ def _calibrate(
         plan.chart_reflectances,
         method=plan.method,
         grid=plan.grid,
+        check=True,
         progress=progress,
         should_stop=should_stop,
     )

@@ -44,7 +44,7 @@ from tunespec.core.io.export import (
 from tunespec.core.io.session import Session
 from tunespec.core.layout import TargetLayout
 from tunespec.core.processing import ProcessedSession, process_session, write_processed
-from tunespec.core.progress import ProgressFn, StopFn
+from tunespec.core.progress import ProgressFn, StopFn, sub_progress
 from tunespec.core.spectra import (
     CALIBRATION_GRID,
     Grid,
@@ -58,6 +58,7 @@ if TYPE_CHECKING:
     # the estimators import scipy (a third of a second): imported where they run,
     # so that loading a configuration (and failing on it) answers at once
     from tunespec.core.plausibility import Checks
+    from tunespec.core.selfcheck import SelfCheck
     from tunespec.core.sensitivity import SensitivityEstimate
     from tunespec.core.stats import CalibrationReport, PredictionStats
     from tunespec.core.uncertainty import ReflectanceUncertainty
@@ -91,6 +92,9 @@ class Calibration:
         :class:`tunespec.core.sensitivity.SensitivityEstimate`.
     report
         :class:`tunespec.core.stats.CalibrationReport`; ``report.training`` is Table 1.
+    self_check
+        :class:`tunespec.core.selfcheck.SelfCheck` (or its ``as_dict()`` form, as a
+        restored calibration has it); ``None`` when not run.
     """
 
     estimate: SensitivityEstimate
@@ -98,6 +102,7 @@ class Calibration:
     #: Table 1 per patch: the mean over the LEDs of the RGB error (RMS over R, G, B,
     #: full scale); their mean is Table 1's RGB mean.
     patch_rgb_error: Mapping[str, float] | None = None
+    self_check: SelfCheck | Mapping[str, Any] | None = None
 
     @property
     def sensitivity(self) -> Spectra:
@@ -295,11 +300,18 @@ def calibrate(
     *,
     method: str | None = None,
     grid: Grid = CALIBRATION_GRID,
+    check: bool = False,
     progress: ProgressFn | None = None,
     should_stop: StopFn | None = None,
     **options: Any,
 ) -> Calibration:
     """Camera sensitivities from the chart's responses (``core.sensitivity``) + Table 1.
+
+    With ``check`` the calibration's self-check follows
+    (:func:`tunespec.core.selfcheck.self_check`: residuals against the noise model,
+    the LED corrections, the light's reading noise and a second calibration without
+    every 5th patch, which about doubles the step's time). Table 1 and the
+    sensitivities are the same either way.
 
     Parameters
     ----------
@@ -327,12 +339,30 @@ def calibrate(
         responses,
         illum,
         refl,
-        progress=progress,
+        progress=sub_progress(progress, 0.0, 0.5) if check else progress,
         should_stop=should_stop,
         **options,
     )
     rep = calibration_report(est, responses, illum, refl)
-    return Calibration(est, rep, table1_by_patch(est, responses, illum, refl))
+    checked = None
+    if check:
+        from tunespec.core.selfcheck import self_check
+
+        refit = {**options, "method": est.method}
+        checked = self_check(
+            est,
+            responses,
+            illum,
+            refl,
+            reported_illuminants=chart.illuminants,
+            fit=lambda r: estimate_camera_sensitivity(
+                r, illum, refl, should_stop=should_stop, **refit
+            ),
+            progress=sub_progress(progress, 0.5, 1.0),
+            should_stop=should_stop,
+        )
+    per_patch = table1_by_patch(est, responses, illum, refl)
+    return Calibration(est, rep, per_patch, self_check=checked)
 
 
 def _with_reference(responses: Any, refl: Spectra) -> Any:
@@ -644,6 +674,7 @@ def _write_report(
         flags=tuple(warnings),
         exports={k: p.name for k, p in files.items()},
         threshold_rgb_mean=threshold_rgb_mean,
+        self_check=calibration.self_check,
         table1_patches=calibration.patch_rgb_error,
         chart_layout=chart.layout,
         provenance={**dict(provenance), **items},

@@ -208,6 +208,9 @@ class ReportData:
         variance of L* and of the reflectances (a table).
     threshold_rgb_mean
         Pass/fail limit on Table 1's RGB mean (full scale): the summary's verdict.
+    self_check
+        The calibration's self-check (:class:`tunespec.core.selfcheck.SelfCheck` or
+        its ``as_dict()``): the verdict's further conditions and a table.
     table1_patches
         Table 1's RGB error per fitted patch (mean over the LEDs): the map of the
         chart, the histogram, the worst patches and the per-patch table.
@@ -253,6 +256,7 @@ class ReportData:
     exports: Mapping[str, str | PathLike[str]] = field(default_factory=dict)
     notes: str = ""
     threshold_rgb_mean: float | None = None
+    self_check: Any = None
     table1_patches: Mapping[str, float] | None = None
     chart_layout: Any = None
     chart_choice: Mapping[str, Any] | None = None
@@ -441,19 +445,108 @@ def export_label(key: str) -> str:
     return words[:1].upper() + words[1:]
 
 
+def _self_check(report: ReportData) -> dict[str, Any] | None:
+    """The self-check's ``as_dict()`` form, or ``None``."""
+    c = report.self_check
+    if c is None:
+        return None
+    return dict(c) if isinstance(c, Mapping) else c.as_dict()
+
+
+def _self_check_findings(checked: Mapping[str, Any]) -> list[str]:
+    """Each check that flagged, in a few words (the warnings say more)."""
+
+    def chi(d: Mapping[str, Any]) -> str:
+        values = ", ".join(f"{c} {d['reduced'][c]:.1f}" for c in d["flagged"])
+        return f"reduced chi-square {values} over {d['limit']:.1f}"
+
+    out = []
+    fitted = checked["residual_chi_square"]
+    if fitted.get("flagged"):
+        out.append(f"calibration residuals beyond the noise model ({chi(fitted)})")
+    held = checked.get("held_out")
+    if held is None:
+        out.append("no prediction of left-out patches was made")
+    elif held["chi_square"].get("flagged"):
+        out.append(
+            f"left-out patches' residuals beyond the noise model ({chi(held['chi_square'])})"
+        )
+    if checked.get("implausible_leds"):
+        out.append(
+            f"implausible LED corrections ({', '.join(checked['implausible_leds'])})"
+        )
+    limit = checked.get("limits", {}).get("meter_noise_fraction")
+    noise = checked.get("meter_noise_fraction", {})
+    if limit is not None and noise and max(noise.values()) > limit:
+        out.append(
+            f"noisy light readings ({100 * max(noise.values()):.2f} % of the peak)"
+        )
+    named = len(out) - (held is None)  # the findings of the checks listed here
+    if checked.get("warnings") and not named:
+        out += [str(w) for w in checked["warnings"]]  # a check this list lacks
+    return out
+
+
+#: The verdict's three outcomes.
+VERDICTS = ("PASS", "PASS with warnings", "FAIL")
+
+
 def verdict(report: ReportData) -> tuple[str, str] | None:
-    """``("PASS" | "FAIL", why)`` from Table 1's RGB mean and the threshold, or
-    ``None`` without either."""
+    """``(outcome, why)``, ``outcome`` one of :data:`VERDICTS`, or ``None`` without
+    Table 1 or the threshold.
+
+    Without a self-check: ``PASS`` or ``FAIL`` from Table 1's RGB mean against the
+    threshold. With one (:mod:`tunespec.core.selfcheck`), ``PASS`` needs Table 1
+    *and* the prediction of the patches a second calibration left out within the
+    threshold, *and* no finding of the self-check (residuals against the noise
+    model, the LED corrections, the light's reading noise); a prediction over the
+    threshold fails, a finding gives ``PASS with warnings``, naming each check.
+    """
     fitted, _ = _table1_parts(report)
     if fitted is None or report.threshold_rgb_mean is None:
         return None
+    limit = report.threshold_rgb_mean
     mean = float(_as_dict(fitted)["RGB"]["mean"])
-    ok = mean <= report.threshold_rgb_mean
-    why = (
-        f"Table 1 RGB mean error {mean:.4f} of full scale is "
-        f"{'within' if ok else 'over'} the threshold {report.threshold_rgb_mean:.4f}"
+    ok = mean <= limit
+    checked = _self_check(report)
+    if checked is None:
+        why = (
+            f"Table 1 RGB mean error {mean:.4f} of full scale is "
+            f"{'within' if ok else 'over'} the threshold {limit:.4f}"
+        )
+        return ("PASS" if ok else "FAIL"), why
+    over = [] if ok else [f"Table 1 RGB mean error {mean:.4f}"]
+    within = [f"Table 1 RGB mean error {mean:.4f}"] if ok else []
+    findings = _self_check_findings(checked)
+    held = checked.get("held_out")
+    if held is not None:
+        held_mean = float(held["prediction"]["RGB"]["mean"])
+        text = f"left-out patches' (1 in {held['every']}) RGB mean {held_mean:.4f}"
+        (within if held_mean <= limit else over).append(text)
+    if over:
+        why = f"{' and '.join(over)} over the threshold {limit:.4f}"
+        if findings:
+            why += f"; self-check: {'; '.join(findings)}"
+        return "FAIL", why
+    why = f"{' and '.join(within)} within the threshold {limit:.4f}"
+    if findings:
+        return "PASS with warnings", f"{why}; but: {'; '.join(findings)}"
+    chi = checked["residual_chi_square"]["reduced"]
+    why += (
+        "; residuals consistent with the noise model (reduced chi-square "
+        + ", ".join(f"{c} {v:.2f}" for c, v in chi.items())
+        + "), light-source corrections and readings plausible"
     )
-    return ("PASS" if ok else "FAIL"), why
+    return "PASS", why
+
+
+def _verdict_colours(outcome: str) -> tuple[str, str, str]:
+    """(background, edge, text) colours of a verdict."""
+    if outcome == "PASS":
+        return "#e8f4ea", "#3c9a4f", "#2d7a3d"
+    if outcome == "FAIL":
+        return "#fde8e8", "#c00000", "#c00000"
+    return "#fff3cd", "#e0a800", "#8a5a00"
 
 
 def _key_numbers(report: ReportData) -> _Table:
@@ -480,6 +573,16 @@ def _key_numbers(report: ReportData) -> _Table:
     if held is not None:
         d = _as_dict(held)
         rows.append(("Held-aside RGB mean error", f"{d['RGB']['mean']:.4f}", "-"))
+    checked = _self_check(report)
+    if checked is not None and checked.get("held_out") is not None:
+        h = checked["held_out"]
+        rows.append(
+            (
+                f"Left-out patches' RGB mean error (1 in {h['every']}, self-check)",
+                f"{h['prediction']['RGB']['mean']:.4f}",
+                "-",
+            )
+        )
     if report.table2 is not None:
         d = _as_dict(report.table2)
         de, rms = PAPER_TABLE2_AVERAGE
@@ -1099,6 +1202,75 @@ def _table1_parts(report: ReportData) -> tuple[Any, Any]:
     return t1, held
 
 
+def _self_check_table(report: ReportData) -> _Table | None:
+    """The calibration's self-check: each check, its value, its limit, its outcome."""
+    checked = _self_check(report)
+    if checked is None:
+        return None
+    rows: list[tuple[str, str, str, str]] = []
+
+    def chi_row(label: str, chi: Mapping[str, Any]) -> tuple[str, str, str, str]:
+        values = ", ".join(f"{c} {v:.2f}" for c, v in chi["reduced"].items())
+        flagged = chi.get("flagged", [])
+        return (
+            label,
+            f"{values} (1 ± {chi['spread']:.2f}, {chi['n_stimuli']} stimuli)",
+            f"{chi['limit']:.2f}",
+            f"over: {', '.join(flagged)}" if flagged else "ok",
+        )
+
+    rows.append(
+        chi_row("Residuals / noise model (fitted)", checked["residual_chi_square"])
+    )
+    held = checked.get("held_out")
+    if held is not None:
+        p, t = held["prediction"]["RGB"], held["training"]["RGB"]
+        limit = report.threshold_rgb_mean
+        rows.append(
+            (
+                f"Left-out patches (1 in {held['every']}, {len(held['patches'])}): "
+                "RGB mean / max",
+                f"{p['mean']:.4f} / {p['max']:.4f} (fitted {t['mean']:.4f} / "
+                f"{t['max']:.4f})",
+                "-" if limit is None else f"{limit:.4f}",
+                "-" if limit is None else ("ok" if p["mean"] <= limit else "over"),
+            )
+        )
+        rows.append(chi_row("Residuals / noise model (left out)", held["chi_square"]))
+    limits = checked.get("limits", {})
+    noise = checked.get("meter_noise_fraction", {})
+    if noise:
+        name, worst = max(noise.items(), key=lambda kv: kv[1])
+        lim = float(limits.get("meter_noise_fraction", float("nan")))
+        rows.append(
+            (
+                "Light's reading noise (of the peak)",
+                f"{100 * worst:.2f} % ({name})",
+                f"{100 * lim:.1f} %",
+                "ok" if worst <= lim else "over",
+            )
+        )
+    leds = checked.get("implausible_leds", [])
+    if "gain" in limits:
+        rows.append(
+            (
+                "LED corrections (gain, offset)",
+                f"implausible: {', '.join(leds)}" if leds else "all plausible",
+                f"±{100 * limits['gain']:.0f} %, ±{limits['shift_nm']:.0f} nm",
+                "over" if leds else "ok",
+            )
+        )
+    return _Table(
+        "Self-check of the calibration",
+        ("Check", "Value", "Limit", "Outcome"),
+        tuple(rows),
+        note="Reduced chi-square: squared residuals over the variance the noise "
+        "model predicts (ROI noise, flat-field residual; for left-out patches also "
+        "the calibration's own), per degree of freedom; 1 if the model is right. "
+        "Left out: a second calibration without those patches predicts them.",
+    )
+
+
 def _result_tables(report: ReportData) -> list[_Table]:
     tables = []
     fitted, held = _table1_parts(report)
@@ -1110,7 +1282,11 @@ def _result_tables(report: ReportData) -> list[_Table]:
         tables.append(_table1(held, title, paper=False))
     tables += [
         t
-        for t in (_worst_patches_table(report), _table1_patch_table(report))
+        for t in (
+            _self_check_table(report),
+            _worst_patches_table(report),
+            _table1_patch_table(report),
+        )
         if t is not None
     ]
     if report.table2 is not None:
@@ -1362,12 +1538,8 @@ def _html_summary(report: ReportData, flags: Sequence[Flag]) -> list[str]:
     parts = ["<h2>Summary</h2>"]
     v = verdict(report)
     if v is not None:
-        ok = v[0] == "PASS"
-        colour = (
-            "#e8f4ea; border-left: 6px solid #3c9a4f"
-            if ok
-            else ("#fde8e8; border-left: 6px solid #c00000")
-        )
+        background, edge, _ = _verdict_colours(v[0])
+        colour = f"{background}; border-left: 6px solid {edge}"
         parts.append(
             f'<p class="verdict" style="background: {colour}; padding: 0.6em 1em; '
             f'font-size: 1.15em"><b>{e(v[0])}</b>: {e(v[1])}.</p>'
@@ -1544,36 +1716,32 @@ def _summary_page(report: ReportData) -> Figure:
     if v is not None:
         from matplotlib.patches import FancyBboxPatch
 
-        ok = v[0] == "PASS"
+        background, edge, ink = _verdict_colours(v[0])
+        lines = textwrap.wrap(v[1] + ".", 80)
+        height = max(0.045, 0.0135 * len(lines) + 0.012)
         fig.patches.append(
             FancyBboxPatch(
-                (0.08, y - 0.045),
+                (0.08, y - height),
                 0.84,
-                0.045,
+                height,
                 boxstyle="round,pad=0.004",
                 transform=fig.transFigure,
-                facecolor="#e8f4ea" if ok else "#fde8e8",
-                edgecolor="#3c9a4f" if ok else "#c00000",
+                facecolor=background,
+                edgecolor=edge,
                 lw=1.2,
             )
         )
         fig.text(
             0.1,
-            y - 0.0225,
-            v[0],
-            fontsize=16,
+            y - height / 2,
+            "\n".join(textwrap.wrap(v[0], 10)),
+            fontsize=16 if v[0] != "PASS with warnings" else 11,
             weight="bold",
             va="center",
-            color="#2d7a3d" if ok else "#c00000",
+            color=ink,
         )
-        fig.text(
-            0.22,
-            y - 0.0225,
-            "\n".join(textwrap.wrap(v[1] + ".", 80)),
-            fontsize=9,
-            va="center",
-        )
-        y -= 0.07
+        fig.text(0.22, y - height / 2, "\n".join(lines), fontsize=9, va="center")
+        y -= height + 0.025
     y = _draw_key_numbers(fig, y, _key_numbers(report))
     if report.notes:
         notes = textwrap.wrap(report.notes, 100)

@@ -364,3 +364,76 @@ def test_every_export_kind_has_a_name_for_the_reader() -> None:
         "summary_json",
     }
     assert kinds <= set(EXPORT_LABELS), kinds - set(EXPORT_LABELS)
+
+
+def _self_check(*, chi=(0.7, 0.5, 0.7), held_mean=0.0022, warnings=()):
+    """A :class:`~tunespec.core.selfcheck.SelfCheck` of made-up numbers."""
+    from tunespec.core.selfcheck import ChiSquare, HeldOut, SelfCheck
+    from tunespec.core.stats import prediction_stats
+
+    fitted = ChiSquare(np.array(chi), dof=2889, n_stimuli=3080)
+    held = HeldOut(
+        every=5,
+        patches=("A5", "A10"),
+        prediction=prediction_stats(np.zeros((1, 3)), np.full((1, 3), held_mean)),
+        chi_square=ChiSquare(np.array(chi), dof=616, n_stimuli=616),
+        training=prediction_stats(np.zeros((1, 3)), np.full((1, 3), 0.002)),
+    )
+    return SelfCheck(fitted, held, {"LED450": 0.001}, warnings=tuple(warnings))
+
+
+def test_verdict_needs_the_self_check(report: ReportData, tmp_path: Path) -> None:
+    """With a self-check, PASS needs Table 1 and the left-out patches within the
+    threshold and no finding; a finding gives PASS with warnings, naming it; a
+    left-out prediction over the threshold fails."""
+    from dataclasses import replace
+
+    from tunespec.app.report.report import verdict
+
+    base = replace(report, threshold_rgb_mean=0.005)
+    ok = verdict(replace(base, self_check=_self_check()))
+    assert ok == (
+        "PASS",
+        "Table 1 RGB mean error 0.0021 and left-out patches' (1 in 5) RGB mean "
+        "0.0022 within the threshold 0.0050; residuals consistent with the noise "
+        "model (reduced chi-square R 0.70, G 0.50, B 0.70), light-source "
+        "corrections and readings plausible",
+    )
+    # the same as a dict (read back from calibration.json)
+    as_dict = replace(base, self_check=_self_check().as_dict())
+    assert verdict(as_dict) == ok
+    finding = "LED540: the calibration scaled its reported spectrum by 0.770"
+    led = replace(_self_check(warnings=[finding]), implausible_leds=("LED540",))
+    warned = verdict(replace(base, self_check=led))
+    assert warned[0] == "PASS with warnings"
+    assert warned[1].endswith("but: implausible LED corrections (LED540)")
+    chi = _self_check(chi=(2.5, 0.5, 0.7), warnings=["residuals: R"])
+    assert verdict(replace(base, self_check=chi))[1].endswith(
+        "but: calibration residuals beyond the noise model (reduced chi-square "
+        "R 2.5 over 2.0); left-out patches' residuals beyond the noise model "
+        "(reduced chi-square R 2.5 over 2.0)"
+    )
+    over = verdict(replace(base, self_check=_self_check(held_mean=0.006)))
+    assert over == (
+        "FAIL",
+        "left-out patches' (1 in 5) RGB mean 0.0060 over the threshold 0.0050",
+    )
+    no_held = replace(_self_check(), held_out=None)
+    assert verdict(replace(base, self_check=no_held)) == (
+        "PASS with warnings",
+        "Table 1 RGB mean error 0.0021 within the threshold 0.0050; but: no "
+        "prediction of left-out patches was made",
+    )
+    # the report shows the verdict in amber and the self-check's table
+    html_path, _ = write_report(
+        tmp_path,
+        replace(
+            base,
+            self_check=_self_check(chi=(2.5, 0.5, 0.7), warnings=["residuals: R"]),
+        ),
+    )
+    text = html_path.read_text(encoding="utf-8")
+    assert "<b>PASS with warnings</b>" in text and "#e0a800" in text
+    assert "Self-check of the calibration" in text
+    assert "R 2.50, G 0.50, B 0.70 (1 ± 0.03, 3080 stimuli)" in text
+    assert "<td>over: R</td>" in text

@@ -199,6 +199,14 @@ def show_table1(panel: StatsTablePanel, calibration: Any) -> None:
     note = f"{t.n_stimuli} stimuli; method {calibration.method}; paper: RGB mean 0.0024"
     if calibration.excluded_patches:
         note += f"; {len(calibration.excluded_patches)} saturated patch(es) left out"
+    checked = getattr(calibration, "self_check", None)
+    if checked is not None:
+        found = len(checked.get("warnings", ()))
+        note += (
+            f"; self-check: {found} finding(s), see the warnings"
+            if found
+            else "; self-check passed"
+        )
     panel.set_note(note)
 
 

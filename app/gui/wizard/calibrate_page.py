@@ -124,14 +124,15 @@ class CalibratePage(StepPage):
         m.save()
         m.layout_needed.emit(result.layout)
         m.calibrated.emit(result)
-        verdict = "PASS" if result.passed else "FAIL"
         text = (
-            f"{verdict}: RGB mean error {result.rgb_mean:.4f} (threshold "
+            f"{result.verdict}: RGB mean error {result.rgb_mean:.4f} (threshold "
             f"{result.threshold:.4f}), {result.table1.n_stimuli} stimuli, "
             f"{result.elapsed_s:.1f} s."
         )
         if not result.passed:
             text += " Check the corners and the saturation, then recalibrate."
+        elif result.verdict != "PASS":
+            text += " The self-check found something: see the warnings."
         return text  # the warnings are in the page's badge
 
     def restore(self) -> bool:
@@ -141,7 +142,7 @@ class CalibratePage(StepPage):
             return False
         self.mark_done(
             f"Calibration restored: RGB mean error {result.rgb_mean:.4f} "
-            f"({'PASS' if result.passed else 'FAIL'}).",
+            f"({result.verdict}).",
             result,
         )
         return True

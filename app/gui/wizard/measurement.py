@@ -725,6 +725,7 @@ def calibrate_job(
         chart,
         layout_reflectances(chart_layout, grid=CALIBRATION_GRID),
         method=method,
+        check=True,
         progress=sub_progress(progress, 0.6, 1.0),
         should_stop=should_stop,
     )
