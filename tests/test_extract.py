@@ -274,3 +274,20 @@ def test_partial_view_keeps_the_patches_in_the_image(
     ratio = ex.responses.rgb[:, 0] / (full.rgb[idx, 0] * scale)
     # the same up to the TIFF's quantisation (measured 0.25 % at worst)
     assert np.abs(ratio - 1).max() < 0.01
+
+
+@pytest.mark.parametrize("shift_mosaic_px", [-44.0, -22.0, 44.0])
+def test_right_edge_off_is_refused(image, layout, reference, by_hand, shift_mosaic_px):
+    """The outline the bench's finder once gave on a crop of this frame: the right
+    edge about 22 plane (44 mosaic) pixels off, patch means off by up to 128 %.
+    Such an outline (and one off by half as much) is refused, naming the ROIs."""
+    corners = hand_corners_mosaic_px(layout)
+    corners[1:3, 0] += shift_mosaic_px  # TR and BR
+    with pytest.raises(InputError, match=r"refused.*not uniform"):
+        extract_chart(image, layout, corners_px=corners, reflectances=reference)
+    kept = extract_chart(
+        image, layout, corners_px=corners, reflectances=reference, force=True
+    )
+    # what the check protects from: patch means far off the right ones
+    dev = np.abs(kept.responses.rgb[:, 0] / by_hand.responses.rgb[:, 0] - 1).max()
+    assert dev > 0.15 and kept.forced

@@ -363,9 +363,17 @@ def _capture_and_process(
         return session
 
     session: Session = hooks.stages.timed(f"capture_{which}", capturing)
+    # the chart's extraction is checked against its reference data too
+    ref = None
+    if which == "chart" and plan.chart_reflectances is not None:
+        from tunespec.app.pipeline.extract import reference_xyz
+
+        ref = reference_xyz(layout, plan.chart_reflectances)
     processed: ProcessedSession = hooks.stages.timed(
         f"process_{which}",
-        lambda p: process(session, progress=p, should_stop=hooks.should_stop),
+        lambda p: process(
+            session, progress=p, should_stop=hooks.should_stop, reference_xyz=ref
+        ),
     )
     return session, processed
 

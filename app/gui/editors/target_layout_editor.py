@@ -123,6 +123,14 @@ def find_target_corners(
     from tunespec.core.homography import locate_target
     from tunespec.core.io.raw import plane_to_full_px
 
+    grid = _find_patch_grid(frame, target_layout)
+    if grid is not None:
+        return FoundCorners(
+            plane_to_full_px(grid),
+            None,
+            "Patch grid found in the shown frame; check the ROIs, drag a handle "
+            "to correct.",
+        )
     try:
         corners_plane, _fit = locate_target(frame.planes[1], target_layout)
     except InputError as exc:
@@ -135,6 +143,27 @@ def find_target_corners(
         None,
         "Corners found in the shown frame; drag a handle to correct.",
     )
+
+
+def _find_patch_grid(
+    frame: Any, target_layout: TargetLayout
+) -> NDArray[np.float64] | None:
+    """The layout's outer corners (plane px) from the patch-grid finder of
+    ``tunespec extract`` (any background, any rotation), or None."""
+    from tunespec.app.pipeline.extract import layout_reference, reference_xyz
+    from tunespec.core.chart_finder import find_patch_grid
+    from tunespec.core.errors import InputError
+
+    ref = reference_xyz(target_layout, layout_reference(target_layout))
+    try:
+        fit = find_patch_grid(
+            np.moveaxis(np.asarray(frame.planes), 0, -1),
+            target_layout,
+            reference_xyz=ref,
+        )
+    except InputError:
+        return None
+    return fit.corners_px
 
 
 def _polylines(quads: NDArray[np.float64]) -> tuple[NDArray, NDArray]:
@@ -289,6 +318,10 @@ class TargetLayoutEditor(QWidget):
         self.names_check = QCheckBox("Show patch names")
         self.load_button = QPushButton("Load…")
         self.save_button = QPushButton("Save…")
+        self.open_image_button = QPushButton("Open image…")
+        self.open_image_button.setToolTip(
+            "Show a camera raw file (CR2, DNG, ...) to place the layout on"
+        )
         self.find_button = QPushButton("Find corners")
         self.find_button.setToolTip(
             "Find the target's corners automatically, then drag to correct"
@@ -336,6 +369,7 @@ class TargetLayoutEditor(QWidget):
         buttons.addWidget(self.load_button)
         buttons.addWidget(self.save_button)
         corners = QHBoxLayout()
+        corners.addWidget(self.open_image_button)
         corners.addWidget(self.find_button)
         corners.addWidget(self.reset_button)
         history = QHBoxLayout()
@@ -377,6 +411,7 @@ class TargetLayoutEditor(QWidget):
         self.load_button.clicked.connect(self._on_load_button_clicked)
         self.save_button.clicked.connect(self._on_save_button_clicked)
         self.find_button.clicked.connect(self._on_find_button_clicked)
+        self.open_image_button.clicked.connect(self._on_open_image_button_clicked)
         self.reset_button.clicked.connect(self._on_reset_button_clicked)
 
     # -- public API -------------------------------------------------------------------
@@ -674,6 +709,37 @@ class TargetLayoutEditor(QWidget):
         )
         if path:
             self.load(path)
+
+    @Slot()
+    def _on_open_image_button_clicked(self) -> None:
+        path, _ = QFileDialog.getOpenFileName(
+            self,
+            "Open a camera raw file",
+            self.last_dir,
+            "Camera raw files (*.dng *.cr2 *.cr3 *.nef *.arw *.orf *.raf *.rw2 "
+            "*.pef *.srw *.DNG *.CR2);;All files (*)",
+        )
+        if path:
+            self.open_image(path)
+
+    def open_image(self, path: str | Path) -> bool:
+        """Show a camera raw file (anything LibRaw reads) to place the layout on;
+        its corners are in the file's mosaic pixels, as ``tunespec extract`` and
+        processing read them. Errors are shown, not raised."""
+        from tunespec.core.io.raw import load_raw
+
+        try:
+            preview = build_preview(load_raw(path))
+        except TuneSpecError as exc:
+            self.status_label.setText(f"Cannot open: {exc}")
+            log.error("cannot open image: %s", exc)
+            return False
+        self.last_dir = str(Path(path).parent)
+        self.show_preview(preview)
+        self.status_label.setText(
+            f"Showing {Path(path).name}; Find corners, or drag the handles."
+        )
+        return True
 
     @Slot()
     def _on_save_button_clicked(self) -> None:
