@@ -277,3 +277,17 @@ def test_a_deep_key_path_in_an_error_is_cut() -> None:
     with pytest.raises(InputError) as info:
         loads_json('{"' + key + '": [[[1e999]]]}')
     assert len(str(info.value)) < 200 and "non-finite" in str(info.value)
+
+
+def test_a_negative_session_version_is_refused(tmp_path) -> None:
+    from tunespec.core.io.session import CaptureSettings, Session
+
+    settings = CaptureSettings(
+        ("L1",), exposure_mode="fixed", exposures_s={"L1": (1.0,)}
+    )
+    s = Session.create(tmp_path / "s", settings=settings)
+    doc = json.loads(s.manifest_path.read_text())
+    doc["version"] = -1
+    s.manifest_path.write_text(json.dumps(doc))
+    with pytest.raises(InputError, match="bad session version -1"):
+        Session.open(tmp_path / "s")
