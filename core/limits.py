@@ -265,7 +265,7 @@ def check_tree(value: Any, *, path: str | PathLike[str] | None = None) -> None:
     while stack:
         v, depth, key = stack.pop()
         nodes += 1
-        where = f" (at {key})" if key else ""
+        where = f" (at {key if len(key) <= 80 else key[:60] + '...'})" if key else ""
         if nodes > MAX_NODES:
             raise InputError(f"more than {MAX_NODES} values", path=path)
         if depth > MAX_DEPTH:

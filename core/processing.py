@@ -735,8 +735,7 @@ def process_session(
     allow_incomplete
         Skip channels with missing frames (with a warning) instead of failing.
     verify
-        Check every raw file's and SPD's SHA-256 against the manifest first
-        (default; ``--no-verify`` skips it).
+        Check every raw and SPD file's SHA-256 first (``--no-verify`` skips it).
     loader
         Reads a raw file; default :func:`tunespec.core.io.raw.load_raw`.
     progress, should_stop

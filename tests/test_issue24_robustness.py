@@ -252,3 +252,42 @@ def test_a_spectral_csv_row_with_an_extra_field_is_refused(tmp_path) -> None:
     # a trailing separator on every line is still fine
     path.write_text("\n".join(ln + "," for ln in lines[:7] + lines[8:]) + "\n")
     assert read_spectra_csv(path).values.shape[0] == 140
+
+
+@pytest.mark.parametrize("value", ["nan", "inf", "-inf"])
+def test_cgats_with_a_non_finite_spectral_range_keyword(tmp_path, value) -> None:
+    from tunespec.core.io.cgats import read_cgats, ti3_table, write_cgats
+
+    sg = load_colorchecker_sg()
+    path = tmp_path / "x.ti3"
+    write_cgats(ti3_table(sg.names, reflectance=sg), path)
+    text = path.read_text()
+    assert 'SPECTRAL_START_NM "380' in text
+    path.write_text(
+        text.replace('SPECTRAL_START_NM "380', f'SPECTRAL_START_NM "{value}', 1)
+    )
+    spectra = read_cgats(path).spectra()  # the field names give the wavelengths
+    assert spectra is not None and spectra.wavelength_nm[0] == 380.0
+
+
+def test_a_deep_key_path_in_an_error_is_cut() -> None:
+    from tunespec.core.limits import loads_json
+
+    key = "k" * 500
+    with pytest.raises(InputError) as info:
+        loads_json('{"' + key + '": [[[1e999]]]}')
+    assert len(str(info.value)) < 200 and "non-finite" in str(info.value)
+
+
+def test_a_negative_session_version_is_refused(tmp_path) -> None:
+    from tunespec.core.io.session import CaptureSettings, Session
+
+    settings = CaptureSettings(
+        ("L1",), exposure_mode="fixed", exposures_s={"L1": (1.0,)}
+    )
+    s = Session.create(tmp_path / "s", settings=settings)
+    doc = json.loads(s.manifest_path.read_text())
+    doc["version"] = -1
+    s.manifest_path.write_text(json.dumps(doc))
+    with pytest.raises(InputError, match="bad session version -1"):
+        Session.open(tmp_path / "s")

@@ -561,8 +561,14 @@ def check_config(
             raise InputError(
                 f"export.{key}: expected true or false, got {shown(flag)}", path=src
             )
+    _check_confirmed_scheduler(cfg, scheduler)
+
+
+def _check_confirmed_scheduler(cfg: Mapping[str, Any], scheduler: str | None) -> None:
+    """The file's scheduler, checked; an address in a file needs ``--scheduler``."""
     from tunespec.app.pipeline.engine import LOCAL_SCHEDULERS
 
+    src = cfg.get("_path")
     address = check_scheduler(cfg.get("scheduler"), "scheduler", path=src)
     if scheduler is not None:
         check_scheduler(scheduler, "--scheduler")

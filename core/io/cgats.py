@@ -445,6 +445,8 @@ class CgatsTable:
             end = float(self.keywords["SPECTRAL_END_NM"])
         except (KeyError, ValueError):
             return found
+        if not (math.isfinite(start) and math.isfinite(end)):
+            return found  # the names decide
         if n == len(found) and n > 1:
             exact = [start + j * (end - start) / (n - 1) for j in range(n)]
             if all(

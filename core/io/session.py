@@ -747,7 +747,7 @@ class Session:
                 f"not a session manifest (format != {SESSION_FORMAT!r})", path=path
             )
         version = m.get("version", 0)
-        if not isinstance(version, int) or isinstance(version, bool):
+        if not isinstance(version, int) or isinstance(version, bool) or version < 0:
             raise InputError(f"bad session version {shown(version)}", path=path)
         if version > SESSION_VERSION:
             raise InputError(
