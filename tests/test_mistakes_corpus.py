@@ -399,3 +399,17 @@ def test_config_force_key_is_checked() -> None:
     check_config({"force": True})
     with pytest.raises(InputError, match="force: expected true or false"):
         check_config({"force": "yes"})
+
+
+def test_force_on_calibrate_is_recorded_beside_the_sensitivities(
+    good, tmp_path, capsys
+) -> None:
+    x = good
+    chart = fs.truncated_spectra(x.chart, tmp_path / "c.csv", 420, 680, "reflectance")
+    argv = [*_cal(x, reflectances=chart, method="pca"), "-o", str(tmp_path / "S.csv")]
+    code, lines = _run([*argv, "--force", "--stats", str(tmp_path / "t1.json")], capsys)
+    assert code == 0, lines
+    assert any("accepted with --force" in ln and "covers 420-680" in ln for ln in lines)
+    side = json.loads((tmp_path / "S.csv.meta.json").read_text())
+    stats = json.loads((tmp_path / "t1.json").read_text())
+    assert side["forced"] == stats["forced"] and "covers 420-680" in side["forced"][0]
