@@ -269,6 +269,8 @@ CASES: list[tuple[str, Callable, str, str]] = [
     ("--noise-std -1", lambda x, d: _est(x, noise_std=-1), "refused", "--noise-std"),
     ("--noise-std 1e300", lambda x, d: _est(x, noise_std=1e300), "refused",
      "--noise-std"),
+    ("--noise-std 0.5", lambda x, d: _est(x, noise_std=0.5), "refused",
+     "50% of full scale"),
     ("--spd-shift-nm -12", lambda x, d: _est(x, spd_shift_nm=-12), "refused",
      "--spd-shift-nm -12"),
     ("--hold-out-every 1", lambda x, d: _cal(x, hold_out_every=1), "refused",

@@ -405,6 +405,7 @@ def cmd_estimate(args: argparse.Namespace) -> int:
             "(in units of full scale)"
         )
     responses = read_responses_csv(args.responses)
+    checks(pl.check_noise_std, args.noise_std, responses.rgb_std)
     reported = read_spectral(args.illuminants, kind="illuminant")
     sensitivity = absolute_sensitivities(args.sensitivities)
     prior = _prior(args.prior)
