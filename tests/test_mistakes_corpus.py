@@ -415,3 +415,13 @@ def test_force_on_calibrate_is_recorded_beside_the_sensitivities(
     side = json.loads((tmp_path / "S.csv.meta.json").read_text())
     stats = json.loads((tmp_path / "t1.json").read_text())
     assert side["forced"] == stats["forced"] and "covers 420-680" in side["forced"][0]
+
+
+@pytest.mark.slow
+def test_semantic_fuzz_seeded() -> None:
+    """A seeded part of ``tools/fuzz_inputs.py --semantic``: no traceback, no hang,
+    nothing accepted without a warning and wrong by more than 1 dE00."""
+    counts, bugs = fs.fuzz_semantic(200, seed=5)
+    assert not bugs, bugs[:5]
+    assert sum(counts[o] for o in fs.OUTCOMES) == 200
+    assert counts["refused"] > 150  # the mutations are mistakes: mostly refused
