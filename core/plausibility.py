@@ -32,6 +32,7 @@ The checks and the quantities they rest on:
 - **Relative sensitivities** (:func:`check_absolute_sensitivities`): a CSV whose
   peak is exactly 1 is normalised, not on the calibration's absolute scale.
 - **Spectroradiometer shift** (:func:`check_spd_shift`): a few nm at most.
+- **A noise level** (:func:`check_noise_std`): at most 5 % of full scale.
 
 References
 ----------
@@ -68,6 +69,7 @@ __all__ = [
     "check_absolute_sensitivities",
     "check_coverage",
     "check_estimate_inputs",
+    "check_noise_std",
     "check_prior_size",
     "check_responses",
     "check_signal_scale",
@@ -338,6 +340,31 @@ def check_prior_size(n_spectra: int, path: object = None) -> None:
             "or leave --prior out (the ColorChecker SG)",
             path=None if path is None else str(path),
         )
+
+
+#: Largest ``--noise-std`` (full scale) a measurement's noise can be: above it the
+#: Wiener estimate (Eq. 5) is the prior's mean whatever was measured.
+MAX_NOISE_STD = 0.05
+
+
+def check_noise_std(
+    noise_std: float | None, rgb_std: NDArray[np.float64] | None
+) -> None:
+    """``--noise-std`` within what a camera's responses carry: at most
+    :data:`MAX_NOISE_STD` of full scale."""
+    if noise_std is None or noise_std <= MAX_NOISE_STD:
+        return
+    own = ""
+    if rgb_std is not None and rgb_std.size:
+        own = (
+            f"; the responses' own standard deviations: median {np.median(rgb_std):.2g}"
+        )
+    raise Implausible(
+        "noise",
+        f"--noise-std {noise_std:g} is {noise_std:.0%} of full scale (at most "
+        f"{MAX_NOISE_STD:g} accepted{own}): the estimate would be the prior's mean "
+        "whatever was measured; give the level in units of full scale, or leave it out",
+    )
 
 
 def check_spd_shift(shift_nm: float | None) -> None:

@@ -269,6 +269,8 @@ CASES: list[tuple[str, Callable, str, str]] = [
     ("--noise-std -1", lambda x, d: _est(x, noise_std=-1), "refused", "--noise-std"),
     ("--noise-std 1e300", lambda x, d: _est(x, noise_std=1e300), "refused",
      "--noise-std"),
+    ("--noise-std 0.5", lambda x, d: _est(x, noise_std=0.5), "refused",
+     "50% of full scale"),
     ("--spd-shift-nm -12", lambda x, d: _est(x, spd_shift_nm=-12), "refused",
      "--spd-shift-nm -12"),
     ("--hold-out-every 1", lambda x, d: _cal(x, hold_out_every=1), "refused",
@@ -399,3 +401,27 @@ def test_config_force_key_is_checked() -> None:
     check_config({"force": True})
     with pytest.raises(InputError, match="force: expected true or false"):
         check_config({"force": "yes"})
+
+
+def test_force_on_calibrate_is_recorded_beside_the_sensitivities(
+    good, tmp_path, capsys
+) -> None:
+    x = good
+    chart = fs.truncated_spectra(x.chart, tmp_path / "c.csv", 420, 680, "reflectance")
+    argv = [*_cal(x, reflectances=chart, method="pca"), "-o", str(tmp_path / "S.csv")]
+    code, lines = _run([*argv, "--force", "--stats", str(tmp_path / "t1.json")], capsys)
+    assert code == 0, lines
+    assert any("accepted with --force" in ln and "covers 420-680" in ln for ln in lines)
+    side = json.loads((tmp_path / "S.csv.meta.json").read_text())
+    stats = json.loads((tmp_path / "t1.json").read_text())
+    assert side["forced"] == stats["forced"] and "covers 420-680" in side["forced"][0]
+
+
+@pytest.mark.slow
+def test_semantic_fuzz_seeded() -> None:
+    """A seeded part of ``tools/fuzz_inputs.py --semantic``: no traceback, no hang,
+    nothing accepted without a warning and wrong by more than 1 dE00."""
+    counts, bugs = fs.fuzz_semantic(200, seed=5)
+    assert not bugs, bugs[:5]
+    assert sum(counts[o] for o in fs.OUTCOMES) == 200
+    assert counts["refused"] > 150  # the mutations are mistakes: mostly refused

@@ -359,7 +359,12 @@ def _case(inputs: Inputs, rng: random.Random, d: Path) -> tuple[str, str, list[s
         p = edited_responses(x.responses, d / "r.csv", sat)
         return f"saturated share {share:.0%}", "estimate", ["--responses", p, *est[2:]]
     if kind == 8:
-        what = rng.choice(["side file", "prior 3", "spd shift", "cgats sens", "swap"])
+        what = rng.choice(
+            ["side file", "prior 3", "spd shift", "cgats sens", "swap", "noise"]
+        )
+        if what == "noise":
+            v = rng.choice([0.1, 0.5, 1.0, 10.0])
+            return f"--noise-std {v:g}", "estimate", [*est, "--noise-std", v]
         if what == "side file":
             p = copy_without_side_file(x.sensitivities, d / "nometa.csv")
             return (

@@ -479,6 +479,7 @@ def cmd_estimate(args: argparse.Namespace) -> int:
             "(in units of full scale)"
         )
     responses = read_responses_csv(args.responses)
+    checks(pl.check_noise_std, args.noise_std, responses.rgb_std)
     reported = read_spectral(args.illuminants, kind="illuminant")
     sensitivity = absolute_sensitivities(args.sensitivities)
     prior = _prior(args.prior)
@@ -495,7 +496,12 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         [
             (f"--illuminants {args.illuminants}", reported.wavelength_nm),
             (f"--sensitivities {args.sensitivities}", sensitivity.wavelength_nm),
-            (f"--prior {args.prior}", prior.wavelength_nm),
+            (
+                f"--prior {args.prior}"
+                if args.prior
+                else "the prior (ColorChecker SG)",
+                prior.wavelength_nm,
+            ),
         ],
         "estimate",
         grid_nm=grid.wavelength_nm,
@@ -504,11 +510,11 @@ def cmd_estimate(args: argparse.Namespace) -> int:
     from tunespec.core.sensitivity import correct_illuminants_from_meta
     from tunespec.core.wiener import on_integration_grid, wiener_reflectance
 
-    # corrected on the spectra's own grid, then resampled: as the main job does;
-    # Eq. 1 integrated on the sensitivities' (finer) grid, reflectance on `grid`
     _check_names(
         responses, reported, "illuminant", args.illuminants, responses.illuminants
     )
+    # corrected on the spectra's own grid, then resampled: as the main job does;
+    # Eq. 1 integrated on the sensitivities' (finer) grid, reflectance on `grid`
     corrected = correct_illuminants_from_meta(reported, meta, args.spd_shift_nm)
     illum_fine, sens_fine, _ = on_integration_grid(corrected, sensitivity, grid)
     pl.check_estimate_inputs(
