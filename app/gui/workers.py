@@ -501,8 +501,12 @@ class Throttle(QObject):
     ``display_update_period``). Use it as a slot: ``signal.connect(throttle)``.
     """
 
-    def __init__(self, fn: Callable[..., Any], period_ms: int = 50) -> None:
-        super().__init__()
+    def __init__(
+        self, fn: Callable[..., Any], period_ms: int = 50, parent: QObject | None = None
+    ) -> None:
+        # give it the widget ``fn`` draws on as parent: it then dies with it, and
+        # a pending call never reaches a deleted widget
+        super().__init__(parent)
         self._fn = fn
         self._args: tuple[Any, ...] | None = None
         self._timer = QTimer(self)

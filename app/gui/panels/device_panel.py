@@ -45,8 +45,10 @@ LIVE_PERIOD_MS = 200
 
 
 def format_error(exc: BaseException) -> str:
-    """One plain line for the operator: the message, prefixed by its kind if useful."""
-    text = str(exc) or type(exc).__name__
+    """One plain line for the operator: the message, prefixed by its kind if useful
+    (a message of several lines gives its first; the log has the rest)."""
+    lines = [line.strip() for line in str(exc).splitlines() if line.strip()]
+    text = lines[0] if lines else type(exc).__name__
     name = type(exc).__name__
     if name in ("DeviceTimeoutError", "TimeoutError"):
         return f"Timeout: {text}"

@@ -180,7 +180,9 @@ class StepPage(QWidget):
         metrics = self.start_button.fontMetrics()
         widest = max(metrics.horizontalAdvance(t) for t in (start_text, retake_text))
         self.start_button.setMinimumWidth(widest + 32)
-        self._progress_display = Throttle(self._show_progress, self.PROGRESS_PERIOD_MS)
+        self._progress_display = Throttle(
+            self._show_progress, self.PROGRESS_PERIOD_MS, parent=self
+        )
         self.eta_timer = QTimer(self)
         self.eta_timer.setInterval(self.ETA_PERIOD_MS)
         self.eta_timer.timeout.connect(self._on_eta_timer_timeout)
