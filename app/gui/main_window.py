@@ -124,6 +124,9 @@ class MainWindow(QMainWindow):
             camera_specs=_spec_choices("camera", settings.get("devices/camera_spec")),
             sim_options=options,
         )
+        self.device_panel.realtime_changed.connect(
+            self._on_device_panel_realtime_changed
+        )
         self.measurement.connector = self.device_panel.connect_devices
         self.measurement.sim_options = options
         self.wizard_panel = WizardPanel(self.measurement)
@@ -360,6 +363,11 @@ class MainWindow(QMainWindow):
             self.device_panel.light_spec_combo.setCurrentText("sim")
             self.device_panel.camera_spec_combo.setCurrentText("sim")
             self.device_panel.connect_devices()
+
+    @Slot(bool)
+    def _on_device_panel_realtime_changed(self, on: bool) -> None:
+        self.settings.set("sim/realtime", bool(on))
+        self.measurement.sim_options["realtime"] = bool(on)
 
     @Slot()
     def _on_all_off_action_triggered(self) -> None:

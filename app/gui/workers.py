@@ -214,6 +214,8 @@ class WorkerSignals(QObject):
     stage_changed = Signal(str)
     #: Something the operator must know about the result (e.g. a weak LED).
     warned = Signal(str)
+    #: The job's own estimate of the seconds it has left (NaN: not known yet).
+    remaining_changed = Signal(float)
     returned = Signal(object)
     errored = Signal(object)
     finished = Signal()
@@ -656,6 +658,11 @@ class DeviceContext:
         log.info("%s", text)
         if self._job is not None:
             self._job.signals.stage_changed.emit(text)
+
+    def set_remaining(self, seconds: float) -> None:
+        """Say how many seconds the job has left (the page shows it)."""
+        if self._job is not None:
+            self._job.signals.remaining_changed.emit(float(seconds))
 
     def warn(self, text: str) -> None:
         """Pass a warning on to the GUI at once (the page logs and shows it)."""
