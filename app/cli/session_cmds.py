@@ -140,6 +140,12 @@ def _add_capture(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
     )
     p.add_argument("--darks", type=int, default=1, help="dark frames per exposure")
     p.add_argument("--channels", default=None, help="comma-separated LED channels")
+    p.add_argument(
+        "--strict",
+        action="store_true",
+        help="stop (exit 2) at the first frame that is saturated or under-exposed, "
+        "instead of warning and going on (the frame is taken again on --resume)",
+    )
     add_output_options(p)
     p.set_defaults(func=cmd_capture, output_dirs=("out",))
 
@@ -318,6 +324,7 @@ def _capture_cmd(args: argparse.Namespace, resume: bool) -> int:
             max_exposure_s=args.max_exposure,
             progress=out.progress("capturing"),
             on_warning=warned,
+            strict=args.strict,
         )
     out.say(
         f"{len(result.captured)} frame(s) captured, {result.skipped} already there; "
