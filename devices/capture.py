@@ -29,6 +29,7 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass, replace
 from os import PathLike
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -60,10 +61,12 @@ __all__ = [
     "bytes_needed",
     "capture",
     "check_frame",
+    "check_same_camera",
     "device_identities",
     "free_space_warning",
     "meter_exposure",
     "new_session",
+    "recorded_sim_camera",
 ]
 
 #: Called after each committed frame with its record and raw file (GUI live view).
@@ -145,17 +148,76 @@ def check_frame(path: Path, spec: FrameSpec, fixed_exposure: bool) -> str | None
     return None
 
 
+def _camera_record(camera: Camera) -> dict[str, str]:
+    """The camera's identity, and its raw size (``"WxH"``) where it tells."""
+    out = {k: str(v) for k, v in asdict(camera.identity).items()}
+    resolution = getattr(camera, "resolution", None)
+    if isinstance(resolution, tuple) and len(resolution) == 2:
+        out["resolution"] = f"{int(resolution[0])}x{int(resolution[1])}"
+    return out
+
+
 def device_identities(
     light: LightSource, camera: Camera, stage: object | None = None
 ) -> dict[str, dict[str, str]]:
-    """Identities of the devices as the session manifest stores them."""
+    """Identities of the devices as the session manifest stores them (the
+    camera's with its raw size)."""
     out = {
         "light": {k: str(v) for k, v in asdict(light.identity).items()},
-        "camera": {k: str(v) for k, v in asdict(camera.identity).items()},
+        "camera": _camera_record(camera),
     }
     if stage is not None:
         out["stage"] = {"kind": type(stage).__name__}
     return out
+
+
+def recorded_sim_camera(session: Session) -> dict[str, Any]:
+    """The simulated camera a session was captured with: ``{"resolution": (w, h),
+    "seed": n}`` (what of them the manifest records), ``{}`` for hardware.
+
+    A resume or a retake opens the simulated camera with these, so the missing
+    frames match the ones already taken.
+    """
+    cam = session.devices.get("camera", {})
+    if not cam.get("model", "").startswith("SimCamera"):
+        return {}
+    out: dict[str, Any] = {}
+    with contextlib.suppress(ValueError):
+        w, h = (int(v) for v in cam.get("resolution", "").split("x"))
+        out["resolution"] = (w, h)
+    serial = cam.get("serial", "")
+    if serial.startswith("SIM-"):
+        with contextlib.suppress(ValueError):
+            out["seed"] = int(serial[4:])
+    return out
+
+
+def check_same_camera(session: Session, camera: Camera) -> None:
+    """Refuse to add frames to a session from another camera than its frames came
+    from: another model, serial or raw size (before the first frame is taken).
+
+    Raises
+    ------
+    InputError
+        Naming what differs.
+    """
+    if not session.ok_frames():
+        return
+    was = session.devices.get("camera", {})
+    now = _camera_record(camera)
+    diffs = [
+        f"{key} {was[key]} -> {now[key]}"
+        for key in ("model", "serial", "resolution")
+        if was.get(key) and now.get(key) and was[key] != now[key]
+    ]
+    if diffs:
+        raise InputError(
+            "this session's frames were taken with another camera or camera "
+            f"settings ({'; '.join(diffs)}): resume it with the camera it was "
+            "captured with (a simulated camera: leave out --resolution and --seed, "
+            "the session's are used)",
+            path=session.manifest_path,
+        )
 
 
 def new_session(
@@ -649,6 +711,7 @@ def _capture_locked(
             path=session.root,
         )
     session.clean_temp()
+    check_same_camera(session, camera)
     session.set_devices(device_identities(light, camera, stage))
     if retake:
         session.mark_bad(retake, "retake requested")
