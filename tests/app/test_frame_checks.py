@@ -89,6 +89,19 @@ def test_the_gui_step_shows_a_clipped_frame_at_once(window, qtbot, tmp_path):
     assert page.warning_label.isVisible()
     assert "retake with a shorter exposure" in page.warning_label.text()
     assert m.capture_options.exposure == 30.0
+    # the action under the badge: the clipped session is kept aside, and the
+    # chart is taken again from the dark frame at a quarter of the exposure
+    assert page.shorter_button.isVisible()
+    page.shorter_button.click()
+    dark = wizard.dark_page
+    assert wizard.current_page is dark and dark.running
+    assert m.capture_options.exposure == 7.5
+    qtbot.waitUntil(lambda: not dark.running, timeout=STEP_TIMEOUT_MS)
+    assert dark.state == StepState.DONE
+    assert {f.exposure_s for f in m.session("chart").frames} == {7.5}
+    assert page.state == StepState.PENDING and not page.shorter_button.isVisible()
+    aside = [p for p in (tmp_path / "m").iterdir() if ".clipped-" in p.name]
+    assert len(aside) == 1 and (aside[0] / "manifest.json").is_file()
 
 
 @pytest.mark.slow

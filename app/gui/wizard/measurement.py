@@ -405,6 +405,31 @@ class Measurement(QObject):
             return ()
         return read_capture_warnings(MeasurementFolder(self.folder).session_dir(which))
 
+    def shorten_exposure(self, which: str = "chart") -> Path | None:
+        """Put the ``which`` session aside (its frames are kept, renamed
+        ``<session>.clipped-<time>``) and shorten the exposure of the next one: a
+        fixed exposure to a quarter, a metered one metered again. Returns where
+        the old session went (None if there was none)."""
+        from dataclasses import replace
+
+        root = self.path(CHART_DIR if which == "chart" else SAMPLE_DIR)
+        moved = None
+        if root.exists():
+            moved = root.with_name(f"{root.name}.clipped-{time.strftime('%H%M%S')}")
+            n = 1
+            while moved.exists():
+                n += 1
+                moved = moved.with_name(f"{moved.name.split('_')[0]}_{n}")
+            root.rename(moved)
+            log.warning("%s session with clipped frames kept as %s", which, moved)
+        opts = self.capture_options
+        if opts.exposure != "auto":
+            self.capture_options = replace(
+                opts, exposure=max(0.001, round(float(opts.exposure) / 4, 4))
+            )
+        self.save()
+        return moved
+
     def phase_complete(self, which: str, kind: str | None) -> bool:
         """Whether the session holds every frame of ``kind`` (None: every frame)."""
         session = self.session(which)
