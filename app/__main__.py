@@ -42,10 +42,17 @@ def _parse(argv: Sequence[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(
         prog="tunespec-gui", description="The TuneSpec operator's workstation."
     )
-    parser.add_argument(
+    timing = parser.add_mutually_exclusive_group()
+    timing.add_argument(
         "--fast-sim",
         action="store_true",
-        help="run the simulated bench in virtual time (no real exposure waits)",
+        help="run the simulated bench in virtual time, no real exposure waits "
+        "(the default unless 'Real-time exposures' was switched on)",
+    )
+    timing.add_argument(
+        "--realtime-sim",
+        action="store_true",
+        help="the simulated camera waits out every exposure, as a real one does",
     )
     parser.add_argument(
         "--sim-resolution",
@@ -82,8 +89,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     app.setOrganizationName(ORGANIZATION)
     app.setApplicationName(APPLICATION)
     sim: dict[str, object] = {}
-    if args.fast_sim:
-        sim["realtime"] = False
+    if args.fast_sim or args.realtime_sim:
+        sim["realtime"] = bool(args.realtime_sim)
     if args.sim_resolution:
         from tunespec.devices.registry import parse_resolution
 

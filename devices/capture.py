@@ -29,6 +29,7 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass, replace
 from os import PathLike
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -54,14 +55,18 @@ from tunespec.devices.protocols import (
 )
 
 __all__ = [
+    "BadFrameError",
     "CaptureResult",
     "FrameCallback",
     "bytes_needed",
     "capture",
+    "check_frame",
+    "check_same_camera",
     "device_identities",
     "free_space_warning",
     "meter_exposure",
     "new_session",
+    "recorded_sim_camera",
 ]
 
 #: Called after each committed frame with its record and raw file (GUI live view).
@@ -82,6 +87,9 @@ METER_STEP = 4
 LOW_SIGNAL_LEVEL = 0.05
 #: Metering shots per channel before giving up.
 METER_MAX_SHOTS = 6
+#: A lit frame with more than this fraction of its (sampled) pixels clipped is
+#: flagged the moment it is taken (what metering calls too bright).
+FLAG_CLIPPED_FRACTION = METER_CLIPPED_FRACTION
 
 
 @dataclass(frozen=True)
@@ -109,17 +117,107 @@ class CaptureResult:
     warnings: tuple[str, ...] = ()
 
 
+class BadFrameError(InputError):
+    """A frame failed its check and the capture was asked to stop (``strict``);
+    the frame is marked bad, so a resume takes it again."""
+
+
+def check_frame(path: Path, spec: FrameSpec, fixed_exposure: bool) -> str | None:
+    """What is wrong with a lit frame just taken, in the operator's words, or None.
+
+    Saturation: more than :data:`FLAG_CLIPPED_FRACTION` of the pixels clipped
+    (processing would refuse the white frame, or drop the patches). Under-exposure
+    (fixed exposures only: a metered one was aimed at ``target_level``, and a weak
+    LED is reported when metered): the brightest level below
+    :data:`LOW_SIGNAL_LEVEL` of full scale. Dark frames are not checked.
+    """
+    if spec.kind == "dark":
+        return None
+    level, clipped = _bright_level(path)
+    what = f"{spec.kind} frame {spec.channel} at {spec.exposure_s:g} s"
+    if clipped > FLAG_CLIPPED_FRACTION:
+        return (
+            f"{what}: {clipped:.1%} of its pixels are clipped (saturated); retake "
+            "with a shorter exposure (--exposure, or auto to meter it)"
+        )
+    if fixed_exposure and level < LOW_SIGNAL_LEVEL:
+        return (
+            f"{what}: under-exposed, its brightest part at {level:.1%} of full "
+            "scale; retake with a longer exposure (--exposure, or auto to meter it)"
+        )
+    return None
+
+
+def _camera_record(camera: Camera) -> dict[str, str]:
+    """The camera's identity, and its raw size (``"WxH"``) where it tells."""
+    out = {k: str(v) for k, v in asdict(camera.identity).items()}
+    resolution = getattr(camera, "resolution", None)
+    if isinstance(resolution, tuple) and len(resolution) == 2:
+        out["resolution"] = f"{int(resolution[0])}x{int(resolution[1])}"
+    return out
+
+
 def device_identities(
     light: LightSource, camera: Camera, stage: object | None = None
 ) -> dict[str, dict[str, str]]:
-    """Identities of the devices as the session manifest stores them."""
+    """Identities of the devices as the session manifest stores them (the
+    camera's with its raw size)."""
     out = {
         "light": {k: str(v) for k, v in asdict(light.identity).items()},
-        "camera": {k: str(v) for k, v in asdict(camera.identity).items()},
+        "camera": _camera_record(camera),
     }
     if stage is not None:
         out["stage"] = {"kind": type(stage).__name__}
     return out
+
+
+def recorded_sim_camera(session: Session) -> dict[str, Any]:
+    """The simulated camera a session was captured with: ``{"resolution": (w, h),
+    "seed": n}`` (what of them the manifest records), ``{}`` for hardware.
+
+    A resume or a retake opens the simulated camera with these, so the missing
+    frames match the ones already taken.
+    """
+    cam = session.devices.get("camera", {})
+    if not cam.get("model", "").startswith("SimCamera"):
+        return {}
+    out: dict[str, Any] = {}
+    with contextlib.suppress(ValueError):
+        w, h = (int(v) for v in cam.get("resolution", "").split("x"))
+        out["resolution"] = (w, h)
+    serial = cam.get("serial", "")
+    if serial.startswith("SIM-"):
+        with contextlib.suppress(ValueError):
+            out["seed"] = int(serial[4:])
+    return out
+
+
+def check_same_camera(session: Session, camera: Camera) -> None:
+    """Refuse to add frames to a session from another camera than its frames came
+    from: another model, serial or raw size (before the first frame is taken).
+
+    Raises
+    ------
+    InputError
+        Naming what differs.
+    """
+    if not session.ok_frames():
+        return
+    was = session.devices.get("camera", {})
+    now = _camera_record(camera)
+    diffs = [
+        f"{key} {was[key]} -> {now[key]}"
+        for key in ("model", "serial", "resolution")
+        if was.get(key) and now.get(key) and was[key] != now[key]
+    ]
+    if diffs:
+        raise InputError(
+            "this session's frames were taken with another camera or camera "
+            f"settings ({'; '.join(diffs)}): resume it with the camera it was "
+            "captured with (a simulated camera: leave out --resolution and --seed, "
+            "the session's are used)",
+            path=session.manifest_path,
+        )
 
 
 def new_session(
@@ -417,6 +515,7 @@ def capture(
     on_frame: FrameCallback | None = None,
     on_warning: Callable[[str], None] | None = None,
     on_stage: Callable[[str], None] | None = None,
+    strict: bool = False,
 ) -> CaptureResult:
     """Run (or resume) the capture sequence of a session.
 
@@ -446,6 +545,9 @@ def capture(
     on_stage
         Called with what starts now, for an operator watching a long sequence:
         ``"metering LED495, 7 of 22"``, ``"white frame LED410, 1 of 22"``.
+    strict
+        Stop at the first frame that fails :func:`check_frame` (it is marked bad)
+        instead of warning and going on.
 
     Returns
     -------
@@ -456,6 +558,8 @@ def capture(
     InputError
         A session that already holds frames without ``resume``; channels the light
         source does not have.
+    BadFrameError
+        ``strict`` and a frame failed its check.
     SessionBusyError
         Another process is capturing into the session (its lock names it); a lock
         left by a killed capture is taken over, with a warning in the result.
@@ -491,6 +595,7 @@ def capture(
                 on_frame=on_frame,
                 warnings=warnings,
                 on_stage=on_stage,
+                strict=strict,
             )
         except OSError as exc:
             if exc.errno != errno.ENOSPC:
@@ -590,6 +695,7 @@ def _capture_locked(
     on_frame: FrameCallback | None,
     warnings: list[str],
     on_stage: Callable[[str], None] | None = None,
+    strict: bool = False,
 ) -> CaptureResult:
     if session.frames and not (resume or retake):
         raise InputError(
@@ -605,6 +711,7 @@ def _capture_locked(
             path=session.root,
         )
     session.clean_temp()
+    check_same_camera(session, camera)
     session.set_devices(device_identities(light, camera, stage))
     if retake:
         session.mark_bad(retake, "retake requested")
@@ -662,7 +769,9 @@ def _capture_locked(
                 if spec.channel != current:
                     light.set_levels(_levels_for(light, settings, spec.channel))
                     current = spec.channel
-                captured.append(_take(session, camera, spec, light, on_frame).id)
+                record = _take(session, camera, spec, light, on_frame)
+                captured.append(record.id)
+                _flag(session, record, warnings, strict)
                 step()
         light.all_off()
     except BaseException:
@@ -675,6 +784,23 @@ def _capture_locked(
         session.clean_temp()
     report(progress, 1.0)
     return CaptureResult(session, tuple(captured), skipped, metered, tuple(warnings))
+
+
+def _flag(
+    session: Session, record: FrameRecord, warnings: list[str], strict: bool
+) -> None:
+    """Check a frame just committed; warn (or, ``strict``, mark it bad and stop)."""
+    problem = check_frame(
+        session.path_of(record),
+        record.spec,
+        session.settings.exposure_mode == "fixed",
+    )
+    if problem is None:
+        return
+    if strict:
+        session.mark_bad([record.id], problem)
+        raise BadFrameError(f"{problem} (stopped: --strict)", path=session.root)
+    warnings.append(problem)
 
 
 def _stage(

@@ -152,8 +152,15 @@ def _add_capture(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
     )
     p.add_argument("--darks", type=int, default=1, help="dark frames per exposure")
     p.add_argument("--channels", default=None, help="comma-separated LED channels")
+    p.add_argument(
+        "--strict",
+        action="store_true",
+        help="stop (exit 2) at the first frame that is saturated or under-exposed, "
+        "instead of warning and going on (the frame is taken again on --resume)",
+    )
     add_output_options(p)
-    p.set_defaults(func=cmd_capture, output_dirs=("out",))
+    # None: not given (a resumed session then keeps the seed it was captured with)
+    p.set_defaults(func=cmd_capture, output_dirs=("out",), seed=None)
 
 
 def _add_process(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -339,7 +346,7 @@ def _capture_cmd(args: argparse.Namespace, resume: bool) -> int:
         add_capture_warnings,
         clear_capture_warnings,
     )
-    from tunespec.devices.capture import capture, new_session
+    from tunespec.devices.capture import capture, new_session, recorded_sim_camera
     from tunespec.devices.registry import open_bench
 
     exists = (args.out / "manifest.json").is_file()
@@ -364,13 +371,30 @@ def _capture_cmd(args: argparse.Namespace, resume: bool) -> int:
         add_capture_warnings(args.out, [text])
         out.warn(text)
 
+    resolution, seed = args.resolution, args.seed
+    if session is not None:
+        # the missing frames are taken as the others were (issue 24, item 3)
+        recorded = recorded_sim_camera(session)
+        for key, flag in (("resolution", "--resolution"), ("seed", "--seed")):
+            given = getattr(args, key)
+            if key in recorded and given is not None and given != recorded[key]:
+                shown = "x".join(map(str, given)) if key == "resolution" else given
+                was = recorded[key]
+                was = "x".join(map(str, was)) if key == "resolution" else was
+                raise InputError(
+                    f"{flag} {shown} differs from the session's {was}: leave "
+                    f"{flag} out to resume with the session's",
+                    path=args.out,
+                )
+        resolution = recorded.get("resolution", resolution)
+        seed = recorded.get("seed", seed)
     with open_bench(
         args.light,
         args.camera,
         layout=layout.with_corners(None),
         layout_path=args.layout,
-        resolution=args.resolution,
-        seed=args.seed,
+        resolution=resolution,
+        seed=0 if seed is None else seed,
     ) as bench:
         if session is None:
             clear_capture_warnings(args.out)  # of an earlier session in this folder
@@ -396,6 +420,7 @@ def _capture_cmd(args: argparse.Namespace, resume: bool) -> int:
             max_exposure_s=args.max_exposure,
             progress=out.progress("capturing"),
             on_warning=warned,
+            strict=args.strict,
         )
     out.say(
         f"{len(result.captured)} frame(s) captured, {result.skipped} already there; "

@@ -103,6 +103,15 @@ class MainWindow(QMainWindow):
         self.resize(1400, 900)
 
         self.controller = DeviceController(opener)
+        c = self.controller
+        # connected first, so the window has taken in what the devices said before
+        # a step that follows the same signal reports itself done (a signal from
+        # the device thread is queued to each receiver in the order connected)
+        c.devices_opened.connect(self._on_controller_devices_opened)
+        c.devices_closed.connect(self._on_controller_devices_closed)
+        c.spd_measured.connect(self._on_controller_spd_measured)
+        c.frame_acquired.connect(self._on_controller_frame_acquired)
+        c.errored.connect(self._on_controller_errored)
         self._truth: dict[str, Any] = {}
         self._last_preview: dict[str, Any] = {}
         options = {**settings.sim_options(), **(sim_options or {})}
@@ -114,6 +123,9 @@ class MainWindow(QMainWindow):
             light_specs=_spec_choices("light", settings.get("devices/light_spec")),
             camera_specs=_spec_choices("camera", settings.get("devices/camera_spec")),
             sim_options=options,
+        )
+        self.device_panel.realtime_changed.connect(
+            self._on_device_panel_realtime_changed
         )
         self.measurement.connector = self.device_panel.connect_devices
         self.measurement.sim_options = options
@@ -164,14 +176,10 @@ class MainWindow(QMainWindow):
         self.addAction(self.wizard_panel.abort_action)
 
         # redraw at most ~20 Hz however fast the devices report
-        self._spd_throttle = Throttle(self.spd_plot.show_spd)
-        self._frame_throttle = Throttle(self.layout_editor.show_preview)
-        c = self.controller
-        c.devices_opened.connect(self._on_controller_devices_opened)
-        c.devices_closed.connect(self._on_controller_devices_closed)
-        c.spd_measured.connect(self._on_controller_spd_measured)
-        c.frame_acquired.connect(self._on_controller_frame_acquired)
-        c.errored.connect(self._on_controller_errored)
+        self._spd_throttle = Throttle(self.spd_plot.show_spd, parent=self.spd_plot)
+        self._frame_throttle = Throttle(
+            self.layout_editor.show_preview, parent=self.layout_editor
+        )
         m = self.measurement
         m.layout_needed.connect(self._on_measurement_layout_needed)
         m.folder_changed.connect(self._on_measurement_folder_changed)
@@ -355,6 +363,11 @@ class MainWindow(QMainWindow):
             self.device_panel.light_spec_combo.setCurrentText("sim")
             self.device_panel.camera_spec_combo.setCurrentText("sim")
             self.device_panel.connect_devices()
+
+    @Slot(bool)
+    def _on_device_panel_realtime_changed(self, on: bool) -> None:
+        self.settings.set("sim/realtime", bool(on))
+        self.measurement.sim_options["realtime"] = bool(on)
 
     @Slot()
     def _on_all_off_action_triggered(self) -> None:

@@ -214,6 +214,8 @@ class WorkerSignals(QObject):
     stage_changed = Signal(str)
     #: Something the operator must know about the result (e.g. a weak LED).
     warned = Signal(str)
+    #: The job's own estimate of the seconds it has left (NaN: not known yet).
+    remaining_changed = Signal(float)
     returned = Signal(object)
     errored = Signal(object)
     finished = Signal()
@@ -501,8 +503,12 @@ class Throttle(QObject):
     ``display_update_period``). Use it as a slot: ``signal.connect(throttle)``.
     """
 
-    def __init__(self, fn: Callable[..., Any], period_ms: int = 50) -> None:
-        super().__init__()
+    def __init__(
+        self, fn: Callable[..., Any], period_ms: int = 50, parent: QObject | None = None
+    ) -> None:
+        # give it the widget ``fn`` draws on as parent: it then dies with it, and
+        # a pending call never reaches a deleted widget
+        super().__init__(parent)
         self._fn = fn
         self._args: tuple[Any, ...] | None = None
         self._timer = QTimer(self)
@@ -652,6 +658,11 @@ class DeviceContext:
         log.info("%s", text)
         if self._job is not None:
             self._job.signals.stage_changed.emit(text)
+
+    def set_remaining(self, seconds: float) -> None:
+        """Say how many seconds the job has left (the page shows it)."""
+        if self._job is not None:
+            self._job.signals.remaining_changed.emit(float(seconds))
 
     def warn(self, text: str) -> None:
         """Pass a warning on to the GUI at once (the page logs and shows it)."""

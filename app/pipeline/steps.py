@@ -51,7 +51,12 @@ from tunespec.core.spectra import (
     Spectra,
     write_spectra_csv,
 )
-from tunespec.devices.capture import FrameCallback, capture, new_session
+from tunespec.devices.capture import (
+    FrameCallback,
+    capture,
+    new_session,
+    recorded_sim_camera,
+)
 from tunespec.devices.registry import Bench, sim_scene
 
 if TYPE_CHECKING:
@@ -157,6 +162,24 @@ def bench_for_target(
     return Bench(bench.light, camera, scene, camera.truth())
 
 
+def bench_as_recorded(bench: Bench, session: Session) -> Bench:
+    """``bench`` with the simulated camera ``session`` was captured with (its
+    resolution and seed: ``devices.capture.recorded_sim_camera``); hardware, or a
+    camera already so, as it is. The one rule the CLI's and the GUI's resume and
+    retake share."""
+    recorded = recorded_sim_camera(session)
+    if not bench.simulated or not recorded:
+        return bench
+    camera = bench.sim_camera
+    seed = recorded.get("seed")
+    resolution = recorded.get("resolution")
+    same_seed = seed is None or camera.identity.serial == f"SIM-{seed}"
+    if same_seed and resolution in (None, camera.resolution):
+        return bench
+    camera = camera.looking_at(bench.sim_stage, seed=seed, resolution=resolution)
+    return Bench(bench.light, camera, bench.stage, camera.truth())
+
+
 def capture_target(
     bench: Bench,
     session_dir: str | PathLike[str],
@@ -205,6 +228,10 @@ def capture_target(
         session = Session.open(root)
         if session.layout is None:
             session.set_layout(layout.with_corners(None))
+        # the missing frames are taken as the others were: a simulated camera
+        # gets the session's resolution and seed back (a camera that differs
+        # otherwise is refused by capture() before its first frame)
+        bench = bench_as_recorded(bench, session)
     else:
         clear_capture_warnings(root)  # of an earlier session in this folder
         session = new_session(

@@ -362,8 +362,16 @@ class SimCamera:
         self._closed = True
         self._maps.clear()
 
-    def looking_at(self, scene: SimScene, *, seed: int | None = None) -> SimCamera:
-        """The same camera (sensor, lens, light, clock, settings) facing ``scene``.
+    def looking_at(
+        self,
+        scene: SimScene,
+        *,
+        seed: int | None = None,
+        resolution: tuple[int, int] | None = None,
+    ) -> SimCamera:
+        """The same camera (sensor, lens, light, clock, settings) facing ``scene``
+        (with another noise ``seed`` or ``resolution`` if given: a session resumed
+        with the settings it was captured with).
 
         Everything that belongs to the camera and the bench is kept; only the scene
         and, if given, the noise seed change. A bench that swaps targets must not
@@ -375,7 +383,7 @@ class SimCamera:
             scene,
             sensitivity=self._sensitivity,
             render_grid=self._grid,
-            resolution=(self._width, self._height),
+            resolution=resolution or (self._width, self._height),
             clock=self._clock,
             seed=self._seed if seed is None else int(seed),
             realtime=self._realtime,

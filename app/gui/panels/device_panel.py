@@ -45,8 +45,10 @@ LIVE_PERIOD_MS = 200
 
 
 def format_error(exc: BaseException) -> str:
-    """One plain line for the operator: the message, prefixed by its kind if useful."""
-    text = str(exc) or type(exc).__name__
+    """One plain line for the operator: the message, prefixed by its kind if useful
+    (a message of several lines gives its first; the log has the rest)."""
+    lines = [line.strip() for line in str(exc).splitlines() if line.strip()]
+    text = lines[0] if lines else type(exc).__name__
     name = type(exc).__name__
     if name in ("DeviceTimeoutError", "TimeoutError"):
         return f"Timeout: {text}"
@@ -72,6 +74,8 @@ class DevicePanel(QWidget):
 
     #: The operator changed exposure or ISO: exposure in s, ISO.
     camera_settings_changed = Signal(float, int)
+    #: The operator switched the simulated bench's real-time exposures on or off.
+    realtime_changed = Signal(bool)
     #: The current channel changed: index, name.
     channel_selected = Signal(int, str)
 
@@ -115,6 +119,14 @@ class DevicePanel(QWidget):
         self.light_spec_combo.addItems(light_specs)
         self.camera_spec_combo = QComboBox(editable=True)
         self.camera_spec_combo.addItems(camera_specs)
+        self.realtime_check = QCheckBox("Real-time exposures")
+        self.realtime_check.setToolTip(
+            "Simulated bench: the camera waits out every exposure as a real one "
+            "does (a chart takes about 20 minutes). Off: virtual time, the frames "
+            "are the same and the whole wizard takes about 2 minutes. Set before "
+            "connecting."
+        )
+        self.realtime_check.setChecked(bool(self.sim_options.get("realtime", False)))
         self.connect_button = QPushButton("Connect")
         self.disconnect_button = QPushButton("Disconnect")
         self.state_label = QLabel("Not connected")
@@ -130,6 +142,7 @@ class DevicePanel(QWidget):
         conn_form = QFormLayout()
         conn_form.addRow("Light source", self.light_spec_combo)
         conn_form.addRow("Camera", self.camera_spec_combo)
+        conn_form.addRow(self.realtime_check)
         conn_buttons = QHBoxLayout()
         conn_buttons.addWidget(self.connect_button)
         conn_buttons.addWidget(self.disconnect_button)
@@ -231,6 +244,9 @@ class DevicePanel(QWidget):
         self.spd_button.clicked.connect(self._on_spd_button_clicked)
         self.snap_button.clicked.connect(self._on_snap_button_clicked)
         self.live_check.toggled.connect(self._on_live_check_toggled)
+        self.realtime_check.toggled.connect(self._on_realtime_check_toggled)
+        self.light_spec_combo.currentTextChanged.connect(self._on_spec_changed)
+        self.camera_spec_combo.currentTextChanged.connect(self._on_spec_changed)
         self.exposure_spin.valueChanged.connect(self._on_camera_edited)
         self.iso_combo.currentIndexChanged.connect(self._on_camera_edited)
         self.channel_table.itemSelectionChanged.connect(
@@ -286,6 +302,8 @@ class DevicePanel(QWidget):
         self.disconnect_button.setEnabled(on and idle)
         self.light_spec_combo.setEnabled(not on)
         self.camera_spec_combo.setEnabled(not on)
+        # a simulated camera only, and fixed once it is open
+        self.realtime_check.setEnabled(not on and self._simulated_specs())
         for w in (
             self.channel_table,
             self.solo_button,
@@ -298,6 +316,9 @@ class DevicePanel(QWidget):
             w.setEnabled(on and idle)
         # "All off" stays available during a capture: it also aborts it
         self.all_off_button.setEnabled(on)
+
+    def _simulated_specs(self) -> bool:
+        return self.camera_spec_combo.currentText().strip().startswith("sim")
 
     def _level_spin(self, row: int) -> QDoubleSpinBox:
         return self.channel_table.cellWidget(row, 2)
@@ -332,6 +353,16 @@ class DevicePanel(QWidget):
     @Slot()
     def _on_snap_button_clicked(self) -> None:
         self.controller.snap_preview()
+
+    @Slot(bool)
+    def _on_realtime_check_toggled(self, on: bool) -> None:
+        self.sim_options["realtime"] = bool(on)
+        log.info("simulated bench: %s", "real-time exposures" if on else "virtual time")
+        self.realtime_changed.emit(bool(on))
+
+    @Slot(str)
+    def _on_spec_changed(self, _text: str) -> None:
+        self._update_enabled()
 
     @Slot(bool)
     def _on_live_check_toggled(self, on: bool) -> None:

@@ -4,11 +4,13 @@ from __future__ import annotations
 
 from typing import Any
 
+from PySide6.QtCore import Signal
 from PySide6.QtWidgets import (
     QComboBox,
     QDoubleSpinBox,
     QFormLayout,
     QHBoxLayout,
+    QPushButton,
     QSpinBox,
     QWidget,
 )
@@ -40,6 +42,9 @@ _NOUN = {
 class CapturePage(StepPage):
     """One phase of the chart session's capture sequence.
 
+    A clipped frame (flagged as it is taken) shows "Retake with shorter exposure"
+    under the badge: :attr:`shorter_exposure_requested`, which the wizard answers.
+
     Parameters
     ----------
     measurement
@@ -68,11 +73,31 @@ class CapturePage(StepPage):
         self.kind = kind
         self.key = kind
         self.options_widget: QWidget | None = None
+        # under the warning badge, while a frame of the chart's is clipped
+        self.shorter_button = QPushButton("Retake with shorter exposure")
+        self.shorter_button.setToolTip(
+            "Keep these frames aside (renamed) and take the chart session again "
+            "from the dark frame: a fixed exposure a quarter as long, a metered "
+            "one metered again"
+        )
+        self.shorter_button.hide()
+        layout = self.layout()
+        layout.insertWidget(layout.indexOf(self.warning_label) + 1, self.shorter_button)
+        self.shorter_button.clicked.connect(self.shorter_exposure_requested)
+        self.warnings_changed.connect(self._on_warnings_changed)
+        self.state_changed.connect(self._on_warnings_changed)
         if kind == "dark":
             self._build_options()
             measurement.folder_changed.connect(self._on_measurement_folder_changed)
         else:  # no options: the space stays under the description
             self.body.addStretch(1)
+
+    #: The operator asked to take the chart again with a shorter exposure.
+    shorter_exposure_requested = Signal()
+
+    def _on_warnings_changed(self, *_args: object) -> None:
+        clipped = any("clipped (saturated)" in w for w in self.warnings)
+        self.shorter_button.setVisible(clipped and not self.running)
 
     def _build_options(self) -> None:
         """Exposure, ISO, darks and repeats: set before the first frame of the session."""

@@ -413,6 +413,31 @@ class Measurement(QObject):
             return ()
         return read_capture_warnings(MeasurementFolder(self.folder).session_dir(which))
 
+    def shorten_exposure(self, which: str = "chart") -> Path | None:
+        """Put the ``which`` session aside (its frames are kept, renamed
+        ``<session>.clipped-<time>``) and shorten the exposure of the next one: a
+        fixed exposure to a quarter, a metered one metered again. Returns where
+        the old session went (None if there was none)."""
+        from dataclasses import replace
+
+        root = self.path(CHART_DIR if which == "chart" else SAMPLE_DIR)
+        moved = None
+        if root.exists():
+            moved = root.with_name(f"{root.name}.clipped-{time.strftime('%H%M%S')}")
+            n = 1
+            while moved.exists():
+                n += 1
+                moved = moved.with_name(f"{moved.name.split('_')[0]}_{n}")
+            root.rename(moved)
+            log.warning("%s session with clipped frames kept as %s", which, moved)
+        opts = self.capture_options
+        if opts.exposure != "auto":
+            self.capture_options = replace(
+                opts, exposure=max(0.001, round(float(opts.exposure) / 4, 4))
+            )
+        self.save()
+        return moved
+
     def phase_complete(self, which: str, kind: str | None) -> bool:
         """Whether the session holds every frame of ``kind`` (None: every frame)."""
         session = self.session(which)
@@ -521,14 +546,34 @@ def _frames_of(kind: str | None, n_channels: int, n_brackets: int, n_darks: int)
     return per_kind[kind] if kind is not None else sum(per_kind.values())
 
 
-class _PhaseProgress:
-    """The progress of one capture phase: metering (while exposures are unknown) and
-    the frames of the phase.
+#: The latest time a frame took beyond its exposure (s), seen by any capture of
+#: this program: the first frames of the next phase are estimated with it.
+_LAST_OVERHEAD_S: list[float] = []
 
-    ``capture()`` reports one step per metered channel, then one per frame; the
-    fraction is the steps done over the steps done plus those left, and never goes
-    back (before metering, the frames left are an upper bound, replaced by the real
-    count from the session when the first frame is in).
+
+class _PhaseProgress:
+    """The progress and the time left of one capture phase: metering (while the
+    exposures are unknown), then the frames of the phase.
+
+    ``capture()`` reports one step per metered channel, then one per frame. The
+    time left is taken from the exposures actually chosen (the session's, as soon
+    as they are metered; the mean metered so far for the channels still to
+    meter): every frame left costs its exposure (when the camera really waits it
+    out: hardware, or the simulated bench in real time) plus what a frame took
+    beyond its exposure so far, and every channel still to meter what metering one
+    took so far. The fraction is the time elapsed over elapsed plus left, and
+    never goes back; before any time is known, it counts steps (before metering
+    the frames left are an upper bound, replaced by the real count from the
+    session when the exposures are known).
+
+    Parameters
+    ----------
+    waits
+        Whether a frame takes its exposure time.
+    remaining
+        Called with the seconds left (NaN while unknown) after each step.
+    session_now
+        The session as it is on disk now (None before the first frame).
     """
 
     def __init__(
@@ -538,11 +583,28 @@ class _PhaseProgress:
         n_channels: int,
         options: CaptureOptions,
         progress: ProgressFn | None,
+        *,
+        waits: bool = False,
+        remaining: Callable[[float], None] | None = None,
+        session_now: Callable[[], Any] | None = None,
     ) -> None:
         self._kind = kind
         self._progress = progress
+        self._remaining = remaining
+        self._session_now = session_now
+        self._waits = bool(waits)
         self.done = 0
         self._last = 0.0
+        self._t0 = self._t_stage = time.monotonic()
+        self._frame_in_stage = False
+        #: Seconds each metered channel took; seconds beyond the exposure a frame took.
+        self.meter_s: list[float] = []
+        self.overhead_s: list[float] = []
+        self._meter_done = 0
+        #: Exposures (s) of the phase's frames still missing; None while unknown.
+        self.exposures_left: list[float] | None = None
+        self._metered: list[float] = []
+        self._n_frames_per_channel = 1
         if session is None:
             self._n_meter = n_channels
             self.frames_left = _frames_of(
@@ -557,25 +619,101 @@ class _PhaseProgress:
             self.frames_left = _frames_of(
                 kind, n, len(settings.bracket_factors), settings.n_darks
             )
+            self._note_metered(session)
         else:
             self._n_meter = 0
             self.frame_taken(session)
 
-    def frame_taken(self, session: Any) -> None:
-        """Count the frames of the phase still missing in ``session`` (resolved)."""
+    @property
+    def n_meter_left(self) -> int:
+        """Channels still to meter."""
+        return max(0, self._n_meter - self._meter_done)
+
+    def _note_metered(self, session: Any) -> None:
+        """The exposures metered so far (their mean stands in for the others)."""
+        if session is None:
+            return
+        exposures = session.settings.exposures_s
+        self._metered = [float(t) for ts in exposures.values() for t in ts]
+
+    def stage_started(self) -> None:
+        """A metering or a frame starts now (``capture()``'s ``on_stage``)."""
+        self._t_stage = time.monotonic()
+        self._frame_in_stage = False
+
+    def frame_taken(self, session: Any, exposure_s: float | None = None) -> None:
+        """A frame of ``exposure_s`` was committed; count the frames of the phase
+        still missing in ``session`` (once its exposures are resolved)."""
+        if exposure_s is not None:
+            wall = time.monotonic() - self._t_stage
+            over = max(0.0, wall - (exposure_s if self._waits else 0.0))
+            self.overhead_s.append(over)
+            _LAST_OVERHEAD_S[:] = [over]
+            self._frame_in_stage = True
         if session is not None and session.settings.resolved:
-            self._n_meter = 0
+            self._n_meter = self._meter_done = 0
             missing = session.missing(verify=False)
-            self.frames_left = sum(self._kind in (None, s.kind) for s in missing)
+            mine = [s for s in missing if self._kind in (None, s.kind)]
+            self.frames_left = len(mine)
+            self.exposures_left = [float(s.exposure_s) for s in mine]
+
+    def remaining_s(self) -> float:
+        """Seconds left (NaN while unknown)."""
+        over = (
+            float(np.median(self.overhead_s))
+            if self.overhead_s
+            else _LAST_OVERHEAD_S[0]
+            if _LAST_OVERHEAD_S
+            else None
+        )
+        mean_t = float(np.mean(self._metered)) if self._metered else None
+        if over is None and self.meter_s and mean_t is not None:
+            # no frame yet: a metering shot is a frame too (most channels need one)
+            over = max(0.0, float(np.mean(self.meter_s)) - self._waited(mean_t))
+        left = 0.0
+        if self.n_meter_left:
+            if not self.meter_s:
+                return float("nan")
+            left += self.n_meter_left * float(np.mean(self.meter_s))
+        if self.frames_left:
+            exposures = self.exposures_left
+            if exposures is None:
+                if mean_t is None and self._waits:
+                    return float("nan")
+                exposures = [mean_t or 0.0] * self.frames_left
+            if over is None:
+                return float("nan")
+            left += sum(self._waited(t) + over for t in exposures)
+        return left
+
+    def _waited(self, exposure_s: float) -> float:
+        return exposure_s if self._waits else 0.0
 
     def step(self) -> None:
-        """One step done; report the fraction."""
+        """One step done; report the fraction and the time left."""
         self.done += 1
-        left = max(0, self._n_meter - self.done) + self.frames_left
-        fraction = self.done / max(1, self.done + left)
+        if not self._frame_in_stage and self.n_meter_left:
+            # a metering step: the stage was that channel's metering
+            self.meter_s.append(time.monotonic() - self._t_stage)
+            self._meter_done += 1
+            if self._session_now is not None:
+                now = self._session_now()
+                self._note_metered(now)
+                # all metered: the frames left and their exposures are known
+                self.frame_taken(now)
+        self._frame_in_stage = False
+        remaining = self.remaining_s()
+        if np.isfinite(remaining):
+            elapsed = time.monotonic() - self._t0
+            fraction = elapsed / max(1e-9, elapsed + remaining)
+        else:
+            left = self.n_meter_left + self.frames_left
+            fraction = self.done / max(1, self.done + left)
         self._last = max(self._last, min(fraction, 1.0))
         if self._progress is not None:
             self._progress(self._last)
+        if self._remaining is not None:
+            self._remaining(remaining)
 
 
 def capture_job(
@@ -615,7 +753,18 @@ def capture_job(
         return Session.open(root) if (root / MANIFEST_NAME).exists() else None
 
     session = session_now()
-    meter = _PhaseProgress(kind, session, len(light.channels()), options, progress)
+    # a frame takes its exposure on hardware, and on the simulated bench in real time
+    waits = not bench.simulated or bool(context.options.get("realtime", False))
+    meter = _PhaseProgress(
+        kind,
+        session,
+        len(light.channels()),
+        options,
+        progress,
+        waits=waits,
+        remaining=context.set_remaining,
+        session_now=session_now,
+    )
     if session is not None and session.settings.resolved and meter.frames_left == 0:
         retake = [f.id for f in session.frames if kind in (None, f.kind)]
         session.mark_bad(retake, "retaken by the operator")
@@ -633,12 +782,16 @@ def capture_job(
             context.show_spd(
                 partial(now.read_spd, record), _levels_of(light, record.channel)
             )
-        meter.frame_taken(now)
+        meter.frame_taken(now, float(record.exposure_s))
         if kind is not None and now.settings.resolved and meter.frames_left == 0:
             phase_done[0] = True
 
     def stop() -> bool:
         return phase_done[0] or bool(should_stop and should_stop())
+
+    def on_stage(text: str) -> None:
+        meter.stage_started()
+        context.set_stage(text)
 
     warnings: tuple[str, ...] = ()
     try:
@@ -655,7 +808,7 @@ def capture_job(
             should_stop=stop,
             on_frame=on_frame,
             on_warning=context.warn,
-            on_stage=context.set_stage,
+            on_stage=on_stage,
         )
     except Cancelled:
         if not phase_done[0] or (should_stop and should_stop()):

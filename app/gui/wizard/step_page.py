@@ -11,6 +11,8 @@ switched off) and taken again. Subclasses say what job to make
 from __future__ import annotations
 
 import logging
+import math
+import time
 from collections.abc import Sequence
 from typing import Any
 
@@ -117,6 +119,8 @@ class StepPage(QWidget):
         self.title = title
         self.state = StepState.PENDING
         self.job: Worker | DeviceJob | None = None
+        self._job_remaining = None
+        self._shown_remaining_s = float("inf")
         self.result: Any = None
         self.clock = ProgressClock()
         self._finish_state = StepState.FAILED
@@ -180,7 +184,9 @@ class StepPage(QWidget):
         metrics = self.start_button.fontMetrics()
         widest = max(metrics.horizontalAdvance(t) for t in (start_text, retake_text))
         self.start_button.setMinimumWidth(widest + 32)
-        self._progress_display = Throttle(self._show_progress, self.PROGRESS_PERIOD_MS)
+        self._progress_display = Throttle(
+            self._show_progress, self.PROGRESS_PERIOD_MS, parent=self
+        )
         self.eta_timer = QTimer(self)
         self.eta_timer.setInterval(self.ETA_PERIOD_MS)
         self.eta_timer.timeout.connect(self._on_eta_timer_timeout)
@@ -238,10 +244,13 @@ class StepPage(QWidget):
         job.signals.progressed.connect(self._on_job_progressed)
         job.signals.stage_changed.connect(self._on_job_stage_changed)
         job.signals.warned.connect(self._on_job_warned)
+        job.signals.remaining_changed.connect(self._on_job_remaining_changed)
         job.signals.returned.connect(self._on_job_returned)
         job.signals.errored.connect(self._on_job_errored)
         job.signals.finished.connect(self._on_job_finished)
         self.clock.restart()
+        self._job_remaining: tuple[float, float] | None = None
+        self._shown_remaining_s = float("inf")
         self.progress_bar.setValue(0)
         self.remaining_label.setText("starting…")
         self.result_label.setStyleSheet("")
@@ -379,10 +388,30 @@ class StepPage(QWidget):
     def _on_job_warned(self, text: str) -> None:
         self.add_warnings([text])
 
+    @Slot(float)
+    def _on_job_remaining_changed(self, seconds: float) -> None:
+        if self.running:
+            self._job_remaining = (float(seconds), time.monotonic())
+
+    def remaining_s(self) -> float:
+        """The seconds left as shown: the job's own estimate (taken from what it
+        will do, e.g. the exposures chosen) counted down since it came, else the
+        elapsed time scaled by the fraction left; never more than shown before,
+        so the operator sees it only go down (NaN while unknown)."""
+        if self._job_remaining is not None:
+            seconds, at = self._job_remaining
+            estimate = seconds - (time.monotonic() - at)
+        else:
+            estimate = self.clock.update(self.clock.fraction)
+        if not math.isfinite(estimate):
+            return float("nan")
+        self._shown_remaining_s = min(self._shown_remaining_s, max(0.0, estimate))
+        return self._shown_remaining_s
+
     @Slot()
     def _on_eta_timer_timeout(self) -> None:
         if self.running:
-            remaining = self.clock.update(self.clock.fraction)
+            remaining = self.remaining_s()
             self.remaining_label.setText(
                 f"{ProgressClock.format_s(self.clock.elapsed_s)} elapsed, "
                 f"{ProgressClock.format_s(remaining)} left"

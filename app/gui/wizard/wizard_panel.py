@@ -203,6 +203,8 @@ class WizardPanel(QWidget):
             )
             page.step_finished.connect(lambda _r, i=i: self._on_page_step_finished(i))
             page.warnings_changed.connect(lambda _w, i=i: self._show_state(i))
+        for page in (self.dark_page, self.white_page, self.chart_page):
+            page.shorter_exposure_requested.connect(self._on_shorter_exposure_requested)
         self.step_list.currentRowChanged.connect(self._on_step_list_row_changed)
         self.back_button.clicked.connect(self._on_back_button_clicked)
         self.next_button.clicked.connect(self._on_next_button_clicked)
@@ -350,7 +352,33 @@ class WizardPanel(QWidget):
 
         QThreadPool.globalInstance().waitForDone(10_000)
 
+    def retake_with_shorter_exposure(self) -> bool:
+        """The chart session had clipped frames: keep it aside, shorten the
+        exposure and take the chart again from the dark frame (False, and why on
+        the page, if a step runs)."""
+        if self._refuse_while_running():
+            return False
+        try:
+            moved = self.measurement.shorten_exposure("chart")
+        except Exception as exc:
+            from tunespec.app.gui.panels.device_panel import format_error
+
+            self.dark_page.result_label.setText(format_error(exc))
+            return False
+        for page in (self.chart_page, self.white_page, self.dark_page):
+            page.reset()
+        self.dark_page._show_options(self.measurement.capture_options)
+        self.go_to(self.pages.index(self.dark_page))
+        if moved is not None:
+            log.info("retaking the chart with a shorter exposure (%s)", moved.name)
+        self.dark_page.start()
+        return True
+
     # -- slots ---------------------------------------------------------------------------
+    @Slot()
+    def _on_shorter_exposure_requested(self) -> None:
+        self.retake_with_shorter_exposure()
+
     @Slot(str)
     def _on_controller_prompt_requested(self, message: str) -> None:
         self.prompt_label.setText(f"<b>{message}</b>")
