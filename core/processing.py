@@ -797,8 +797,10 @@ def process_session(
 
     # -- per channel: darks, brackets, Eq. 2, statistics ------------------------------
     acc = _ChannelStats.empty(layout, use, _RoiGeometry.of(rois, layout.n_patches))
-    _collect(session, acc, [first, *[c for c in use if c != first]], whites, targets,
-             reader, spds)  # fmt: skip
+    for c in [first, *[c for c in use if c != first]]:
+        acc.add(session, c, reader.pixels(whites[c]), reader.pixels(targets[c]))
+        ref = targets[c][0]
+        acc.add_spd(c, suppress_meter_floor(spds[c]), ref.exposure_s)
     warnings.extend(acc.warnings())
     n_px = rois.n_pixels
     n_patch = layout.n_patches
@@ -870,50 +872,6 @@ def check_spds(session: Session, refs: dict[str, FrameRecord]) -> dict[str, Spec
                 path=where[c],
             )
     return spds
-
-
-def _collect(
-    session: Session,
-    acc: _ChannelStats,
-    order: Sequence[str],
-    whites: dict[str, list[FrameRecord]],
-    targets: dict[str, list[FrameRecord]],
-    reader: _FrameReader,
-    spds: dict[str, Spectra],
-) -> None:
-    """Every channel's statistics into ``acc``, in ``order``, with its measured SPD
-    (:func:`check_spds`); the next frame decodes on another thread while this one
-    is gathered."""
-    reader.prefetch(_read_order(session.frames, order, whites, targets))
-    try:
-        for c in order:
-            acc.add(session, c, reader.pixels(whites[c]), reader.pixels(targets[c]))
-            ref = targets[c][0]
-            acc.add_spd(c, suppress_meter_floor(spds[c]), ref.exposure_s)
-    finally:
-        reader.close()
-
-
-def _read_order(
-    frames: Sequence[FrameRecord],
-    order: Sequence[str],
-    whites: dict[str, list[FrameRecord]],
-    targets: dict[str, list[FrameRecord]],
-) -> list[FrameRecord]:
-    """The frames in the order :meth:`_FrameReader.pixels` reads them: per channel
-    its whites, their darks not read yet, its targets, theirs."""
-    seen: set[str] = set()
-    out: list[FrameRecord] = []
-    for c in order:
-        for group in (whites[c], targets[c]):
-            recs = list(group)
-            for r in group:
-                recs += find_darks(frames, r.exposure_s, r.iso)
-            for r in recs:
-                if r.id not in seen:
-                    seen.add(r.id)
-                    out.append(r)
-    return out
 
 
 def _session_rois(
@@ -1056,9 +1014,6 @@ class _FrameReader:
         self._rois: RoiSet | None = None
         self._preloaded: dict[str, RawFrame] = {}
         self._darks: dict[tuple[float, int], _Pixels] = {}
-        self._plan: list[FrameRecord] = []
-        self._ahead: dict[str, Any] = {}
-        self._pool: Any = None
         self.done = 0
 
     def step(self) -> None:
@@ -1066,38 +1021,10 @@ class _FrameReader:
         report(self._progress, self.done / self._total)
         check_stop(self._should_stop)
 
-    def prefetch(self, plan: Sequence[FrameRecord]) -> None:
-        """Read the frames of ``plan`` one ahead, on a thread of their own (the raw
-        decoder releases the GIL): a bounded pipeline of two frames, so decoding
-        the next frame overlaps gathering this one's pixels."""
-        from concurrent.futures import ThreadPoolExecutor
-
-        self._plan = [r for r in plan if r.id not in self._preloaded]
-        self._pool = ThreadPoolExecutor(1, thread_name_prefix="tunespec-read")
-        self._top_up()
-
-    def _top_up(self) -> None:
-        while self._pool is not None and self._plan and len(self._ahead) < 1:
-            rec = self._plan.pop(0)
-            path = self._session.path_of(rec)
-            self._ahead[rec.id] = self._pool.submit(self._load, path)
-
-    def close(self) -> None:
-        """Stop reading ahead (frames in flight are finished and dropped)."""
-        if self._pool is not None:
-            self._pool.shutdown(wait=True, cancel_futures=True)
-            self._pool = None
-        self._ahead.clear()
-
     def read(self, rec: FrameRecord) -> RawFrame:
         check_stop(self._should_stop)
-        ahead = self._ahead.pop(rec.id, None)
         try:
-            if ahead is not None:
-                self._top_up()
-                frame = ahead.result()
-            else:
-                frame = self._load(self._session.path_of(rec))
+            frame = self._load(self._session.path_of(rec))
         except InputError as exc:
             raise InputError(
                 f"frame {rec.id}: {exc}; {self._retake.format(rec.id)}"

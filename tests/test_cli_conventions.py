@@ -118,15 +118,20 @@ def test_help_lists_the_exit_codes() -> None:
 
 def _value(action: argparse.Action) -> str:
     """A value argparse accepts for a required argument (the check of the outputs
-    comes before anything reads it)."""
+    comes before anything reads it): the first candidate its type takes."""
     if action.choices:
         return str(next(iter(action.choices)))
     known = {grid_arg: "400:700:10", seed_arg: "0", resolution_arg: "64x48"}
     if action.type in known:
         return known[action.type]
-    if action.type in (int, float):
-        return "1"
-    return "input.csv"
+    for candidate in ("input.csv", "1", "0.5", "400:700:10", "64x48", "sim"):
+        try:
+            if action.type is not None:
+                action.type(candidate)  # type: ignore[operator]
+        except (ValueError, TypeError, argparse.ArgumentTypeError, InputError):
+            continue
+        return candidate
+    raise AssertionError(f"no test value for {action.dest}: add one to _value")
 
 
 def _argv(name: str, parser: argparse.ArgumentParser, blocked: Path) -> list[str]:

@@ -117,8 +117,10 @@ def formats_arg(text: str) -> tuple[str, ...]:
 
     try:
         return valid_formats(text)
-    except TuneSpecError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
+    except TuneSpecError:
+        raise argparse.ArgumentTypeError(
+            f"expected a comma-separated list of envi, zarr, tiff, got {text!r}"
+        ) from None
 
 
 def noise_model_arg(text: str) -> object:

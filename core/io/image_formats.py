@@ -270,7 +270,7 @@ def valid_formats(formats: Sequence[str] | str) -> tuple[str, ...]:
     unknown = [n for n in names if n not in IMAGE_FORMATS]
     if unknown or not names:
         raise InputError(
-            f"--formats: expected a comma-separated list of "
+            f"image formats (--formats): expected a comma-separated list of "
             f"{', '.join(IMAGE_FORMATS)}, got {','.join(names) or 'nothing'!r}"
         )
     return tuple(f for f in IMAGE_FORMATS if f in names)

@@ -106,7 +106,7 @@ def test_formats_choose_the_files(tmp_path) -> None:
     }  # fmt: skip
     with pytest.raises(InputError, match="--formats"):
         open_image_outputs(tmp_path / "e")
-    with pytest.raises(InputError, match="--formats: expected"):
+    with pytest.raises(InputError, match=r"formats \(--formats\): expected"):
         ImageOutputs.create(tmp_path / "x", (2, 2), WL, block_rows=1,
                             provenance={}, formats=("envi", "hdf5"))  # fmt: skip
 
@@ -136,3 +136,20 @@ def test_zarr_chunks_written_whole_are_what_zarr_writes(tmp_path) -> None:
     mine = (tmp_path / "ours" / "cube.zarr" / "reflectance").joinpath(*chunk)
     assert mine.read_bytes() == (tmp_path / "theirs.zarr").joinpath(*chunk).read_bytes()
     assert len(list((tmp_path / "ours" / "cube.zarr" / "reflectance").rglob("0"))) >= 9
+
+
+def test_formats_option_is_checked_by_the_parser(capsys) -> None:
+    from tunespec.app.cli import build_parser
+
+    parser = build_parser()
+    argv = ["estimate-image", "s", "--sensitivities", "S.csv", "-o", "d"]
+    assert parser.parse_args(argv).formats == ("envi", "zarr", "tiff")
+    assert parser.parse_args([*argv, "--formats", "TIFF,zarr"]).formats == (
+        "zarr", "tiff",
+    )  # fmt: skip
+    with pytest.raises(SystemExit) as exc:
+        parser.parse_args([*argv, "--formats", "envi,hdf5"])
+    assert exc.value.code == 2
+    assert "expected a comma-separated list of envi, zarr, tiff" in (
+        capsys.readouterr().err
+    )
