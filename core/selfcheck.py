@@ -541,8 +541,9 @@ def _chi_square_warning(chi: ChiSquare, what: str) -> list[str]:
     return [
         f"{what} residuals exceed the noise model: reduced chi-square {values} "
         f"(limit {chi.limit:.1f}; worst under {worst}): an effect the model lacks "
-        "(non-linearity, noise the ROI statistics miss, a wrong LED spectrum), so "
-        "the error bars are too narrow"
+        "(non-linearity, noise the ROI statistics miss, a wrong LED spectrum, or "
+        "sensitivities too constrained to fit this camera), so the error bars are "
+        "too narrow"
     ]
 
 
