@@ -128,3 +128,12 @@ def test_demo_command_prints_both_tables(tmp_path, capsys) -> None:
     assert not (out / "reflectances.csv").exists()
     summary = json.loads((out / "summary.json").read_text())
     assert summary["table1_rgb_rms_mean"] <= 0.0024
+    # the good bench passes its self-check (issue 23): reduced chi-square 0.87-1.07
+    # at this resolution, 1 in 5 left-out patches predicted as well as the fitted
+    assert "Self-check:" in text and "all checks passed" in text
+    checked = summary["self_check"]
+    assert checked["passed"] is True and checked["warnings"] == []
+    assert max(checked["residual_chi_square"]["reduced"].values()) < 1.5
+    held = checked["held_out"]
+    assert held["prediction"]["RGB"]["mean"] < 1.5 * held["training"]["RGB"]["mean"]
+    assert not any("self-check" in w for w in summary["warnings"])

@@ -446,11 +446,13 @@ def export_label(key: str) -> str:
 
 
 def _self_check(report: ReportData) -> dict[str, Any] | None:
-    """The self-check's ``as_dict()`` form, or ``None``."""
+    """The self-check's ``as_dict()`` form, or ``None`` (also for a document that
+    lacks its residual check: a ``calibration.json`` edited by hand)."""
     c = report.self_check
     if c is None:
         return None
-    return dict(c) if isinstance(c, Mapping) else c.as_dict()
+    d = dict(c) if isinstance(c, Mapping) else c.as_dict()
+    return d if isinstance(d.get("residual_chi_square"), Mapping) else None
 
 
 def _self_check_findings(checked: Mapping[str, Any]) -> list[str]:
