@@ -307,11 +307,18 @@ class ProcessedSession:
 
     def checked(self, reference_xyz: ArrayLike | None = None) -> ProcessedSession:
         """A copy with :attr:`check`: :func:`tunespec.core.extraction.
-        check_responses` of the broadband channel (white LEDs first), with the
-        chart's reference XYZ (layout order) if given; a failed check also adds a
-        warning."""
-        channel = _detection_channel(self.responses.illuminants)
-        check = check_responses(self.responses, channel, reference_xyz=reference_xyz)
+        check_responses` of a white LED's channel, with the chart's reference XYZ
+        (layout order) if given; a failed check also adds a warning. A session
+        without a white LED is not checked (its ``notes`` say so)."""
+        white = [c for c in self.responses.illuminants if "WHITE" in c.upper()]
+        if not white:
+            # under a narrow LED alone neither the ROI spread (its pixel noise is
+            # not known here) nor the colours (XYZ needs a broadband light) tell a
+            # wrong extraction from a right one
+            note = "no broadband channel in the session: extraction not checked"
+            check = ExtractionCheck((), {}, (note,))
+            return replace(self, check=check)
+        check = check_responses(self.responses, white[0], reference_xyz=reference_xyz)
         warnings = self.warnings
         if not check.ok:
             warnings = (*warnings, f"patch extraction check failed: {check.summary()}")

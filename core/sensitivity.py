@@ -1145,15 +1145,27 @@ def estimate_camera_sensitivity(
                "spd_shift_nm": shift_nm, "spd_shift_at_bound": shift_at_bound}  # fmt: skip
     excess = _excess_variance(problem, S, correction, shift_nm, responses.illuminants)
     report(progress, 1.0)
-    meta = {"source": f"estimated ({method})", "spd_shift_nm": repr(shift_nm),
-            "excess_variance": json.dumps(excess.as_dict())}  # fmt: skip
-    if correction is not None:
-        meta["led_correction"] = json.dumps(correction.as_dict())
-    sens = Spectra(problem.wavelength_nm, S, CHANNELS, meta)
+    sens = _result_spectra(problem, S, method, shift_nm, correction, excess)
     return SensitivityEstimate(
         sens, method, params, problem.excluded_patches, spd_shift_nm=shift_nm,
         led_correction=correction, covariance=covariance, excess=excess,
     )  # fmt: skip
+
+
+def _result_spectra(
+    problem: _Problem,
+    S: NDArray[np.float64],
+    method: str,
+    shift_nm: float,
+    correction: LedCorrection | None,
+    excess: ExcessVariance,
+) -> Spectra:
+    """The fitted sensitivities with what the side file keeps in their ``meta``."""
+    meta = {"source": f"estimated ({method})", "spd_shift_nm": repr(shift_nm),
+            "excess_variance": json.dumps(excess.as_dict())}  # fmt: skip
+    if correction is not None:
+        meta["led_correction"] = json.dumps(correction.as_dict())
+    return Spectra(problem.wavelength_nm, S, CHANNELS, meta)
 
 
 def _excess_variance(

@@ -515,10 +515,7 @@ def reflectance_uncertainty(
     prior_var = np.diagonal(cov_prior, axis1=1, axis2=2).copy()
     lab_prior_var = np.diagonal(lab_cov_prior, axis1=1, axis2=2).copy()
     budget = {"prior mismatch": (prior_var, lab_prior_var)}
-    for t in BUDGET_TERMS[1:]:
-        if t in terms:
-            lab_t = np.diagonal(lab_covariance(xyz, term_xyz[t]), axis1=1, axis2=2)
-            budget[t] = (term_var[t], lab_t.copy())
+    budget |= _budget_terms(xyz, term_var, term_xyz)
     # A reflectance factor lies in [0, 1] (as the clipped estimate does), so its
     # standard deviation cannot exceed 0.5 (Popoviciu's inequality); the linear
     # model can claim more where the LEDs see nothing.
@@ -537,6 +534,23 @@ def reflectance_uncertainty(
         lab_prior_part_variance=lab_prior_var,
         budget=budget,
     )
+
+
+def _budget_terms(
+    xyz: NDArray[np.float64],
+    term_var: dict[str, NDArray[np.float64]],
+    term_xyz: dict[str, NDArray[np.float64]],
+) -> dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]]:
+    """The response terms of the budget, in :data:`BUDGET_TERMS` order: each
+    one's reflectance variance and its CIELAB variance (from its XYZ covariance)."""
+    return {
+        t: (
+            term_var[t],
+            np.diagonal(lab_covariance(xyz, term_xyz[t]), axis1=1, axis2=2).copy(),
+        )
+        for t in BUDGET_TERMS[1:]
+        if t in term_var
+    }
 
 
 def budget_summary(unc: ReflectanceUncertainty) -> dict[str, dict[str, float]]:

@@ -469,7 +469,8 @@ def _noise_variance(
         level = float(noise_std)
         if not (np.isfinite(level) and 0.0 <= level <= 1e6):  # level**2 stays finite
             raise InputError(
-                f"--noise-std {noise_std!r}: expected a finite value in [0, 1e6]"
+                f"noise_std={noise_std!r} (--noise-std): expected a finite value "
+                "in [0, 1e6]"
             )
         var = np.full(shape, level**2)
     elif responses.rgb_std is not None:

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.helpers import without_progress
 from tunespec.app.cli import EXIT_DISK_FULL, main
 from tunespec.core.atomic import atomic_open, atomic_write_text
 from tunespec.core.datasets import load_colorchecker_sg
@@ -40,7 +41,7 @@ def _plant(link: Path, victim: Path) -> None:
 
 
 def _one_line(capsys, rc: int, code: int) -> str:
-    err = capsys.readouterr().err.strip()
+    err = without_progress(capsys.readouterr().err)
     assert rc == code, err
     assert "Traceback" not in err and len(err.splitlines()) == 1, err
     return err

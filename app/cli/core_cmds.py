@@ -29,7 +29,7 @@ from tunespec.core.responses import Responses
 from tunespec.core.spectra import CALIBRATION_MAX_STEP_NM, Grid, Spectra
 
 #: Largest --noise-std (responses are in full-scale units, 0..1).
-MAX_NOISE_STD = 10.0
+MAX_NOISE_STD = 1.0
 
 #: What the spectral options accept (any of these, found from the content).
 SPECTRAL_FORMATS = (
@@ -283,47 +283,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         )
     ):
         out.warn(warning)
-    responses = read_responses_csv(args.responses)
-    illum_in = read_spectral(args.illuminants, kind="illuminant")
-    refl_in = read_spectral(args.reflectances, kind="reflectance")
-    if args.names is not None:
-        from tunespec.core.io.name_map import read_name_map, rename_spectra
-
-        refl_in = rename_spectra(
-            refl_in, read_name_map(args.names), source=str(args.reflectances)
-        )
-    out.inputs(illum_in, refl_in)
-    grid = resolve_grid(
-        args,
-        [(illum_in, False), (refl_in, True)],
-        out,
-        max_step_nm=CALIBRATION_MAX_STEP_NM,
-    )
-    checks(
-        pl.check_coverage,
-        [
-            (f"--illuminants {args.illuminants}", illum_in.wavelength_nm),
-            (f"--reflectances {args.reflectances}", refl_in.wavelength_nm),
-        ],
-        "calibrate",
-        grid_nm=grid.wavelength_nm,
-    )
-    illuminants = _resampled(illum_in, grid, average=True)
-    reflectances = _resampled(refl_in, grid)
-    # The estimator checks the names of the patches it fits; checking all of them
-    # here (held-aside ones included) fails before a fit of several seconds.
-    _check_names(
-        responses, illuminants, "illuminant", args.illuminants, responses.illuminants
-    )
-    _check_names(responses, reflectances, "patch", args.reflectances, responses.patches)
-    checks(
-        pl.check_responses,
-        responses.rgb,
-        responses.patches,
-        responses.illuminants,
-        rgb_std=responses.rgb_std,
-        saturated=responses.saturated,
-        path=args.responses,
+    responses, illum_in, illuminants, reflectances, grid = _calibration_inputs(
+        args, out, checks
     )
     # the estimators (scipy) are imported once the inputs are known to be good: an
     # error in them is reported at once
@@ -337,17 +298,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             responses.patches, every=args.hold_out_every, offset=args.hold_out_every - 1
         )
         fit = responses.subset(list(fit_names))
-    kwargs: dict[str, Any] = {
-        "method": args.method,
-        "exclude": args.exclude_camera,
-        "fit_spd_shift": args.fit_spd_shift,
-    }
-    if args.self_calibrate is not None:
-        kwargs["self_calibrate"] = args.self_calibrate
-    if args.method == "pca":
-        # explained_variance, when given, takes precedence over n_components.
-        kwargs["n_components"] = args.components
-        kwargs["explained_variance"] = args.explained_variance
+    kwargs = _fit_options(args)
     est = estimate_camera_sensitivity(
         fit, illuminants, reflectances, progress=out.progress("calibrating"), **kwargs
     )
@@ -395,6 +346,74 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     _write_json(args.stats, stats)
     out.summary({**stats, "output": str(args.output)})
     return 0
+
+
+def _calibration_inputs(
+    args: argparse.Namespace, out: Console, checks: Any
+) -> tuple[Responses, Spectra, Spectra, Spectra, Grid]:
+    """``calibrate``'s inputs read and checked: the responses, the illuminants as
+    read and on the grid, the reflectances on the grid, and the grid."""
+    from tunespec.core import plausibility as pl
+
+    responses = read_responses_csv(args.responses)
+    illum_in = read_spectral(args.illuminants, kind="illuminant")
+    refl_in = read_spectral(args.reflectances, kind="reflectance")
+    if args.names is not None:
+        from tunespec.core.io.name_map import read_name_map, rename_spectra
+
+        refl_in = rename_spectra(
+            refl_in, read_name_map(args.names), source=str(args.reflectances)
+        )
+    out.inputs(illum_in, refl_in)
+    grid = resolve_grid(
+        args,
+        [(illum_in, False), (refl_in, True)],
+        out,
+        max_step_nm=CALIBRATION_MAX_STEP_NM,
+    )
+    checks(
+        pl.check_coverage,
+        [
+            (f"--illuminants {args.illuminants}", illum_in.wavelength_nm),
+            (f"--reflectances {args.reflectances}", refl_in.wavelength_nm),
+        ],
+        "calibrate",
+        grid_nm=grid.wavelength_nm,
+    )
+    illuminants = _resampled(illum_in, grid, average=True)
+    reflectances = _resampled(refl_in, grid)
+    # The estimator checks the names of the patches it fits; checking all of them
+    # here (held-aside ones included) fails before a fit of several seconds.
+    _check_names(
+        responses, illuminants, "illuminant", args.illuminants, responses.illuminants
+    )
+    _check_names(responses, reflectances, "patch", args.reflectances, responses.patches)
+    checks(
+        pl.check_responses,
+        responses.rgb,
+        responses.patches,
+        responses.illuminants,
+        rgb_std=responses.rgb_std,
+        saturated=responses.saturated,
+        path=args.responses,
+    )
+    return responses, illum_in, illuminants, reflectances, grid
+
+
+def _fit_options(args: argparse.Namespace) -> dict[str, Any]:
+    """``estimate_camera_sensitivity``'s options from ``calibrate``'s arguments."""
+    kwargs: dict[str, Any] = {
+        "method": args.method,
+        "exclude": args.exclude_camera,
+        "fit_spd_shift": args.fit_spd_shift,
+    }
+    if args.self_calibrate is not None:
+        kwargs["self_calibrate"] = args.self_calibrate
+    if args.method == "pca":
+        # explained_variance, when given, takes precedence over n_components.
+        kwargs["n_components"] = args.components
+        kwargs["explained_variance"] = args.explained_variance
+    return kwargs
 
 
 def _self_check(
@@ -471,13 +490,8 @@ def cmd_estimate(args: argparse.Namespace) -> int:
             f"--spd-shift-nm: wavelength shift {args.spd_shift_nm} nm is not finite"
         )
     checks(pl.check_spd_shift, args.spd_shift_nm)
-    if args.noise_std is not None and not (
-        np.isfinite(args.noise_std) and 0.0 <= args.noise_std <= 1.0
-    ):
-        raise InputError(
-            f"--noise-std {args.noise_std:g}: expected a finite level from 0 to 1 "
-            "(in units of full scale)"
-        )
+    if args.noise_std is not None:  # syntax here, plausibility below
+        valid_number(args.noise_std, "--noise-std", lo=0.0, hi=MAX_NOISE_STD)
     responses = read_responses_csv(args.responses)
     checks(pl.check_noise_std, args.noise_std, responses.rgb_std)
     reported = read_spectral(args.illuminants, kind="illuminant")

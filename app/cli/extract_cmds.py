@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
+from tunespec.app.cli.common import Console, add_output_options
 from tunespec.core.errors import InputError
 
 
@@ -59,6 +59,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         action="store_true",
         help="keep an extraction that fails the check (flagged in the CSV)",
     )
+    add_output_options(p)
     p.set_defaults(func=cmd_extract, output_files=("output", "preview", "save_layout"))
 
 
@@ -107,16 +108,28 @@ def cmd_extract(args: argparse.Namespace) -> int:
     figures = ", ".join(
         f"{k} {v:.3g}" if isinstance(v, float) else f"{k} {v}" for k, v in m.items()
     )
-    print(
+    out = Console(args)
+    out.say(
         f"{layout.name}: {layout.n_patches} patches ({ex.method} outline) -> "
         f"{args.output}; check: {ex.check.summary()} ({figures})"
     )
     for note in ex.check.notes:
-        print(f"note: {note}")
+        out.note(note)
     if ex.forced:
-        print(
-            f"tunespec extract: warning: kept with --force although the check "
-            f"failed: {ex.check.summary()}",
-            file=sys.stderr,
-        )
+        out.warn(f"kept with --force although the check failed: {ex.check.summary()}")
+    out.summary(
+        {
+            "layout": layout.name,
+            "patches": layout.n_patches,
+            "outline": ex.method,
+            "output": str(args.output),
+            "check": {
+                "ok": ex.check.ok,
+                "problems": list(ex.check.problems),
+                "notes": list(ex.check.notes),
+                "metrics": dict(m),
+            },
+            "forced": bool(ex.forced),
+        }
+    )
     return 0

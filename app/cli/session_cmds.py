@@ -255,6 +255,7 @@ def _add_run(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "(it runs on the simulated bench as it is) and exit",
     )
     p.add_argument(
+        "-o",
         "--out",
         type=Path,
         default=None,
