@@ -43,7 +43,7 @@ def test_csv_round_trip_is_exact(tmp_path) -> None:
 @pytest.mark.parametrize(
     ("text", "fragment", "line"),
     [
-        ("x,a\n400,1\n", "expected one naming the wavelengths", 1),
+        ("x,a\n400,1\n", "expected a first column naming the wavelengths", 1),
         ("wavelength,a\n400,1\n410,x\n", "not a number", 3),
         ("wavelength,a\n400,1\n410,nan\n", "not finite", 3),
         ("wavelength,a\n400,1\n410,-0.5\n", "negative", 3),
