@@ -92,6 +92,12 @@ PERCENT_BULK = 1.5
 MAX_PLAUSIBLE_FRACTION = 1.05
 #: Largest fluorescent reflectance factor accepted (limits.MAX_REFLECTANCE says 3).
 MAX_FLUORESCENT_FRACTION = 3.0
+#: A value above :data:`MAX_PLAUSIBLE_FRACTION` that exceeds its spectral
+#: neighbours' mean by this much (and by half of it) is a typo, not fluorescence.
+SPIKE_FRACTION = 0.3
+#: Largest response (full scale = 1, saturation): flat-fielding moves a response a
+#: little above 1, nothing moves it above this.
+MAX_RESPONSE = 1.5
 #: Largest spectroradiometer wavelength shift (nm) a user may ask to undo.
 MAX_SPD_SHIFT_NM = 5.0
 #: Fewest prior spectra: reflectances have about six significant dimensions and the
@@ -257,9 +263,14 @@ def _check_spikes(
     high = f > MAX_PLAUSIBLE_FRACTION
     if not np.any(high):
         return
-    left = np.concatenate([f[:, :1], f[:, :-1]], axis=1)
-    right = np.concatenate([f[:, 1:], f[:, -1:]], axis=1)
-    spike = high & (np.maximum(left, right) < 0.5 * f)
+    # the mean of the spectral neighbours (the one neighbour at either end)
+    nb = np.empty_like(f)
+    if f.shape[1] > 2:
+        nb[:, 1:-1] = 0.5 * (f[:, :-2] + f[:, 2:])
+    nb[:, 0] = f[:, min(1, f.shape[1] - 1)]
+    nb[:, -1] = f[:, max(f.shape[1] - 2, 0)]
+    # a spike: well above both neighbours (fluorescence is a band, not one sample)
+    spike = high & (f - nb > np.maximum(SPIKE_FRACTION, 0.5 * nb))
     bad = spike | (f > MAX_FLUORESCENT_FRACTION)
     if not np.any(bad):
         return  # a smooth band above 1: fluorescence
@@ -387,8 +398,8 @@ def check_responses(
     saturated: NDArray[np.float64] | None = None,
     path: object = None,
 ) -> None:
-    """Responses a dark-subtracted photo can give: no mean far below zero, and not
-    mostly saturated."""
+    """Responses a dark-subtracted photo can give: no mean far below zero, none
+    above :data:`MAX_RESPONSE` (full scale is 1), and not mostly saturated."""
     where = None if path is None else str(path)
     sigma = np.zeros_like(rgb) if rgb_std is None else np.nan_to_num(rgb_std)
     floor = -(NEGATIVE_SIGMAS * sigma + NEGATIVE_FLOOR)
@@ -401,6 +412,17 @@ def check_responses(
             f"{rgb[p, i, c]:.4g} ({'RGB'[c]}) is {NEGATIVE_SIGMAS:g} noise standard "
             f"deviations below zero, which a dark-subtracted photo cannot give "
             f"({int(np.sum(low))} such value(s)); check the responses file",
+            path=where,
+        )
+    high = rgb > MAX_RESPONSE
+    if np.any(high):
+        p, i, c = (int(x) for x in np.argwhere(high)[0])
+        raise Implausible(
+            "full_scale",
+            f"patch {patches[p]} under {illuminants[i]}: response "
+            f"{rgb[p, i, c]:.4g} ({'RGB'[c]}) is above full scale (1 = saturation; "
+            f"{int(np.sum(high))} such value(s)): responses are in units of full "
+            "scale; check the responses file (a typo? percent or counts?)",
             path=where,
         )
     if saturated is not None and saturated.size:
@@ -512,6 +534,14 @@ def check_estimate_inputs(
     (:func:`check_responses`) and their scale against Eq. 1
     (:func:`check_signal_scale`). ``illuminants`` (named as the responses'
     lights) and ``sensitivity`` on one grid."""
+    lights = illuminants.select(list(responses.illuminants))
+    # the scale first: its message says by how much
+    checks(
+        check_signal_scale,
+        responses.rgb,
+        white_response(lights, sensitivity),
+        responses.illuminants,
+    )
     checks(
         check_responses,
         responses.rgb,
@@ -520,13 +550,6 @@ def check_estimate_inputs(
         rgb_std=responses.rgb_std,
         saturated=responses.saturated,
         path=responses_path,
-    )
-    lights = illuminants.select(list(responses.illuminants))
-    checks(
-        check_signal_scale,
-        responses.rgb,
-        white_response(lights, sensitivity),
-        responses.illuminants,
     )
 
 

@@ -210,6 +210,12 @@ CASES: list[tuple[str, Callable, str, str]] = [
     ("chart in percent with a typo", lambda x, d: _cal(
         x, reflectances=_percent_with_typo(x.chart, d)), "refused",
      "300 in a file of percent"),
+    ("chart typo 1.6 on a white", lambda x, d: _cal(x, reflectances=_typo_on_white(
+        x.chart, d, 1.6)), "refused", "1.6 in a file of fractions"),
+    ("one response 5 (full scale is 1)", lambda x, d: _est(
+        x, responses=_one_response(x, d, 5.0, channel=0)), "refused", "full scale"),
+    ("chart responses x100", lambda x, d: _cal(x, responses=fs.scaled_responses(
+        x.chart_responses, d / "r.csv", 100.0)), "refused", "above full scale"),
     # coverage
     ("illuminants 450-650 nm", lambda x, d: _est(x, illuminants=fs.truncated_spectra(
         x.illuminants, d / "i.csv", 450, 650)), "refused", "covers 450-650"),
@@ -279,6 +285,14 @@ CASES: list[tuple[str, Callable, str, str]] = [
         "capture", "--out", str(d / "s"), "--max-exposure", "0"], "refused",
      "--max-exposure"),
 ]  # fmt: skip
+
+
+def _typo_on_white(path, d, value):
+    """``value`` typed in the brightest spectrum at 530 nm (its neighbours near 0.9)."""
+    s = read_spectral(path, kind="reflectance")
+    k = int(np.argmax(np.median(s.values, axis=1)))
+    j = int(np.argmin(np.abs(s.wavelength_nm - 530)))
+    return fs.typo_spectra(path, d / "white_typo.csv", k, j, value)
 
 
 def _percent_with_typo(path, d):
