@@ -773,6 +773,8 @@ def _capture_locked(
                 captured.append(record.id)
                 _flag(session, record, warnings, strict)
                 step()
+        if any(s.kind == "target" for s in todo):
+            _check_target_found(session, warnings, strict)
         light.all_off()
     except BaseException:
         # the original error matters more than a failure to switch off
@@ -801,6 +803,29 @@ def _flag(
         session.mark_bad([record.id], problem)
         raise BadFrameError(f"{problem} (stopped: --strict)", path=session.root)
     warnings.append(problem)
+
+
+def _check_target_found(session: Session, warnings: list[str], strict: bool) -> None:
+    """Once the target frames are in: can processing find the target in them?
+    (Not when the layout gives its corners: then nothing is searched.)"""
+    from tunespec.core.processing import find_session_corners
+
+    layout = session.layout
+    if layout is None or layout.corners_px is not None:
+        return
+    try:
+        find_session_corners(session, layout)
+    except InputError as exc:
+        problem = (
+            f"the target was not found in its frames ({exc.message}); check that "
+            "it lies flat, fully in view and lit, or give its corners in the "
+            "layout (--layout with corners_px)"
+        )
+        if strict:
+            raise BadFrameError(
+                f"{problem} (stopped: --strict)", path=session.root
+            ) from None
+        warnings.append(problem)
 
 
 def _stage(

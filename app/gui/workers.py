@@ -98,11 +98,18 @@ class _GuiThreadCollector(QObject):
 
     #: How often the counts are checked (ms).
     PERIOD_MS = 250
+    #: Full collections at most this often (s). CPython's own collector skips a
+    #: full one until a quarter of the oldest generation is new, which Python
+    #: code cannot see; walking the whole heap at every tenth gen-1 collection
+    #: stalled the dark frame step (tools/gui_timing.py: 107 ms median, 69 ms
+    #: with CPython's collector), while garbage that old grows slowly.
+    FULL_PERIOD_S = 60.0
 
     _instance: ClassVar[_GuiThreadCollector | None] = None
 
     def __init__(self, app: QCoreApplication) -> None:
         super().__init__(app)
+        self._last_full_s = time.monotonic()
         self._timer = QTimer(self)
         self._timer.setInterval(self.PERIOD_MS)
         self._timer.timeout.connect(self._on_timer_timeout)
@@ -151,6 +158,12 @@ class _GuiThreadCollector(QObject):
         if n0 <= t0 or _GC_PAUSES:
             return 0
         generation = 2 if n1 > t1 and n2 > t2 else 1 if n1 > t1 else 0
+        if generation == 2:
+            now = time.monotonic()
+            if now - self._last_full_s < self.FULL_PERIOD_S:
+                generation = 1
+            else:
+                self._last_full_s = now
         return gc.collect(generation)
 
     @Slot()

@@ -33,7 +33,9 @@ def _capture(out, weak_leds, *extra):
             "--resolution",
             "384x256",
             "--channels",
-            f"LED450,{WEAK_LED}",
+            # the target is found under LED450 (processing looks at the middle
+            # channel; under the weak LED it would be flagged as not found)
+            f"{WEAK_LED},LED450",
             "--out",
             str(out),
             *extra,

@@ -133,3 +133,29 @@ def test_an_interrupted_sample_capture_is_not_shown_done(window, qtbot, tmp_path
     assert wizard2.sample_page.state == StepState.PENDING
     assert "complete" not in wizard2.sample_page.result_label.text()
     w2.close()
+
+
+@pytest.mark.parametrize("strict", [False, True])
+def test_a_target_not_in_view_is_flagged_once_its_frames_are_in(
+    tmp_path, monkeypatch, strict
+):
+    from tunespec.core.layout import TargetLayout
+    from tunespec.devices.capture import BadFrameError, capture, new_session
+    from tunespec.devices.registry import open_bench
+
+    layout = TargetLayout.load(SG_LAYOUT).with_corners(None)
+    with open_bench(resolution=(384, 256), layout=layout) as bench:
+        # the operator forgot the chart: the camera sees the white board
+        real = bench.stage.present
+        monkeypatch.setattr(bench.stage, "present", lambda what: real("white"))
+        session = new_session(
+            tmp_path / "s", bench.light, bench.camera, layout=layout,
+            channels=["LED450", "LED555"],
+        )  # fmt: skip
+        if strict:
+            with pytest.raises(BadFrameError, match="target was not found"):
+                capture(session, bench.light, bench.camera, bench.stage, strict=True)
+            return
+        result = capture(session, bench.light, bench.camera, bench.stage)
+    found = [w for w in result.warnings if "target was not found" in w]
+    assert len(found) == 1 and "corners" in found[0]

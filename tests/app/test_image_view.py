@@ -118,3 +118,33 @@ def test_estimate_can_be_cancelled(qtbot, tmp_path, monkeypatch) -> None:
     assert view.status.text() == "cancelled"
     assert view.image is None
     assert Cancelled is not None
+
+
+def test_scalar_layers_have_a_colour_bar_with_units_and_the_band_a_label(
+    qtbot, tmp_path
+) -> None:
+    from tunespec.app.gui.plots.image_view import BAND_LABEL
+
+    data = _write_folder(tmp_path / "img")
+    view = ImageView()
+    qtbot.addWidget(view)
+    view.open_folder(tmp_path / "img")
+    view.layer_combo.setCurrentText("sRGB")
+    assert not view.colour_bar.isVisible()
+    view.layer_combo.setCurrentText("u(L*)")
+    assert view.colour_bar.isVisible()
+    assert "L* units" in view.colour_bar.axis.labelText
+    lo, hi = view.colour_bar.levels()
+    np.testing.assert_allclose((lo, hi), view.image_item.levels, rtol=1e-6)
+    view.layer_combo.setCurrentText("wavelength")
+    view.band_spin.setValue(600)
+    assert view.colour_bar.axis.labelText == (
+        "reflectance factor at 600 nm (1 = white)"
+    )
+    lo, hi = view.colour_bar.levels()
+    band = data["cube"][:, :, 20]
+    assert lo == pytest.approx(np.percentile(band, 1), rel=1e-5)
+    assert hi == pytest.approx(np.percentile(band, 99), rel=1e-5)
+    # the band around a pixel's spectrum is named in the legend
+    assert "pixel reflectance" in view.legend_label.text()
+    assert BAND_LABEL in view.legend_label.text()

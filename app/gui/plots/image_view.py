@@ -34,6 +34,17 @@ __all__ = ["LAYERS", "ImageView"]
 
 #: The layers the view shows, in the combo box's order.
 LAYERS = ("sRGB", "L*", "a*", "b*", "u(L*)", "u(reflectance)", "wavelength")
+#: The colour bar's label of each scalar layer (quantity and unit; "wavelength"
+#: names its band).
+LAYER_LABELS = {
+    "L*": "L* (CIELAB, D50; 0-100)",
+    "a*": "a* (CIELAB, D50)",
+    "b*": "b* (CIELAB, D50)",
+    "u(L*)": "u(L*): standard uncertainty of L* (L* units)",
+    "u(reflectance)": "u(reflectance): RMS standard uncertainty (reflectance factor)",
+}
+#: The legend of the band around a pixel's spectrum.
+BAND_LABEL = "95 % band (±1.96 u)"
 
 
 class ImageView(QWidget):
@@ -88,6 +99,13 @@ class ImageView(QWidget):
         self.view_box = self.graphics.addViewBox(lockAspect=True, invertY=True)
         self.image_item = pg.ImageItem(axisOrder="row-major")
         self.view_box.addItem(self.image_item)
+        # a scalar layer's colours in its units (hidden for sRGB)
+        self.colour_map = pg.colormap.get("viridis")
+        self.colour_bar = pg.ColorBarItem(
+            values=(0.0, 1.0), colorMap=self.colour_map, interactive=False, width=15
+        )
+        self.graphics.addItem(self.colour_bar, row=0, col=1)
+        self.colour_bar.hide()
         self.roi_a = pg.RectROI((0, 0), (10, 10), pen=pg.mkPen("c", width=2))
         self.roi_b = pg.RectROI((20, 0), (10, 10), pen=pg.mkPen("m", width=2))
         for roi in (self.roi_a, self.roi_b):
@@ -108,12 +126,21 @@ class ImageView(QWidget):
             self.lower, self.upper, brush=(100, 100, 255, 70)
         )
         self.spectrum_plot.addItem(self.band)
+        # beside the plot, not a legend item drawn over the curve (as the other
+        # spectra plots do)
+        self.legend_label = QLabel(
+            "<span style='color:#000000'>&#9473;&#9473;</span> pixel reflectance"
+            "&nbsp;&nbsp;&nbsp;<span style='color:#6464ff'>&#9608;</span> "
+            f"{BAND_LABEL}"
+        )
+        self.legend_label.setObjectName("band_legend")
         self.pixel: tuple[int, int] | None = None
 
         layout = QVBoxLayout(self)
         layout.addLayout(top)
         layout.addWidget(self.graphics, 3)
         layout.addWidget(self.spectrum_plot, 2)
+        layout.addWidget(self.legend_label)
         layout.addWidget(self.region_label)
         layout.addWidget(self.status)
 
@@ -181,13 +208,24 @@ class ImageView(QWidget):
         data = self.layer_data(name)
         self.band_spin.setEnabled(name == "wavelength")
         if data.ndim == 3:
+            self.image_item.setLookupTable(None)
             self.image_item.setImage(data, autoLevels=False, levels=None)
+            self.colour_bar.hide()
         else:
             finite = data[np.isfinite(data)]
             lo, hi = np.percentile(finite, [1, 99]) if finite.size else (0.0, 1.0)
-            self.image_item.setImage(
-                data, autoLevels=False, levels=(lo, max(hi, lo + 1e-6))
-            )
+            levels = (float(lo), float(max(hi, lo + 1e-6)))
+            self.image_item.setImage(data, autoLevels=False, levels=levels)
+            self.image_item.setColorMap(self.colour_map)
+            self.colour_bar.setLevels(levels)
+            self.colour_bar.axis.setLabel(self.layer_label(name))
+            self.colour_bar.show()
+
+    def layer_label(self, name: str) -> str:
+        """What a scalar layer's colour bar says: the quantity and its unit."""
+        if name == "wavelength":
+            return f"reflectance factor at {self.band_spin.value()} nm (1 = white)"
+        return LAYER_LABELS[name]
 
     def show_pixel(self, row: int, col: int) -> None:
         """Plot the spectrum of pixel (row, col) with its 95 % band."""
