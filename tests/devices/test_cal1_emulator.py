@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from tests.devices.conftest import CAL1_TIMEOUT_S
+from tests.helpers import without_progress
 from tunespec.app.cli import device_cmds
 from tunespec.core.datasets import resource_path
 from tunespec.devices.cal1.driver import Cal1LightSource, open_cal1
@@ -362,7 +363,7 @@ def test_cli_emulator_with_an_error_fault_gives_a_one_line_device_error(
                 "2",
             ]
         )
-        err = capsys.readouterr().err.strip().splitlines()
+        err = without_progress(capsys.readouterr().err).splitlines()
         assert rc == EXIT_DEVICE, err
         err = [line for line in err if not line.startswith("capturing: ")]  # progress
         assert len(err) == 1 and "switched off" in err[0]

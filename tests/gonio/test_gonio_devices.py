@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
+from tests.helpers import without_progress
 from tunespec.app.cli import main
 from tunespec.app.pipeline import gonio_devices
 from tunespec.app.pipeline.gonio import GeometryStep, GonioPlan, frame_names
@@ -95,7 +96,7 @@ def test_gonio_run_on_cal1_and_zaber_emulators_resumes_after_a_drop(
 
     monkeypatch.setattr(gonio_devices.DeviceGonioBench, "capture", stalling)
     assert main([*args, *new]) == 3
-    err = capsys.readouterr().err.strip().splitlines()
+    err = without_progress(capsys.readouterr().err).splitlines()
     assert len(err) == 1 and "continue with --resume" in err[0]
     before = {p: p.read_bytes() for p in out.rglob("*.npy")}
     assert len(before) == 28 and not any("g02" in str(p) for p in before)
