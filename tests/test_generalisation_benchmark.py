@@ -14,8 +14,8 @@ import pytest
 BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "generalisation.py"
 
 
-@pytest.fixture(scope="module")
-def summary(tmp_path_factory):
+def _run(tmp_path_factory, *options: str) -> dict:
+    """The benchmark, one camera per family, on the shipped light-source model."""
     sys.path.insert(0, str(BENCH.parent))
     try:
         spec = importlib.util.spec_from_file_location("generalisation", BENCH)
@@ -23,14 +23,29 @@ def summary(tmp_path_factory):
         sys.modules["generalisation"] = mod  # dataclasses look their module up
         spec.loader.exec_module(mod)
         out = tmp_path_factory.mktemp("gen") / "gen.json"
-        argv = ["--per-family", "1", "--lights", "cal1-model"]
-        assert (
-            mod.main([*argv, "--variants", "bayes,nnls,truth", "--json", str(out)]) == 0
-        )
+        argv = ["--per-family", "1", "--lights", "cal1-model", *options]
+        assert mod.main([*argv, "--json", str(out)]) == 0
     finally:
         sys.path.remove(str(BENCH.parent))
         sys.modules.pop("generalisation", None)
     return json.loads(out.read_text())
+
+
+@pytest.fixture(scope="module")
+def summary(tmp_path_factory):
+    return _run(tmp_path_factory, "--variants", "bayes,nnls,truth")
+
+
+@pytest.fixture(scope="module")
+def lab_conditions(tmp_path_factory):
+    """Issue 23's conditions: the light's spectra reported every 10 nm with reading
+    noise of 0.3 % of each peak (clipped at zero, two readings averaged), stray light,
+    cross-talk and a non-linearity on the responses."""
+    return _run(
+        tmp_path_factory,
+        "--variants", "bayes,truth-read", "--report-step-nm", "10",
+        "--meter-noise", "0.003", "--systematic",
+    )  # fmt: skip
 
 
 @pytest.mark.slow
@@ -54,3 +69,20 @@ def test_fitted_led_offsets_follow_the_injected_ones(summary) -> None:
 
     assert len(fit) == 10 * 22
     assert np.corrcoef(fit, true)[0, 1] > 0.9
+
+
+@pytest.mark.slow
+def test_noisy_coarse_readings_and_sensor_effects_keep_numbers_and_error_bars(
+    lab_conditions,
+) -> None:
+    fams = lab_conditions["summary"]
+    assert len(fams) == 10
+    for fam, per in fams.items():
+        bayes, truth = per["bayes"], per["truth-read"]
+        # 0.098-0.126 measured (issue 23 asks at most 0.2 at 0.3 % noise)
+        assert bayes["de00_mean"] <= 0.2, (fam, bayes["de00_mean"])
+        assert bayes["de00_mean"] <= truth["de00_mean"], fam
+        # the intervals are not too narrow (L* 0.96-1.0 measured; 0.70-0.95 without
+        # the calibration's excess-variance terms)
+        for k in ("reflectance", "L", "a", "b"):
+            assert bayes[f"coverage_{k}"] >= 0.93, (fam, k, bayes[f"coverage_{k}"])
