@@ -47,6 +47,7 @@ __all__ = [
     "NOISE_REGION_FRACTION",
     "emission_bands",
     "meter_noise_sd",
+    "reading_noise_rms",
     "suppress_meter_floor",
 ]
 
@@ -134,6 +135,54 @@ def _extremum_fraction(values: NDArray[np.float64]) -> float:
     return float(np.mean(turns)) if turns.size else 0.0
 
 
+def _noise_samples(v: NDArray[np.float64]) -> NDArray[np.float64] | None:
+    """A spectrum's samples below :data:`BAND_NOISE_FRACTION` of its peak that are
+    not exactly zero, or ``None`` where they show no noise: fewer than 8 of them, or
+    fewer than a third turning (a smooth, noise-free tail)."""
+    peak = float(v.max()) if v.size else 0.0
+    if not peak > 0:
+        return None
+    low = v[(v < BAND_NOISE_FRACTION * peak) & (v != 0.0)]
+    if (
+        low.size < _MIN_NOISE_SAMPLES
+        or _extremum_fraction(low) < _MIN_EXTREMUM_FRACTION
+    ):
+        return None
+    return low
+
+
+def _rms_without_tails(low: NDArray[np.float64]) -> float:
+    """Root mean square of ``low`` without its highest tenth (the emission's tails)."""
+    body = np.sort(np.abs(low))[: max(1, int(0.9 * low.size))]
+    return float(np.sqrt(np.mean(body**2)))
+
+
+def reading_noise_rms(values: NDArray[np.float64]) -> float:
+    """The reading noise of one reported spectrum, as reported (clipped or not).
+
+    On the samples far below the peak that are not exactly zero: DER_SNR (second
+    differences, which an emission's smooth tails do not disturb) where there are
+    at least 20 of them, else their root mean square without the highest tenth;
+    0.0 where they show no noise. On a spectrum cleaned by
+    :func:`suppress_meter_floor` it measures the noise left in the bands' margins.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> v = np.exp(-0.5 * ((np.arange(400.0) - 200.0) / 10.0) ** 2)
+    >>> noisy = np.maximum(v + 0.001 * np.random.default_rng(0).standard_normal(400), 0)
+    >>> round(reading_noise_rms(noisy), 4), reading_noise_rms(v)
+    (0.0006, 0.0)
+    """
+    low = _noise_samples(np.asarray(values, dtype=np.float64))
+    if low is None:
+        return 0.0
+    if low.size >= _MIN_DIFFERENCES + 4:
+        d = np.abs(2.0 * low[2:-2] - low[:-4] - low[4:])
+        return float(_DER_SNR * np.median(d))
+    return _rms_without_tails(low)
+
+
 def emission_bands(
     values: NDArray[np.float64],
     wavelength_nm: NDArray[np.float64],
@@ -161,14 +210,10 @@ def emission_bands(
     low = v[v < BAND_NOISE_FRACTION * peak]
     if low.size == 0 or np.mean(low == 0.0) > _CLEANED_ZERO_FRACTION:
         return None
-    low = low[low != 0.0]
-    if (
-        low.size < _MIN_NOISE_SAMPLES
-        or _extremum_fraction(low) < _MIN_EXTREMUM_FRACTION
-    ):
+    noise = _noise_samples(v)
+    if noise is None:
         return None
-    body = np.sort(np.abs(low))[: max(1, int(0.9 * low.size))]
-    limit = limit_sd * float(np.sqrt(np.mean(body**2)))
+    limit = limit_sd * _rms_without_tails(noise)
     step_nm = float(np.median(np.diff(wavelength_nm))) if v.size > 1 else 1.0
     margin = max(1, round(margin_nm / step_nm))
     above = np.concatenate([[False], v > limit, [False]])

@@ -142,12 +142,13 @@ def test_noisy_readings_of_the_light_are_flagged(bench) -> None:
     peak = leds.values.max(axis=1, keepdims=True)
     noisy = leds.with_values(
         np.maximum(
-            leds.values + 0.003 * peak * rng.standard_normal(leds.values.shape), 0
+            leds.values + 0.005 * peak * rng.standard_normal(leds.values.shape), 0
         )
     )
     found = meter_noise_fractions(noisy)
-    # 0.23-0.36 % for the 20 narrow LEDs; a white is broad, with no noise-only region
-    # to measure (0)
+    # a single clipped reading of 0.5 % of the peak: DER_SNR over the samples above
+    # zero finds about 0.6 of it in the 20 narrow LEDs; a white is broad, with no
+    # noise-only region to measure (0)
     narrow = [n for n in leds.names if n.startswith("LED")]
     assert len(narrow) == 20
     assert all(found[n] > METER_NOISE_LIMIT for n in narrow), found
