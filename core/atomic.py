@@ -100,22 +100,10 @@ def atomic_write_bytes(
     DiskFullError
         No space left: the temporary file is removed, ``path`` is as it was.
     """
-    path = Path(path)
-    tmp = _temp_beside(path, suffix)
     chunks = [data] if isinstance(data, bytes | bytearray | memoryview) else data
-    try:
-        with open(tmp, "wb") as fh:
-            for chunk in chunks:
-                fh.write(chunk)
-            fh.flush()
-            os.fsync(fh.fileno())
-        _commit(tmp, path)
-    except BaseException as exc:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        if isinstance(exc, OSError) and exc.errno == errno.ENOSPC:
-            raise DiskFullError(path.parent) from None
-        raise
+    with atomic_open(path, "wb", suffix=suffix) as fh:
+        for chunk in chunks:
+            fh.write(chunk)
 
 
 def atomic_write_text(path: str | PathLike[str], text: str) -> None:
@@ -125,13 +113,14 @@ def atomic_write_text(path: str | PathLike[str], text: str) -> None:
 
 @contextlib.contextmanager
 def atomic_open(
-    path: str | PathLike[str], mode: str = "w", **kwargs: Any
+    path: str | PathLike[str], mode: str = "w", *, suffix: str = ".tmp", **kwargs: Any
 ) -> Iterator[IO[Any]]:
     """``open(path, mode)`` for writing, atomically: the file handed out is a
     temporary file beside ``path``, renamed over ``path`` when the block ends
     without an exception and removed when it raises.
 
-    ``mode`` is ``"w"`` (text; ``encoding`` defaults to UTF-8) or ``"wb"``.
+    ``mode`` is ``"w"`` (text; ``encoding`` defaults to UTF-8) or ``"wb"``; the
+    temporary file's name is ``path``'s with ``suffix`` after it.
 
     Examples
     --------
@@ -145,7 +134,7 @@ def atomic_open(
     if mode not in ("w", "wb"):
         raise ValueError(f"atomic_open writes only ('w' or 'wb'), got {mode!r}")
     path = Path(path)
-    tmp = _temp_beside(path, ".tmp")
+    tmp = _temp_beside(path, suffix)
     if mode == "w":
         kwargs.setdefault("encoding", "utf-8")
     try:
