@@ -193,7 +193,7 @@ def test_pixels_against_truth(images, bench_session) -> None:
         assert COVERAGE_RANGE[0] < np.mean(np.abs(z_l) < 1.96) < COVERAGE_RANGE[1]
         assert COVERAGE_RANGE[0] < np.mean(np.abs(z_r) < 1.96) < COVERAGE_RANGE[1]
         # single-superpixel noise: measured 0.38 (patches) and 0.22 (regions)
-        # against 0.11 patch-wise; the goal of 1.5x is not met (README)
+        # against 0.11 patch-wise; the goal of 1.5x is not met (docs/validation.md)
         assert de.mean() < 5.0 * de_patch
         assert de.mean() < 0.6
 

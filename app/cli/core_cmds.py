@@ -614,7 +614,7 @@ def _write_uncertainty(
     reported: Spectra,
     sensitivity: Spectra,
 ) -> dict[str, str]:
-    """Standard uncertainties beside the reflectances (see the README's formats);
+    """Standard uncertainties beside the reflectances (see docs/user-guide.md, "Uncertainty");
     ``sensitivity`` as read, on its own grid (its covariance's)."""
     from tunespec.core.io.export import write_colorimetry_csv
     from tunespec.core.sensitivity import calibration_from_meta

@@ -1427,7 +1427,7 @@ def _provenance_tables(report: ReportData) -> list[_Table]:
                 "Validated accuracy of the calibration method",
                 ("Item", "Value"),
                 VALIDATED_ACCURACY,
-                note="python benchmarks/generalisation.py; README, 'Validated accuracy'.",
+                note="python benchmarks/generalisation.py; docs/validation.md, 'Validated accuracy'.",
             )
         )
     summary = [("Created", _created_text(report.created))]
