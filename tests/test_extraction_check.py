@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from tests.core.test_processing import _layout, _make_session, _npy_loader
+from tests.helpers import without_progress
 from tunespec.core.errors import InputError
 from tunespec.core.extraction import (
     MAX_EXCESS_SPREAD,
@@ -131,7 +132,7 @@ def test_sg_session_processed_as_cc24_is_refused_or_flagged(tmp_path, capsys) ->
     out, png = tmp_path / "r.csv", tmp_path / "p.png"
     args = ["process", str(session.root), "-o", str(out), "--layout", "colorchecker_24"]
     assert main([*args, "--preview", str(png)]) == 2
-    err = capsys.readouterr().err.strip()
+    err = without_progress(capsys.readouterr().err)
     assert "refused" in err and "not uniform" in err and "\n" not in err
     assert png.is_file() and not out.exists()
     assert main([*args, "--force"]) == 0
