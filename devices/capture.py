@@ -122,14 +122,20 @@ class BadFrameError(InputError):
     the frame is marked bad, so a resume takes it again."""
 
 
-def check_frame(path: Path, spec: FrameSpec, fixed_exposure: bool) -> str | None:
+def check_frame(
+    path: Path,
+    spec: FrameSpec,
+    fixed_exposure: bool,
+    max_exposure_s: float = MAX_EXPOSURE_S,
+) -> str | None:
     """What is wrong with a lit frame just taken, in the operator's words, or None.
 
     Saturation: more than :data:`FLAG_CLIPPED_FRACTION` of the pixels clipped
     (processing would refuse the white frame, or drop the patches). Under-exposure
     (fixed exposures only: a metered one was aimed at ``target_level``, and a weak
     LED is reported when metered): the brightest level below
-    :data:`LOW_SIGNAL_LEVEL` of full scale. Dark frames are not checked.
+    :data:`LOW_SIGNAL_LEVEL` of full scale, with a longer exposure advised unless
+    the frame already has ``max_exposure_s``. Dark frames are not checked.
     """
     if spec.kind == "dark":
         return None
@@ -141,6 +147,13 @@ def check_frame(path: Path, spec: FrameSpec, fixed_exposure: bool) -> str | None
             "with a shorter exposure (--exposure, or auto to meter it)"
         )
     if fixed_exposure and level < LOW_SIGNAL_LEVEL:
+        if spec.exposure_s >= max_exposure_s * (1.0 - 1e-9):
+            # no longer exposure to advise: the LED is too weak for this scene
+            return (
+                f"{what}: under-exposed, its brightest part at {level:.1%} of full "
+                "scale at the longest exposure allowed (--max-exposure); its "
+                "responses will be noisy"
+            )
         return (
             f"{what}: under-exposed, its brightest part at {level:.1%} of full "
             "scale; retake with a longer exposure (--exposure, or auto to meter it)"
@@ -771,7 +784,7 @@ def _capture_locked(
                     current = spec.channel
                 record = _take(session, camera, spec, light, on_frame)
                 captured.append(record.id)
-                _flag(session, record, warnings, strict)
+                _flag(session, record, warnings, strict, max_exposure_s)
                 step()
         if any(s.kind == "target" for s in todo):
             _check_target_found(session, warnings, strict)
@@ -789,13 +802,18 @@ def _capture_locked(
 
 
 def _flag(
-    session: Session, record: FrameRecord, warnings: list[str], strict: bool
+    session: Session,
+    record: FrameRecord,
+    warnings: list[str],
+    strict: bool,
+    max_exposure_s: float,
 ) -> None:
     """Check a frame just committed; warn (or, ``strict``, mark it bad and stop)."""
     problem = check_frame(
         session.path_of(record),
         record.spec,
         session.settings.exposure_mode == "fixed",
+        max_exposure_s,
     )
     if problem is None:
         return

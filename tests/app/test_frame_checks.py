@@ -159,3 +159,19 @@ def test_a_target_not_in_view_is_flagged_once_its_frames_are_in(
         result = capture(session, bench.light, bench.camera, bench.stage)
     found = [w for w in result.warnings if "target was not found" in w]
     assert len(found) == 1 and "corners" in found[0]
+
+
+def test_an_under_exposed_frame_is_told_how_to_fix_it_only_where_it_can_be(
+    tmp_path, capsys
+):
+    # a short fixed exposure: retake longer; at the longest exposure allowed there is
+    # no longer one to advise
+    for out, extra, advice in (
+        (tmp_path / "a", (), True),
+        (tmp_path / "b", ("--max-exposure", "0.001"), False),
+    ):
+        assert _capture(out, "--exposure", "0.001", *extra) == 0
+        low = [w for w in read_capture_warnings(out) if "under-exposed" in w]
+        assert low, read_capture_warnings(out)
+        assert all(("retake with a longer exposure" in w) == advice for w in low)
+        assert all(("longest exposure allowed" in w) != advice for w in low)
