@@ -26,10 +26,12 @@ Eq. 1's illumination (:func:`reading_variance`).
 References
 ----------
 Trichromatic Reflectance Capture Using a Tunable Light Source (the paper in
-``shared/reference``), Eq. 1. IUPAC Compendium of Chemical Terminology ("Gold Book"),
-"limit of detection" (3 standard deviations of the blank). F. Stoehr et al., "DER_SNR: A
-simple & general spectroscopic signal-to-noise measurement algorithm", ASP Conference
-Series 394 (2008) 505.
+``shared/reference``), Eq. 1. F. Stoehr et al., "DER_SNR: A simple & general
+spectroscopic signal-to-noise measurement algorithm", ASP Conference Series 394 (2008)
+505. CIE 167:2005, "Recommended practice for tabulating spectral data for use in colour
+computations" (coarser spectral data interpolated by a higher-order polynomial, Sprague's,
+rather than linearly; :func:`~tunespec.core.spectra.resampling_matrix` uses a cubic
+spline).
 """
 
 from __future__ import annotations
@@ -41,7 +43,6 @@ from tunespec.core.spectra import Spectra
 
 __all__ = [
     "BAND_NOISE_FRACTION",
-    "DETECTION_LIMIT_SD",
     "EMISSION_LIMIT_SD",
     "EMISSION_MARGIN_NM",
     "NOISE_REGION_FRACTION",
@@ -51,8 +52,6 @@ __all__ = [
     "suppress_meter_floor",
 ]
 
-#: Reported samples below this many noise standard deviations are set to zero.
-DETECTION_LIMIT_SD = 3.0
 #: Samples below this fraction of a spectrum's peak estimate its noise.
 NOISE_REGION_FRACTION = 0.01
 #: A reported sample above this many times the noise's RMS is emission (at 4 a clipped
