@@ -185,12 +185,22 @@ class SensitivityEstimate:
         (:func:`correct_spd_shift`). Returns ``illuminants`` itself when nothing
         changes.
         """
-        illuminants = suppress_meter_floor(illuminants)
-        if self.led_correction is not None:
-            return self.led_correction.apply(illuminants)
-        if self.spd_shift_nm == 0.0:
-            return illuminants
-        return correct_spd_shift(illuminants, self.spd_shift_nm)
+        return _undo_metering(
+            suppress_meter_floor(illuminants), self.led_correction, self.spd_shift_nm
+        )
+
+
+def _undo_metering(
+    illuminants: Spectra, correction: LedCorrection | None, shift_nm: float
+) -> Spectra:
+    """The one rule that undoes a calibration's metering corrections: the per-LED
+    ones where there are, else the common wavelength shift; ``illuminants`` itself
+    when there is nothing to undo."""
+    if correction is not None:
+        return correction.apply(illuminants)
+    if not shift_nm:
+        return illuminants
+    return correct_spd_shift(illuminants, shift_nm)
 
 
 @dataclass(frozen=True)
@@ -650,15 +660,14 @@ def correct_illuminants_from_meta(
                 raise InputError(
                     "led_correction is not valid JSON", path=source
                 ) from None
-        return LedCorrection.from_dict(doc, path=source).apply(illuminants)
+        correction = LedCorrection.from_dict(doc, path=source)
+        return _undo_metering(illuminants, correction, 0.0)
     if spd_shift_nm is None:
         try:
             spd_shift_nm = float(meta.get("spd_shift_nm", 0.0))
         except (TypeError, ValueError):
             raise InputError("spd_shift_nm is not a number", path=source) from None
-    if not spd_shift_nm:
-        return illuminants
-    return correct_spd_shift(illuminants, spd_shift_nm)
+    return _undo_metering(illuminants, None, spd_shift_nm)
 
 
 def calibration_from_files(
@@ -1178,11 +1187,11 @@ def _excess_variance(
     """The chart's residuals beyond its known noise (:func:`fit_excess_variance`):
     Eq. 1 with the fitted corrections against the responses, the known variance
     the ROI noise and the flat-field residual."""
-    L = Spectra(problem.wavelength_nm, problem.L, tuple(illuminant_names))
-    if correction is not None:
-        L = correction.apply(L)
-    elif shift_nm:
-        L = correct_spd_shift(L, shift_nm)
+    L = _undo_metering(
+        Spectra(problem.wavelength_nm, problem.L, tuple(illuminant_names)),
+        correction,
+        shift_nm,
+    )
     pred = stimulus_matrix(L.values, problem.R, problem.step_nm) @ S.T
     noise = (
         problem.var
