@@ -500,9 +500,10 @@ def reflectance_uncertainty(
             )
             @ IWF.transpose(0, 2, 1)
         )
-        E = P + W @ noise_all[lo:hi] @ Wt
+        E = P.copy()  # + W N W' term by term: the budget's parts add up to it
         for t, N in terms.items():
             Et = W @ N[lo:hi] @ Wt
+            E += Et
             term_var[t][lo:hi] = np.diagonal(Et, axis1=1, axis2=2)
             term_xyz[t][lo:hi] = T.T[None] @ Et @ T[None]
         cov[lo:hi] = 0.5 * (E + E.transpose(0, 2, 1))
