@@ -310,15 +310,15 @@ class ProcessedSession:
         check_responses` of a white LED's channel, with the chart's reference XYZ
         (layout order) if given; a failed check also adds a warning. A session
         without a white LED is not checked (its ``notes`` say so)."""
-        white = [c for c in self.responses.illuminants if "WHITE" in c.upper()]
-        if not white:
+        white = _white_channel(self.responses.illuminants)
+        if white is None:
             # under a narrow LED alone neither the ROI spread (its pixel noise is
             # not known here) nor the colours (XYZ needs a broadband light) tell a
             # wrong extraction from a right one
             note = "no broadband channel in the session: extraction not checked"
             check = ExtractionCheck((), {}, (note,))
             return replace(self, check=check)
-        check = check_responses(self.responses, white[0], reference_xyz=reference_xyz)
+        check = check_responses(self.responses, white, reference_xyz=reference_xyz)
         warnings = self.warnings
         if not check.ok:
             warnings = (*warnings, f"patch extraction check failed: {check.summary()}")
@@ -556,12 +556,15 @@ def _patch_stats(
     return mean.T, std.T, frac
 
 
+def _white_channel(channels: Sequence[str]) -> str | None:
+    """The first white LED's channel, if there is one."""
+    return next((c for c in channels if "WHITE" in c.upper()), None)
+
+
 def _detection_channel(channels: Sequence[str]) -> str:
     """A broadband channel for finding the target (white LEDs first)."""
-    for c in channels:
-        if "WHITE" in c.upper():
-            return c
-    return channels[len(channels) // 2]
+    white = _white_channel(channels)
+    return white if white is not None else channels[len(channels) // 2]
 
 
 def _green_plane(frame: RawFrame, step: int) -> NDArray[np.float32]:
