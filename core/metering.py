@@ -15,10 +15,12 @@ reports them, from 1 to 10 nm: at 10 nm an LED is two or three samples wide, and
 resampled its interpolated noise no longer looks like noise, so the readers clean
 illuminant files before anything resamples them. On the generalisation benchmark's two
 22-LED lights and 52 cameras (``benchmarks/metering_denoise.py``) the response error
-that noise of 0.1 % of the peak leaves falls to within 1.1-1.4x of an oracle that knows
-where each LED emits, at 1, 5 and 10 nm. A noise-free spectrum, and a cleaned one, are
-returned unchanged. :func:`meter_noise_sd` (DER_SNR) remains the noise estimate of a
-finely sampled spectrum, for the self-check.
+that noise of 0.1 % of the peak leaves falls to within 1.0-1.4x of an oracle that knows
+where each LED emits, at 1, 5 and 10 nm (0.1 % and 0.3 %). A noise-free spectrum, and a cleaned one, are
+returned unchanged. :func:`meter_noise_sd` (DER_SNR, corrected for
+clipping) estimates an instrument's noise per reading, which the CAL1 driver checks
+replies against; :func:`reading_noise_rms` the noise of a spectrum as it stands,
+cleaned or not, for the self-check.
 
 What cleaning leaves, the noise inside the bands, is propagated as an uncertainty of
 Eq. 1's illumination (:func:`reading_variance`).
@@ -116,15 +118,24 @@ def meter_noise_sd(values: NDArray[np.float64]) -> float:
     clipped = bool(np.any(low == 0.0)) and not bool(np.any(low < 0.0))
     if clipped:
         low = low[low > 0.0]
-    d = np.abs(2.0 * low[2:-2] - low[:-4] - low[4:])
-    if d.size < _MIN_DIFFERENCES or _extremum_fraction(low) < _MIN_EXTREMUM_FRACTION:
+    if (
+        low.size < _MIN_DIFFERENCES + 4
+        or _extremum_fraction(low) < _MIN_EXTREMUM_FRACTION
+    ):
         return 0.0
-    sd = float(_DER_SNR * np.median(d))
+    sd = _der_snr(low)
     if clipped:
         sd /= _HALF_NORMAL_SD
     # rounding jitter of a computed, noise-free tail turns as noise does, at a level
     # far below any instrument's
     return sd if sd > 1e-6 * peak else 0.0
+
+
+def _der_snr(samples: NDArray[np.float64]) -> float:
+    """DER_SNR's noise standard deviation of ``samples`` in order (Stoehr et al.
+    2008): the median of ``|2 f_i - f_(i-2) - f_(i+2)|`` times 1.482602 / sqrt(6)."""
+    d = np.abs(2.0 * samples[2:-2] - samples[:-4] - samples[4:])
+    return float(_DER_SNR * np.median(d))
 
 
 def _extremum_fraction(values: NDArray[np.float64]) -> float:
@@ -177,8 +188,7 @@ def reading_noise_rms(values: NDArray[np.float64]) -> float:
     if low is None:
         return 0.0
     if low.size >= _MIN_DIFFERENCES + 4:
-        d = np.abs(2.0 * low[2:-2] - low[:-4] - low[4:])
-        return float(_DER_SNR * np.median(d))
+        return _der_snr(low)
     return _rms_without_tails(low)
 
 
