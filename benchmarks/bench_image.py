@@ -33,15 +33,13 @@ CFA DNGs) into ``--work`` (kept for later runs). Then, side by side in one run:
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-from raw_session import decode_all, session_paths
+from raw_session import child_json, decode_all, session_paths
 
 DEFAULT_FORMATS = "envi,zarr,tiff"
 GOAL_RATIO = 1.5
@@ -97,14 +95,7 @@ rss = ru.ru_maxrss * (1 if sys.platform == "darwin" else 1024)
 print(json.dumps({{"wall_s": wall, "peak_rss_bytes": rss, "user_s": ru.ru_utime,
                   "sys_s": ru.ru_stime}}))
 """
-    env = dict(os.environ)
-    if source is not None:
-        env["PYTHONPATH"] = str(source)
-    done = subprocess.run(
-        [sys.executable, "-c", code], check=True, capture_output=True, text=True,
-        env=env,
-    )  # fmt: skip
-    return json.loads(done.stdout.strip().splitlines()[-1])
+    return child_json(code, source)
 
 
 def _output_bytes(out: Path) -> int:
@@ -116,7 +107,6 @@ def _write_floor(folder: Path, n_bytes: int) -> float:
     """Wall seconds to write ``n_bytes`` of float32 noise into a fresh file in
     ``folder`` with positioned writes of 64 MB (as the outputs are written): what
     the outputs cost this machine's page cache alone, without computing them."""
-    import os
 
     import numpy as np
 

@@ -32,7 +32,7 @@ import time
 import tracemalloc
 from pathlib import Path
 
-from raw_session import decode_all, session_paths
+from raw_session import child_json, decode_all, session_paths
 
 GOAL_RATIO = 1.1
 GOAL_PEAK_BYTES = 2e9
@@ -61,10 +61,6 @@ def _process_in(source: Path | None, session_dir: Path) -> float:
     """Wall seconds of ``process_session`` in a child process, with the TuneSpec of
     ``source`` (``SOURCE/tunespec/core``, ...: an earlier commit's ``git archive``)
     or this one's (``None``)."""
-    import json
-    import os
-    import subprocess
-
     code = f"""
 import json, time
 from tunespec.core.io.session import Session
@@ -75,14 +71,7 @@ t0 = time.perf_counter()
 process_session(Session.open({str(session_dir)!r}))
 print(json.dumps(time.perf_counter() - t0))
 """
-    env = dict(os.environ)
-    if source is not None:
-        env["PYTHONPATH"] = str(source)
-    done = subprocess.run(
-        [sys.executable, "-c", code], check=True, capture_output=True, text=True,
-        env=env,
-    )  # fmt: skip
-    return float(json.loads(done.stdout.strip().splitlines()[-1]))
+    return float(child_json(code, source))
 
 
 def _process(session_dir: Path) -> float:

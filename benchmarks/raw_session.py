@@ -8,11 +8,14 @@ a work folder for later runs.
 
 from __future__ import annotations
 
+import json
+import os
 import shutil
 import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 
 def session_paths(
@@ -51,3 +54,18 @@ def decode_all(paths: list[Path]) -> tuple[float, float]:
             mosaic = raw.raw_image_visible.copy()
         del mosaic
     return time.perf_counter() - t0, time.process_time() - c0
+
+
+def child_json(code: str, source: Path | None = None) -> Any:
+    """Run Python ``code`` in a child process and return the JSON its last stdout
+    line prints; with ``source``, the child imports the TuneSpec there
+    (``SOURCE/tunespec/core``, ...: an earlier commit's ``git archive``) instead of
+    this one, so both can be timed side by side in one run."""
+    env = dict(os.environ)
+    if source is not None:
+        env["PYTHONPATH"] = str(source)
+    done = subprocess.run(
+        [sys.executable, "-c", code], check=True, capture_output=True, text=True,
+        env=env,
+    )  # fmt: skip
+    return json.loads(done.stdout.strip().splitlines()[-1])
