@@ -636,8 +636,8 @@ def _read_phi(job: ImageJob, row0: int, row1: int) -> NDArray[np.float32]:
 def illuminants_of(job: ImageJob) -> Spectra:
     """Each channel's measured SPD x its target exposure (as processing's), on the
     first SPD's wavelengths."""
+    from tunespec.core.io.spectral import read_spectra_csv
     from tunespec.core.processing import ILLUMINANT_UNIT
-    from tunespec.core.spectra import read_spectra_csv
 
     wl: NDArray[np.float64] | None = None
     rows = []

@@ -60,17 +60,19 @@ from tunespec.core.io.raw import (
     plane_to_full_px,
     quad_mask,
 )
+from tunespec.core.io.responses_csv import write_responses_csv
 from tunespec.core.io.session import (
     FrameRecord,
     Session,
     find_darks,
     frames_by_channel,
 )
+from tunespec.core.io.spectral_csv import write_spectra_csv
 from tunespec.core.layout import TargetLayout
 from tunespec.core.metering import suppress_meter_floor
 from tunespec.core.progress import ProgressFn, StopFn, check_stop, report
-from tunespec.core.responses import Responses, write_responses_csv
-from tunespec.core.spectra import Spectra, write_spectra_csv
+from tunespec.core.responses import Responses
+from tunespec.core.spectra import Spectra
 
 __all__ = [
     "BRACKET_CLIP_LEVEL",

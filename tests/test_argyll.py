@@ -51,9 +51,12 @@ from tunespec.core.io.export import (
     reflectance_ti3,
     sensitivity_meta_path,
 )
-from tunespec.core.responses import Responses, read_responses_csv, write_responses_csv
+from tunespec.core.io.responses_csv import read_responses_csv, write_responses_csv
+from tunespec.core.io.spectral import read_spectra_csv
+from tunespec.core.io.spectral_csv import write_spectra_csv
+from tunespec.core.responses import Responses
 from tunespec.core.sensitivity import correct_spd_shift
-from tunespec.core.spectra import Grid, Spectra, read_spectra_csv, write_spectra_csv
+from tunespec.core.spectra import Grid, Spectra
 
 requires_argyll = pytest.mark.skipif(
     shutil.which("spec2cie") is None or shutil.which("colverify") is None,

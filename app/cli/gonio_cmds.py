@@ -290,15 +290,15 @@ def cmd_gonio_run(args: argparse.Namespace) -> int:
     """Run ``gonio-run``."""
     from tunespec.app.cli.common import absolute_sensitivities
     from tunespec.app.pipeline.gonio_devices import run_gonio_session
+    from tunespec.core.io.cht import load_layout
     from tunespec.core.io.export import read_sensitivity_meta
-    from tunespec.core.layout import TargetLayout
+    from tunespec.core.io.spectral import read_spectra_csv
     from tunespec.core.limits import valid_number
     from tunespec.core.sensitivity_bayes import LedCorrection
-    from tunespec.core.spectra import read_spectra_csv
     from tunespec.devices.protocols import DeviceError
 
     valid_number(args.iso, "--iso", lo=50, hi=102400, integer=True)
-    layout = TargetLayout.load(args.layout)
+    layout = load_layout(args.layout)
     saved, corr, S = args.out / "calibration.csv", None, None
     # every input read before the session folder gets its plan
     if saved.exists():
@@ -397,8 +397,8 @@ def cmd_match(args: argparse.Namespace) -> int:
         spd_delta_uv,
     )
     from tunespec.core.io.session import atomic_write_text
+    from tunespec.core.io.spectral import read_spectra_csv
     from tunespec.core.limits import MAX_REFLECTANCE, dumps_json, valid_number
-    from tunespec.core.spectra import read_spectra_csv
 
     max_level = valid_number(
         args.max_level, "--max-level", lo=0.0, hi=1.0, lo_open=True
@@ -468,7 +468,7 @@ def _drive_and_measure(
     """Set the light to ``levels`` and write the SPD its spectroradiometer reports."""
     import numpy as np
 
-    from tunespec.core.spectra import write_spectra_csv
+    from tunespec.core.io.spectral_csv import write_spectra_csv
     from tunespec.devices.registry import open_light_source
 
     path = args.measured_out or args.output.with_name(

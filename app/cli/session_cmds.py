@@ -15,8 +15,8 @@ from tunespec.app.cli.common import (
     seed_arg,
 )
 from tunespec.core.errors import InputError
+from tunespec.core.io.cht import load_layout
 from tunespec.core.io.session import Session, SessionLock
-from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import check_output_file
 
 __all__ = ["register"]
@@ -360,7 +360,7 @@ def _capture_cmd(args: argparse.Namespace, resume: bool) -> int:
     session = Session.open(args.out) if exists else None
     layout = None
     if args.layout is not None:
-        layout = TargetLayout.load(args.layout)
+        layout = load_layout(args.layout)
     elif session is not None:
         layout = session.layout
     if layout is None:
@@ -461,7 +461,7 @@ def cmd_process(args: argparse.Namespace) -> int:
     check_output_file(illum, "--illuminants-out")
     out = Console(args)
     session = Session.open(args.session)
-    layout = TargetLayout.load(args.layout) if args.layout else None
+    layout = load_layout(args.layout) if args.layout else None
     from tunespec.app.pipeline.extract import (
         flag_forced_csv,
         layout_reference_xyz,

@@ -42,9 +42,10 @@ from numpy.typing import NDArray
 
 from tunespec.core.errors import InputError, check_names
 from tunespec.core.io.session import atomic_write_bytes, atomic_write_text
+from tunespec.core.io.spectral import read_spectra_csv
 from tunespec.core.limits import dumps_json, read_json, valid_number
 from tunespec.core.progress import ProgressFn, StopFn, check_stop, report
-from tunespec.core.spectra import DEFAULT_GRID, Spectra, read_spectra_csv
+from tunespec.core.spectra import DEFAULT_GRID, Spectra
 from tunespec.devices.goniometer import ANGLE_AXES, Geometry
 
 __all__ = [

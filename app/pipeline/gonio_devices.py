@@ -31,15 +31,12 @@ from numpy.typing import NDArray
 
 from tunespec.app.pipeline.gonio import GonioPlan, capture_gonio
 from tunespec.core.io.session import atomic_write_text
+from tunespec.core.io.spectral import read_spectra_csv
+from tunespec.core.io.spectral_csv import write_spectra_csv
 from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import dumps_json, read_json
 from tunespec.core.progress import ProgressFn, StopFn, sub_progress
-from tunespec.core.spectra import (
-    DEFAULT_GRID,
-    Spectra,
-    read_spectra_csv,
-    write_spectra_csv,
-)
+from tunespec.core.spectra import DEFAULT_GRID, Spectra
 from tunespec.devices.protocols import DeviceProtocolError
 
 __all__ = ["DeviceGonioBench", "measure_led_spectra", "run_gonio_session"]

@@ -31,6 +31,7 @@ from tunespec.core.colorimetry import astm_e308_weights_d50, xyz_d50, xyz_to_lab
 from tunespec.core.errors import InputError
 from tunespec.core.fusion import fuse_patch, fused_covariance, material_prior
 from tunespec.core.hdr import HdrImage, hdr_patch_responses, merge_brackets
+from tunespec.core.io.spectral import read_spectra_csv
 from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import read_json
 from tunespec.core.metering import suppress_meter_floor
@@ -43,7 +44,7 @@ from tunespec.core.progress import (
 )
 from tunespec.core.responses import Responses
 from tunespec.core.single_shot import apply_xyz_transform, xyz_transform
-from tunespec.core.spectra import DEFAULT_GRID, Spectra, read_spectra_csv
+from tunespec.core.spectra import DEFAULT_GRID, Spectra
 from tunespec.core.wiener import wiener_reflectance
 
 __all__ = [

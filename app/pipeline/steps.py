@@ -42,15 +42,11 @@ from tunespec.core.io.export import (
     write_colorimetry_csv,
 )
 from tunespec.core.io.session import Session
+from tunespec.core.io.spectral_csv import write_spectra_csv
 from tunespec.core.layout import TargetLayout
 from tunespec.core.processing import ProcessedSession, process_session, write_processed
 from tunespec.core.progress import ProgressFn, StopFn, sub_progress
-from tunespec.core.spectra import (
-    CALIBRATION_GRID,
-    Grid,
-    Spectra,
-    write_spectra_csv,
-)
+from tunespec.core.spectra import CALIBRATION_GRID, Grid, Spectra
 from tunespec.devices.capture import (
     FrameCallback,
     capture,

@@ -55,11 +55,13 @@ from numpy.typing import NDArray
 
 from tunespec.core.atomic import atomic_open, atomic_write_text
 from tunespec.core.colorimetry import lab_d50, xyz_d50
-from tunespec.core.errors import InputError, check_names, read_json
+from tunespec.core.errors import InputError, check_names
 from tunespec.core.io.cgats import CgatsTable, ti3_table, write_cgats
-from tunespec.core.limits import dumps_json, shown
-from tunespec.core.responses import Responses, write_responses_csv
-from tunespec.core.spectra import Grid, Spectra, write_spectra_csv
+from tunespec.core.io.responses_csv import write_responses_csv
+from tunespec.core.io.spectral_csv import write_spectra_csv
+from tunespec.core.limits import dumps_json, read_json, shown
+from tunespec.core.responses import Responses
+from tunespec.core.spectra import Grid, Spectra
 
 if TYPE_CHECKING:
     from tunespec.core.colorimetry import ReflectanceStats

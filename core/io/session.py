@@ -56,10 +56,18 @@ from tunespec.core.atomic import (
     create_temp_file,
     fsync_dir,
 )
-from tunespec.core.errors import InputError, read_json
+from tunespec.core.errors import InputError
+from tunespec.core.io.spectral import read_spectra_csv
+from tunespec.core.io.spectral_csv import write_spectra_csv
 from tunespec.core.layout import TargetLayout
-from tunespec.core.limits import MAX_NAME_CHARS, dumps_json, shown, valid_number
-from tunespec.core.spectra import Spectra, read_spectra_csv, write_spectra_csv
+from tunespec.core.limits import (
+    MAX_NAME_CHARS,
+    dumps_json,
+    read_json,
+    shown,
+    valid_number,
+)
+from tunespec.core.spectra import Spectra
 
 __all__ = [
     "FRAME_KINDS",

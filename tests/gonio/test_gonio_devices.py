@@ -20,8 +20,10 @@ from tunespec.app.pipeline import gonio_devices
 from tunespec.app.pipeline.gonio import GeometryStep, GonioPlan, frame_names
 from tunespec.core.colorimetry import delta_e_2000, lab_d50, xyz_to_lab_d50
 from tunespec.core.datasets import resource_path
+from tunespec.core.io.spectral import read_spectra_csv
+from tunespec.core.io.spectral_csv import write_spectra_csv
 from tunespec.core.layout import TargetLayout
-from tunespec.core.spectra import DEFAULT_GRID, read_spectra_csv, write_spectra_csv
+from tunespec.core.spectra import DEFAULT_GRID
 from tunespec.devices.cal1.emulator import Cal1Emulator
 from tunespec.devices.clock import VirtualClock
 from tunespec.devices.goniometer import Geometry
