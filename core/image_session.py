@@ -737,7 +737,7 @@ def _corrected_for(
     """The illuminants corrected as ``tunespec estimate`` corrects them (per-LED
     corrections on the SPDs' own grid), and both illuminants and sensitivities on
     the integration grid (:func:`tunespec.core.wiener.integration_grid`)."""
-    from tunespec.core.sensitivity import correct_illuminants_from_meta
+    from tunespec.core.calibration import correct_illuminants_from_meta
     from tunespec.core.wiener import on_integration_grid
 
     corrected = correct_illuminants_from_meta(illuminants_of(job), meta)
@@ -996,10 +996,10 @@ def systematic_table(
     SystematicTable
         Zeros when no region is free of clipping.
     """
+    from tunespec.core.calibration import Calibration
     from tunespec.core.datasets import read_sensitivities
     from tunespec.core.image import _u_lightness
     from tunespec.core.responses import Responses
-    from tunespec.core.sensitivity import calibration_from_files
     from tunespec.core.uncertainty import reflectance_uncertainty
     from tunespec.core.wiener import wiener_reflectance
 
@@ -1018,7 +1018,7 @@ def systematic_table(
     sensitivity = read_sensitivities(sensitivity_csv)
     L, S, _ = _corrected_for(job, sensitivity, meta, grid)
     est = wiener_reflectance(resp, L, S, prior)
-    calibration = calibration_from_files(sensitivity_csv, meta)
+    calibration = Calibration.from_meta(sensitivity, meta)
     unc = reflectance_uncertainty(est, resp, illuminants_of(job), calibration)
     bins = bank.bins_of(c.astype(np.float32), phi)
     y = unc.xyz[:, 1]

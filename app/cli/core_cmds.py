@@ -10,7 +10,6 @@ import numpy as np
 
 from tunespec.app.cli.common import (
     Console,
-    absolute_sensitivities,
     add_force_option,
     add_grid_option,
     add_output_options,
@@ -19,6 +18,7 @@ from tunespec.app.cli.common import (
     resolve_grid,
     seed_arg,
 )
+from tunespec.core.calibration import absolute_sensitivities
 from tunespec.core.errors import InputError, check_names
 from tunespec.core.io.export import read_sensitivity_meta, write_sensitivities_csv
 from tunespec.core.io.responses_csv import read_responses_csv, write_responses_csv
@@ -521,7 +521,7 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         grid_nm=grid.wavelength_nm,
     )
     # imported after the inputs are read (scipy): an error in them is reported at once
-    from tunespec.core.sensitivity import correct_illuminants_from_meta
+    from tunespec.core.calibration import correct_illuminants_from_meta
     from tunespec.core.wiener import on_integration_grid, wiener_reflectance
 
     _check_names(
@@ -616,11 +616,11 @@ def _write_uncertainty(
 ) -> dict[str, str]:
     """Standard uncertainties beside the reflectances (see docs/user-guide.md, "Uncertainty");
     ``sensitivity`` as read, on its own grid (its covariance's)."""
+    from tunespec.core.calibration import Calibration
     from tunespec.core.io.export import write_colorimetry_csv
-    from tunespec.core.sensitivity import calibration_from_meta
     from tunespec.core.uncertainty import reflectance_uncertainty
 
-    calibration = calibration_from_meta(sensitivity, meta)
+    calibration = Calibration.from_meta(sensitivity, meta)
     unc = reflectance_uncertainty(est, responses, reported, calibration)
     u_path = args.output.with_name(args.output.stem + "_uncertainty.csv")
     write_spectra_csv(est.reflectance.with_values(unc.reflectance_std), u_path)

@@ -15,11 +15,11 @@ from typing import Any
 
 from tunespec.app.cli.common import (
     Console,
-    absolute_sensitivities,
     add_grid_option,
     add_output_options,
     add_sensitivities_option,
 )
+from tunespec.core.calibration import absolute_sensitivities
 from tunespec.core.datasets import read_sensitivities
 from tunespec.core.errors import InputError
 from tunespec.core.io.spectral import read_spectral
@@ -352,11 +352,11 @@ def cmd_report(args: argparse.Namespace) -> int:
 def _table1_from_files(
     args: argparse.Namespace, data: dict[str, Any], grid: Grid | None
 ) -> Any:
-    from tunespec.core.io.export import read_sensitivity_meta
-    from tunespec.core.sensitivity import (
+    from tunespec.core.calibration import (
         correct_illuminants_from_meta,
         predict_responses,
     )
+    from tunespec.core.io.export import read_sensitivity_meta
     from tunespec.core.stats import prediction_stats
 
     need = [n for n in ("sensitivity", "illuminants", "responses") if n not in data]

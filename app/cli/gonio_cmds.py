@@ -288,8 +288,8 @@ def _start_plan(args: argparse.Namespace, *, needs: tuple[str, ...] = ()) -> Non
 
 def cmd_gonio_run(args: argparse.Namespace) -> int:
     """Run ``gonio-run``."""
-    from tunespec.app.cli.common import absolute_sensitivities
     from tunespec.app.pipeline.gonio_devices import run_gonio_session
+    from tunespec.core.calibration import absolute_sensitivities
     from tunespec.core.io.cht import load_layout
     from tunespec.core.io.export import read_sensitivity_meta
     from tunespec.core.io.spectral import read_spectra_csv

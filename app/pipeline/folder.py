@@ -686,14 +686,14 @@ def restore_calibration_steps(
     """The processed chart and the ``pipeline.Calibration`` of a restored result.
 
     Nothing is estimated again: the sensitivities, their covariance and LED
-    corrections come from the files (``core.sensitivity.calibration_from_files``),
+    corrections come from the files (``core.calibration.Calibration.load``),
     Table 1 is recomputed from them (``core.stats.calibration_report``). ``None``
     when the processed chart is not in ``result_dir``.
     """
     from dataclasses import replace
 
     from tunespec.app.pipeline.steps import Calibration
-    from tunespec.core.sensitivity import calibration_from_files
+    from tunespec.core.calibration import Calibration as FileCalibration
     from tunespec.core.spectra import CALIBRATION_GRID
     from tunespec.core.stats import calibration_report
     from tunespec.devices.registry import layout_reflectances
@@ -702,7 +702,7 @@ def restore_calibration_steps(
     if chart is None:
         return None
     csv = result_dir / "sensitivity.csv"
-    est = calibration_from_files(csv, read_sensitivity_meta(csv))
+    est = FileCalibration.load(csv)
     # the sensitivities as restored (with the SPD shift in their meta) and what the
     # CSV cannot say: the method and the patches the fit left out
     est = replace(

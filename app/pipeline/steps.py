@@ -416,10 +416,10 @@ def table1_by_patch(
     For each patch the mean over its LEDs of the per-stimulus error
     ``sqrt(mean_c (c - c_hat)^2)`` (the paper's Table 1, "RGB" row), with Eq. 1
     predicting ``c_hat`` from the estimated sensitivities
-    (:func:`tunespec.core.sensitivity.predict_responses`), the illuminants corrected
+    (:func:`tunespec.core.calibration.predict_responses`), the illuminants corrected
     as the calibration found. Patches the fit left out are not listed.
     """
-    from tunespec.core.sensitivity import predict_responses
+    from tunespec.core.calibration import predict_responses
 
     skip = set(estimate.excluded_patches)
     patches = [p for p in responses.patches if p not in skip]
@@ -496,14 +496,14 @@ def estimate(
     (``SensitivityEstimate.spd_shift_nm``); the sample's SPDs come from the same
     instrument, so it is undone on them too. ``None`` takes it from
     ``sensitivity.meta`` (the per-LED corrections of a ``"bayes"`` calibration, else
-    its common shift; :func:`~tunespec.core.sensitivity.correct_illuminants_from_meta`).
+    its common shift; :func:`~tunespec.core.calibration.correct_illuminants_from_meta`).
     With ``calibration`` carrying a covariance, the standard uncertainties of the
     reflectances and their CIELAB are computed too (:mod:`tunespec.core.uncertainty`).
     ``checks`` (default: refuse, no override) runs the plausibility checks of the
     responses against Eq. 1 first (:func:`tunespec.core.plausibility.check_estimate_inputs`).
     """
+    from tunespec.core.calibration import correct_illuminants_from_meta
     from tunespec.core.plausibility import Checks, check_estimate_inputs
-    from tunespec.core.sensitivity import correct_illuminants_from_meta
     from tunespec.core.uncertainty import reflectance_uncertainty
     from tunespec.core.wiener import on_integration_grid, wiener_reflectance
 
