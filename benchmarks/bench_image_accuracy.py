@@ -55,8 +55,8 @@ def _capture(
 
     from tunespec.app.cli import main as cli
     from tunespec.app.pipeline.plan import ESTIMATION_GRID as GRID
+    from tunespec.app.pipeline.processing import process_session, write_processed
     from tunespec.core.io.session import Session
-    from tunespec.core.processing import process_session, write_processed
     from tunespec.devices.capture import capture, new_session
     from tunespec.devices.registry import open_bench
     from tunespec.devices.sim.scene import default_regions

@@ -33,8 +33,8 @@ COVERAGE_RANGE = (0.90, 0.999)
 @pytest.fixture(scope="module")
 def bench_session(tmp_path_factory) -> dict:
     """A session of the SG with mixed regions, its truth and a bayes calibration."""
+    from tunespec.app.pipeline.processing import process_session, write_processed
     from tunespec.core.io.session import Session
-    from tunespec.core.processing import process_session, write_processed
     from tunespec.devices.capture import capture, new_session
     from tunespec.devices.registry import open_bench
     from tunespec.devices.sim.scene import default_regions

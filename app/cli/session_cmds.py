@@ -453,7 +453,7 @@ def _corners_arg(text: str | None) -> object:
 
 
 def cmd_process(args: argparse.Namespace) -> int:
-    from tunespec.core.processing import process_session, write_processed
+    from tunespec.app.pipeline.processing import process_session, write_processed
 
     illum = args.illuminants_out or args.output.with_name(
         args.output.stem + "_illuminants.csv"

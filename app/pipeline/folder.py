@@ -647,7 +647,7 @@ PROCESSED_FILES = ("responses.csv", "illuminants.csv")
 
 
 def _write_processed(out_dir: Path, processed: Any) -> None:
-    from tunespec.core.processing import write_processed
+    from tunespec.app.pipeline.processing import write_processed
 
     write_processed(processed, *(out_dir / name for name in PROCESSED_FILES))
 

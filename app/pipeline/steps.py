@@ -33,6 +33,7 @@ from tunespec.app.pipeline.folder import (
     write_exports_index,
 )
 from tunespec.app.pipeline.plan import ESTIMATION_GRID, chart_layout, sample_layout
+from tunespec.app.pipeline.processing import process_session, write_processed
 from tunespec.core.colorimetry import ReflectanceStats, reflectance_stats
 from tunespec.core.datasets import load_colorchecker_sg
 from tunespec.core.errors import InputError
@@ -44,7 +45,7 @@ from tunespec.core.io.export import (
 from tunespec.core.io.session import Session
 from tunespec.core.io.spectral_csv import write_spectra_csv
 from tunespec.core.layout import TargetLayout
-from tunespec.core.processing import ProcessedSession, process_session, write_processed
+from tunespec.core.processing import ProcessedSession
 from tunespec.core.progress import ProgressFn, StopFn, sub_progress
 from tunespec.core.spectra import CALIBRATION_GRID, Grid, Spectra
 from tunespec.devices.capture import (

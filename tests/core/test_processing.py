@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tunespec.app.pipeline.processing import process_session, write_processed
 from tunespec.core.errors import InputError
 from tunespec.core.io.raw import RawFrame
 from tunespec.core.io.responses_csv import read_responses_csv
@@ -25,8 +26,6 @@ from tunespec.core.processing import (
     RoiSet,
     find_session_corners,
     flat_window,
-    process_session,
-    write_processed,
 )
 from tunespec.core.progress import Cancelled
 from tunespec.core.spectra import Spectra
