@@ -40,6 +40,7 @@ from tunespec.app.gui.plots.image_view import ImageView
 from tunespec.app.gui.plots.reflectance_plot import ReflectancePlot
 from tunespec.app.gui.plots.sensitivity_plot import SensitivityPlot
 from tunespec.app.gui.plots.spd_plot import SpdPlot
+from tunespec.app.gui.processes import one_blas_thread, start_process_server
 from tunespec.app.gui.settings import AppSettings
 from tunespec.app.gui.wizard.measurement import (
     CALIBRATION_DIR,
@@ -55,8 +56,6 @@ from tunespec.app.gui.workers import (
     Worker,
     collect_on_gui_thread,
     gc_paused,
-    one_blas_thread,
-    start_process_server,
 )
 
 __all__ = ["MainWindow"]
