@@ -29,6 +29,7 @@ from PySide6.QtWidgets import (
 import tunespec.app.gui.qt_compat  # noqa: F401 (before any signal)
 from tunespec.app.gui.editors.target_layout_editor import TargetLayoutEditor
 from tunespec.app.gui.panels.device_panel import DevicePanel, format_error
+from tunespec.app.gui.panels.gonio_panel import GonioPanel
 from tunespec.app.gui.panels.log_panel import LogPanel
 from tunespec.app.gui.panels.stats_table_panel import (
     show_table1,
@@ -153,6 +154,8 @@ class MainWindow(QMainWindow):
         self.tabs.addTab(spectra, "Spectra")
         self.tabs.addTab(tables, "Tables")
         self.tabs.addTab(self.image_view, "Spectral image")
+        self.gonio_panel = GonioPanel()
+        self.tabs.addTab(self.gonio_panel, "Gonio")
         self.setCentralWidget(self.tabs)
 
         self.device_dock = QDockWidget("Devices", self)
@@ -522,6 +525,8 @@ class MainWindow(QMainWindow):
         finally:
             if self.image_view.worker is not None:
                 self.image_view.worker.abort()
+            if self.gonio_panel.worker is not None:
+                self.gonio_panel.worker.abort()
             self.wizard_panel.shutdown()
             self.controller.shutdown()
             self.log_panel.detach()
