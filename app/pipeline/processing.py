@@ -24,6 +24,7 @@ from numpy.typing import ArrayLike
 
 from tunespec.core.errors import InputError
 from tunespec.core.io.raw import RawFrame, full_to_plane_px, load_raw
+from tunespec.core.io.responses_csv import write_responses_csv
 from tunespec.core.io.session import (
     FrameRecord,
     Session,
@@ -47,7 +48,6 @@ from tunespec.core.processing import (
     flat_window,
 )
 from tunespec.core.progress import ProgressFn, StopFn, check_stop, report
-from tunespec.core.responses import write_responses_csv
 from tunespec.core.spectra import Spectra, write_spectra_csv
 
 __all__ = [
