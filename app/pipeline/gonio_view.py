@@ -69,8 +69,8 @@ def run_gonio_plan(
                        progress=progress, should_stop=should_stop)  # fmt: skip
     else:
         from tunespec.app.pipeline.gonio_devices import run_gonio_session
+        from tunespec.core.io.spectral import read_spectra_csv
         from tunespec.core.layout import TargetLayout
-        from tunespec.core.spectra import read_spectra_csv
 
         if not kept.exists():
             raise InputError("a session on devices needs a plan: choose a plan file")
@@ -133,7 +133,7 @@ def geometry_progress(folder: str | Path) -> list[tuple[int, int]] | None:
 
 
 def _session_leds(root: Path) -> list[str]:
-    from tunespec.core.spectra import read_spectra_csv
+    from tunespec.core.io.spectral import read_spectra_csv
 
     path = root / "leds_reported.csv"
     if path.exists():

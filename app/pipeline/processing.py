@@ -31,6 +31,7 @@ from tunespec.core.io.session import (
     find_darks,
     frames_by_channel,
 )
+from tunespec.core.io.spectral_csv import write_spectra_csv
 from tunespec.core.layout import TargetLayout
 from tunespec.core.metering import suppress_meter_floor
 from tunespec.core.processing import (
@@ -48,7 +49,7 @@ from tunespec.core.processing import (
     flat_window,
 )
 from tunespec.core.progress import ProgressFn, StopFn, check_stop, report
-from tunespec.core.spectra import Spectra, write_spectra_csv
+from tunespec.core.spectra import Spectra
 
 __all__ = [
     "SPD_MIN_COVERAGE_NM",
