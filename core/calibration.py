@@ -239,7 +239,7 @@ class Calibration:
             The side file is missing (and ``without_side_file`` not set), either
             file is malformed, or the sensitivities are in relative units.
         """
-        from tunespec.core.errors import read_json
+        from tunespec.core.limits import read_json
         from tunespec.core.io.export import (
             parse_sensitivity_meta,
             sensitivity_meta_path,
