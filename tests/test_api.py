@@ -1,0 +1,157 @@
+"""The Python API (``tunespec.app.api``) gives the command line's answers.
+
+- ``docs/api-example.ipynb``, its code cells run in order on a fresh demo folder,
+  gives the demo's Table 2 exactly, and the ``estimate`` + ``evaluate`` commands on
+  the same files give the same numbers (slow: runs the demo once).
+- colour-science objects cross the boundary both ways, checked as files are.
+- Inputs are refused as the command line refuses them.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tunespec.app import api
+from tunespec.app.cli import main
+from tunespec.core.datasets import load_camera, load_colorchecker_sg, load_led_set
+from tunespec.core.errors import InputError
+from tunespec.core.responses import Responses, write_responses_csv
+from tunespec.core.spectra import Grid, Spectra, read_spectra_csv, write_spectra_csv
+
+NOTEBOOK = Path(__file__).resolve().parents[1] / "docs" / "api-example.ipynb"
+GRID = Grid(400.0, 700.0, 10.0)
+
+
+def _run_notebook(cwd: Path, monkeypatch) -> dict:
+    """The notebook's code cells executed in order in one namespace, in ``cwd``."""
+    nb = json.loads(NOTEBOOK.read_text(encoding="utf-8"))
+    assert nb["nbformat"] == 4
+    monkeypatch.chdir(cwd)
+    ns: dict = {"__name__": "__notebook__"}
+    for cell in nb["cells"]:
+        if cell["cell_type"] == "code":
+            exec(compile("".join(cell["source"]), str(NOTEBOOK), "exec"), ns)
+    return ns
+
+
+def _flat(doc: dict) -> dict[str, float]:
+    return {f"{p}/{k}": v for p, d in doc.items() for k, v in d.items()}
+
+
+@pytest.mark.slow
+def test_the_notebook_gives_the_clis_table2_exactly(tmp_path, monkeypatch) -> None:
+    demo = tmp_path / "demo"
+    assert main(["demo", "--out", str(demo), "--no-report", "-q"]) == 0
+    ns = _run_notebook(tmp_path, monkeypatch)
+    got = ns["table2"].as_dict()
+    # the demo's own Table 2 (summary.json and the report's table2 CSV), bit for bit
+    summary = json.loads((demo / "summary.json").read_text())["table2"]
+    assert {k: got[k] for k in summary} == summary
+    with (demo / "export" / "table2_reflectance.csv").open(newline="") as fh:
+        rows = {r["patch"]: r for r in csv.DictReader(fh)}
+    for patch, stats in got["patches"].items():
+        assert float(rows[patch]["delta_e00_d50"]) == stats["delta_e00"], patch
+        assert float(rows[patch]["spectral_rms"]) == stats["spectral_rms"], patch
+    # the command line's estimate + evaluate on the same files: the same numbers
+    export = demo / "export"
+    out, stats_json = tmp_path / "cli_reflectances.csv", tmp_path / "table2.json"
+    assert main(["estimate", "--responses", str(export / "responses.csv"),
+                 "--illuminants", str(export / "illuminants.csv"),
+                 "--sensitivities", str(export / "sensitivities.csv"),
+                 "--grid", "400:700:5", "-o", str(out), "-q"]) == 0  # fmt: skip
+    assert main(["evaluate", "--estimated", str(out),
+                 "--reference", str(export / "reference_reflectances.csv"),
+                 "--stats", str(stats_json), "-q"]) == 0  # fmt: skip
+    cli = json.loads(stats_json.read_text())
+    # the reflectances bit for bit, and api.evaluate is `evaluate` bit for bit
+    np.testing.assert_array_equal(
+        read_spectra_csv(out).values, ns["result"].reflectance.values
+    )
+    # api.evaluate is `evaluate`: on the same files, the same Table 2 bit for bit
+    from_files = api.evaluate(out, export / "reference_reflectances.csv").as_dict()
+    assert {k: from_files[k] for k in ("patches", "average", "max")} == {
+        k: cli[k] for k in ("patches", "average", "max")
+    }
+    # the CSV reader hands back a Fortran-ordered array, which changes the BLAS
+    # summation order of the colorimetry: CIEDE2000 from the file may differ from
+    # the in-memory estimate's in the last bits of a double (as tests/test_demo_chain)
+    assert _flat(cli["patches"]) == pytest.approx(_flat(got["patches"]), rel=1e-12)
+    assert ns["again"].as_dict()["average"] == got["average"]
+    assert ns["result"].reflectance.names == tuple(got["patches"])
+    # and the mean is the demo's 0.07, not the 0.2-0.4 of uncorrected spectra
+    assert got["average"]["delta_e00"] < 0.1
+
+
+# -- colour-science at the boundary -----------------------------------------------------
+def test_to_colour_and_back_keeps_every_value() -> None:
+    sg = load_colorchecker_sg(GRID).select(["A1", "B2", "C3"])
+    msds = api.to_colour(sg)
+    assert list(msds.labels) == ["A1", "B2", "C3"]
+    np.testing.assert_array_equal(msds.wavelengths, sg.wavelength_nm)
+    np.testing.assert_array_equal(msds.values.T, sg.values)
+    back = api.from_colour(msds, kind="reflectance")
+    assert back.names == sg.names
+    np.testing.assert_array_equal(back.values, sg.values)
+    # one SpectralDistribution, and a list of them
+    sds = msds.to_sds()
+    one = api.from_colour(sds[1])
+    assert one.names == ("B2",)
+    np.testing.assert_array_equal(one.values[0], sg.values[1])
+    np.testing.assert_array_equal(api.from_colour(sds).values, sg.values)
+
+
+def test_from_colour_converts_percent_and_refuses_what_a_file_could_not_hold() -> None:
+    from colour import SpectralDistribution
+
+    wl = np.arange(400.0, 701.0, 10.0)
+    percent = SpectralDistribution(np.full(wl.size, 45.0), wl, name="grey")
+    assert api.from_colour(percent, kind="reflectance").values.max() == pytest.approx(
+        0.45
+    )
+    bad = SpectralDistribution(np.where(wl == 500.0, -0.2, 0.5), wl, name="dip")
+    with pytest.raises(InputError, match=r"prior: values must lie in \[0, "):
+        api.from_colour(bad, what="prior")
+    with pytest.raises(InputError, match="SpectralDistribution"):
+        api.from_colour({"A1": [0.1, 0.2]})
+
+
+# -- refused at the boundary ----------------------------------------------------------------
+@pytest.fixture
+def files(tmp_path) -> dict[str, Path]:
+    """Sensitivities (no side file), LED spectra and responses of three patches."""
+    cam = load_camera(grid=GRID)
+    sens = Spectra(cam.wavelength_nm, cam.values * 0.01, cam.names, {})
+    leds = load_led_set(GRID)
+    rgb = np.full((3, len(leds.names), 3), 0.2)
+    resp = Responses(("A1", "B2", "C3"), leds.names, rgb, np.full_like(rgb, 1e-3))
+    paths = {
+        "sens": tmp_path / "sens.csv",
+        "leds": tmp_path / "leds.csv",
+        "resp": tmp_path / "responses.csv",
+    }
+    write_spectra_csv(sens, paths["sens"])
+    write_spectra_csv(leds, paths["leds"])
+    write_responses_csv(resp, paths["resp"])
+    return paths
+
+
+def test_estimate_refuses_sensitivities_without_their_side_file(files) -> None:
+    with pytest.raises(InputError, match=r"sens\.csv\.meta\.json"):
+        api.estimate(files["resp"], files["leds"], files["sens"])
+
+
+def test_responses_under_illuminants_not_given_are_refused(files) -> None:
+    leds = load_led_set(GRID)
+    few = leds.select(leds.names[:3])
+    with pytest.raises(InputError, match="not in the illuminants"):
+        api.read_stimuli(files["resp"], few)
+
+
+def test_an_unknown_method_is_refused_before_anything_runs(files) -> None:
+    with pytest.raises(InputError, match="unknown method 'magic'"):
+        api.calibrate(files["resp"], files["leds"], method="magic")
