@@ -43,11 +43,20 @@ def _flat(doc: dict) -> dict[str, float]:
     return {f"{p}/{k}": v for p, d in doc.items() for k, v in d.items()}
 
 
+@pytest.fixture(scope="module")
+def demo_root(tmp_path_factory) -> Path:
+    """A fresh ``tunespec demo --out demo`` (in the folder returned)."""
+    root = tmp_path_factory.mktemp("api_demo")
+    assert main(["demo", "--out", str(root / "demo"), "--no-report", "-q"]) == 0
+    return root
+
+
 @pytest.mark.slow
-def test_the_notebook_gives_the_clis_table2_exactly(tmp_path, monkeypatch) -> None:
-    demo = tmp_path / "demo"
-    assert main(["demo", "--out", str(demo), "--no-report", "-q"]) == 0
-    ns = _run_notebook(tmp_path, monkeypatch)
+def test_the_notebook_gives_the_clis_table2_exactly(
+    demo_root, tmp_path, monkeypatch
+) -> None:
+    demo = demo_root / "demo"
+    ns = _run_notebook(demo_root, monkeypatch)
     got = ns["table2"].as_dict()
     # the demo's own Table 2 (summary.json and the report's table2 CSV), bit for bit
     summary = json.loads((demo / "summary.json").read_text())["table2"]
@@ -85,6 +94,55 @@ def test_the_notebook_gives_the_clis_table2_exactly(tmp_path, monkeypatch) -> No
     assert ns["result"].reflectance.names == tuple(got["patches"])
     # and the mean is the demo's 0.07, not the 0.2-0.4 of uncorrected spectra
     assert got["average"]["delta_e00"] < 0.1
+
+
+@pytest.mark.slow
+def test_calibrate_gives_the_demos_table1_and_sensitivities(
+    demo_root, tmp_path
+) -> None:
+    """The chart's exported files through api.calibrate: the demo's Table 1 exactly
+    and, saved, its sensitivities CSV byte for byte (as ``tunespec calibrate``)."""
+    demo = demo_root / "demo"
+    export = demo / "export"
+    res = api.calibrate(
+        export / "chart_responses.csv",
+        export / "chart_illuminants.csv",
+        export / "chart_camera.ti3",
+    )
+    summary = json.loads((demo / "summary.json").read_text())
+    assert res.table1.as_dict() == summary["table1"]
+    saved = res.calibration.save(tmp_path / "sensitivities.csv")
+    assert saved.read_bytes() == (export / "sensitivities.csv").read_bytes()
+    back = api.load_calibration(saved)
+    assert back.led_correction == res.calibration.led_correction
+
+
+@pytest.mark.slow
+def test_estimate_images_is_the_estimate_image_command(demo_root, tmp_path) -> None:
+    tifffile = pytest.importorskip("tifffile")
+    demo = demo_root / "demo"
+    sens = demo / "export" / "sensitivities.csv"
+    assert main(["estimate-image", str(demo / "sample"), "--sensitivities", str(sens),
+                 "--out", str(tmp_path / "cli"), "--formats", "tiff",
+                 "--scheduler", "sync", "-q"]) == 0  # fmt: skip
+    from tunespec.app.pipeline.image import ImageSettings
+
+    got = api.estimate_images(
+        demo / "sample",
+        api.load_calibration(sens),
+        tmp_path / "api",
+        settings=ImageSettings(formats=("tiff",)),
+    )
+    assert got.out_dir == tmp_path / "api"
+    for name in ("xyz.tif", "lab.tif", "uncertainty.tif"):
+        np.testing.assert_array_equal(
+            tifffile.imread(tmp_path / "api" / name),
+            tifffile.imread(tmp_path / "cli" / name),
+        )
+    assert (
+        got.provenance["shape"]
+        == json.loads((tmp_path / "cli" / "provenance.json").read_text())["shape"]
+    )
 
 
 # -- colour-science at the boundary -----------------------------------------------------
