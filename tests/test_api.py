@@ -145,6 +145,29 @@ def test_estimate_images_is_the_estimate_image_command(demo_root, tmp_path) -> N
     )
 
 
+@pytest.mark.slow
+def test_extract_is_the_extract_command(tmp_path) -> None:
+    """The shipped DNG of a ColorChecker: the same responses as ``tunespec extract``
+    writes, the reference given as colour-science spectra or the layout's own."""
+    from tunespec.core.datasets import resource_path
+    from tunespec.core.io.spectral import read_spectral
+    from tunespec.core.responses import read_responses_csv
+
+    dng = Path(__file__).parent / "data" / "tinydng_colorchart.dng"
+    out = tmp_path / "responses.csv"
+    assert main(["extract", str(dng), "--layout", "colorchecker_24", "-o", str(out),
+                 "-q"]) == 0  # fmt: skip
+    cli = read_responses_csv(out)
+    ex = api.extract(dng, "colorchecker_24")
+    assert ex.check.ok and ex.responses.patches == cli.patches
+    np.testing.assert_allclose(ex.responses.rgb, cli.rgb, rtol=1e-9)
+    reference = read_spectral(resource_path("charts", "colorchecker_24.csv"))
+    with_colour = api.extract(
+        dng, "colorchecker_24", reflectances=api.to_colour(reference)
+    )
+    np.testing.assert_array_equal(with_colour.responses.rgb, ex.responses.rgb)
+
+
 # -- colour-science at the boundary -----------------------------------------------------
 def test_to_colour_and_back_keeps_every_value() -> None:
     sg = load_colorchecker_sg(GRID).select(["A1", "B2", "C3"])
