@@ -8,12 +8,11 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from tunespec.core.io.export import tunespec_version
-
-if TYPE_CHECKING:
-    from tunespec.core.colorimetry import ReflectanceStats
-    from tunespec.core.stats import PredictionStats
-
+from tunespec.app.pipeline.record import (
+    chart_reference,
+    instrument_rows,
+    software_versions,
+)
 from tunespec.app.report.data import (
     COLORIMETRY_DATA,
     PAPER_TABLE1,
@@ -22,12 +21,16 @@ from tunespec.app.report.data import (
     _as_dict,
     _created_text,
     _self_check,
-    _software_versions,
     _table1_parts,
     export_label,
     quality_flags,
     shipped_datasets,
 )
+from tunespec.core.io.export import tunespec_version
+
+if TYPE_CHECKING:
+    from tunespec.core.colorimetry import ReflectanceStats
+    from tunespec.core.stats import PredictionStats
 
 
 @dataclass(frozen=True)
@@ -106,15 +109,16 @@ def _worst_patches_table(report: ReportData, n: int = 10) -> _Table | None:
     errors = report.table1_patches
     if not errors:
         return None
-    paper = PAPER_TABLE1["RGB"][0]
+    mean = sum(errors.values()) / len(errors) or 1.0
     worst = sorted(errors.items(), key=lambda kv: -kv[1])[:n]
-    rows = tuple((name, f"{e:.4f}", f"{e / paper:.1f}") for name, e in worst)
+    rows = tuple((name, f"{e:.4f}", f"{e / mean:.2f}") for name, e in worst)
     return _Table(
         f"Table 1: the {len(worst)} worst patches",
-        ("Patch", "RGB error (mean over LEDs)", "x paper mean"),
+        ("Patch", "RGB error (mean over LEDs, full scale)", "x mean of all patches"),
         rows,
         "Per patch: the mean over its LEDs of the RMS over R, G, B of measured minus "
-        "predicted (Eq. 1); full-scale units.",
+        f"predicted (Eq. 1), full-scale units; the last column is that error over "
+        f"the mean of the {len(errors)} fitted patches ({mean:.4f}).",
     )
 
 
@@ -127,6 +131,65 @@ def _table1_patch_table(report: ReportData) -> _Table | None:
         "Table 1 per patch (RGB error, mean over the LEDs, full scale)",
         ("Patch", "Error") * 3,
         _side_by_side([(k, f"{v:.4f}") for k, v in errors.items()]),
+    )
+
+
+def _record_table(report: ReportData) -> _Table | None:
+    """The operator's record: who, what sample, which chart and its reference data,
+    the room, the software; ``None`` without a record."""
+    rec = report.record
+    if rec is None:
+        return None
+    missing = "not recorded"
+    layout = report.chart_layout
+    chart = str(getattr(layout, "name", "") or "chart not named")
+    rows = [
+        ("Operator", rec.operator or missing),
+        ("Sample ID", rec.sample_id or missing),
+        ("Chart", f"{chart}, serial {rec.chart_serial or missing}"),
+        ("Chart reference data", chart_reference(rec, layout)),
+        (
+            "Room temperature, light warm-up",
+            f"{rec.temperature_c + ' °C' if rec.temperature_c else missing}, "
+            f"{rec.warm_up_min + ' min' if rec.warm_up_min else missing}",
+        ),
+        (
+            "Software",
+            f"TuneSpec {tunespec_version()}; versions and settings under Provenance",
+        ),
+    ]
+    if rec.notes:
+        rows.append(("Notes", rec.notes))
+    return _Table(
+        "Measurement record",
+        ("Item", "Value"),
+        tuple(rows),
+        "Filled by the operator: [provenance] of the run configuration, --operator, "
+        "--sample-id ... on the command line, or Measurement record... in the GUI "
+        "(record.json in the measurement folder).",
+    )
+
+
+def _instruments_table(report: ReportData) -> _Table | None:
+    """Light source, spectroradiometer and camera with serials and calibration
+    dates (the operator's, else the devices')."""
+    if report.record is None:
+        return None
+    rows = tuple(
+        (
+            r["instrument"],
+            r["model"],
+            r["serial"] + (" (device)" if r["serial_source"] == "device" else ""),
+            r["firmware"],
+            r["calibration"],
+        )
+        for r in instrument_rows(report.record, report.devices)
+    )
+    return _Table(
+        "Instruments",
+        ("Instrument", "Model", "Serial", "Firmware", "Calibrated"),
+        rows,
+        "(device): the serial the device reported; the others the operator's.",
     )
 
 
@@ -477,7 +540,7 @@ def _provenance_tables(report: ReportData) -> list[_Table]:
     if report.settings:
         rows = tuple((str(k), str(v)) for k, v in report.settings.items())
         tables.append(_Table("Settings", ("Setting", "Value"), rows))
-    sw = tuple(_software_versions().items())
+    sw = tuple(software_versions().items())
     tables.append(_Table("Software", ("Component", "Version"), sw))
     datasets = report.datasets
     if datasets is None:

@@ -438,3 +438,49 @@ def test_verdict_needs_the_self_check(report: ReportData, tmp_path: Path) -> Non
     assert "Self-check of the calibration" in text
     assert "R 2.50, G 0.50, B 0.70 (1 ± 0.03, 3080 stimuli)" in text
     assert "<td>over: R</td>" in text
+
+
+def test_a_small_sample_set_fills_its_page_with_labelled_plots(
+    report: ReportData,
+) -> None:
+    from tunespec.app.report.figures import _GRID_AREA_IN, _grid_shape
+
+    assert _grid_shape(8)[:2] == (2, 4) and _grid_shape(24)[:2] == (4, 6)
+    assert _grid_shape(12)[:2] == (3, 4)
+    (_, fig), *_ = [f for f in report_figures(report) if "grid" in f[0]]
+    ax = fig.axes[0]
+    texts = [t.get_text() for t in ax.texts]
+    assert texts.count("wavelength (nm)") == 8 == texts.count("reflectance factor")
+    # the cells' frames span most of the page's plot area (eight patches, 2 x 4)
+    frames = ax.collections[1].get_segments()
+    top = max(seg[:, 1].max() for seg in frames)
+    bottom = min(seg[:, 1].min() for seg in frames)
+    assert (top - bottom) > 0.8 * _GRID_AREA_IN[3]
+
+
+def test_worst_patches_column_compares_with_the_measurement_itself() -> None:
+    from tunespec.app.report.tables import _worst_patches_table
+
+    errors = {"A1": 0.001, "A2": 0.003, "A3": 0.002}
+    t = _worst_patches_table(ReportData(table1_patches=errors))
+    assert t is not None and "paper" not in " ".join(t.header)
+    assert [r[2] for r in t.rows] == ["1.50", "1.00", "0.50"]  # over the mean 0.002
+
+
+def test_led_spectra_are_shown_as_radiance(report: ReportData) -> None:
+    from dataclasses import replace
+
+    from tunespec.app.report.data import RADIANCE_UNIT, led_radiance
+
+    leds = report.illuminants
+    assert leds is not None
+    assert led_radiance(report) == (leds, None)  # exposures unknown: as given
+    exposures = {n: 2.0 * (k + 1) for k, n in enumerate(leds.names)}
+    shown, unit = led_radiance(replace(report, illuminant_exposures_s=exposures))
+    assert unit == RADIANCE_UNIT
+    np.testing.assert_allclose(shown.values[1], leds.values[1] / 4.0)
+    fig = dict(report_figures(replace(report, illuminant_exposures_s=exposures)))
+    assert (
+        fig["light_camera"].axes[0].get_ylabel()
+        == f"spectral radiance ({RADIANCE_UNIT})"
+    )
