@@ -429,8 +429,9 @@ def verdict(report: ReportData) -> tuple[str, str] | None:
     """``(outcome, why)``, ``outcome`` one of :data:`VERDICTS`, or ``None`` without
     Table 1 or the threshold.
 
-    Without a self-check: ``PASS`` or ``FAIL`` from Table 1's RGB mean against the
-    threshold. With one (:mod:`tunespec.core.selfcheck`), ``PASS`` needs Table 1
+    Without a self-check: ``FAIL`` from Table 1's RGB mean over the threshold, else
+    ``PASS with warnings`` (Table 1 alone cannot pass: no left-out patches were
+    predicted and no residuals checked against the noise model). With one (:mod:`tunespec.core.selfcheck`), ``PASS`` needs Table 1
     *and* the prediction of the patches a second calibration left out within the
     threshold, *and* no finding of the self-check (residuals against the noise
     model, the LED corrections, the light's reading noise); a prediction over the
@@ -448,7 +449,12 @@ def verdict(report: ReportData) -> tuple[str, str] | None:
             f"Table 1 RGB mean error {mean:.4f} of full scale is "
             f"{'within' if ok else 'over'} the threshold {limit:.4f}"
         )
-        return ("PASS" if ok else "FAIL"), why
+        if not ok:
+            return "FAIL", why
+        return "PASS with warnings", (
+            f"{why}; but: no self-check of the calibration (no left-out patches "
+            "predicted, no residual check against the noise model)"
+        )
     over = [] if ok else [f"Table 1 RGB mean error {mean:.4f}"]
     within = [f"Table 1 RGB mean error {mean:.4f}"] if ok else []
     findings = _self_check_findings(checked)

@@ -324,7 +324,13 @@ def test_summary_verdict_per_patch_errors_and_provenance(
         "FAIL",
         "Table 1 RGB mean error 0.0021 of full scale is over the threshold 0.0020",
     )
-    assert verdict(replace(full, threshold_rgb_mean=0.005))[0] == "PASS"
+    # Table 1 alone never passes outright: the self-check is missing (issue 27)
+    assert verdict(replace(full, threshold_rgb_mean=0.005)) == (
+        "PASS with warnings",
+        "Table 1 RGB mean error 0.0021 of full scale is within the threshold 0.0050; "
+        "but: no self-check of the calibration (no left-out patches predicted, no "
+        "residual check against the noise model)",
+    )
     html_path, pdf_path = write_report(tmp_path, full)
     text = html_path.read_text(encoding="utf-8")
     assert "<b>FAIL</b>" in text
