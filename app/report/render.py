@@ -249,6 +249,9 @@ _LINES_PER_PAGE = 84
 #: Marks a table's title among the lines of a flowed page.
 _TITLE_MARK = "\x00"
 _WRAP = 110
+#: A table of at least this many lines may start on a page with room left and go
+#: on on the next.
+_SPLIT_LINES = 30
 
 
 def _text_table(t: _Table) -> list[str]:
@@ -386,16 +389,21 @@ def _draw_table(
 
 
 def _flow_pages(title: str, tables: Sequence[_Table]) -> Iterator[Figure]:
-    """Tables flowed onto A4 pages: a table that fits on a page is not split, a
-    longer one is split between rows, its header repeated."""
+    """Tables flowed onto A4 pages: a short table that fits on a page is not split;
+    a long one (:data:`_SPLIT_LINES`) that does not fit the rest of a page with
+    room left, or one longer than a page, is split between rows, its header
+    repeated (no page left half empty before a long table)."""
     pages: list[list[str]] = [[]]
     for t in tables:
         lines = _text_table(t)
         lines[0] = _TITLE_MARK + lines[0]  # drawn as a heading
         room = _LINES_PER_PAGE - len(pages[-1])
-        if len(lines) > room and len(lines) <= _LINES_PER_PAGE:
+        split = len(lines) > _LINES_PER_PAGE or (
+            len(lines) > room and len(lines) >= _SPLIT_LINES and room >= 20
+        )
+        if len(lines) > room and not split:
             pages.append([])
-        elif len(lines) > _LINES_PER_PAGE:
+        elif split:
             head, body = lines[:4], lines[4:]
             while body:
                 room = _LINES_PER_PAGE - len(pages[-1]) - len(head)

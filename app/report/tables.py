@@ -130,7 +130,8 @@ def _table1_patch_table(report: ReportData) -> _Table | None:
     return _Table(
         "Table 1 per patch (RGB error, mean over the LEDs, full scale)",
         ("Patch", "Error") * 3,
-        _side_by_side([(k, f"{v:.4f}") for k, v in errors.items()]),
+        # read across: a page break between rows keeps the order
+        _side_by_side([(k, f"{v:.4f}") for k, v in errors.items()], down=False),
     )
 
 
@@ -194,15 +195,16 @@ def _instruments_table(report: ReportData) -> _Table | None:
 
 
 def _side_by_side(
-    pairs: Sequence[tuple[str, str]], per_row: int = 3
+    pairs: Sequence[tuple[str, str]], per_row: int = 3, *, down: bool = True
 ) -> tuple[tuple[str, ...], ...]:
-    """(name, value) pairs in ``per_row`` column pairs, read down, then across."""
+    """(name, value) pairs in ``per_row`` column pairs, read down, then across
+    (``down``), or across, then down."""
     n_rows = math.ceil(len(pairs) / per_row)
     rows = []
     for r in range(n_rows):
         cells: list[str] = []
         for c in range(per_row):
-            k = c * n_rows + r
+            k = c * n_rows + r if down else r * per_row + c
             cells += list(pairs[k]) if k < len(pairs) else ["", ""]
         rows.append(tuple(cells))
     return tuple(rows)
@@ -243,7 +245,12 @@ def _budget_table(budget: Mapping[str, Mapping[str, float]]) -> _Table:
     )
     return _Table(
         "Uncertainty budget",
-        ("Term", "Share of u(L*)²", "Median u(L*) alone", "Share of u(reflectance)²"),
+        (
+            "Term",
+            "Share of u(L*)²",
+            "Median u(L*) alone (L* units)",
+            "Share of u(reflectance)²",
+        ),
         rows,
         note="Variances add: each share is the term's part of the summed variance "
         "over the sample's patches (and wavelengths). Prior mismatch: what the LEDs "
@@ -273,7 +280,7 @@ def _table2(stats: ReflectanceStats | Mapping[str, Any]) -> _Table:
     rows.append(("paper average", f"{de:.2f}", f"{rms:.4f}"))
     return _Table(
         "Table 2: reflectance accuracy",
-        ("Patch", "CIEDE2000 [D50]", "Spectral RMS"),
+        ("Patch", "CIEDE2000 [D50]", "Spectral RMS (reflectance factor)"),
         tuple(rows),
         "CIE 1931 2° observer, CIE D50, ASTM E308, ICC D50 white. Paper: Table 2, "
         "eight Neugebauer primaries of a 3D printer.",
@@ -369,8 +376,6 @@ def _result_tables(report: ReportData) -> list[_Table]:
     ]
     if report.table2 is not None:
         tables.append(_table2(report.table2))
-    if report.chart_choice is not None:
-        tables.append(_chart_choice_table(report.chart_choice))
     if (
         report.lab is not None
         and report.lab_std is not None
@@ -418,6 +423,8 @@ def _result_tables(report: ReportData) -> list[_Table]:
                 f"uncertainty; common offset {corr.common_shift_nm:+.2f} nm.",
             )
         )
+    if report.chart_choice is not None:  # the method's background: last
+        tables.append(_chart_choice_table(report.chart_choice))
     return tables
 
 

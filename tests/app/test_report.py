@@ -490,3 +490,20 @@ def test_led_spectra_are_shown_as_radiance(report: ReportData) -> None:
         fig["light_camera"].axes[0].get_ylabel()
         == f"spectral radiance ({RADIANCE_UNIT})"
     )
+
+
+def test_a_long_table_fills_the_page_before_it() -> None:
+    """No half-empty page before a long table: it starts where room is left."""
+    from tunespec.app.report.render import _flow_pages
+    from tunespec.app.report.tables import _Table
+
+    short = _Table("A", ("k", "v"), tuple((f"a{i}", "1") for i in range(40)))
+    long = _Table("B", ("k", "v"), tuple((f"b{i}", "2") for i in range(100)))
+    # 46 + 106 lines at 84 a page: two pages (three if B started on a new one)
+    assert len(list(_flow_pages("Results", [short, long]))) == 2
+    # a short table still moves whole to the next page
+    first = _Table("X", ("k", "v"), tuple((f"x{i}", "1") for i in range(70)))
+    small = _Table("C", ("k", "v"), tuple((f"c{i}", "3") for i in range(15)))
+    pages = list(_flow_pages("Results", [first, small]))
+    text = ["\n".join(x.get_text() for x in fig.texts) for fig in pages]
+    assert len(pages) == 2 and "c0" not in text[0] and "c14" in text[1]
