@@ -151,4 +151,6 @@ def test_demo_command_prints_both_tables(tmp_path, capsys) -> None:
     assert prov["chart"] == "ColorChecker SG" and prov["chart_serial"] == ""
     assert [i["serial_source"] for i in prov["instruments"]] == ["device"] * 3
     assert prov["settings"]["sensitivity method"] == "bayes"
+    light = prov["light_status"]  # the simulated light's own status
+    assert float(light["light source case temperature at the run's start (°C)"]) > 15
     assert json.loads((out / "record.json").read_text())["operator"] == "Kim"

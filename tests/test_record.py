@@ -16,6 +16,7 @@ from tunespec.app.pipeline.record import (
     MeasurementRecord,
     chart_reference,
     instrument_rows,
+    light_status_items,
     read_record,
     record_from_mapping,
     record_summary,
@@ -153,3 +154,24 @@ def test_the_report_shows_the_instruments_with_their_sources(tmp_path) -> None:
     assert "<td>Camera</td><td>EOS 5D Mark III</td><td>C-9 (device)</td>" in html
     # no record given (a caller of the library): no record section
     assert "Measurement record" not in render_html(ReportData())
+
+
+def test_the_light_says_its_temperature_and_warm_up_if_it_can() -> None:
+    from tunespec.devices.protocols import DeviceError, LightStatus
+
+    class Light:
+        def __init__(self, status):
+            self._status = status
+
+        def status(self):
+            if isinstance(self._status, Exception):
+                raise self._status
+            return self._status
+
+    items = light_status_items(Light(LightStatus(True, 31.25, 1800.0)))
+    assert items == {
+        "light source case temperature at the run's start (°C)": "31.2",
+        "light source on for, at the run's start (min)": "30.0",
+    }
+    assert light_status_items(Light(DeviceError("no reply"))) == {}
+    assert light_status_items(object()) == {}

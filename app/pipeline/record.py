@@ -33,6 +33,7 @@ __all__ = [
     "MeasurementRecord",
     "chart_reference",
     "instrument_rows",
+    "light_status_items",
     "read_record",
     "record_from_mapping",
     "record_summary",
@@ -317,6 +318,32 @@ def instrument_rows(
         }
     )
     return rows
+
+
+def light_status_items(light: Any) -> dict[str, str]:
+    """What the light source says of itself now (its case temperature, how long it
+    has been on: the warm-up), for the report's provenance; ``{}`` if it cannot
+    say (no ``status``, or the query failed: the record is not worth a failed run).
+    """
+    import math
+
+    from tunespec.core.errors import TuneSpecError
+    from tunespec.devices.protocols import DeviceError
+
+    try:
+        status = light.status()
+    except (AttributeError, NotImplementedError, OSError, DeviceError, TuneSpecError):
+        return {}
+    out = {}
+    temperature = float(getattr(status, "temperature_c", float("nan")))
+    if math.isfinite(temperature):
+        out["light source case temperature at the run's start (°C)"] = (
+            f"{temperature:.1f}"
+        )
+    on_s = float(getattr(status, "on_time_s", float("nan")))
+    if math.isfinite(on_s):
+        out["light source on for, at the run's start (min)"] = f"{on_s / 60:.1f}"
+    return out
 
 
 def chart_reference(record: MeasurementRecord, layout: Any = None) -> str:

@@ -43,6 +43,7 @@ from tunespec.app.pipeline.plan import (
 )
 from tunespec.app.pipeline.record import (
     MeasurementRecord,
+    light_status_items,
     record_summary,
     update_record,
 )
@@ -441,6 +442,7 @@ def _run_on(
     folder = MeasurementFolder.at(plan.out_dir)
     _write_plan(folder, plan)
     record = update_record(folder.root, plan.record)
+    light_state = light_status_items(bench.light)  # its warm-up, before capturing
     # a simulated bench is opened showing the chart; hardware shows what the
     # operator puts there (the stage asks)
     chart_session, chart = _capture_and_process(
@@ -496,7 +498,7 @@ def _run_on(
             settings=settings,
             warnings=warnings,
             report=plan.report,
-            provenance=_provenance(folder, plan, bench),
+            provenance={**_provenance(folder, plan, bench), **light_state},
             sessions={"chart": folder.chart_dir, "sample": folder.sample_dir},
             input_files=plan.input_files,
             threshold_rgb_mean=DEFAULT_THRESHOLD_RGB_MEAN,
@@ -521,9 +523,15 @@ def _run_on(
         timings_s=dict(hooks.stages.timings_s),
         warnings=warnings,
         truth=truth,
-        provenance=record_summary(
-            record, chart_session.devices, chart_layout=chart.layout, settings=settings
-        ),
+        provenance={
+            **record_summary(
+                record,
+                chart_session.devices,
+                chart_layout=chart.layout,
+                settings=settings,
+            ),
+            "light_status": light_state,
+        },
     )
     files["summary_json"] = folder.write_summary(result.summary())
     report(progress, 1.0)
