@@ -163,8 +163,11 @@ def render_html(
     ]
     record = [x for x in (_record_table(report), _instruments_table(report)) if x]
     if record:
-        parts.append("<h2>Measurement record</h2>")
-        parts += [_html_table(x) for x in record]
+        parts.append("<h2>Measurement record</h2>")  # the first table's heading
+        parts += [
+            _html_table(replace(record[0], title="")),
+            *map(_html_table, record[1:]),
+        ]
     parts += _html_summary(report, flags)
     captions = {
         "light_camera": "LED spectra as the light source's spectroradiometer "

@@ -88,7 +88,7 @@ def _key_numbers(report: ReportData) -> _Table:
         rows.append(("Table 2 max. CIEDE2000", f"{d['max']['delta_e00']:.2f}", "-"))
         rows.append(
             (
-                "Table 2 mean spectral RMS",
+                "Table 2 mean spectral RMS (reflectance factor)",
                 f"{d['average']['spectral_rms']:.4f}",
                 f"{rms:.4f}",
             )
