@@ -222,11 +222,11 @@ class Calibration:
             The side file is missing (and ``without_side_file`` not set), either
             file is malformed, or the sensitivities are in relative units.
         """
-        from tunespec.core.limits import read_json
         from tunespec.core.io.export import (
             parse_sensitivity_meta,
             sensitivity_meta_path,
         )
+        from tunespec.core.limits import read_json
 
         path = Path(path)
         if path.suffix.lower() == ".json" and path.is_file():

@@ -957,6 +957,7 @@ def export_job(
     Results restored from disk lack the processed sessions; they are recomputed
     from the sessions with the corners used then.
     """
+    from tunespec.app.pipeline.record import read_record
     from tunespec.app.pipeline.steps import calibrate, estimate, export
     from tunespec.devices.registry import layout_reflectances
 
@@ -1023,6 +1024,7 @@ def export_job(
         sessions={"chart": folder / CHART_DIR, "sample": folder / SAMPLE_DIR},
         input_files=[folder / MEASUREMENT_FILE, *input_files],
         threshold_rgb_mean=calibration.threshold,
+        record=read_record(folder),  # the "Measurement record..." dialog's fields
     )
     if progress is not None:
         progress(1.0)
