@@ -20,8 +20,11 @@ from tunespec.app import api
 from tunespec.app.cli import main
 from tunespec.core.datasets import load_camera, load_colorchecker_sg, load_led_set
 from tunespec.core.errors import InputError
-from tunespec.core.responses import Responses, write_responses_csv
-from tunespec.core.spectra import Grid, Spectra, read_spectra_csv, write_spectra_csv
+from tunespec.core.io.responses_csv import write_responses_csv
+from tunespec.core.io.spectral import read_spectra_csv
+from tunespec.core.io.spectral_csv import write_spectra_csv
+from tunespec.core.responses import Responses
+from tunespec.core.spectra import Grid, Spectra
 
 NOTEBOOK = Path(__file__).resolve().parents[1] / "docs" / "api-example.ipynb"
 GRID = Grid(400.0, 700.0, 10.0)
@@ -150,8 +153,8 @@ def test_extract_is_the_extract_command(tmp_path) -> None:
     """The shipped DNG of a ColorChecker: the same responses as ``tunespec extract``
     writes, the reference given as colour-science spectra or the layout's own."""
     from tunespec.core.datasets import resource_path
+    from tunespec.core.io.responses_csv import read_responses_csv
     from tunespec.core.io.spectral import read_spectral
-    from tunespec.core.responses import read_responses_csv
 
     dng = Path(__file__).parent / "data" / "tinydng_colorchart.dng"
     out = tmp_path / "responses.csv"
