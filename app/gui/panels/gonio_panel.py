@@ -136,6 +136,11 @@ class GonioPanel(QWidget):
         self.table.horizontalHeader().setStretchLastSection(True)
 
         self.patch_combo = QComboBox()
+        self._build_plots()
+        self._lay_out(form, buttons)
+        self._connect()
+
+    def _build_plots(self) -> None:
         self.spectrum_plot = pg.PlotWidget(background="w")
         self.spectrum_plot.showGrid(x=True, y=True, alpha=0.25)
         self.spectrum_plot.getAxis("bottom").enableAutoSIPrefix(False)
@@ -177,6 +182,7 @@ class GonioPanel(QWidget):
             "(±1.96 u); L*a*b*: bars ±1.96 u"
         )
 
+    def _lay_out(self, form: QFormLayout, buttons: QHBoxLayout) -> None:
         plots = QHBoxLayout()
         plots.addWidget(self.spectrum_plot, 1)
         plots.addWidget(self.lab_plot, 1)
@@ -193,6 +199,7 @@ class GonioPanel(QWidget):
         layout.addLayout(plots, 3)
         layout.addWidget(self.legend_label)
 
+    def _connect(self) -> None:
         self.poll_timer = QTimer(self)
         self.poll_timer.setInterval(300)
         self.poll_timer.timeout.connect(self._on_poll_timer_timeout)
