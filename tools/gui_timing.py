@@ -8,10 +8,15 @@ same for the background imports the window starts with, which it waits for)::
     python tools/gui_timing.py                      # virtual time, 1536x1024
     python tools/gui_timing.py --all --repeat 3      # every step, 3 runs
     python tools/gui_timing.py --realtime --exposure 0.5
+    python tools/gui_timing.py --why                 # what the GUI thread ran in stalls
 
 With ``--repeat N`` every step's stall is given as the median and the largest of N
 runs, each in a fresh process as the GUI starts (on a machine shared with other
 work a single run is noisy).
+
+``--why`` samples the GUI thread's stack (every 2 ms, from a thread of its own)
+while the event loop has not ticked for 20 ms, and prints per step the places of
+this project (and pyqtgraph) seen most in those stalls: where to look.
 
 ``--realtime`` waits the exposures as the real camera would (``--exposure`` fixes
 them; the default metering picks up to 30 s per LED).
@@ -64,15 +69,21 @@ def _timed_run(app: Any, args: argparse.Namespace, tmp: Path) -> tuple[list, Any
     timer = QTimer()
     timer.setInterval(10)
     timer.timeout.connect(on_tick)
+    seen: dict[str, dict[str, int]] = {}
+    sampling = {"step": "", "on": False}
+    if args.why:
+        _start_sampler(last, seen, sampling)
 
     def measure(title: str, start: Any, running: Any) -> tuple[str, float, float]:
         last[0], longest[0] = time.perf_counter(), 0.0
         timer.start()
+        sampling.update(step=title, on=True)
         t0 = time.perf_counter()
         start()
         while running():
             app.processEvents()
             time.sleep(0.002)
+        sampling["on"] = False
         timer.stop()
         return title, time.perf_counter() - t0, 1000 * longest[0]
 
@@ -98,7 +109,51 @@ def _timed_run(app: Any, args: argparse.Namespace, tmp: Path) -> tuple[list, Any
         if page.state != "done":
             print(page.result_label.text())
             break
+    for step, places in seen.items():
+        top = sorted(places.items(), key=lambda kv: -kv[1])[:6]
+        print(f"stalls in {step}: " + "; ".join(f"{n}x {w}" for w, n in top))
     return rows, window
+
+
+def _start_sampler(last: list[float], seen: dict, sampling: dict) -> None:
+    """A daemon thread: while the event loop has not ticked for 20 ms, note the
+    GUI thread's innermost frames of this project and pyqtgraph (``--why``)."""
+    import threading
+    import traceback
+
+    main = threading.main_thread().ident
+
+    def sample() -> None:
+        while True:
+            time.sleep(0.002)
+            if not sampling["on"] or time.perf_counter() - last[0] < 0.02:
+                continue
+            frame = sys._current_frames().get(main)
+            if frame is None:
+                continue
+            stack = traceback.extract_stack(frame)
+            ours = [
+                f"{Path(f.filename).name}:{f.lineno} {f.name}"
+                for f in stack
+                if "tunespec" in f.filename
+                or "/app/" in f.filename
+                or "/core/" in f.filename
+                or "pyqtgraph" in f.filename
+            ]
+            inner = stack[-1]
+            where = " < ".join(reversed(ours[-3:]))
+            if (
+                not ours
+                or ours[-1]
+                != f"{Path(inner.filename).name}:{inner.lineno} {inner.name}"
+            ):
+                where = f"{Path(inner.filename).name}:{inner.lineno} {inner.name}" + (
+                    f" < {where}" if where else ""
+                )
+            step = seen.setdefault(sampling["step"], {})
+            step[where] = step.get(where, 0) + 1
+
+    threading.Thread(target=sample, name="stall-sampler", daemon=True).start()
 
 
 def _run_in_child(argv: list[str]) -> list[list[Any]]:
@@ -126,6 +181,9 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument(
         "--repeat", type=int, default=1, help="runs, each in a fresh process (1)"
+    )
+    parser.add_argument(
+        "--why", action="store_true", help="sample the GUI thread's stack in stalls"
     )
     parser.add_argument("--rows-json", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)

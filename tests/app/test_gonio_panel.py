@@ -153,3 +153,34 @@ def test_the_simulated_gonio_bench_runs_from_the_panel(qtbot, tmp_path):
     _, y = panel.spectrum_curve.getData()
     np.testing.assert_allclose(y, disk["reflectance"][0, 1])
     assert np.all(np.isfinite(disk["u_lab"])) and np.all(disk["u_lab"] > 0)
+
+
+def test_devices_are_passed_by_spec_and_all_are_needed(qtbot, monkeypatch, tmp_path):
+    got = {}
+
+    def run(out, *, plan=None, n_geometries=14, devices=None, seed=0,
+            progress=None, should_stop=None):  # fmt: skip
+        got.update(out=out, plan=plan, devices=devices)
+        raise InputError("stop here")
+
+    monkeypatch.setattr(gonio_view, "run_gonio_plan", run)
+    panel = GonioPanel()
+    panel.worker_class = Worker
+    qtbot.addWidget(panel)
+    panel.bench_combo.setCurrentIndex(1)
+    assert not panel.device_rows.isHidden() and not panel.n_spin.isEnabled()
+    panel.folder_edit.setText(str(tmp_path / "s"))
+    panel.plan_edit.setText("plan.json")
+    assert panel.start() is None and "Devices need" in panel.status.text()
+    panel.light_edit.setText("cal1+socket://localhost:7001")
+    panel.gonio_edit.setText("zaber+socket://localhost:7002")
+    panel.sens_edit.setText("cal.csv")
+    panel.layout_edit.setText("sample.json")
+    with qtbot.waitSignal(panel.finished, timeout=10_000):
+        panel.start()
+    assert got["plan"] == "plan.json" and got["out"] == tmp_path / "s"
+    assert got["devices"] == gonio_view.DeviceSpecs(
+        "cal1+socket://localhost:7001", "sim", "zaber+socket://localhost:7002",
+        "cal.csv", "sample.json",
+    )  # fmt: skip
+    assert panel.status.text() == "gonio run failed: stop here"

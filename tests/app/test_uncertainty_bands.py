@@ -42,3 +42,18 @@ def test_reflectance_band_follows_the_selected_patch(qtbot) -> None:
     assert "95 %" in plot.title_label.text()
     plot.set_data(est)
     assert "95 %" not in plot.bands
+
+
+def test_a_band_of_the_same_name_is_updated_in_place(qtbot) -> None:
+    from tunespec.app.gui.plots.spectra_plot import SpectraPlot
+
+    plot = SpectraPlot("bands", "reflectance factor")
+    qtbot.addWidget(plot)
+    wl = np.arange(400.0, 701.0, 10.0)
+    first = plot.set_band("R 95 %", wl, wl * 0, wl * 0 + 1)
+    again = plot.set_band("R 95 %", wl, wl * 0 + 0.2, wl * 0 + 0.7, colour="r")
+    assert again is first and list(plot.bands) == ["R 95 %"]
+    lo, hi = again.curves_
+    np.testing.assert_allclose(lo.getData()[1], 0.2)
+    np.testing.assert_allclose(hi.getData()[1], 0.7)
+    assert again.brush().color().red() == 255

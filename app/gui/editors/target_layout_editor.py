@@ -575,11 +575,13 @@ class TargetLayoutEditor(QWidget):
             )
         )
 
-    def _redraw(self) -> None:
-        lay = self._layout
+    def _clear_names(self) -> None:
         for item in self.name_items:
             self.frame_plot.view_box.removeItem(item)
         self.name_items.clear()
+
+    def _redraw(self) -> None:
+        lay = self._layout
         try:
             if lay.corners_px is None:
                 raise TuneSpecError("no corners")
@@ -597,20 +599,25 @@ class TargetLayoutEditor(QWidget):
                 self.selected_item,
             ):
                 item.setData([], [])
+            self._clear_names()
             self._quads_px = None
             return
         self._quads_px = patches
         self.grid_item.setData(*_polylines(patches))
         self.roi_item.setData(*_polylines(rois))
         self.outline_item.setData(*_polylines(outline))
-        if self.names_check.isChecked():
-            centres = patches.mean(axis=1)
-            for name, (x, y) in zip(lay.patch_names, centres, strict=True):
+        names = list(lay.patch_names) if self.names_check.isChecked() else []
+        if [t.textItem.toPlainText() for t in self.name_items] != names:
+            # made again only when the names change: a chart's 140 labels cost the
+            # GUI thread tens of ms to make (gui_timing --why), moving them far less
+            self._clear_names()
+            for name in names:
                 text = pg.TextItem(name, color=(255, 255, 255), anchor=(0.5, 1.3))
-                text.setPos(x, y)
                 text.setZValue(6)
                 self.frame_plot.view_box.addItem(text)
                 self.name_items.append(text)
+        for text, (x, y) in zip(self.name_items, patches.mean(axis=1), strict=False):
+            text.setPos(x, y)
         self._redraw_selection()
 
     def _redraw_selection(self) -> None:

@@ -133,13 +133,22 @@ class GonioPanel(QWidget):
         self.table.setSelectionBehavior(QTableWidget.SelectionBehavior.SelectRows)
         self.table.setSelectionMode(QTableWidget.SelectionMode.SingleSelection)
         self.table.setEditTriggers(QTableWidget.EditTrigger.NoEditTriggers)
+        self.table.horizontalHeader().setStretchLastSection(True)
 
         self.patch_combo = QComboBox()
+        self._build_plots()
+        self._lay_out(form, buttons)
+        self._connect()
+
+    def _build_plots(self) -> None:
         self.spectrum_plot = pg.PlotWidget(background="w")
         self.spectrum_plot.showGrid(x=True, y=True, alpha=0.25)
         self.spectrum_plot.getAxis("bottom").enableAutoSIPrefix(False)
         self.spectrum_plot.setLabel("bottom", "wavelength", units="nm")
+        self.spectrum_plot.getAxis("left").enableAutoSIPrefix(False)
         self.spectrum_plot.setLabel("left", "reflectance factor")
+        self.spectrum_plot.setXRange(380.0, 730.0, padding=0.02)
+        self.spectrum_plot.setYRange(0.0, 1.0, padding=0.02)
         self.spectrum_curve = self.spectrum_plot.plot(pen=pg.mkPen("k", width=2))
         self.spectrum_upper = self.spectrum_plot.plot(pen=pg.mkPen(None))
         self.spectrum_lower = self.spectrum_plot.plot(pen=pg.mkPen(None))
@@ -152,7 +161,10 @@ class GonioPanel(QWidget):
         self.lab_plot.showGrid(x=True, y=True, alpha=0.25)
         self.lab_plot.getAxis("bottom").enableAutoSIPrefix(False)
         self.lab_plot.setLabel("bottom", "theta_r (deg), plane of incidence")
+        self.lab_plot.getAxis("left").enableAutoSIPrefix(False)
         self.lab_plot.setLabel("left", "CIELAB (D50)")
+        self.lab_plot.setXRange(0.0, 70.0, padding=0.02)
+        self.lab_plot.setYRange(-50.0, 100.0, padding=0.02)
         self.lab_plot.addLegend(offset=(-10, 10))
         self.lab_curves: dict[str, Any] = {}
         self.lab_bars: dict[str, Any] = {}
@@ -170,6 +182,7 @@ class GonioPanel(QWidget):
             "(±1.96 u); L*a*b*: bars ±1.96 u"
         )
 
+    def _lay_out(self, form: QFormLayout, buttons: QHBoxLayout) -> None:
         plots = QHBoxLayout()
         plots.addWidget(self.spectrum_plot, 1)
         plots.addWidget(self.lab_plot, 1)
@@ -186,6 +199,7 @@ class GonioPanel(QWidget):
         layout.addLayout(plots, 3)
         layout.addWidget(self.legend_label)
 
+    def _connect(self) -> None:
         self.poll_timer = QTimer(self)
         self.poll_timer.setInterval(300)
         self.poll_timer.timeout.connect(self._on_poll_timer_timeout)
@@ -299,6 +313,8 @@ class GonioPanel(QWidget):
         self.patch_combo.addItems(result["patches"])
         self.patch_combo.blockSignals(False)
         self.refresh_geometries()
+        for plot in (self.spectrum_plot, self.lab_plot):  # from the empty ranges
+            plot.enableAutoRange()
         if self.table.rowCount() and not self.table.selectedItems():
             self.table.selectRow(0)
         self._on_selection_changed()

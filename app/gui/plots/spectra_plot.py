@@ -119,11 +119,17 @@ class SpectraPlot(QWidget):
         (the title says what they are).
         """
         x = np.asarray(wavelength_nm, dtype=float)
-        lo = pg.PlotDataItem(x, np.asarray(lower, dtype=float))
-        hi = pg.PlotDataItem(x, np.asarray(upper, dtype=float))
-        self.remove_band(name)
         brush = pg.mkColor(colour)
         brush.setAlpha(alpha)
+        band = self.bands.get(name)
+        if band is not None:  # in place: new items cost the GUI thread far more
+            lo, hi = band.curves_
+            lo.setData(x, np.asarray(lower, dtype=float))
+            hi.setData(x, np.asarray(upper, dtype=float))
+            band.setBrush(brush)
+            return band
+        lo = pg.PlotDataItem(x, np.asarray(lower, dtype=float))
+        hi = pg.PlotDataItem(x, np.asarray(upper, dtype=float))
         band = pg.FillBetweenItem(lo, hi, brush=brush)
         band.setZValue(-10)
         band.curves_ = (lo, hi)  # keep the edges alive with the band
