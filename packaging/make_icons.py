@@ -126,7 +126,7 @@ def main() -> None:
         draw_png(n).save(OUT / f"tunespec-{n}.png", optimize=True)
     draw_png(256).save(OUT / "tunespec.png", optimize=True)
     master.save(OUT / "tunespec.ico", sizes=[(n, n) for n in SIZES_ICO])
-    print(f"icons written to {OUT}")  # noqa: T201 - a developer script
+    print(f"icons written to {OUT}")
 
 
 if __name__ == "__main__":
