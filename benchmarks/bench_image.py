@@ -19,7 +19,7 @@ CFA DNGs) into ``--work`` (kept for later runs). Then, side by side in one run:
   peak resident set size (goal: at most 1.5x the decode + write floor, under 2 GB);
 - **Wiener stage vs. matrix product**: the per-pixel Eq. 5 of one block (with one
   BLAS thread, as the pipeline's tasks run it)
-  (:data:`~tunespec.core.image_session.BLOCK_PIXELS` pixels as rows, 66
+  (:data:`~tunespec.app.pipeline.image_session.BLOCK_PIXELS` pixels as rows, 66
   responses, 61 wavelengths; sorting by bin, one product per bin, unsorting)
   against ``numpy.matmul`` of the same float32 shapes in one product, on this machine (goal: the stage at >= 50 % of the product's
   throughput);
@@ -147,9 +147,9 @@ def _wiener_vs_matmul() -> dict[str, float]:
     """The binned Wiener stage of one block against one float32 product."""
     import numpy as np
 
+    from tunespec.app.pipeline.image_session import BLOCK_PIXELS
     from tunespec.core.datasets import load_colorchecker_sg
     from tunespec.core.image import _apply_bins, build_wiener_bank, estimate_pixels
-    from tunespec.core.image_session import BLOCK_PIXELS
 
     grid, F, white, noise = _synthetic_system()
     sg = load_colorchecker_sg(grid).values

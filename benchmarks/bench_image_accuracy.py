@@ -55,8 +55,8 @@ def _capture(
 
     from tunespec.app.cli import main as cli
     from tunespec.app.pipeline.plan import ESTIMATION_GRID as GRID
+    from tunespec.app.pipeline.processing import process_session, write_processed
     from tunespec.core.io.session import Session
-    from tunespec.core.processing import process_session, write_processed
     from tunespec.devices.capture import capture, new_session
     from tunespec.devices.registry import open_bench
     from tunespec.devices.sim.scene import default_regions
@@ -96,12 +96,12 @@ def _evaluate(work: Path, cap: dict, label: str, extra: list[str]) -> None:
 
     from tunespec.app.cli import main as cli
     from tunespec.app.pipeline.plan import ESTIMATION_GRID as GRID
+    from tunespec.core.calibration import correct_illuminants_from_meta
     from tunespec.core.colorimetry import delta_e_2000, lab_d50
     from tunespec.core.datasets import load_colorchecker_sg, read_sensitivities
     from tunespec.core.io.export import read_sensitivity_meta
     from tunespec.core.io.raw import full_to_plane_px
     from tunespec.core.processing import RoiSet
-    from tunespec.core.sensitivity import correct_illuminants_from_meta
     from tunespec.core.wiener import wiener_reflectance
 
     p, sens_csv, mats, pm = cap["processed"], cap["sens"], cap["mats"], cap["pm"]

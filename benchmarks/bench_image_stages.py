@@ -4,7 +4,7 @@ Usage::
 
     python benchmarks/bench_image_stages.py [--resolution 5760x3840] [--work DIR]
 
-Runs the stages of :mod:`tunespec.core.image_session` one after the other in this
+Runs the stages of :mod:`tunespec.app.pipeline.image_session` one after the other in this
 thread (no Dask: the sum of the stages is the work the threads share) on the
 session ``benchmarks/bench_image.py`` captures (the same ``--work`` folder; captured
 here if missing), and prints wall, user and system seconds and minor page faults
@@ -51,7 +51,7 @@ def _timed(owner: Any, name: str, label: str) -> None:
 def _instrument() -> None:
     import zarr
 
-    import tunespec.core.image_session as st
+    import tunespec.app.pipeline.image_session as st
     from tunespec.core.io import image_formats, raw
 
     for owner, name, label in (
@@ -71,7 +71,7 @@ def _instrument() -> None:
 
 def run_stages(session_dir: Path, sensitivities: Path, out: Path) -> np.ndarray:
     """Every stage of one session in this thread; returns the total costs."""
-    import tunespec.core.image_session as st
+    import tunespec.app.pipeline.image_session as st
     from tunespec.app.pipeline import image as pim
     from tunespec.core.io.session import Session
 

@@ -12,7 +12,7 @@ runs). Then, in this process and on the same (page-cached) files:
 
 - **decode**: ``rawpy.imread`` + ``raw_image_visible`` copy of every file, the least
   any raw pipeline must do;
-- **process**: :func:`tunespec.core.processing.process_session` (reads every file
+- **process**: :func:`tunespec.app.pipeline.processing.process_session` (reads every file
   with ``load_raw``, dark subtraction, Eq. 2 flat field, automatic corners, ROI
   statistics of the 140 ColorChecker SG patches).
 
@@ -64,7 +64,7 @@ def _process_in(source: Path | None, session_dir: Path) -> float:
     code = f"""
 import json, time
 from tunespec.core.io.session import Session
-from tunespec.core.processing import process_session
+from tunespec.app.pipeline.processing import process_session
 s = Session.open({str(session_dir)!r})
 process_session(s)  # imports, ROIs rasterised: as the in-process runs are warm
 t0 = time.perf_counter()
@@ -75,8 +75,8 @@ print(json.dumps(time.perf_counter() - t0))
 
 
 def _process(session_dir: Path) -> float:
+    from tunespec.app.pipeline.processing import process_session
     from tunespec.core.io.session import Session
-    from tunespec.core.processing import process_session
 
     t0 = time.perf_counter()
     process_session(Session.open(session_dir))

@@ -42,6 +42,7 @@ from tunespec.core.illuminant_match import (
     illuminant_spd,
     match_illuminant,
 )
+from tunespec.core.io.spectral import read_spectra_csv
 from tunespec.core.sensitivity import estimate_camera_sensitivity
 from tunespec.core.simulate import simulate_capture
 from tunespec.core.single_shot import (
@@ -49,7 +50,7 @@ from tunespec.core.single_shot import (
     optimise_mix_for_camera,
     xyz_transform,
 )
-from tunespec.core.spectra import DEFAULT_GRID, Grid, Spectra, read_spectra_csv
+from tunespec.core.spectra import DEFAULT_GRID, Grid, Spectra
 from tunespec.core.wiener import wiener_reflectance
 
 FINE = Grid(380.0, 730.0, 1.0)

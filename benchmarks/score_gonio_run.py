@@ -23,8 +23,9 @@ import xarray as xr
 
 from tunespec.core.colorimetry import delta_e_2000, lab_d50, xyz_d50, xyz_to_lab_d50
 from tunespec.core.datasets import resource_path
+from tunespec.core.io.spectral import read_spectra_csv
 from tunespec.core.layout import TargetLayout
-from tunespec.core.spectra import DEFAULT_GRID, read_spectra_csv
+from tunespec.core.spectra import DEFAULT_GRID
 
 
 def main() -> None:

@@ -13,7 +13,8 @@ from pathlib import Path
 import numpy as np
 
 from tunespec.core.errors import InputError
-from tunespec.core.spectra import DEFAULT_GRID, Grid, Spectra, read_spectra_csv
+from tunespec.core.io.spectral import read_spectra_csv
+from tunespec.core.spectra import DEFAULT_GRID, Grid, Spectra
 
 __all__ = [
     "DEFAULT_CAMERA",

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from os import PathLike
-from typing import Any
 
 
 class TuneSpecError(Exception):
@@ -93,20 +92,6 @@ def _mb(n_bytes: int) -> str:
 
 class SingularSystemError(TuneSpecError, ArithmeticError):
     """A linear system that cannot be solved (too few or degenerate stimuli)."""
-
-
-def read_text(path: str | PathLike[str]) -> str:
-    """A text file's contents within the limits of :mod:`tunespec.core.limits`."""
-    from tunespec.core.limits import read_text as _read_text
-
-    return _read_text(path)
-
-
-def read_json(path: str | PathLike[str]) -> Any:
-    """A JSON file's contents within the limits of :mod:`tunespec.core.limits`."""
-    from tunespec.core.limits import read_json as _read_json
-
-    return _read_json(path)
 
 
 def check_names(

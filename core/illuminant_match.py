@@ -45,7 +45,8 @@ from numpy.typing import ArrayLike, NDArray
 from tunespec.core.colorimetry import CMFS_NAME, _colour, delta_e_2000
 from tunespec.core.colorimetry import _quiet_colour as _quiet
 from tunespec.core.errors import InputError
-from tunespec.core.spectra import Grid, Spectra, read_spectra_csv
+from tunespec.core.io.spectral import read_spectra_csv
+from tunespec.core.spectra import Grid, Spectra
 
 __all__ = [
     "IlluminantMatch",

@@ -38,8 +38,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tunespec.core.atomic import atomic_write_text
-from tunespec.core.errors import InputError, read_json
-from tunespec.core.limits import dumps_json, valid_name, valid_number
+from tunespec.core.errors import InputError
+from tunespec.core.limits import dumps_json, read_json, valid_name, valid_number
 
 __all__ = [
     "PatchGrid",
@@ -364,18 +364,22 @@ class TargetLayout:
 
     @classmethod
     def load(cls, path: str | PathLike[str]) -> TargetLayout:
-        """A layout from a file: TuneSpec JSON, an ArgyllCMS ``.cht`` template, or
-        the stem of a shipped layout (``"colorchecker_24"``).
+        """A layout from a TuneSpec JSON file or the stem of a shipped layout
+        (``"colorchecker_24"``).
 
         A name with no folder and no suffix that is not a file here is looked up in
-        the shipped ``resources/layouts``; a ``.cht`` file is read as an Argyll
-        template (:func:`tunespec.core.io.cht.read_cht`).
+        the shipped ``resources/layouts``. An ArgyllCMS ``.cht`` template is read by
+        :func:`tunespec.core.io.cht.load_layout`, which takes all three (and which
+        every ``--layout`` option uses).
         """
         path = _shipped_layout(path)
         if path.suffix.lower() == ".cht":
-            from tunespec.core.io.cht import read_cht
-
-            return read_cht(path).to_layout()
+            # the data class imports no reader (core.io.cht imports it)
+            raise InputError(
+                "an ArgyllCMS .cht template, not a tunespec-layout JSON file "
+                "(tunespec.core.io.cht.load_layout reads both)",
+                path=path,
+            )
         d = read_json(path)
         if not isinstance(d, dict):
             raise InputError("expected a JSON object", path=path)

@@ -1,7 +1,7 @@
 """Camera responses per patch and illuminant.
 
 Their long-format CSV is read and written in :mod:`tunespec.core.io.responses_csv`
-(the functions here delegate). CSV columns: ``patch,illuminant,R,G,B`` and optionally ``R_std,G_std,B_std`` (per-pixel
+(``read_responses_csv``, ``write_responses_csv``; this module imports no reader). CSV columns: ``patch,illuminant,R,G,B`` and optionally ``R_std,G_std,B_std`` (per-pixel
 standard deviation inside the patch ROI, as Eq. 6 of the paper uses), ``n_pixels`` and
 ``saturated`` (fraction of ROI pixels at or above the white level). Values are linear,
 dark-corrected and flat-fielded, in units of full scale (1.0 = saturation).
@@ -10,14 +10,13 @@ dark-corrected and flat-fielded, in units of full scale (1.0 = saturation).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from os import PathLike
 
 import numpy as np
 from numpy.typing import NDArray
 
 from tunespec.core.errors import InputError, check_names
 
-__all__ = ["CHANNELS", "Responses", "read_responses_csv", "write_responses_csv"]
+__all__ = ["CHANNELS", "Responses"]
 
 CHANNELS = ("R", "G", "B")
 _STD = tuple(f"{c}_std" for c in CHANNELS)
@@ -105,19 +104,3 @@ def _indices(have: tuple[str, ...], names: list[str] | None, what: str) -> list[
         return list(range(len(have)))
     check_names(names, have, f"{{n}} {what} name(s) not in the responses: {{names}}")
     return [have.index(n) for n in names]
-
-
-def read_responses_csv(path: str | PathLike[str]) -> Responses:
-    """Read a long-format responses CSV
-    (:func:`tunespec.core.io.responses_csv.read_responses_csv`)."""
-    from tunespec.core.io.responses_csv import read_responses_csv as read
-
-    return read(path)
-
-
-def write_responses_csv(responses: Responses, path: str | PathLike[str]) -> None:
-    """Write ``responses`` in long format
-    (:func:`tunespec.core.io.responses_csv.write_responses_csv`)."""
-    from tunespec.core.io.responses_csv import write_responses_csv as write
-
-    write(responses, path)

@@ -60,11 +60,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from tunespec.core.calibration import predict_responses
 from tunespec.core.errors import InputError
 from tunespec.core.metering import reading_noise_rms
 from tunespec.core.progress import ProgressFn, StopFn, check_stop, report
 from tunespec.core.responses import CHANNELS, Responses
-from tunespec.core.sensitivity import SensitivityEstimate, predict_responses
+from tunespec.core.sensitivity import SensitivityEstimate
 from tunespec.core.spectra import Spectra
 from tunespec.core.stats import PredictionStats, prediction_stats, split_patches
 from tunespec.core.uncertainty import (

@@ -23,7 +23,7 @@ so plain least squares amplifies noise; a priori knowledge is needed. Two method
 
 Both return sensitivities on the absolute scale of the inputs, so that
 :func:`~tunespec.core.forward_model.render_rgb` with the given illuminants predicts
-the responses (:func:`predict_responses`).
+the responses (:func:`~tunespec.core.calibration.predict_responses`).
 
 The estimation also finds a wavelength-scale error of the spectroradiometer that
 reported the illuminants, with the chart's known reflectances as the wavelength
@@ -47,9 +47,8 @@ as a method for choosing a good ridge parameter", Technometrics 21 (1979) 215-22
 from __future__ import annotations
 
 import json
-import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -57,6 +56,12 @@ from numpy.typing import NDArray
 from scipy.linalg import eigh, solve_triangular
 from scipy.optimize import minimize_scalar
 
+from tunespec.core.calibration import (
+    Calibration,
+    select_named,
+    shift_values,
+    undo_metering,
+)
 from tunespec.core.datasets import load_camera_database
 from tunespec.core.errors import InputError, SingularSystemError
 from tunespec.core.excess import (
@@ -64,7 +69,6 @@ from tunespec.core.excess import (
     ExcessVariance,
     fit_excess_variance,
 )
-from tunespec.core.forward_model import render_rgb
 from tunespec.core.metering import suppress_meter_floor
 from tunespec.core.progress import ProgressFn, StopFn, check_stop, report
 from tunespec.core.responses import CHANNELS, Responses
@@ -73,13 +77,12 @@ from tunespec.core.sensitivity_bayes import (
     LedCorrection,
     _nnls_quadratic,
     _smoothness_penalty,
-    apply_led_corrections,
     database_roughness,
     fit_bayes,
 )
 from tunespec.core.sensitivity_bayes import _subspace_penalty as _basis_penalty
-from tunespec.core.simulate import check_rgb_sensitivity, check_same_grid
-from tunespec.core.spectra import Grid, Spectra, resampling_matrix
+from tunespec.core.simulate import check_same_grid
+from tunespec.core.spectra import Grid, Spectra
 
 __all__ = [
     "SENSITIVITY_METHODS",
@@ -89,13 +92,8 @@ __all__ = [
     "SMOOTH_RELATIVE_ERROR",
     "SPD_SHIFT_RANGE_NM",
     "SensitivityEstimate",
-    "calibration_from_files",
-    "calibration_from_meta",
-    "correct_illuminants_from_meta",
-    "correct_spd_shift",
     "database_basis",
     "estimate_camera_sensitivity",
-    "predict_responses",
     "stimulus_matrix",
 ]
 
@@ -128,79 +126,9 @@ _RIDGE_RELATIVE = 1e-10
 _MIN_RANK_SMOOTH = 4
 
 
-@dataclass(frozen=True, eq=False)
-class SensitivityEstimate:
-    """Result of :func:`estimate_camera_sensitivity`.
-
-    Parameters
-    ----------
-    sensitivity : Spectra, (3, n_wl)
-        Estimated sensitivities, names ``R, G, B``, on the absolute scale that makes
-        :func:`~tunespec.core.forward_model.render_rgb` with the given illuminants
-        (corrected by ``spd_shift_nm`` if one was fitted) predict the responses
-        (response per power unit and nm).
-    method
-        The method used, a key of :data:`SENSITIVITY_METHODS`.
-    params
-        JSON-friendly details of the fit (components, weights, database size, ...).
-    excluded_patches
-        Patches left out because some of their responses were saturated.
-    spd_shift_nm
-        Wavelength-scale error of the spectroradiometer found by the fit (0 when
-        no shift was fitted, see ``params["spd_shift_fitted"]``): the reported
-        spectra are the true ones moved by this much towards longer wavelengths.
-        ``sensitivity`` then belongs to the *corrected* spectra,
-        :meth:`correct_illuminants`; use those in Eq. 1 and in reflectance
-        estimation.
-    excess
-        The responses' systematic errors beyond the known noise that the chart's
-        residuals show (:func:`~tunespec.core.excess.fit_excess_variance`).
-    """
-
-    sensitivity: Spectra
-    method: str
-    params: dict[str, Any] = field(default_factory=dict)
-    excluded_patches: tuple[str, ...] = ()
-    spd_shift_nm: float = 0.0
-    led_correction: LedCorrection | None = None
-    covariance: NDArray[np.float64] | None = None
-    excess: ExcessVariance | None = None
-
-    @property
-    def std(self) -> NDArray[np.float64] | None:
-        """Standard uncertainty of each sensitivity sample, (3, n_wl), if known."""
-        if self.covariance is None:
-            return None
-        n = self.sensitivity.wavelength_nm.size
-        return np.sqrt(np.maximum(np.diag(self.covariance)[: 3 * n], 0.0)).reshape(3, n)
-
-    def correct_illuminants(self, illuminants: Spectra) -> Spectra:
-        """The illuminant spectra with the fitted metering errors undone.
-
-        First the spectroradiometer's noise floor goes
-        (:func:`~tunespec.core.metering.suppress_meter_floor`, as the calibration saw
-        the spectra). With a per-LED self-calibration (:attr:`led_correction`) each
-        LED it knows is corrected by its own gain and offset and any other spectrum
-        by the common offset; otherwise the fitted common shift is undone
-        (:func:`correct_spd_shift`). Returns ``illuminants`` itself when nothing
-        changes.
-        """
-        return _undo_metering(
-            suppress_meter_floor(illuminants), self.led_correction, self.spd_shift_nm
-        )
-
-
-def _undo_metering(
-    illuminants: Spectra, correction: LedCorrection | None, shift_nm: float
-) -> Spectra:
-    """The one rule that undoes a calibration's metering corrections: the per-LED
-    ones where there are, else the common wavelength shift; ``illuminants`` itself
-    when there is nothing to undo."""
-    if correction is not None:
-        return correction.apply(illuminants)
-    if not shift_nm:
-        return illuminants
-    return correct_spd_shift(illuminants, shift_nm)
+#: The estimator's name for its result: a :class:`~tunespec.core.calibration.Calibration`
+#: (kept because the estimator's callers, the statistics and the self-check use it).
+SensitivityEstimate = Calibration
 
 
 @dataclass(frozen=True)
@@ -225,7 +153,7 @@ class _Problem:
 
     def shifted(self, shift_nm: float) -> _Problem:
         """The same system with the illuminants' wavelength shift undone."""
-        L = _shift_values(self.wavelength_nm, self.L, shift_nm)
+        L = shift_values(self.wavelength_nm, self.L, shift_nm)
         return replace(self, A=stimulus_matrix(L, self.R, self.step_nm), L=L)
 
 
@@ -354,70 +282,6 @@ def database_basis(
     return Vt[:n], float(explained[n - 1])
 
 
-def predict_responses(
-    sensitivity: Spectra,
-    illuminants: Spectra,
-    reflectances: Spectra,
-    patches: Sequence[str] | None = None,
-    illuminant_names: Sequence[str] | None = None,
-) -> Responses:
-    """Responses that Eq. 1 predicts for known stimuli.
-
-    Parameters
-    ----------
-    sensitivity : Spectra, (3, n_wl)
-        Camera sensitivities R, G, B (e.g. ``SensitivityEstimate.sensitivity``).
-    illuminants : Spectra, (n_i, n_wl)
-        Illuminant spectra on the same grid.
-    reflectances : Spectra, (n_p, n_wl)
-        Patch reflectances on the same grid.
-    patches, illuminant_names
-        Which patches and illuminants, in that order (default: all).
-
-    Returns
-    -------
-    Responses
-        Noise-free ``rgb`` (n_p, n_i, 3); no ``rgb_std`` etc.
-
-    Raises
-    ------
-    InputError
-        Unknown names (naming the spectra's source file), different grids.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> from tunespec.core.spectra import Spectra
-    >>> wl = np.array([500.0, 510.0])
-    >>> S = Spectra(wl, np.ones((3, 2)), ("R", "G", "B"))
-    >>> i = Spectra(wl, [[0.01, 0.01]], ("LED",))
-    >>> r = Spectra(wl, [[0.5, 0.5]], ("white",))
-    >>> predict_responses(S, i, r).rgb
-    array([[[0.1, 0.1, 0.1]]])
-    """
-    check_same_grid(reflectances, illuminants, sensitivity)
-    check_rgb_sensitivity(sensitivity)
-    refl = _select(reflectances, patches, "patch(es)")
-    illum = _select(illuminants, illuminant_names, "illuminant(s)")
-    rgb = render_rgb(
-        refl.values, illum.values, sensitivity.values, reflectances.step_nm
-    )
-    return Responses(refl.names, illum.names, rgb)
-
-
-def _select(spectra: Spectra, names: Sequence[str] | None, what: str) -> Spectra:
-    if names is None:
-        return spectra
-    missing = [n for n in names if n not in spectra.names]
-    if missing:
-        shown = ", ".join(missing[:8]) + (" ..." if len(missing) > 8 else "")
-        raise InputError(
-            f"{len(missing)} {what} not found in the spectra: {shown}",
-            path=spectra.meta.get("source"),
-        )
-    return spectra.select(names)
-
-
 def _check_finite(spectra: Spectra, what: str) -> None:
     ok = np.isfinite(spectra.values).all(axis=1)
     if not ok.all():
@@ -433,10 +297,10 @@ def _prepare(
 ) -> _Problem:
     """Validate the inputs and build the system of Eq. 3 (rows patch-major)."""
     check_same_grid(reflectances, illuminants)
-    illum = _select(
+    illum = select_named(
         illuminants, responses.illuminants, "illuminant(s) of the responses"
     )
-    refl = _select(reflectances, responses.patches, "patch(es) of the responses")
+    refl = select_named(reflectances, responses.patches, "patch(es) of the responses")
     _check_finite(illum, "illuminant(s)")
     _check_finite(refl, "reflectance(s)")
     # the reported spectra without their noise floor, as correct_illuminants gives them
@@ -569,179 +433,6 @@ def _estimate_sensitivity_pca(
     return S, params
 
 
-def _shift_values(
-    wavelength_nm: NDArray[np.float64], values: NDArray[np.float64], shift_nm: float
-) -> NDArray[np.float64]:
-    """``values`` (n, n_wl) evaluated at ``wavelength_nm + shift_nm``, >= 0.
-
-    A cubic spline, not linear interpolation: on a 5 nm grid a narrowband LED spans a
-    few samples, and linear interpolation would blur it by more than the shift.
-    Outside the grid the end values are held. The common-shift case of
-    :func:`~tunespec.core.sensitivity_bayes.apply_led_corrections`.
-    """
-    if shift_nm == 0.0:
-        return np.asarray(values, dtype=np.float64)
-    n = np.atleast_2d(values).shape[0]
-    return apply_led_corrections(
-        wavelength_nm, np.atleast_2d(values), np.ones(n), np.full(n, float(shift_nm))
-    )
-
-
-def correct_spd_shift(illuminants: Spectra, spd_shift_nm: float) -> Spectra:
-    """Undo a spectroradiometer's wavelength shift: ``i(l) = reported(l + shift)``.
-
-    Parameters
-    ----------
-    illuminants : Spectra, (n_i, n_wl)
-        Spectra as reported, on an equidistant grid.
-    spd_shift_nm
-        The instrument's shift (reported peaks lie this much too long), e.g.
-        ``SensitivityEstimate.spd_shift_nm``.
-
-    Returns
-    -------
-    Spectra
-        Same names and grid; cubic-spline interpolation, clipped at 0.
-
-    Raises
-    ------
-    InputError
-        If ``spd_shift_nm`` is not finite.
-
-    References
-    ----------
-    The paper, Eq. 1 (the reported SPD enters the forward model); the shift model
-    is a wavelength-scale error of the spectroradiometer (CIE 250:2022,
-    spectroradiometric measurement of optical radiation sources).
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> from tunespec.core.spectra import Spectra
-    >>> wl = np.arange(400.0, 501.0, 5.0)
-    >>> led = Spectra(wl, [np.exp(-0.5 * ((wl - 451.0) / 10.0) ** 2)], ("LED",))
-    >>> fixed = correct_spd_shift(led, 1.0)
-    >>> float(wl[np.argmax(fixed.values[0])])
-    450.0
-    """
-    if not np.isfinite(spd_shift_nm):
-        raise InputError(
-            f"spectroradiometer wavelength shift {spd_shift_nm} nm is not finite"
-        )
-    values = _shift_values(illuminants.wavelength_nm, illuminants.values, spd_shift_nm)
-    return illuminants.with_values(values)
-
-
-def correct_illuminants_from_meta(
-    illuminants: Spectra, meta: Mapping[str, Any], spd_shift_nm: float | None = None
-) -> Spectra:
-    """Undo the light source's metering errors that a calibration found.
-
-    The noise floor first (:func:`~tunespec.core.metering.suppress_meter_floor`, as
-    the calibration saw the spectra), then the per-LED corrections of a ``"bayes"``
-    calibration (``meta["led_correction"]``, a :class:`LedCorrection` as JSON or a
-    dict) or else the common wavelength shift (``spd_shift_nm`` if given, else
-    ``meta["spd_shift_nm"]``). ``meta`` is a sensitivity's ``Spectra.meta`` or the
-    ``.meta.json`` beside a sensitivities CSV.
-
-    Raises
-    ------
-    InputError
-        A malformed correction or shift (naming ``meta["source"]``).
-    """
-    source = meta.get("meta_path") or meta.get("source")
-    illuminants = suppress_meter_floor(illuminants)
-    doc = meta.get("led_correction")
-    if doc is not None and spd_shift_nm is None:
-        if isinstance(doc, str):
-            try:
-                doc = json.loads(doc)
-            except json.JSONDecodeError:
-                raise InputError(
-                    "led_correction is not valid JSON", path=source
-                ) from None
-        correction = LedCorrection.from_dict(doc, path=source)
-        return _undo_metering(illuminants, correction, 0.0)
-    if spd_shift_nm is None:
-        try:
-            spd_shift_nm = float(meta.get("spd_shift_nm", 0.0))
-        except (TypeError, ValueError):
-            raise InputError("spd_shift_nm is not a number", path=source) from None
-    return _undo_metering(illuminants, None, spd_shift_nm)
-
-
-def calibration_from_files(
-    sensitivity_csv: str | os.PathLike[str], meta: Mapping[str, Any]
-) -> SensitivityEstimate:
-    """A calibration back from ``calibrate``'s CSV and the side file's ``meta``
-    (:func:`calibration_from_meta` of the file's sensitivities)."""
-    from tunespec.core.datasets import read_sensitivities
-
-    return calibration_from_meta(read_sensitivities(sensitivity_csv), meta)
-
-
-def calibration_from_meta(
-    sens: Spectra, meta: Mapping[str, Any]
-) -> SensitivityEstimate:
-    """A calibration back from its sensitivities (as read, on their own grid) and the
-    side file's ``meta``.
-
-    ``meta`` as :func:`tunespec.core.io.export.read_sensitivity_meta` returns it; the
-    sensitivities stay on their own grid, the covariance follows them there.
-
-    Raises
-    ------
-    InputError
-        The covariance does not fit the sensitivities and LED corrections.
-    """
-    source = meta.get("meta_path")
-    corr = None
-    if "led_correction" in meta:
-        doc = meta["led_correction"]
-        corr = LedCorrection.from_dict(
-            json.loads(doc) if isinstance(doc, str) else doc, path=source
-        )
-    cov = meta.get("covariance")
-    if cov is not None:
-        n_led = len(corr.names) if corr is not None else 0
-        wl = np.asarray(meta.get("covariance_wavelength_nm", sens.wavelength_nm))
-        expected = 3 * wl.size + 2 * n_led
-        if cov.shape != (expected, expected):
-            raise InputError(
-                f"covariance is {cov.shape[0]} x {cov.shape[1]}; {wl.size} samples "
-                f"per channel and {n_led} LED corrections need {expected} x {expected}",
-                path=source,
-            )
-        if wl.shape != sens.wavelength_nm.shape or not np.allclose(
-            wl, sens.wavelength_nm
-        ):
-            # sensitivities written on another grid (rawtoaces' 5 nm): the covariance
-            # follows the same linear resampling, T Sigma T'
-            T1 = resampling_matrix(wl, sens.wavelength_nm)
-            T = np.zeros((3 * T1.shape[0] + 2 * n_led, expected))
-            for k in range(3):
-                T[
-                    k * T1.shape[0] : (k + 1) * T1.shape[0],
-                    k * wl.size : (k + 1) * wl.size,
-                ] = T1
-            T[3 * T1.shape[0] :, 3 * wl.size :] = np.eye(2 * n_led)
-            cov = T @ cov @ T.T
-    excess = None
-    if "excess_variance" in meta:
-        doc = meta["excess_variance"]
-        excess = ExcessVariance.from_dict(
-            json.loads(doc) if isinstance(doc, str) else doc, path=source
-        )
-    return SensitivityEstimate(
-        sens,
-        "bayes" if corr is not None else "unknown",
-        spd_shift_nm=float(meta.get("spd_shift_nm", 0.0)),
-        led_correction=corr,
-        covariance=cov,
-        excess=excess,
-    )
-
-
 def _fit_spd_shift(
     problem: _Problem,
     database: dict[str, Spectra],
@@ -794,7 +485,7 @@ def _fit_spd_shift(
 
     def objective(shift_nm: float) -> float:
         check_stop(should_stop)
-        L = _shift_values(wl, problem.L, shift_nm) * problem.step_nm
+        L = shift_values(wl, problem.L, shift_nm) * problem.step_nm
         total = 0.0
         for k in range(3):
             G = np.einsum("il,im,ilm->lm", L, L, M[:, k], optimize=True)
@@ -1187,7 +878,7 @@ def _excess_variance(
     """The chart's residuals beyond its known noise (:func:`fit_excess_variance`):
     Eq. 1 with the fitted corrections against the responses, the known variance
     the ROI noise and the flat-field residual."""
-    L = _undo_metering(
+    L = undo_metering(
         Spectra(problem.wavelength_nm, problem.L, tuple(illuminant_names)),
         correction,
         shift_nm,

@@ -1,8 +1,9 @@
 """Spectral data: a wavelength grid and named spectra on it.
 
 The files are read and written in :mod:`tunespec.core.io.spectral` (CSV, CGATS,
-rawtoaces JSON, found from the content) and :mod:`tunespec.core.io.spectral_csv`;
-``read_spectra_csv`` and ``write_spectra_csv`` here delegate to them.
+rawtoaces JSON, found from the content: ``read_spectral``, ``read_spectra_csv``) and
+:mod:`tunespec.core.io.spectral_csv` (``write_spectra_csv``); this module imports no
+reader, so the data classes stand below the formats.
 
 Every input is resampled onto one working :class:`Grid` before any computation, so
 reflectances, illuminants and sensitivities always share their wavelength axis.
@@ -13,16 +14,12 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
-from os import PathLike
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tunespec.core.errors import InputError, check_names
-from tunespec.core.limits import (
-    MAX_VALUE,
-    shown,
-)
+from tunespec.core.limits import shown
 
 __all__ = [
     "CALIBRATION_GRID",
@@ -32,9 +29,7 @@ __all__ = [
     "Grid",
     "Spectra",
     "grid_from_data",
-    "read_spectra_csv",
     "resampling_matrix",
-    "write_spectra_csv",
 ]
 
 _WL_TOL_NM = 1e-6
@@ -402,32 +397,3 @@ def resampling_matrix(
         W[j, k - 1] += 1.0 - f
         W[j, k] += f
     return W
-
-
-def read_spectra_csv(
-    path: str | PathLike[str],
-    grid: Grid | None = None,
-    *,
-    allow_negative: bool = False,
-    max_value: float = MAX_VALUE,
-    average: bool = False,
-) -> Spectra:
-    """Read spectral data (CSV, CGATS or rawtoaces JSON) and optionally resample it.
-
-    Kept for the callers of the numerics; the reader is
-    :func:`tunespec.core.io.spectral.read_spectral` (formats live in ``core.io``).
-    """
-    from tunespec.core.io.spectral import read_spectral
-
-    return read_spectral(
-        path, grid, allow_negative=allow_negative, max_value=max_value, average=average
-    )
-
-
-def write_spectra_csv(
-    spectra: Spectra, path: str | PathLike[str], *, header: str = "wavelength_nm"
-) -> None:
-    """Write a spectral CSV (:func:`tunespec.core.io.spectral_csv.write_spectra_csv`)."""
-    from tunespec.core.io.spectral_csv import write_spectra_csv as write
-
-    write(spectra, path, header=header)

@@ -22,9 +22,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from tunespec.core.calibration import predict_responses
 from tunespec.core.errors import InputError
 from tunespec.core.responses import Responses
-from tunespec.core.sensitivity import SensitivityEstimate, predict_responses
+from tunespec.core.sensitivity import SensitivityEstimate
 from tunespec.core.spectra import Spectra
 
 __all__ = [

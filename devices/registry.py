@@ -32,9 +32,10 @@ from urllib.parse import parse_qs
 
 from tunespec.core.datasets import resource_path
 from tunespec.core.errors import InputError
+from tunespec.core.io.spectral import read_spectra_csv
 from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import contained_path, shown
-from tunespec.core.spectra import DEFAULT_GRID, Grid, Spectra, read_spectra_csv
+from tunespec.core.spectra import DEFAULT_GRID, Grid, Spectra
 from tunespec.devices.clock import Clock, RealClock, VirtualClock
 from tunespec.devices.protocols import (
     Camera,

@@ -6,7 +6,7 @@ import re
 from pathlib import Path
 
 from tunespec.core.datasets import load_camera, load_colorchecker_sg, load_led_set
-from tunespec.core.spectra import write_spectra_csv
+from tunespec.core.io.spectral_csv import write_spectra_csv
 
 #: The files :func:`write_shipped_spectra` writes: camera, LEDs, ColorChecker SG.
 SHIPPED_SPECTRA = ("cam.csv", "leds.csv", "sg.csv")

@@ -36,6 +36,7 @@ import numpy as np
 import pytest
 
 from tunespec.app.cli import export_cmds
+from tunespec.core.calibration import correct_spd_shift
 from tunespec.core.colorimetry import delta_e_2000, lab_d50, reflectance_stats, xyz_d50
 from tunespec.core.datasets import (
     load_camera,
@@ -51,9 +52,11 @@ from tunespec.core.io.export import (
     reflectance_ti3,
     sensitivity_meta_path,
 )
-from tunespec.core.responses import Responses, read_responses_csv, write_responses_csv
-from tunespec.core.sensitivity import correct_spd_shift
-from tunespec.core.spectra import Grid, Spectra, read_spectra_csv, write_spectra_csv
+from tunespec.core.io.responses_csv import read_responses_csv, write_responses_csv
+from tunespec.core.io.spectral import read_spectra_csv
+from tunespec.core.io.spectral_csv import write_spectra_csv
+from tunespec.core.responses import Responses
+from tunespec.core.spectra import Grid, Spectra
 
 requires_argyll = pytest.mark.skipif(
     shutil.which("spec2cie") is None or shutil.which("colverify") is None,

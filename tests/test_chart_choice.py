@@ -17,7 +17,8 @@ from tunespec.app.pipeline.chart_choice import (
 from tunespec.app.report.report import ReportData, render_html
 from tunespec.core.datasets import load_colorchecker_sg, resource_path
 from tunespec.core.errors import InputError
-from tunespec.core.spectra import DEFAULT_GRID, read_spectra_csv
+from tunespec.core.io.spectral import read_spectra_csv
+from tunespec.core.spectra import DEFAULT_GRID
 
 SCORES = (
     ChartScore("ColorChecker 24", 24, 0.00036, 0.0145, 0.082, 0.227, 0.0080),

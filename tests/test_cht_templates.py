@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from tunespec.core.errors import InputError
-from tunespec.core.io.cht import read_cht
+from tunespec.core.io.cht import load_layout, read_cht
 from tunespec.core.layout import TargetLayout
 
 
@@ -103,7 +103,7 @@ def test_cht_is_a_layout_wherever_a_layout_is(tmp_path) -> None:
         tmp_path,
         "  D ALL ALL _ _ 330 228 0 0 0 0\n  Y 1 6 A D 46 46 12 11.5 52.5 52.5",
     )
-    lay = TargetLayout.load(p)
+    lay = load_layout(p)
     assert (lay.rows, lay.cols) == (4, 6) and lay.patch_names[0] == "A1"
 
 

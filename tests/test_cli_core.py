@@ -14,7 +14,9 @@ from tunespec.core.datasets import (
     resource_path,
 )
 from tunespec.core.io.export import COLORIMETRY_COLUMNS
-from tunespec.core.spectra import Grid, read_spectra_csv, write_spectra_csv
+from tunespec.core.io.spectral import read_spectra_csv
+from tunespec.core.io.spectral_csv import write_spectra_csv
+from tunespec.core.spectra import Grid
 
 
 @pytest.fixture(scope="module")

@@ -15,7 +15,7 @@ from tunespec.core.datasets import (
     resource_path,
 )
 from tunespec.core.io.spectral import read_spectral
-from tunespec.core.spectra import write_spectra_csv
+from tunespec.core.io.spectral_csv import write_spectra_csv
 
 
 @pytest.fixture(scope="module")

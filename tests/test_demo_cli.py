@@ -19,8 +19,8 @@ import pytest
 
 from tunespec.app.cli import main
 from tunespec.core.datasets import resource_path
+from tunespec.core.io.responses_csv import read_responses_csv
 from tunespec.core.io.session import MANIFEST_NAME, Session
-from tunespec.core.responses import read_responses_csv
 
 LAYOUT = resource_path("layouts", "neugebauer_cmy.json")
 #: Wall-clock budget of the killed capture (a safety net, not a timing assertion).

@@ -16,8 +16,8 @@ from tunespec.app.cli import main
 from tunespec.app.pipeline.extract import extract_chart, read_linear_image
 from tunespec.core.errors import InputError
 from tunespec.core.io.raw import plane_to_full_px
+from tunespec.core.io.spectral import read_spectra_csv
 from tunespec.core.layout import TargetLayout, apply_homography
-from tunespec.core.spectra import read_spectra_csv
 
 DNG = Path(__file__).parent / "data" / "tinydng_colorchart.dng"
 

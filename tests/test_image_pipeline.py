@@ -33,8 +33,8 @@ COVERAGE_RANGE = (0.90, 0.999)
 @pytest.fixture(scope="module")
 def bench_session(tmp_path_factory) -> dict:
     """A session of the SG with mixed regions, its truth and a bayes calibration."""
+    from tunespec.app.pipeline.processing import process_session, write_processed
     from tunespec.core.io.session import Session
-    from tunespec.core.processing import process_session, write_processed
     from tunespec.devices.capture import capture, new_session
     from tunespec.devices.registry import open_bench
     from tunespec.devices.sim.scene import default_regions
@@ -149,12 +149,9 @@ def test_pixel_means_agree_with_patchwise_estimates(images, bench_session) -> No
 
 def _patchwise(bench_session) -> tuple[np.ndarray, np.ndarray]:
     """Patch-wise estimate and uncertainty, as ``tunespec estimate`` computes them."""
+    from tunespec.core.calibration import Calibration, correct_illuminants_from_meta
     from tunespec.core.datasets import load_colorchecker_sg, read_sensitivities
     from tunespec.core.io.export import read_sensitivity_meta
-    from tunespec.core.sensitivity import (
-        calibration_from_files,
-        correct_illuminants_from_meta,
-    )
     from tunespec.core.uncertainty import reflectance_uncertainty
     from tunespec.core.wiener import on_integration_grid, wiener_reflectance
 
@@ -166,7 +163,7 @@ def _patchwise(bench_session) -> tuple[np.ndarray, np.ndarray]:
     est = wiener_reflectance(
         p.responses, illum_fine, sens_fine, load_colorchecker_sg(GRID)
     )
-    cal = calibration_from_files(bench_session["sens"], meta)
+    cal = Calibration.load(bench_session["sens"])
     unc = reflectance_uncertainty(est, p.responses, p.illuminants, cal)
     return est.reflectance.values, unc.reflectance_std
 

@@ -73,9 +73,9 @@ def test_repeats_shrink_the_pixel_noise(tmp_path) -> None:
     noise model knows the frames were averaged."""
     import tifffile
 
+    from tunespec.app.pipeline.processing import process_session
     from tunespec.core.colorimetry import delta_e_2000
     from tunespec.core.io.session import Session
-    from tunespec.core.processing import process_session
 
     spread, eq6 = {}, {}
     for n in (1, 4):
@@ -112,12 +112,12 @@ def test_four_frames_and_the_smooth_dark_bring_pixels_near_patchwise(tmp_path) -
     import tifffile
 
     from tunespec.app.pipeline.plan import ESTIMATION_GRID as GRID
+    from tunespec.app.pipeline.processing import process_session, write_processed
+    from tunespec.core.calibration import correct_illuminants_from_meta
     from tunespec.core.colorimetry import delta_e_2000, lab_d50
     from tunespec.core.datasets import load_colorchecker_sg, read_sensitivities
     from tunespec.core.io.export import read_sensitivity_meta
     from tunespec.core.io.session import Session
-    from tunespec.core.processing import process_session, write_processed
-    from tunespec.core.sensitivity import correct_illuminants_from_meta
     from tunespec.core.wiener import wiener_reflectance
 
     session, pm, mats = _capture(tmp_path, 4, (384, 256))

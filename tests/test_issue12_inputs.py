@@ -15,7 +15,10 @@ from tunespec.app.pipeline.plan import load_config
 from tunespec.app.pipeline.run import run_config
 from tunespec.core.datasets import load_colorchecker_sg, resource_path
 from tunespec.core.errors import DiskFullError, InputError
+from tunespec.core.io.responses_csv import read_responses_csv
 from tunespec.core.io.session import Session
+from tunespec.core.io.spectral import read_spectra_csv
+from tunespec.core.io.spectral_csv import write_spectra_csv
 from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import (
     MAX_DEPTH,
@@ -23,8 +26,6 @@ from tunespec.core.limits import (
     loads_json,
     valid_number,
 )
-from tunespec.core.responses import read_responses_csv
-from tunespec.core.spectra import read_spectra_csv, write_spectra_csv
 from tunespec.devices.registry import layout_reflectances
 
 SG_LAYOUT = resource_path("layouts", "colorchecker_sg.json")

@@ -32,8 +32,9 @@ from tunespec.core.io.export import (
     write_sensitivities_csv,
     write_sensitivity_json,
 )
-from tunespec.core.io.spectral import read_spectral
-from tunespec.core.spectra import Grid, Spectra, read_spectra_csv, write_spectra_csv
+from tunespec.core.io.spectral import read_spectra_csv, read_spectral
+from tunespec.core.io.spectral_csv import write_spectra_csv
+from tunespec.core.spectra import Grid, Spectra
 
 
 def _one_line(capsys, rc: int, code: int = 2) -> str:

@@ -22,8 +22,10 @@ from tunespec.core.atomic import atomic_open, atomic_write_text
 from tunespec.core.datasets import load_colorchecker_sg
 from tunespec.core.errors import DiskFullError
 from tunespec.core.io.cgats import ti3_table, write_cgats
-from tunespec.core.responses import Responses, read_responses_csv, write_responses_csv
-from tunespec.core.spectra import read_spectra_csv, write_spectra_csv
+from tunespec.core.io.responses_csv import read_responses_csv, write_responses_csv
+from tunespec.core.io.spectral import read_spectra_csv
+from tunespec.core.io.spectral_csv import write_spectra_csv
+from tunespec.core.responses import Responses
 
 VICTIM_TEXT = "the user's own file\n"
 

@@ -22,7 +22,8 @@ import pytest
 
 from tunespec.app.cli import main
 from tunespec.core.io.spectral import read_spectral
-from tunespec.core.spectra import Spectra, write_spectra_csv
+from tunespec.core.io.spectral_csv import write_spectra_csv
+from tunespec.core.spectra import Spectra
 
 _TOOL = Path(__file__).resolve().parents[1] / "tools" / "fuzz_semantic.py"
 

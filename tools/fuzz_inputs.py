@@ -49,16 +49,15 @@ import numpy as np
 from tunespec.app.pipeline.plan import check_config, load_config
 from tunespec.core.errors import TuneSpecError
 from tunespec.core.io.cgats import read_cgats, ti3_table, write_cgats
+from tunespec.core.io.cht import load_layout
+from tunespec.core.io.responses_csv import read_responses_csv, write_responses_csv
 from tunespec.core.io.session import CaptureSettings, Session, plan_frames
+from tunespec.core.io.spectral import read_spectra_csv
+from tunespec.core.io.spectral_csv import write_spectra_csv
 from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import MAX_VALUE
-from tunespec.core.responses import Responses, read_responses_csv, write_responses_csv
-from tunespec.core.spectra import (
-    DEFAULT_GRID,
-    Spectra,
-    read_spectra_csv,
-    write_spectra_csv,
-)
+from tunespec.core.responses import Responses
+from tunespec.core.spectra import DEFAULT_GRID, Spectra
 from tunespec.devices.registry import layout_reflectances
 
 KINDS = ("spectra", "responses", "cgats", "manifest", "layout", "config", "session")
@@ -358,7 +357,7 @@ def read_case(kind: str, path: Path, root: Path) -> str:
                 return "non-finite colour values"
         return "" if _names_ok(t.sample_names) or not t.sample_names else "bad names"
     if kind == "layout":
-        lay = TargetLayout.load(path)
+        lay = load_layout(path)
         if not _std_json(lay.to_dict()) or not _names_ok(lay.patch_names):
             return "layout not standard JSON or bad names"
         if lay.corners_px is not None:

@@ -38,9 +38,10 @@ from pathlib import Path
 import numpy as np
 
 from tunespec.app.cli import main
+from tunespec.core.io.responses_csv import read_responses_csv, write_responses_csv
 from tunespec.core.io.spectral import read_spectral
-from tunespec.core.responses import read_responses_csv, write_responses_csv
-from tunespec.core.spectra import Grid, Spectra, write_spectra_csv
+from tunespec.core.io.spectral_csv import write_spectra_csv
+from tunespec.core.spectra import Grid, Spectra
 
 OUTCOMES = ("refused", "flagged", "accepted", "accepted_wrong", "traceback", "hang")
 BUGS = ("accepted_wrong", "traceback", "hang")

@@ -26,7 +26,6 @@ __all__ = [
     "EXIT_INPUT",
     "Console",
     "TerminalProgress",
-    "absolute_sensitivities",
     "add_bench_options",
     "add_force_option",
     "add_grid_option",
@@ -220,21 +219,6 @@ class Console:
         if self.quiet:
             return None
         return progress_bar(label)
-
-
-def absolute_sensitivities(path: Path) -> Spectra:
-    """Sensitivities for Eq. 1: any format, refused in relative units without a scale."""
-    from tunespec.core.datasets import read_sensitivities
-
-    sensitivity = read_sensitivities(path)
-    if sensitivity.meta.get("relative"):
-        raise InputError(
-            "sensitivities in relative units (normalised, no absolute scale): Eq. 1 "
-            "needs the calibration's scale; give the sensitivities CSV that "
-            "'tunespec calibrate' wrote, or a rawtoaces JSON written by TuneSpec",
-            path=path,
-        )
-    return sensitivity
 
 
 def resolve_grid(

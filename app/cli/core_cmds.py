@@ -10,7 +10,6 @@ import numpy as np
 
 from tunespec.app.cli.common import (
     Console,
-    absolute_sensitivities,
     add_force_option,
     add_grid_option,
     add_output_options,
@@ -19,6 +18,7 @@ from tunespec.app.cli.common import (
     resolve_grid,
     seed_arg,
 )
+from tunespec.core.calibration import absolute_sensitivities
 from tunespec.core.errors import InputError, check_names
 from tunespec.core.io.export import read_sensitivity_meta, write_sensitivities_csv
 from tunespec.core.io.responses_csv import read_responses_csv, write_responses_csv

@@ -159,7 +159,7 @@ def run_cal1_emulator(
     """
     out = out if out is not None else sys.stdout
     # imported here, not at the top: ``tunespec --help`` imports every command module
-    from tunespec.core.spectra import read_spectra_csv
+    from tunespec.core.io.spectral import read_spectra_csv
     from tunespec.devices.cal1.emulator import Cal1Emulator
     from tunespec.devices.clock import RealClock
     from tunespec.devices.sim.led_physics import LedPhysics

@@ -15,14 +15,15 @@ from typing import Any
 
 from tunespec.app.cli.common import (
     Console,
-    absolute_sensitivities,
     add_grid_option,
     add_output_options,
     add_sensitivities_option,
 )
+from tunespec.core.calibration import absolute_sensitivities
 from tunespec.core.datasets import read_sensitivities
-from tunespec.core.errors import InputError, read_json
+from tunespec.core.errors import InputError
 from tunespec.core.io.spectral import read_spectral
+from tunespec.core.limits import read_json
 from tunespec.core.spectra import Grid, Spectra
 
 __all__ = ["register"]
@@ -181,7 +182,7 @@ def _add_export_camera(
 
 def cmd_export_camera(args: argparse.Namespace) -> int:
     from tunespec.core.io.export import export_camera_characterisation
-    from tunespec.core.responses import read_responses_csv
+    from tunespec.core.io.responses_csv import read_responses_csv
 
     out = Console(args)
     responses = read_responses_csv(args.responses)
@@ -221,7 +222,7 @@ def cmd_export_camera(args: argparse.Namespace) -> int:
 def cmd_export_cgats(args: argparse.Namespace) -> int:
     from tunespec.core.io.cgats import write_cgats
     from tunespec.core.io.export import reflectance_ti3
-    from tunespec.core.responses import read_responses_csv
+    from tunespec.core.io.responses_csv import read_responses_csv
 
     out = Console(args)
     reflectance = read_spectral(args.reflectances, args.grid, kind="reflectance")
@@ -306,7 +307,7 @@ def _table1_from_json(path: Path) -> tuple[Any, Any, tuple[str, ...]]:
 
 def cmd_report(args: argparse.Namespace) -> int:
     from tunespec.app.report.report import ReportData, write_report
-    from tunespec.core.responses import read_responses_csv
+    from tunespec.core.io.responses_csv import read_responses_csv
 
     grid = args.grid
     data: dict[str, Any] = {"title": args.title, "session_id": args.session_id}

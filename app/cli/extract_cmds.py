@@ -87,9 +87,9 @@ def cmd_extract(args: argparse.Namespace) -> int:
         layout_reference,
         write_extraction,
     )
-    from tunespec.core.layout import TargetLayout
+    from tunespec.core.io.cht import load_layout
 
-    layout = TargetLayout.load(args.layout)
+    layout = load_layout(args.layout)
     corners = corners_arg(args.corners) if args.corners else None
     refl = layout_reference(layout, args.reflectances, args.layout, args.names)
     ex = extract_chart(

@@ -16,7 +16,7 @@ import threading
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
-from typing import TextIO
+from typing import Any, TextIO
 
 from tunespec.app.cli.common import (
     Console,
@@ -237,7 +237,12 @@ def _add_gonio_run(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> 
         "calibrated sensitivities (tunespec calibrate; needed for a new session)",
         required=False,
     )
-    p.add_argument("--layout", type=Path, required=True, help="sample target layout")
+    p.add_argument(
+        "--layout",
+        type=Path,
+        help="sample target layout (a new session; a resumed one keeps its own "
+        "layout.json)",
+    )
     _mix_arg(p, default=None)
     p.add_argument(
         "--resume", action="store_true", help="continue the session in --out"
@@ -288,16 +293,15 @@ def _start_plan(args: argparse.Namespace, *, needs: tuple[str, ...] = ()) -> Non
 
 def cmd_gonio_run(args: argparse.Namespace) -> int:
     """Run ``gonio-run``."""
-    from tunespec.app.cli.common import absolute_sensitivities
-    from tunespec.app.pipeline.gonio_devices import run_gonio_session
+    from tunespec.app.pipeline.gonio_devices import SESSION_LAYOUT, run_gonio_session
+    from tunespec.core.calibration import absolute_sensitivities
     from tunespec.core.io.export import read_sensitivity_meta
-    from tunespec.core.layout import TargetLayout
+    from tunespec.core.io.spectral import read_spectra_csv
     from tunespec.core.limits import valid_number
-    from tunespec.core.spectra import read_spectra_csv
     from tunespec.devices.protocols import DeviceError
 
     valid_number(args.iso, "--iso", lo=50, hi=102400, integer=True)
-    layout = TargetLayout.load(args.layout)
+    layout = _session_layout(args)
     saved, side, S = args.out / "calibration.csv", None, None
     # every input read before the session folder gets its plan
     if saved.exists():
@@ -305,7 +309,9 @@ def cmd_gonio_run(args: argparse.Namespace) -> int:
     elif args.sensitivities is not None:
         S = absolute_sensitivities(args.sensitivities)
         side = read_sensitivity_meta(args.sensitivities)  # its LED corrections
-    _start_plan(args, needs=("plan", "sensitivities"))
+    _start_plan(args, needs=("plan", "sensitivities", "layout"))
+    if layout is None:  # a resumed session from before layout.json was kept
+        raise InputError(f"{args.out} has no layout.json: give --layout")
     if S is None:
         raise InputError(f"{args.out} has no calibration.csv yet: give --sensitivities")
     out = Console(args)
@@ -313,7 +319,8 @@ def cmd_gonio_run(args: argparse.Namespace) -> int:
         s = run_gonio_session(
             args.out, light=args.light, camera=args.camera, gonio=args.gonio,
             sensitivity=S, layout=layout, sensitivity_meta=side,
-            layout_path=args.layout, resolution=args.resolution, iso=args.iso,
+            layout_path=args.layout or args.out / SESSION_LAYOUT,
+            resolution=args.resolution, iso=args.iso,
             seed=args.seed,
             scheduler=args.scheduler, progress=out.progress("gonio session"),
         )  # fmt: skip
@@ -328,6 +335,27 @@ def cmd_gonio_run(args: argparse.Namespace) -> int:
     out.note(f"data set -> {args.out / 'gonio.nc'}")
     out.summary({"out": str(args.out), **s})
     return 0
+
+
+def _session_layout(args: argparse.Namespace) -> Any:
+    """The sample layout of ``gonio-run``: a started session's own ``layout.json``
+    (a different ``--layout`` is refused), else ``--layout``; None if neither."""
+    from tunespec.app.pipeline.gonio_devices import SESSION_LAYOUT
+    from tunespec.core.io.cht import load_layout
+    from tunespec.core.layout import TargetLayout
+
+    kept = args.out / SESSION_LAYOUT
+    if kept.exists() and (args.out / "plan.json").exists():
+        layout = TargetLayout.load(kept)
+        if args.layout is not None:
+            given = load_layout(args.layout)
+            if given.to_dict() != layout.to_dict():
+                raise InputError(
+                    f"--layout {args.layout}: the session in {args.out} uses its own "
+                    f"{SESSION_LAYOUT}; leave --layout out to resume it"
+                )
+        return layout
+    return None if args.layout is None else load_layout(args.layout)
 
 
 def _add_match(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -394,8 +422,8 @@ def cmd_match(args: argparse.Namespace) -> int:
         spd_delta_uv,
     )
     from tunespec.core.io.session import atomic_write_text
+    from tunespec.core.io.spectral import read_spectra_csv
     from tunespec.core.limits import MAX_REFLECTANCE, dumps_json, valid_number
-    from tunespec.core.spectra import read_spectra_csv
 
     max_level = valid_number(
         args.max_level, "--max-level", lo=0.0, hi=1.0, lo_open=True
@@ -465,7 +493,7 @@ def _drive_and_measure(
     """Set the light to ``levels`` and write the SPD its spectroradiometer reports."""
     import numpy as np
 
-    from tunespec.core.spectra import write_spectra_csv
+    from tunespec.core.io.spectral_csv import write_spectra_csv
     from tunespec.devices.registry import open_light_source
 
     path = args.measured_out or args.output.with_name(

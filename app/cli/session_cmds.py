@@ -15,8 +15,8 @@ from tunespec.app.cli.common import (
     seed_arg,
 )
 from tunespec.core.errors import InputError
+from tunespec.core.io.cht import load_layout
 from tunespec.core.io.session import Session
-from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import check_output_file
 
 __all__ = ["register"]
@@ -346,7 +346,7 @@ def cmd_capture(args: argparse.Namespace) -> int:
     result = capture_job(
         CaptureInputs(
             args.out,
-            TargetLayout.load(args.layout) if args.layout is not None else None,
+            load_layout(args.layout) if args.layout is not None else None,
             CaptureSettings(
                 exposure=args.exposure,
                 iso=args.iso,
@@ -403,7 +403,7 @@ def cmd_process(args: argparse.Namespace) -> int:
     check_output_file(illum, "--illuminants-out")
     out = Console(args)
     session = Session.open(args.session)
-    layout = TargetLayout.load(args.layout) if args.layout else None
+    layout = load_layout(args.layout) if args.layout else None
     from tunespec.app.pipeline.extract import layout_reference_xyz
     from tunespec.app.pipeline.jobs import ProcessInputs, process_job
 

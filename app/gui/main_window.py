@@ -29,6 +29,7 @@ from PySide6.QtWidgets import (
 import tunespec.app.gui.qt_compat  # noqa: F401 (before any signal)
 from tunespec.app.gui.editors.target_layout_editor import TargetLayoutEditor
 from tunespec.app.gui.panels.device_panel import DevicePanel, format_error
+from tunespec.app.gui.panels.gonio_panel import GonioPanel
 from tunespec.app.gui.panels.log_panel import LogPanel
 from tunespec.app.gui.panels.stats_table_panel import (
     show_table1,
@@ -40,6 +41,7 @@ from tunespec.app.gui.plots.image_view import ImageView
 from tunespec.app.gui.plots.reflectance_plot import ReflectancePlot
 from tunespec.app.gui.plots.sensitivity_plot import SensitivityPlot
 from tunespec.app.gui.plots.spd_plot import SpdPlot
+from tunespec.app.gui.processes import one_blas_thread, start_process_server
 from tunespec.app.gui.settings import AppSettings
 from tunespec.app.gui.wizard.measurement import (
     CALIBRATION_DIR,
@@ -55,8 +57,6 @@ from tunespec.app.gui.workers import (
     Worker,
     collect_on_gui_thread,
     gc_paused,
-    one_blas_thread,
-    start_process_server,
 )
 
 __all__ = ["MainWindow"]
@@ -154,6 +154,8 @@ class MainWindow(QMainWindow):
         self.tabs.addTab(spectra, "Spectra")
         self.tabs.addTab(tables, "Tables")
         self.tabs.addTab(self.image_view, "Spectral image")
+        self.gonio_panel = GonioPanel()
+        self.tabs.addTab(self.gonio_panel, "Gonio")
         self.setCentralWidget(self.tabs)
 
         self.device_dock = QDockWidget("Devices", self)
@@ -523,6 +525,8 @@ class MainWindow(QMainWindow):
         finally:
             if self.image_view.worker is not None:
                 self.image_view.worker.abort()
+            if self.gonio_panel.worker is not None:
+                self.gonio_panel.worker.abort()
             self.wizard_panel.shutdown()
             self.controller.shutdown()
             self.log_panel.detach()

@@ -31,14 +31,10 @@ import numpy as np
 from tunespec.core.datasets import load_colorchecker_sg, resource_path
 from tunespec.core.errors import InputError
 from tunespec.core.io.session import atomic_write_text
+from tunespec.core.io.spectral import read_spectra_csv
 from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import dumps_json
-from tunespec.core.spectra import (
-    CALIBRATION_GRID,
-    DEFAULT_GRID,
-    Spectra,
-    read_spectra_csv,
-)
+from tunespec.core.spectra import CALIBRATION_GRID, DEFAULT_GRID, Spectra
 from tunespec.core.stats import sensitivity_rms
 
 __all__ = ["CHARTS", "ChartComparison", "ChartScore", "compare_charts", "held_out_card"]
@@ -194,7 +190,7 @@ def compare_charts(
 
 def load_chart_comparison(path: str | PathLike[str]) -> dict[str, Any]:
     """A ``chart_choice.json`` as written by :meth:`ChartComparison.save`, checked."""
-    from tunespec.core.errors import read_json
+    from tunespec.core.limits import read_json
 
     d = read_json(Path(path))
     if not isinstance(d, dict) or d.get("format") != "tunespec-chart-choice":

@@ -38,12 +38,14 @@ from typing import Any
 
 import numpy as np
 
-from tunespec.core.errors import InputError, read_json
+from tunespec.core.errors import InputError
 from tunespec.core.io.export import read_sensitivity_meta, write_sensitivities_csv
 from tunespec.core.io.session import MANIFEST_NAME, atomic_write_text
+from tunespec.core.io.spectral import read_spectra_csv
+from tunespec.core.io.spectral_csv import write_spectra_csv
 from tunespec.core.layout import TargetLayout
-from tunespec.core.limits import dumps_json
-from tunespec.core.spectra import Spectra, read_spectra_csv, write_spectra_csv
+from tunespec.core.limits import dumps_json, read_json
+from tunespec.core.spectra import Spectra
 
 __all__ = [
     "CALIBRATION_DIR",
@@ -645,7 +647,7 @@ PROCESSED_FILES = ("responses.csv", "illuminants.csv")
 
 
 def _write_processed(out_dir: Path, processed: Any) -> None:
-    from tunespec.core.processing import write_processed
+    from tunespec.app.pipeline.processing import write_processed
 
     write_processed(processed, *(out_dir / name for name in PROCESSED_FILES))
 
@@ -658,8 +660,8 @@ def read_processed(
     The corners are the layout's (``corners_source = "layout"``), as they were used.
     Returns ``None`` when the files are not there (a folder of an older version).
     """
+    from tunespec.core.io.responses_csv import read_responses_csv
     from tunespec.core.processing import ProcessedSession
-    from tunespec.core.responses import read_responses_csv
 
     try:
         responses_csv, illuminants_csv = (

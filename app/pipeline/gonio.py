@@ -42,10 +42,12 @@ from numpy.typing import NDArray
 
 from tunespec.core.errors import InputError, check_names
 from tunespec.core.io.session import atomic_write_bytes, atomic_write_text
+from tunespec.core.io.spectral import read_spectra_csv
 from tunespec.core.limits import dumps_json, read_json, valid_number
 from tunespec.core.progress import ProgressFn, StopFn, check_stop, report
-from tunespec.core.spectra import DEFAULT_GRID, Spectra, read_spectra_csv
+from tunespec.core.spectra import DEFAULT_GRID, Spectra
 from tunespec.devices.goniometer import ANGLE_AXES, Geometry
+from tunespec.devices.protocols import DeviceError
 
 __all__ = [
     "HDR_EXPOSURES",
@@ -276,12 +278,26 @@ def capture_gonio(
             if not (gdir / f"{n}_e{k}.npy").exists()
         ]
         if todo:
-            taken += _capture_geometry(
-                step, gdir, bench, sensitivity, mix_levels, channels, todo, on_frame
-            )
+            try:
+                taken += _capture_geometry(
+                    step, gdir, bench, sensitivity, mix_levels, channels, todo, on_frame
+                )
+            except (InputError, DeviceError) as exc:
+                raise _naming_geometry(exc, gi, step) from exc
         report(progress, (gi + 1) / len(plan.steps))
     bench.light.all_off()
     return taken
+
+
+def _naming_geometry(exc: Exception, index: int, step: GeometryStep) -> Exception:
+    """``exc`` (same type) with the geometry it happened at in front of its message:
+    ``geometry 3 (theta_i 45, theta_r 30): ...`` (the plan's angles)."""
+    g = step.geometry
+    label = f"geometry {index + 1} (theta_i {g.theta_i:g}, theta_r {g.theta_r:g})"
+    try:
+        return type(exc)(f"{label}: {exc}")
+    except TypeError:  # an exception type with other arguments: unchanged
+        return exc
 
 
 def _capture_geometry(

@@ -24,14 +24,11 @@ import numpy as np
 
 from tunespec.app.pipeline.gonio import GonioPlan, capture_gonio, default_plan
 from tunespec.core.io.session import atomic_write_text
+from tunespec.core.io.spectral import read_spectra_csv
+from tunespec.core.io.spectral_csv import write_spectra_csv
 from tunespec.core.limits import dumps_json, read_json
 from tunespec.core.progress import ProgressFn, StopFn, sub_progress
-from tunespec.core.spectra import (
-    DEFAULT_GRID,
-    Spectra,
-    read_spectra_csv,
-    write_spectra_csv,
-)
+from tunespec.core.spectra import DEFAULT_GRID, Spectra
 
 __all__ = ["open_gonio_bench", "run_gonio_demo"]
 

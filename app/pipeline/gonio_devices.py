@@ -32,21 +32,20 @@ from numpy.typing import NDArray
 
 from tunespec.app.pipeline.gonio import GonioPlan, capture_gonio
 from tunespec.core.io.session import atomic_write_text
+from tunespec.core.io.spectral import read_spectra_csv
+from tunespec.core.io.spectral_csv import write_spectra_csv
 from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import dumps_json, read_json
 from tunespec.core.progress import ProgressFn, StopFn, sub_progress
-from tunespec.core.spectra import (
-    DEFAULT_GRID,
-    Spectra,
-    read_spectra_csv,
-    write_spectra_csv,
-)
+from tunespec.core.spectra import DEFAULT_GRID, Spectra
 from tunespec.devices.protocols import DeviceProtocolError
 
 __all__ = ["DeviceGonioBench", "measure_led_spectra", "run_gonio_session"]
 
 #: Where the camera's raw files are kept, one per frame.
 RAW_DIR = "raw"
+#: The session's own copy of the sample target's layout: a resumed session uses it.
+SESSION_LAYOUT = "layout.json"
 #: A simulated camera's field of view, in widths of the sample target (a gonio
 #: camera frames the sample, not the room; ignored for a real camera).
 SIM_FIELD = 2.0
@@ -142,7 +141,9 @@ def run_gonio_session(
     as ``core.io.export.read_sensitivity_meta`` reads it, gives them when
     ``led_correction`` is not given); the corrections are applied to every illuminant of
     Eq. 1, the mix's through its LEDs
-    (:func:`~tunespec.app.pipeline.gonio_process.calibration_correction`). Returns
+    (:func:`~tunespec.app.pipeline.gonio_process.calibration_correction`). The
+    layout is kept as ``layout.json`` (:data:`SESSION_LAYOUT`), which a resumed
+    session is given back (``gonio-run --resume`` without ``--layout``). Returns
     the summary written to ``summary.json``: geometries, the goniometer's read-back
     positions, the mix and per geometry the mean single-shot XYZ uncertainty.
     """
@@ -164,6 +165,10 @@ def run_gonio_session(
     root = Path(out)
     plan = GonioPlan.load(root / "plan.json")
     cal, corr_path = root / "calibration.csv", root / "led_correction.json"
+    if not (root / SESSION_LAYOUT).exists():
+        layout.save(root / SESSION_LAYOUT)
+    if layout_path is None:
+        layout_path = root / SESSION_LAYOUT
     if not cal.exists():
         if led_correction is not None:
             atomic_write_text(corr_path, dumps_json(led_correction.as_dict()))

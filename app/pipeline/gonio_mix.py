@@ -22,7 +22,8 @@ import numpy as np
 
 from tunespec.app.pipeline.gonio import MIX_KINDS
 from tunespec.core.errors import InputError
-from tunespec.core.spectra import Spectra, write_spectra_csv
+from tunespec.core.io.spectral_csv import write_spectra_csv
+from tunespec.core.spectra import Spectra
 
 __all__ = ["MEASURED_MIX_CSV", "choose_mix"]
 

@@ -23,7 +23,8 @@ import numpy as np
 
 from tunespec.app.pipeline.gonio_process import GonioResult
 from tunespec.core.io.session import atomic_write_bytes, atomic_write_text
-from tunespec.core.spectra import Spectra, write_spectra_csv
+from tunespec.core.io.spectral_csv import write_spectra_csv
+from tunespec.core.spectra import Spectra
 from tunespec.devices.goniometer import ANGLE_AXES
 
 __all__ = ["write_gonio_outputs"]

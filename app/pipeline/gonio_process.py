@@ -31,6 +31,7 @@ from tunespec.core.colorimetry import astm_e308_weights_d50, xyz_d50, xyz_to_lab
 from tunespec.core.errors import InputError
 from tunespec.core.fusion import fuse_patch, fused_covariance, material_prior
 from tunespec.core.hdr import HdrImage, hdr_patch_responses, merge_brackets
+from tunespec.core.io.spectral import read_spectra_csv
 from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import read_json
 from tunespec.core.metering import suppress_meter_floor
@@ -43,7 +44,7 @@ from tunespec.core.progress import (
 )
 from tunespec.core.responses import Responses
 from tunespec.core.single_shot import apply_xyz_transform, xyz_transform
-from tunespec.core.spectra import DEFAULT_GRID, Spectra, read_spectra_csv
+from tunespec.core.spectra import DEFAULT_GRID, Spectra
 from tunespec.core.wiener import wiener_reflectance
 
 __all__ = [
@@ -51,6 +52,7 @@ __all__ = [
     "GeometryData",
     "GonioResult",
     "calibration_correction",
+    "geometry_label",
     "process_gonio",
 ]
 
@@ -126,6 +128,17 @@ def _roi_pixels(
 GONIO_MAX_EXCESS_SPREAD = 0.35
 
 
+def geometry_label(index: int, position: Any) -> str:
+    """How a message names geometry ``index`` (0-based): ``geometry 3 (theta_i 45,
+    theta_r 30)``, its angles as read back (``position.json``) where known."""
+    where = ", ".join(
+        f"{k} {position[k]:g}"
+        for k in ("theta_i", "theta_r")
+        if isinstance(position, dict) and isinstance(position.get(k), int | float)
+    )
+    return f"geometry {index + 1}" + (f" ({where})" if where else "")
+
+
 def _check_geometry(
     frame: NDArray[np.float64],
     layout: TargetLayout,
@@ -144,13 +157,8 @@ def _check_geometry(
         layout.patch_names, stats, max_excess_spread=GONIO_MAX_EXCESS_SPREAD
     )
     if not check.ok:
-        where = ", ".join(
-            f"{k} {position[k]:g}"
-            for k in ("theta_i", "theta_r")
-            if isinstance(position, dict) and isinstance(position.get(k), int | float)
-        )
         raise InputError(
-            f"geometry {index + 1} ({where}): patch extraction refused: "
+            f"{geometry_label(index, position)}: patch extraction refused: "
             f"{check.summary()}"
         )
 
@@ -167,6 +175,24 @@ def _load(gdir: Path, name: str, k: int) -> NDArray[np.float64]:
 
 def _process_geometry(gdir: Path, index: int, plan: GonioPlan, layout: TargetLayout,
                       leds: list[str], correct: Correction | None) -> GeometryData:  # fmt: skip
+    """One geometry's responses and illuminants; an InputError names the geometry
+    (its number and read-back angles) and its folder."""
+    pos_path = gdir / "position.json"
+    position = read_json(pos_path) if pos_path.exists() else None
+    try:
+        return _geometry_data(gdir, index, plan, layout, leds, correct, position)
+    except InputError as exc:
+        text = str(exc)
+        if text.startswith(f"geometry {index + 1}"):
+            raise
+        raise InputError(
+            f"{geometry_label(index, position)}, {gdir.name}: {text}"
+        ) from exc
+
+
+def _geometry_data(gdir: Path, index: int, plan: GonioPlan, layout: TargetLayout,
+                   leds: list[str], correct: Correction | None,
+                   position: Any) -> GeometryData:  # fmt: skip
     from tunespec.core.homography import locate_target
 
     step = plan.steps[index]
@@ -182,7 +208,8 @@ def _process_geometry(gdir: Path, index: int, plan: GonioPlan, layout: TargetLay
         except InputError:
             if k == 0:
                 raise
-    position = read_json(gdir / "position.json")
+    if position is None:
+        raise InputError(f"missing {gdir / 'position.json'}: resume the capture first")
     _check_geometry(frame, layout, corners, index, position)
     rois = _roi_pixels(layout, corners, frame.shape[1:])
     exposures = read_json(gdir / "exposure.json")

@@ -1,7 +1,7 @@
 """Spectral and colorimetric images of sessions, as a Dask graph (one machine or many).
 
 :func:`session_graph` turns one session into a graph of the stages of
-:mod:`tunespec.core.image_session`: a task per dark exposure, one per LED (read,
+:mod:`tunespec.app.pipeline.image_session`: a task per dark exposure, one per LED (read,
 dark, Eq. 2, into the on-disk response stack), one setup (noise model, corrected
 illuminants, Wiener bank), one per block of output rows (Eq. 5 per pixel, written
 into the ENVI, Zarr and TIFF files at the block's own offsets) and a last one
@@ -71,7 +71,7 @@ class ImageSettings:
     dark
         ``"pixel"``: the mean dark frame subtracted pixel by pixel; ``"smooth"``:
         its smooth level and hot pixels only
-        (:func:`tunespec.core.image_session.smooth_dark`), which removes the dark
+        (:func:`tunespec.core.image_planes.smooth_dark`), which removes the dark
         frame's read noise from every pixel.
     formats
         The files written (``--formats``): ``envi`` (cube.hdr/.img), ``zarr``
@@ -95,7 +95,7 @@ class ImageSettings:
 
     def __post_init__(self) -> None:
         from tunespec.core.image import NoiseModel, SensorFigures
-        from tunespec.core.image_session import DARK_MODES
+        from tunespec.core.image_planes import DARK_MODES
         from tunespec.core.io.image_formats import valid_formats
 
         object.__setattr__(self, "formats", valid_formats(self.formats))
@@ -155,7 +155,7 @@ def _load_calibration(sensitivities: str | PathLike[str], grid: Grid) -> _Calibr
 
 
 def _rectification(session: Any) -> Any:
-    from tunespec.core.image_session import rectification_for
+    from tunespec.core.image_planes import rectification_for
     from tunespec.core.processing import find_session_corners
 
     layout = session.layout
@@ -179,7 +179,7 @@ def session_graph(
     provenance dict) and the blocks of rows (for progress on a cluster)."""
     from dask import delayed
 
-    from tunespec.core import image_session as st
+    from tunespec.app.pipeline import image_session as st
     from tunespec.core.io.session import Session
 
     session = Session.open(session_dir)
@@ -459,7 +459,7 @@ def _scratch_released() -> Iterator[None]:
     """The local threads' frame and block buffers (about 0.5 GB a thread at full
     resolution) and the cached dark planes are dropped when the work ends, so a
     GUI does not keep them."""
-    from tunespec.core.image_session import release_buffers
+    from tunespec.app.pipeline.image_session import release_buffers
 
     try:
         yield

@@ -244,7 +244,7 @@ def process_job(
     """Process the session (``steps.process``) and write its responses and
     illuminants; returns the ``ProcessedSession``."""
     from tunespec.app.pipeline.extract import flag_forced_csv
-    from tunespec.core.processing import write_processed
+    from tunespec.app.pipeline.processing import write_processed
 
     processed = process(
         Session.open(inputs.session_dir),
@@ -426,7 +426,7 @@ def predicted_table1(
     responses Eq. 1 predicts from ``sensitivity`` under ``illuminants`` corrected as
     the calibration found (``meta``, its side file) against the measured ones; all
     on one grid."""
-    from tunespec.core.sensitivity import (
+    from tunespec.core.calibration import (
         correct_illuminants_from_meta,
         predict_responses,
     )
@@ -611,14 +611,13 @@ def restore_calibration_steps(
     """The processed chart and the ``steps.Calibration`` of a restored result.
 
     Nothing is estimated again: the sensitivities, their covariance and LED
-    corrections come from the files (``core.sensitivity.calibration_from_files``),
+    corrections come from the files (``core.calibration.Calibration.load``),
     Table 1 is recomputed from them (``core.stats.calibration_report``). ``None``
     when the processed chart is not in ``result_dir``.
     """
     from dataclasses import replace
 
-    from tunespec.core.io.export import read_sensitivity_meta
-    from tunespec.core.sensitivity import calibration_from_files
+    from tunespec.core.calibration import Calibration as FileCalibration
     from tunespec.core.stats import calibration_report
     from tunespec.devices.registry import layout_reflectances
 
@@ -626,7 +625,7 @@ def restore_calibration_steps(
     if chart is None:
         return None
     csv = result_dir / "sensitivity.csv"
-    est = calibration_from_files(csv, read_sensitivity_meta(csv))
+    est = FileCalibration.load(csv)
     # the sensitivities as restored (with the SPD shift in their meta) and what the
     # CSV cannot say: the method and the patches the fit left out
     est = replace(

@@ -18,8 +18,9 @@ from typing import Any
 
 from tunespec.core.datasets import resource_path
 from tunespec.core.errors import InputError
+from tunespec.core.io.cht import load_layout
 from tunespec.core.io.session import MAX_BRACKETS, MAX_DARKS
-from tunespec.core.io.spectral import read_spectral
+from tunespec.core.io.spectral import read_spectra_csv, read_spectral
 from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import (
     check_output_dir,
@@ -31,13 +32,7 @@ from tunespec.core.limits import (
     valid_number,
     valid_seed,
 )
-from tunespec.core.spectra import (
-    CALIBRATION_GRID,
-    DEFAULT_GRID,
-    Grid,
-    Spectra,
-    read_spectra_csv,
-)
+from tunespec.core.spectra import CALIBRATION_GRID, DEFAULT_GRID, Grid, Spectra
 from tunespec.devices.registry import (
     DEFAULT_SIM_RESOLUTION,
     layout_reflectances,
@@ -309,8 +304,8 @@ def plan_from_config(
     chart_cfg, sample_cfg = cfg.get("chart", {}), cfg.get("sample", {})
     chart_path = rel(chart_cfg.get("layout"), "chart.layout")
     sample_path = rel(sample_cfg.get("layout"), "sample.layout")
-    c_layout = TargetLayout.load(chart_path) if chart_path else chart_layout()
-    s_layout = TargetLayout.load(sample_path) if sample_path else sample_layout()
+    c_layout = load_layout(chart_path) if chart_path else chart_layout()
+    s_layout = load_layout(sample_path) if sample_path else sample_layout()
 
     def spectra(p: str | None, key: str) -> Spectra | None:
         q = rel(p, key)

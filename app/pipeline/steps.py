@@ -47,6 +47,7 @@ from tunespec.app.pipeline.folder import (
     write_exports_index,
 )
 from tunespec.app.pipeline.plan import ESTIMATION_GRID
+from tunespec.app.pipeline.processing import process_session, write_processed
 from tunespec.core.colorimetry import ReflectanceStats, reflectance_stats
 from tunespec.core.datasets import load_colorchecker_sg
 from tunespec.core.errors import InputError
@@ -56,14 +57,10 @@ from tunespec.core.io.export import (
     write_colorimetry_csv,
 )
 from tunespec.core.io.session import MANIFEST_NAME, Session
-from tunespec.core.processing import ProcessedSession, process_session, write_processed
+from tunespec.core.io.spectral_csv import write_spectra_csv
+from tunespec.core.processing import ProcessedSession
 from tunespec.core.progress import ProgressFn, StopFn, sub_progress
-from tunespec.core.spectra import (
-    CALIBRATION_GRID,
-    Grid,
-    Spectra,
-    write_spectra_csv,
-)
+from tunespec.core.spectra import CALIBRATION_GRID, Grid, Spectra
 
 if TYPE_CHECKING:
     # the estimators import scipy (a third of a second): imported where they run,
@@ -359,10 +356,10 @@ def table1_by_patch(
     For each patch the mean over its LEDs of the per-stimulus error
     ``sqrt(mean_c (c - c_hat)^2)`` (the paper's Table 1, "RGB" row), with Eq. 1
     predicting ``c_hat`` from the estimated sensitivities
-    (:func:`tunespec.core.sensitivity.predict_responses`), the illuminants corrected
+    (:func:`tunespec.core.calibration.predict_responses`), the illuminants corrected
     as the calibration found. Patches the fit left out are not listed.
     """
-    from tunespec.core.sensitivity import predict_responses
+    from tunespec.core.calibration import predict_responses
 
     skip = set(estimate.excluded_patches)
     patches = [p for p in responses.patches if p not in skip]
@@ -439,7 +436,7 @@ def estimate(
     (``SensitivityEstimate.spd_shift_nm``); the sample's SPDs come from the same
     instrument, so it is undone on them too. ``None`` takes it from
     ``sensitivity.meta`` (the per-LED corrections of a ``"bayes"`` calibration, else
-    its common shift; :func:`~tunespec.core.sensitivity.correct_illuminants_from_meta`).
+    its common shift; :func:`~tunespec.core.calibration.correct_illuminants_from_meta`).
     With ``calibration`` carrying a covariance, the standard uncertainties of the
     reflectances and their CIELAB are computed too (:mod:`tunespec.core.uncertainty`).
     ``checks`` (default: refuse, no override) runs the plausibility checks of the
@@ -482,7 +479,7 @@ def estimate_reflectance(
 ) -> Estimation:
     """The estimate chain, written once: undo the light source's metering errors
     the calibration found on the illuminants
-    (:func:`~tunespec.core.sensitivity.correct_illuminants_from_meta`), put them and
+    (:func:`~tunespec.core.calibration.correct_illuminants_from_meta`), put them and
     the sensitivities on the integration grid (``on_integration_grid``), check the
     responses against Eq. 1 (``check_estimate_inputs``), Wiener (Eq. 5-6) and, with
     a ``calibration`` carrying a covariance, the standard uncertainties.
@@ -508,14 +505,14 @@ def estimate_reflectance(
     calibration, uncertainty_from_meta
         The calibration whose covariance gives the standard uncertainties, or
         (``uncertainty_from_meta``) the one ``meta`` holds (``calibrate``'s side
-        file: ``core.sensitivity.calibration_from_meta``).
+        file: ``core.calibration.Calibration.from_meta``).
     checks
         The plausibility checks (default: refuse, no override).
     noise_std, center_prior, clip
         :func:`~tunespec.core.wiener.wiener_reflectance`'s.
     """
+    from tunespec.core.calibration import correct_illuminants_from_meta
     from tunespec.core.plausibility import Checks, check_estimate_inputs
-    from tunespec.core.sensitivity import correct_illuminants_from_meta
     from tunespec.core.uncertainty import reflectance_uncertainty
     from tunespec.core.wiener import on_integration_grid, wiener_reflectance
 
@@ -539,9 +536,9 @@ def estimate_reflectance(
         clip=clip,
     )
     if calibration is None and uncertainty_from_meta:
-        from tunespec.core.sensitivity import calibration_from_meta
+        from tunespec.core.calibration import Calibration as FileCalibration
 
-        calibration = calibration_from_meta(
+        calibration = FileCalibration.from_meta(
             sensitivity, sensitivity.meta if meta is None else meta
         )
     unc = None

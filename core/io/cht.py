@@ -48,7 +48,7 @@ from tunespec.core.errors import InputError
 from tunespec.core.layout import PatchGrid, TargetLayout
 from tunespec.core.limits import MAX_COUNT, read_text, shown
 
-__all__ = ["ChtGrid", "ChtTemplate", "read_cht"]
+__all__ = ["ChtGrid", "ChtTemplate", "load_layout", "read_cht"]
 
 #: A main grid whose patch size / pitch differs in x and y by up to this is drawn
 #: with their geometric mean (SpyderChecker: 42 on 49 and 50, 2 %).
@@ -356,3 +356,15 @@ def _float(tokens: list[str], k: int, *, path: str, line: int) -> float:
     if not np.isfinite(v) or abs(v) > 1e7:
         raise InputError(f"{tokens[0]}: number out of range", path=path, line=line)
     return v
+
+
+def load_layout(path: str | PathLike[str]) -> TargetLayout:
+    """A layout from a file: TuneSpec JSON, an ArgyllCMS ``.cht`` template (by its
+    suffix), or the stem of a shipped layout (``"colorchecker_24"``).
+
+    What every ``--layout`` option and the ``chart.layout``/``sample.layout`` keys of
+    a run config take; :meth:`TargetLayout.load` reads the JSON alone.
+    """
+    if Path(path).suffix.lower() == ".cht":
+        return read_cht(path).to_layout()
+    return TargetLayout.load(path)

@@ -55,11 +55,13 @@ from numpy.typing import NDArray
 
 from tunespec.core.atomic import atomic_open, atomic_write_text
 from tunespec.core.colorimetry import lab_d50, xyz_d50
-from tunespec.core.errors import InputError, check_names, read_json
+from tunespec.core.errors import InputError, check_names
 from tunespec.core.io.cgats import CgatsTable, ti3_table, write_cgats
-from tunespec.core.limits import dumps_json, shown
-from tunespec.core.responses import Responses, write_responses_csv
-from tunespec.core.spectra import Grid, Spectra, write_spectra_csv
+from tunespec.core.io.responses_csv import write_responses_csv
+from tunespec.core.io.spectral_csv import write_spectra_csv
+from tunespec.core.limits import dumps_json, read_json, shown
+from tunespec.core.responses import Responses
+from tunespec.core.spectra import Grid, Spectra
 
 if TYPE_CHECKING:
     from tunespec.core.colorimetry import ReflectanceStats
@@ -74,9 +76,11 @@ __all__ = [
     "camera_transforms",
     "export_camera_characterisation",
     "export_measurement",
+    "parse_sensitivity_meta",
     "read_sensitivity_meta",
     "read_spd_shift",
     "reflectance_ti3",
+    "sensitivity_meta_document",
     "sensitivity_meta_path",
     "sensitivity_rawtoaces_document",
     "tunespec_version",
@@ -146,6 +150,16 @@ def write_sensitivity_meta(
     fills it (``source``, ``spd_shift_nm``).
     """
     path = sensitivity_meta_path(sensitivity_csv)
+    doc = sensitivity_meta_document(sensitivity, covariance)
+    atomic_write_text(path, dumps_json(doc))
+    return path
+
+
+def sensitivity_meta_document(
+    sensitivity: Spectra, covariance: NDArray[np.float64] | None = None
+) -> dict[str, Any]:
+    """What :func:`write_sensitivity_meta` writes, as a dict (a calibration JSON
+    holds the same keys beside its curves)."""
     wl = sensitivity.wavelength_nm
     doc: dict[str, Any] = {
         "estimated_by": sensitivity.meta.get("source", ""),
@@ -164,8 +178,7 @@ def write_sensitivity_meta(
             "wavelength_nm": [float(x) for x in wl],
             "values": [[float(f"{v:.7g}") for v in row] for row in covariance],
         }
-    atomic_write_text(path, dumps_json(doc))
-    return path
+    return doc
 
 
 #: Columns of the colorimetry CSV written beside estimated reflectances.
@@ -216,13 +229,21 @@ def read_sensitivity_meta(sensitivity_csv: str | PathLike[str]) -> dict[str, Any
     path = sensitivity_meta_path(sensitivity_csv)
     if not path.exists():
         return {}
-    doc = read_json(path)
+    return parse_sensitivity_meta(read_json(path), path)
+
+
+def parse_sensitivity_meta(doc: Any, path: str | PathLike[str]) -> dict[str, Any]:
+    """:func:`read_sensitivity_meta` of a document already read (``path`` names it
+    in messages and as ``meta_path``)."""
     if not isinstance(doc, dict):
         raise InputError("expected a JSON object", path=path)
-    out: dict[str, Any] = {
-        "meta_path": str(path),
-        "spd_shift_nm": read_spd_shift(sensitivity_csv),
-    }
+    try:
+        spd_shift_nm = float(doc.get("spd_shift_nm", 0.0))
+    except (TypeError, ValueError):
+        raise InputError(
+            "expected a JSON object with a number spd_shift_nm", path=path
+        ) from None
+    out: dict[str, Any] = {"meta_path": str(path), "spd_shift_nm": spd_shift_nm}
     for key in ("led_correction", "excess_variance"):
         if key in doc:
             out[key] = doc[key]

@@ -504,7 +504,8 @@ class SpectralImage:
 
     def region(self, row0: int, row1: int, col0: int, col1: int) -> dict[str, Any]:
         """Mean and spread of a rectangle: L*a*b* (mean, std), the mean spectrum and
-        its standard deviation over the pixels, and the pixel count."""
+        its standard deviation over the pixels, the pixel count and the pixels' mean
+        RMS standard uncertainty of reflectance (``u_reflectance_mean``)."""
         r0, r1 = sorted((max(0, row0), min(self.shape[0], row1)))
         c0, c1 = sorted((max(0, col0), min(self.shape[1], col1)))
         if r1 <= r0 or c1 <= c0:
@@ -518,6 +519,9 @@ class SpectralImage:
             "lab_std": lab.std(axis=0),
             "reflectance_mean": spec.mean(axis=0),
             "reflectance_std": spec.std(axis=0),
+            "u_reflectance_mean": float(
+                np.mean(self.uncertainty[r0:r1, c0:c1, 1], dtype=np.float64)
+            ),
         }
 
 

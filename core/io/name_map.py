@@ -18,8 +18,8 @@ from __future__ import annotations
 from os import PathLike
 from pathlib import Path
 
-from tunespec.core.errors import InputError, read_text
-from tunespec.core.limits import csv_rows, shown, valid_name
+from tunespec.core.errors import InputError
+from tunespec.core.limits import csv_rows, read_text, shown, valid_name
 from tunespec.core.spectra import Spectra
 
 __all__ = ["read_name_map", "rename_spectra"]

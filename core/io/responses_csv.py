@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from tunespec.core.atomic import atomic_open
-from tunespec.core.errors import InputError, read_text
-from tunespec.core.limits import csv_rows, shown, valid_name, valid_number
+from tunespec.core.errors import InputError
+from tunespec.core.limits import csv_rows, read_text, shown, valid_name, valid_number
 from tunespec.core.responses import CHANNELS, Responses
 
 __all__ = ["read_responses_csv", "write_responses_csv"]

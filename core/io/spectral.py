@@ -66,6 +66,7 @@ __all__ = [
     "KINDS",
     "detect_format",
     "rawtoaces_spectra",
+    "read_spectra_csv",
     "read_spectral",
     "to_reflectance_factor",
 ]
@@ -419,3 +420,23 @@ def read_spectral(
     if average is None:
         average = kind == "illuminant"
     return spectra.resample(grid, source=source, average=average)
+
+
+def read_spectra_csv(
+    path: str | PathLike[str],
+    grid: Grid | None = None,
+    *,
+    allow_negative: bool = False,
+    max_value: float = MAX_VALUE,
+    average: bool = False,
+) -> Spectra:
+    """Read spectral data (CSV, CGATS or rawtoaces JSON) as ``kind="spectra"`` and
+    optionally resample it (point sampling unless ``average``).
+
+    The older name, used by the numerics' callers: :func:`read_spectral` with no
+    kind-specific checks. (It lived in :mod:`tunespec.core.spectra`, which no longer
+    imports its readers.)
+    """
+    return read_spectral(
+        path, grid, allow_negative=allow_negative, max_value=max_value, average=average
+    )

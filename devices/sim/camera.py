@@ -67,8 +67,9 @@ from numpy.typing import ArrayLike, NDArray
 from tunespec.core.datasets import DEFAULT_CAMERA, load_camera
 from tunespec.core.forward_model import render_rgb
 from tunespec.core.io.raw import full_to_plane_px
+from tunespec.core.io.spectral_csv import write_spectra_csv
 from tunespec.core.limits import dumps_json
-from tunespec.core.spectra import Grid, Spectra, write_spectra_csv
+from tunespec.core.spectra import Grid, Spectra
 from tunespec.devices.clock import Clock, RealClock, VirtualClock
 from tunespec.devices.dng import write_dng
 from tunespec.devices.protocols import (

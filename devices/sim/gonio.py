@@ -255,8 +255,8 @@ class GonioBench:
         seed: int = 0,
     ) -> None:
         from tunespec.core.datasets import load_camera, resource_path
+        from tunespec.core.io.spectral import read_spectra_csv
         from tunespec.core.layout import TargetLayout
-        from tunespec.core.spectra import read_spectra_csv
 
         self.light, self.gonio = light, gonio
         self.grid = Grid(380.0, 730.0, 1.0)

@@ -25,7 +25,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tunespec.core.errors import InputError
-from tunespec.core.spectra import Spectra, read_spectra_csv
+from tunespec.core.io.spectral import read_spectra_csv
+from tunespec.core.spectra import Spectra
 from tunespec.devices.clock import Clock, VirtualClock
 from tunespec.devices.protocols import (
     Channel,

@@ -51,8 +51,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tunespec.core.datasets import load_colorchecker_sg, resource_path
+from tunespec.core.io.spectral import read_spectra_csv
 from tunespec.core.layout import TargetLayout, homography_from_corners
-from tunespec.core.spectra import DEFAULT_GRID, Grid, Spectra, read_spectra_csv
+from tunespec.core.spectra import DEFAULT_GRID, Grid, Spectra
 
 __all__ = [
     "BACKGROUND",

@@ -16,8 +16,9 @@ ROWS, COLS = 24, 32
 WL = np.arange(400.0, 701.0, 10.0)
 
 
-def _write_folder(folder) -> dict[str, np.ndarray]:
-    """A finished image folder: left half one colour, right half another."""
+def _write_folder(folder, u_reflectance=None) -> dict[str, np.ndarray]:
+    """A finished image folder: left half one colour, right half another
+    (``u_reflectance``: the RMS u(reflectance) image, else 0.01 everywhere)."""
     rng = np.random.default_rng(0)
     cube = np.empty((ROWS, COLS, WL.size), np.float32)
     cube[:, : COLS // 2] = 0.2 + 0.5 * (WL > 550)  # reddish
@@ -28,6 +29,8 @@ def _write_folder(folder) -> dict[str, np.ndarray]:
     lab[:, COLS // 2 :] = (55.0, -5.0, -25.0)
     lab += rng.normal(0, 0.2, lab.shape).astype(np.float32)
     unc = np.full((ROWS, COLS, 2), (0.2, 0.01), np.float32)
+    if u_reflectance is not None:
+        unc[:, :, 1] = u_reflectance
     xyz = np.full((ROWS, COLS, 3), 30.0, np.float32)
     out = ImageOutputs.create(folder, (ROWS, COLS), WL, block_rows=8,
                               provenance={"session": "test"})  # fmt: skip
@@ -148,3 +151,80 @@ def test_scalar_layers_have_a_colour_bar_with_units_and_the_band_a_label(
     # the band around a pixel's spectrum is named in the legend
     assert "pixel reflectance" in view.legend_label.text()
     assert BAND_LABEL in view.legend_label.text()
+
+
+def _drag(view, start_rc, end_rc, *, shift=False) -> None:
+    """A left-button drag on the image from pixel (row, col) to (row, col)."""
+    from PySide6.QtCore import QEvent, QPointF, Qt
+    from PySide6.QtGui import QMouseEvent
+    from PySide6.QtWidgets import QApplication
+
+    gv = view.graphics
+    mods = (
+        Qt.KeyboardModifier.ShiftModifier if shift else Qt.KeyboardModifier.NoModifier
+    )
+
+    def at(rc):
+        scene = view.view_box.mapViewToScene(QPointF(rc[1], rc[0]))
+        return QPointF(gv.mapFromScene(scene))
+
+    a, b = at(start_rc), at(end_rc)
+    vp = gv.viewport()
+    left, none = Qt.MouseButton.LeftButton, Qt.MouseButton.NoButton
+
+    def send(kind, pos, button, buttons):
+        ev = QMouseEvent(kind, pos, vp.mapToGlobal(pos), button, buttons, mods)
+        QApplication.sendEvent(vp, ev)
+
+    send(QEvent.Type.MouseButtonPress, a, left, left)
+    for t in np.linspace(0.1, 1.0, 6):
+        send(QEvent.Type.MouseMove, a + (b - a) * float(t), none, left)
+    send(QEvent.Type.MouseButtonRelease, b, left, none)
+    QApplication.processEvents()
+
+
+def test_a_drawn_region_gives_numpys_mean_and_spread_of_its_pixels(
+    qtbot, tmp_path
+) -> None:
+    u_image = np.full((ROWS, COLS), 0.01)
+    u_image[3:9, 4:14] = np.linspace(0.005, 0.03, 60).reshape(6, 10)
+    data = _write_folder(tmp_path / "img", u_image)
+    view = ImageView()
+    qtbot.addWidget(view)
+    view.resize(900, 700)
+    view.show()
+    qtbot.waitExposed(view)
+    view.open_folder(tmp_path / "img")
+    view.view_box.setRange(xRange=(0, COLS), yRange=(0, ROWS), padding=0)
+    range_before = view.view_box.viewRange()
+    # without the mode a drag pans; with it the same drag draws a region
+    _drag(view, (3, 4), (9, 14))
+    assert len(view.regions) == 2
+    assert view.view_box.viewRange() != range_before
+    view.view_box.setRange(xRange=(0, COLS), yRange=(0, ROWS), padding=0)
+    view.draw_button.setChecked(True)
+    _drag(view, (3, 4), (9, 14))
+    assert [r.name for r in view.regions] == ["A", "B", "R1"]
+    region = view.regions[2]
+    r0, r1, c0, c1 = region.rect()
+    assert (r0, r1, c0, c1) == (3, 9, 4, 14)
+    pixels = data["cube"][r0:r1, c0:c1].reshape(-1, WL.size).astype(np.float64)
+    x, mean = region.curve.getData()
+    np.testing.assert_allclose(x, WL)
+    np.testing.assert_allclose(mean, pixels.mean(axis=0), rtol=1e-6)
+    _, upper = region.upper.getData()
+    np.testing.assert_allclose(upper - mean, pixels.std(axis=0), rtol=1e-5)
+    stats = view.region_stats(region)
+    assert stats["n_pixels"] == 60
+    # this region's pixels' mean u(reflectance) (written at float32)
+    u = data["unc"][3:9, 4:14, 1].astype(np.float64).mean()
+    assert stats["u_reflectance_mean"] == pytest.approx(u, rel=1e-6)
+    assert "R1: 60 px" in view.region_label.text()
+    assert f"mean u(reflectance) {u:.4f}" in view.region_label.text()
+    # Shift draws without the mode; clearing keeps A and B
+    view.draw_button.setChecked(False)
+    _drag(view, (12, 18), (20, 30), shift=True)
+    assert [r.name for r in view.regions][-1] == "R2"
+    assert view.regions[3].rect() == (12, 20, 18, 30)
+    view.clear_regions_button.click()
+    assert [r.name for r in view.regions] == ["A", "B"]

@@ -16,10 +16,10 @@ from tunespec.app.pipeline.plan import ESTIMATION_GRID, load_config
 from tunespec.app.pipeline.run import run_config, run_demo
 from tunespec.core.colorimetry import lab_d50
 from tunespec.core.errors import InputError
+from tunespec.core.io.responses_csv import read_responses_csv
 from tunespec.core.io.session import Session
+from tunespec.core.io.spectral import read_spectra_csv
 from tunespec.core.progress import Cancelled
-from tunespec.core.responses import read_responses_csv
-from tunespec.core.spectra import read_spectra_csv
 
 #: Paper, Table 1: mean RGB RMS prediction error of the SG under all LEDs.
 PAPER_TABLE1_RGB_RMS = 0.0024

@@ -7,7 +7,8 @@ import os
 import time
 
 from tests.app.helpers import caught
-from tunespec.app.gui.workers import BACKGROUND_NICE, ProcessWorker, Worker
+from tunespec.app.gui.processes import BACKGROUND_NICE, ProcessWorker
+from tunespec.app.gui.workers import Worker
 from tunespec.core.errors import InputError
 from tunespec.core.progress import Cancelled, check_stop
 

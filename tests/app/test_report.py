@@ -258,7 +258,8 @@ def test_shipped_datasets_and_licences() -> None:
 
 
 def test_pdf_tables_wrap_long_cells_instead_of_cutting_them() -> None:
-    from tunespec.app.report.report import _Table, _text_table
+    from tunespec.app.report.render import _text_table
+    from tunespec.app.report.tables import _Table
 
     long = "a description " * 10
     lines = _text_table(_Table("T", ("Name", "What"), (("x", long),)))

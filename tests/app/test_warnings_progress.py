@@ -18,7 +18,8 @@ from tests.app.test_wizard import STEP_TIMEOUT_MS, run_step
 from tests.app.test_wizard import window as window  # the fixture
 from tunespec.app.gui.wizard.step_page import StepState
 from tunespec.core.datasets import resource_path
-from tunespec.core.spectra import read_spectra_csv, write_spectra_csv
+from tunespec.core.io.spectral import read_spectra_csv
+from tunespec.core.io.spectral_csv import write_spectra_csv
 
 WEAK_LED = "LED700"
 #: The weak LED's power relative to the shipped model.

@@ -69,7 +69,7 @@ def test_wizard_runs_to_the_end_on_the_simulated_bench(window, qtbot, tmp_path):
     from tunespec.app.pipeline.steps import calibrate, process
     from tunespec.core.colorimetry import reflectance_stats
     from tunespec.core.io.export import EXPORT_NAMES
-    from tunespec.core.spectra import read_spectra_csv
+    from tunespec.core.io.spectral import read_spectra_csv
     from tunespec.devices.registry import layout_reflectances
 
     folder = tmp_path / "m"

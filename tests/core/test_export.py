@@ -31,8 +31,10 @@ from tunespec.core.io.export import (
     write_reflectance_stats_csv,
     write_sensitivity_json,
 )
-from tunespec.core.responses import Responses, read_responses_csv
-from tunespec.core.spectra import Grid, Spectra, read_spectra_csv
+from tunespec.core.io.responses_csv import read_responses_csv
+from tunespec.core.io.spectral import read_spectra_csv
+from tunespec.core.responses import Responses
+from tunespec.core.spectra import Grid, Spectra
 
 CREATED = "2026-01-02T03:04:05Z"
 SHIPPED = "Canon_EOS_5D_Mark_III_380_780_5.json"

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tunespec.core.image_session import DARK_SMOOTH_PX, smooth_dark
+from tunespec.core.image_planes import DARK_SMOOTH_PX, smooth_dark
 
 
 def test_noise_goes_gradient_and_hot_pixels_stay() -> None:

@@ -14,21 +14,21 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tunespec.app.pipeline.processing import process_session, write_processed
 from tunespec.core.errors import InputError
 from tunespec.core.io.raw import RawFrame
+from tunespec.core.io.responses_csv import read_responses_csv
 from tunespec.core.io.session import CaptureSettings, Session
+from tunespec.core.io.spectral import read_spectra_csv
 from tunespec.core.layout import TargetLayout, apply_homography, homography_from_corners
 from tunespec.core.processing import (
     ProcessedSession,
     RoiSet,
     find_session_corners,
     flat_window,
-    process_session,
-    write_processed,
 )
 from tunespec.core.progress import Cancelled
-from tunespec.core.responses import read_responses_csv
-from tunespec.core.spectra import Spectra, read_spectra_csv
+from tunespec.core.spectra import Spectra
 
 #: Responses of noise-free frames go through uint16 quantisation (1 DN of ~13000).
 ATOL_QUANTISED = 2e-4

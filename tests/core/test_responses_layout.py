@@ -7,8 +7,9 @@ import pytest
 
 from tunespec.core.datasets import resource_path
 from tunespec.core.errors import InputError
+from tunespec.core.io.responses_csv import read_responses_csv, write_responses_csv
 from tunespec.core.layout import TargetLayout, apply_homography
-from tunespec.core.responses import Responses, read_responses_csv, write_responses_csv
+from tunespec.core.responses import Responses
 
 
 def test_responses_round_trip(tmp_path) -> None:

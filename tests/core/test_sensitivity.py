@@ -23,6 +23,7 @@ from tests.tolerances import (
     SENS_RMS_5D_SMOOTH,
     SENS_RMS_TARGET,
 )
+from tunespec.core.calibration import correct_spd_shift, predict_responses
 from tunespec.core.datasets import (
     DEFAULT_CAMERA,
     load_camera_database,
@@ -37,10 +38,8 @@ from tunespec.core.responses import Responses
 from tunespec.core.sensitivity import (
     SENSITIVITY_METHODS,
     SensitivityEstimate,
-    correct_spd_shift,
     database_basis,
     estimate_camera_sensitivity,
-    predict_responses,
     stimulus_matrix,
 )
 from tunespec.core.simulate import (

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from tunespec.core.calibration import correct_illuminants_from_meta
 from tunespec.core.colorimetry import lab_d50, reflectance_stats
 from tunespec.core.datasets import (
     DEFAULT_CAMERA,
@@ -20,10 +21,7 @@ from tunespec.core.datasets import (
     load_training_reflectances_190,
 )
 from tunespec.core.errors import InputError
-from tunespec.core.sensitivity import (
-    correct_illuminants_from_meta,
-    estimate_camera_sensitivity,
-)
+from tunespec.core.sensitivity import estimate_camera_sensitivity
 from tunespec.core.sensitivity_bayes import LedCorrection
 from tunespec.core.simulate import NoiseModel, scale_to_exposure, simulate_responses
 from tunespec.core.spectra import DEFAULT_GRID, Grid, Spectra

@@ -14,13 +14,9 @@ from tunespec.core.datasets import (
 )
 from tunespec.core.errors import InputError
 from tunespec.core.forward_model import lighting_matrix, render_rgb
-from tunespec.core.spectra import (
-    MAX_GRID_SAMPLES,
-    Grid,
-    Spectra,
-    read_spectra_csv,
-    write_spectra_csv,
-)
+from tunespec.core.io.spectral import read_spectra_csv
+from tunespec.core.io.spectral_csv import write_spectra_csv
+from tunespec.core.spectra import MAX_GRID_SAMPLES, Grid, Spectra
 
 
 def test_grid_parse_and_errors() -> None:

@@ -13,8 +13,9 @@ from tests.devices.camera_fixtures import StubLight
 from tunespec.core.datasets import load_camera, load_colorchecker_sg, load_led_set
 from tunespec.core.forward_model import render_rgb
 from tunespec.core.io.raw import full_to_plane_px, load_raw, plane_to_full_px, quad_mask
+from tunespec.core.io.spectral import read_spectra_csv
 from tunespec.core.layout import TargetLayout, apply_homography
-from tunespec.core.spectra import Spectra, read_spectra_csv
+from tunespec.core.spectra import Spectra
 from tunespec.devices.clock import VirtualClock
 from tunespec.devices.dng import CANON_5D_MARK_III_COLOR_MATRIX, write_dng
 from tunespec.devices.protocols import DeviceCommandError, TargetStage

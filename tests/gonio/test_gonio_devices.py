@@ -20,8 +20,11 @@ from tunespec.app.pipeline import gonio_devices
 from tunespec.app.pipeline.gonio import GeometryStep, GonioPlan, frame_names
 from tunespec.core.colorimetry import delta_e_2000, lab_d50, xyz_to_lab_d50
 from tunespec.core.datasets import resource_path
+from tunespec.core.errors import InputError
+from tunespec.core.io.spectral import read_spectra_csv
+from tunespec.core.io.spectral_csv import write_spectra_csv
 from tunespec.core.layout import TargetLayout
-from tunespec.core.spectra import DEFAULT_GRID, read_spectra_csv, write_spectra_csv
+from tunespec.core.spectra import DEFAULT_GRID
 from tunespec.devices.cal1.emulator import Cal1Emulator
 from tunespec.devices.clock import VirtualClock
 from tunespec.devices.goniometer import Geometry
@@ -103,7 +106,10 @@ def test_gonio_run_on_cal1_and_zaber_emulators_resumes_after_a_drop(
     assert main(args) == 2  # a session is there: --resume needed
     assert main([*args, "--resume", "--mix", "camera"]) == 2  # it keeps its mix
     capsys.readouterr()
-    assert main([*args, "--resume"]) == 0
+    # the session kept its layout: --resume needs no --layout (issue 27)
+    assert (out / "layout.json").exists()
+    k = args.index("--layout")
+    assert main([*args[:k], *args[k + 2 :], "--resume"]) == 0
     assert "4 geometries (2 spectral, d50 mix), 26 frames taken now" in (
         capsys.readouterr().out
     )
@@ -177,3 +183,52 @@ def test_gonio_run_checks_its_inputs_before_writing_anything(tmp_path, capsys):
     assert "needs --plan and --sensitivities" in err[0] and "none.csv" in err[1]
     assert "--iso" in err[2]
     assert not out.exists() or not (out / "plan.json").exists()
+
+
+def test_a_processing_failure_names_the_geometry_and_its_folder(tmp_path):
+    """A target not found at one geometry: the message says which (issue 27: the
+    full-resolution run stopped on "could not follow one of the target's sides")."""
+    from tunespec.app.pipeline.gonio_process import process_gonio
+
+    layout = TargetLayout.load(LAYOUT)
+    plan = GonioPlan.load(_plan(tmp_path))
+    out = tmp_path / "s"
+    out.mkdir()
+    plan.save(out / "plan.json")
+    rng = np.random.default_rng(0)
+    for i, step in enumerate(plan.steps):
+        gdir = out / plan.folder(i)
+        gdir.mkdir()
+        g = step.geometry.as_dict()
+        (gdir / "position.json").write_text(json.dumps(g))
+        for n, k in frame_names(step, ["L0"]):  # featureless frames: no target
+            frame = rng.uniform(0.0, 0.01, (3, 48, 64)).astype(np.float32)
+            np.save(gdir / f"{n}_e{k}.npy", frame)
+    S = read_spectra_csv(_sensitivities(tmp_path), allow_negative=True)
+    with pytest.raises(InputError) as err:
+        process_gonio(out, S.resample(DEFAULT_GRID), layout, S.resample(DEFAULT_GRID))
+    assert str(err.value).startswith(
+        f"geometry 1 (theta_i 0, theta_r 10), {plan.folder(0)}: "
+    )
+
+
+def test_gonio_run_resume_uses_the_sessions_own_layout(tmp_path, capsys):
+    """--resume without --layout reads the session's layout.json; a different
+    --layout is refused (checked before any device is opened)."""
+    out = tmp_path / "s"
+    out.mkdir()
+    GonioPlan.load(_plan(tmp_path)).save(out / "plan.json")
+    TargetLayout.load(LAYOUT).save(out / "layout.json")
+    other = tmp_path / "other.json"
+    other.write_text(
+        json.dumps({**TargetLayout.load(LAYOUT).to_dict(), "width_mm": 99.0})
+    )
+    base = ["gonio-run", "--out", str(out), "--resume"]
+    assert main(base) == 2  # past the layout: the calibration is what is missing
+    assert main([*base, "--layout", str(other)]) == 2
+    assert main([*base, "--layout", str(LAYOUT)]) == 2  # the same layout: accepted
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 3
+    assert "no calibration.csv yet" in err[0] and "--layout" not in err[0]
+    assert "uses its own layout.json" in err[1] and "other.json" in err[1]
+    assert "no calibration.csv yet" in err[2]

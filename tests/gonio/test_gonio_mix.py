@@ -11,7 +11,7 @@ from tunespec.app.cli import main
 from tunespec.app.pipeline.gonio import GonioPlan, default_plan
 from tunespec.app.pipeline.gonio_bench import run_gonio_demo
 from tunespec.core.errors import InputError
-from tunespec.core.spectra import read_spectra_csv
+from tunespec.core.io.spectral import read_spectra_csv
 
 
 def test_plan_carries_the_mix_and_rejects_an_unknown_one(tmp_path):

@@ -19,8 +19,9 @@ from tunespec.core.colorimetry import (
 from tunespec.core.errors import InputError
 from tunespec.core.fusion import fuse_patch, fused_covariance
 from tunespec.core.homography import locate_target
+from tunespec.core.io.spectral import read_spectra_csv
 from tunespec.core.layout import apply_homography
-from tunespec.core.spectra import DEFAULT_GRID, read_spectra_csv
+from tunespec.core.spectra import DEFAULT_GRID
 from tunespec.devices.goniometer import Geometry
 from tunespec.devices.protocols import DeviceConnectionError
 from tunespec.devices.sim.gonio import (

@@ -17,7 +17,9 @@ from tunespec.core.illuminant_match import (
     match_illuminant,
     spd_delta_uv,
 )
-from tunespec.core.spectra import Spectra, read_spectra_csv, write_spectra_csv
+from tunespec.core.io.spectral import read_spectra_csv
+from tunespec.core.io.spectral_csv import write_spectra_csv
+from tunespec.core.spectra import Spectra
 
 
 @pytest.fixture(scope="module")

@@ -14,6 +14,7 @@ from tunespec.core.datasets import (
 )
 from tunespec.core.errors import InputError
 from tunespec.core.illuminant_match import illuminant_spd, match_illuminant
+from tunespec.core.io.spectral import read_spectra_csv
 from tunespec.core.sensitivity import estimate_camera_sensitivity
 from tunespec.core.simulate import simulate_capture
 from tunespec.core.single_shot import (
@@ -23,7 +24,7 @@ from tunespec.core.single_shot import (
     root_polynomial_terms,
     xyz_transform,
 )
-from tunespec.core.spectra import DEFAULT_GRID, Grid, Spectra, read_spectra_csv
+from tunespec.core.spectra import DEFAULT_GRID, Grid, Spectra
 
 FINE = Grid(380.0, 730.0, 1.0)
 

@@ -5,21 +5,26 @@
 5D Mark III cube is not loaded): the sRGB preview or one layer (L*, a*, b*, u(L*),
 u(reflectance), the reflectance at one wavelength). Hovering or clicking a pixel
 plots its spectrum with its 95 % band (+-1.96 u); two rectangles (A and B) give
-their mean L*a*b* and spread and the CIEDE2000 between their means. It can also run
+their mean L*a*b* and spread and the CIEDE2000 between their means. "Draw region"
+(or Shift) makes a drag on the image draw a new rectangle instead of panning; every
+region's mean spectrum is plotted with its spread over the region's pixels (mean +-
+1 sd) and the mean of its pixels' standard uncertainty is given. It can also run
 ``estimate-image`` for a session on the worker pool (:class:`~tunespec.app.gui.workers.
 Worker`) with a progress bar and Cancel, and shows the result when it is done.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pyqtgraph as pg
-from PySide6.QtCore import Signal, Slot
+from PySide6.QtCore import QRectF, Qt, Signal, Slot
 from PySide6.QtWidgets import (
     QComboBox,
+    QGraphicsRectItem,
     QHBoxLayout,
     QLabel,
     QLineEdit,
@@ -30,7 +35,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-__all__ = ["LAYERS", "ImageView"]
+__all__ = ["LAYERS", "ImageView", "Region"]
 
 #: The layers the view shows, in the combo box's order.
 LAYERS = ("sRGB", "L*", "a*", "b*", "u(L*)", "u(reflectance)", "wavelength")
@@ -45,6 +50,58 @@ LAYER_LABELS = {
 }
 #: The legend of the band around a pixel's spectrum.
 BAND_LABEL = "95 % band (±1.96 u)"
+#: The legend of the band around a region's mean spectrum.
+REGION_BAND_LABEL = "region mean ± 1 sd over its pixels"
+#: Pens of the regions, in the order they are made (A, B, then drawn ones).
+REGION_COLOURS = ("c", "m", (230, 120, 0), (0, 150, 0), (200, 0, 0), (120, 60, 200))
+
+
+@dataclass(eq=False)
+class Region:
+    """A rectangle on the image and the items that plot its mean spectrum."""
+
+    name: str
+    roi: Any
+    curve: Any
+    band: Any
+    upper: Any
+    lower: Any
+
+    def rect(self) -> tuple[int, int, int, int]:
+        """(row0, row1, col0, col1) in image pixels."""
+        return _rect(self.roi)
+
+
+class DrawingViewBox(pg.ViewBox):
+    """A view box whose left-button drag draws a rectangle (``region_drawn``, in
+    image coordinates) instead of panning while :attr:`drawing` is on or Shift is
+    held; otherwise it pans and zooms as any view box."""
+
+    region_drawn = Signal(object)
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        self.drawing = False
+        self.rubber = QGraphicsRectItem()
+        self.rubber.setPen(pg.mkPen("y", width=1, style=Qt.PenStyle.DashLine))
+        self.rubber.hide()
+        self.addItem(self.rubber, ignoreBounds=True)
+
+    def mouseDragEvent(self, ev: Any, axis: Any = None) -> None:
+        shift = bool(ev.modifiers() & Qt.KeyboardModifier.ShiftModifier)
+        if ev.button() != Qt.MouseButton.LeftButton or not (self.drawing or shift):
+            super().mouseDragEvent(ev, axis)
+            return
+        ev.accept()
+        start = self.mapSceneToView(ev.buttonDownScenePos())
+        now = self.mapSceneToView(ev.scenePos())
+        rect = QRectF(start, now).normalized()
+        if ev.isFinish():
+            self.rubber.hide()
+            self.region_drawn.emit(rect)
+        else:
+            self.rubber.setRect(rect)
+            self.rubber.show()
 
 
 class ImageView(QWidget):
@@ -70,6 +127,7 @@ class ImageView(QWidget):
         self.layer_combo.addItems(LAYERS)
         self.band_spin = QSpinBox()
         self.band_spin.setSuffix(" nm")
+        self.band_spin.setToolTip("the band the 'wavelength' layer shows")
         self.band_spin.setEnabled(False)
         self.progress = QProgressBar()
         self.progress.setRange(0, 1000)
@@ -85,10 +143,21 @@ class ImageView(QWidget):
         self.status = QLabel("Estimate images or open an image folder.")
         self.region_label = QLabel("")
         self.region_label.setWordWrap(True)
+        self.draw_button = QPushButton("Draw region")
+        self.draw_button.setCheckable(True)
+        self.draw_button.setToolTip(
+            "on: a drag on the image draws a new region (Shift+drag does too); "
+            "off: a drag pans"
+        )
+        self.clear_regions_button = QPushButton("Clear drawn regions")
         top = QHBoxLayout()
         top.addWidget(QLabel("Layer"))
         top.addWidget(self.layer_combo)
+        self.band_label = QLabel("Band")
+        top.addWidget(self.band_label)
         top.addWidget(self.band_spin)
+        top.addWidget(self.draw_button)
+        top.addWidget(self.clear_regions_button)
         top.addStretch(1)
         top.addWidget(QLabel("Scheduler"))
         top.addWidget(self.scheduler_edit)
@@ -96,7 +165,8 @@ class ImageView(QWidget):
         top.addWidget(self.cancel_button)
 
         self.graphics = pg.GraphicsLayoutWidget()
-        self.view_box = self.graphics.addViewBox(lockAspect=True, invertY=True)
+        self.view_box = DrawingViewBox(lockAspect=True, invertY=True)
+        self.graphics.addItem(self.view_box, row=0, col=0)
         self.image_item = pg.ImageItem(axisOrder="row-major")
         self.view_box.addItem(self.image_item)
         # a scalar layer's colours in its units (hidden for sRGB)
@@ -106,11 +176,7 @@ class ImageView(QWidget):
         )
         self.graphics.addItem(self.colour_bar, row=0, col=1)
         self.colour_bar.hide()
-        self.roi_a = pg.RectROI((0, 0), (10, 10), pen=pg.mkPen("c", width=2))
-        self.roi_b = pg.RectROI((20, 0), (10, 10), pen=pg.mkPen("m", width=2))
-        for roi in (self.roi_a, self.roi_b):
-            roi.hide()
-            self.view_box.addItem(roi)
+        self.regions: list[Region] = []
         # white like the other spectra plots (the black curve was invisible on
         # pyqtgraph's default black)
         self.spectrum_plot = pg.PlotWidget(background="w")
@@ -126,12 +192,16 @@ class ImageView(QWidget):
             self.lower, self.upper, brush=(100, 100, 255, 70)
         )
         self.spectrum_plot.addItem(self.band)
+        self.roi_a = self.add_region(0, 10, 0, 10, name="A").roi
+        self.roi_b = self.add_region(0, 10, 20, 30, name="B").roi
+        for roi in (self.roi_a, self.roi_b):
+            roi.hide()
         # beside the plot, not a legend item drawn over the curve (as the other
         # spectra plots do)
         self.legend_label = QLabel(
             "<span style='color:#000000'>&#9473;&#9473;</span> pixel reflectance"
             "&nbsp;&nbsp;&nbsp;<span style='color:#6464ff'>&#9608;</span> "
-            f"{BAND_LABEL}"
+            f"{BAND_LABEL}&nbsp;&nbsp;&nbsp;coloured: {REGION_BAND_LABEL}"
         )
         self.legend_label.setObjectName("band_legend")
         self.pixel: tuple[int, int] | None = None
@@ -151,8 +221,74 @@ class ImageView(QWidget):
             self.graphics.scene().sigMouseMoved, rateLimit=20, slot=self._on_mouse_moved
         )
         self.graphics.scene().sigMouseClicked.connect(self._on_mouse_clicked)
-        self.roi_a.sigRegionChangeFinished.connect(self._on_roi_changed)
-        self.roi_b.sigRegionChangeFinished.connect(self._on_roi_changed)
+        self.view_box.region_drawn.connect(self._on_view_box_region_drawn)
+        self.draw_button.toggled.connect(self._on_draw_button_toggled)
+        self.clear_regions_button.clicked.connect(self._on_clear_regions_clicked)
+
+    # -- regions -------------------------------------------------------------------
+    def add_region(
+        self, row0: int, row1: int, col0: int, col1: int, *, name: str | None = None
+    ) -> Region:
+        """A new rectangle region (rows row0..row1-1, columns col0..col1-1) with
+        its mean spectrum and spread plotted; named R1, R2, ... unless ``name``."""
+        colour = REGION_COLOURS[len(self.regions) % len(REGION_COLOURS)]
+        if name is None:
+            name = f"R{sum(r.name.startswith('R') for r in self.regions) + 1}"
+        roi = pg.RectROI(
+            (col0, row0), (max(1, col1 - col0), max(1, row1 - row0)),
+            pen=pg.mkPen(colour, width=2), snapSize=1.0, scaleSnap=True,
+            translateSnap=True,
+        )  # fmt: skip
+        self.view_box.addItem(roi)
+        pen = pg.mkPen(colour, width=2)
+        curve = self.spectrum_plot.plot(pen=pen, name=name)
+        upper = self.spectrum_plot.plot(pen=pg.mkPen(None))
+        lower = self.spectrum_plot.plot(pen=pg.mkPen(None))
+        fill = pg.mkColor(colour)
+        fill.setAlpha(45)
+        band = pg.FillBetweenItem(lower, upper, brush=fill)
+        self.spectrum_plot.addItem(band)
+        region = Region(name, roi, curve, band, upper, lower)
+        self.regions.append(region)
+        roi.sigRegionChangeFinished.connect(self._on_roi_changed)
+        if self.image is not None:
+            self._on_roi_changed()
+        return region
+
+    def remove_drawn_regions(self) -> None:
+        """Remove the drawn regions (A and B stay)."""
+        for region in self.regions[2:]:
+            self.view_box.removeItem(region.roi)
+            for item in (region.curve, region.band, region.upper, region.lower):
+                self.spectrum_plot.removeItem(item)
+        del self.regions[2:]
+        if self.image is not None:
+            self._on_roi_changed()
+
+    def region_stats(self, region: Region) -> dict[str, Any]:
+        """The region's statistics (:meth:`SpectralImage.region
+        <tunespec.core.io.image_formats.SpectralImage.region>`): mean L*a*b*,
+        mean spectrum and its sd over the pixels, the pixels' mean u(reflectance)."""
+        return dict(self.image.region(*region.rect()))
+
+    def _show_region_spectra(self) -> list[dict[str, Any]]:
+        wl = self.image.wavelength_nm
+        stats = []
+        for region in self.regions:
+            try:
+                s = self.region_stats(region)
+            except Exception:  # a region moved off the image: nothing to plot
+                s = None
+            if s is None:
+                for item in (region.curve, region.upper, region.lower):
+                    item.setData([], [])
+            else:
+                m, sd = s["reflectance_mean"], s["reflectance_std"]
+                region.curve.setData(wl, m)
+                region.upper.setData(wl, m + sd)
+                region.lower.setData(wl, m - sd)
+            stats.append(s)
+        return stats
 
     # -- data ----------------------------------------------------------------------
     def open_folder(self, folder: str | Path) -> None:
@@ -171,9 +307,10 @@ class ImageView(QWidget):
         self.band_spin.setValue(int(wl[wl.size // 2]))
         self.band_spin.blockSignals(False)
         rows, cols = image.shape
-        self.roi_a.setPos((cols * 0.1, rows * 0.1))
+        self.remove_drawn_regions()
+        self.roi_a.setPos((round(cols * 0.1), round(rows * 0.1)))
         self.roi_a.setSize((max(2, cols // 8), max(2, rows // 8)))
-        self.roi_b.setPos((cols * 0.6, rows * 0.6))
+        self.roi_b.setPos((round(cols * 0.6), round(rows * 0.6)))
         self.roi_b.setSize((max(2, cols // 8), max(2, rows // 8)))
         self.roi_a.show()
         self.roi_b.show()
@@ -246,20 +383,28 @@ class ImageView(QWidget):
             f"RMS u(reflectance) {u:.4f}"
         )
 
-    def region_text(self) -> str:
-        """Mean +- spread of regions A and B and the CIEDE2000 between them."""
+    def region_text(self, stats: list[dict[str, Any] | None] | None = None) -> str:
+        """Mean +- spread of every region, their pixels' mean u(reflectance), and
+        the CIEDE2000 between the means of A and B."""
         from tunespec.core.colorimetry import delta_e_2000
 
-        stats = [self.image.region(*_rect(roi)) for roi in (self.roi_a, self.roi_b)]
+        if stats is None:
+            stats = [self.region_stats(r) for r in self.regions]
         parts = []
-        for name, s in zip("AB", stats, strict=True):
+        for region, s in zip(self.regions, stats, strict=True):
+            if s is None:
+                parts.append(f"{region.name}: off the image")
+                continue
             m, sd = s["lab_mean"], s["lab_std"]
             parts.append(
-                f"{name}: {s['n_pixels']} px, L*a*b* {m[0]:.2f} {m[1]:.2f} {m[2]:.2f} "
-                f"(sd {sd[0]:.2f} {sd[1]:.2f} {sd[2]:.2f})"
+                f"{region.name}: {s['n_pixels']} px, L*a*b* {m[0]:.2f} {m[1]:.2f} "
+                f"{m[2]:.2f} (sd {sd[0]:.2f} {sd[1]:.2f} {sd[2]:.2f}), "
+                f"mean u(reflectance) {s['u_reflectance_mean']:.4f}"
             )
-        de = float(delta_e_2000(stats[0]["lab_mean"], stats[1]["lab_mean"]))
-        return "; ".join(parts) + f"; dE00(A, B) = {de:.2f}"
+        if stats[0] is not None and stats[1] is not None:
+            de = float(delta_e_2000(stats[0]["lab_mean"], stats[1]["lab_mean"]))
+            parts.append(f"dE00(A, B) = {de:.2f}")
+        return "; ".join(parts)
 
     # -- estimating ------------------------------------------------------------------
     def estimate(
@@ -313,7 +458,28 @@ class ImageView(QWidget):
 
     def _on_roi_changed(self, *_args: Any) -> None:
         if self.image is not None:
-            self.region_label.setText(self.region_text())
+            self.region_label.setText(self.region_text(self._show_region_spectra()))
+
+    def _on_view_box_region_drawn(self, rect: QRectF) -> None:
+        if self.image is None:
+            return
+        rows, cols = self.image.shape
+        r0, r1 = max(0, round(rect.top())), min(rows, round(rect.bottom()))
+        c0, c1 = max(0, round(rect.left())), min(cols, round(rect.right()))
+        if r1 - r0 < 1 or c1 - c0 < 1:
+            self.status.setText("a region needs at least one pixel: drag further")
+            return
+        region = self.add_region(r0, r1, c0, c1)
+        self.status.setText(f"region {region.name}: rows {r0}-{r1 - 1}, "
+                            f"columns {c0}-{c1 - 1}")  # fmt: skip
+
+    @Slot(bool)
+    def _on_draw_button_toggled(self, on: bool) -> None:
+        self.view_box.drawing = on
+
+    @Slot()
+    def _on_clear_regions_clicked(self) -> None:
+        self.remove_drawn_regions()
 
     @Slot()
     def _on_cancel_button_clicked(self) -> None:

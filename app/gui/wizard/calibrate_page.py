@@ -7,13 +7,14 @@ from typing import Any
 from PySide6.QtWidgets import QComboBox, QDoubleSpinBox, QFormLayout, QWidget
 
 from tunespec.app.gui.panels.stats_table_panel import show_table1, table1_panel
+from tunespec.app.gui.processes import ProcessWorker
 from tunespec.app.gui.wizard.measurement import (
     CALIBRATION_DIR,
     CHART_DIR,
     CalibrationResult,
 )
 from tunespec.app.gui.wizard.step_page import StepPage
-from tunespec.app.gui.workers import ProcessWorker, Worker
+from tunespec.app.gui.workers import Worker
 
 __all__ = ["CalibratePage"]
 

@@ -17,6 +17,7 @@ from PySide6.QtWidgets import (
 )
 
 from tunespec.app.gui.panels.stats_table_panel import show_table2, table2_panel
+from tunespec.app.gui.processes import ProcessWorker
 from tunespec.app.gui.wizard.calibrate_page import CORNER_CHOICES
 from tunespec.app.gui.wizard.measurement import (
     ESTIMATE_DIR,
@@ -24,7 +25,7 @@ from tunespec.app.gui.wizard.measurement import (
     EstimateResult,
 )
 from tunespec.app.gui.wizard.step_page import StepPage
-from tunespec.app.gui.workers import ProcessWorker, Worker
+from tunespec.app.gui.workers import Worker
 
 __all__ = ["EstimatePage"]
 

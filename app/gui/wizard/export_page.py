@@ -8,12 +8,13 @@ from PySide6.QtCore import QUrl, Slot
 from PySide6.QtGui import QDesktopServices
 from PySide6.QtWidgets import QListWidget, QPushButton, QWidget
 
+from tunespec.app.gui.processes import ProcessWorker
 from tunespec.app.gui.wizard.measurement import (
     EXPORT_DIR,
     ExportResult,
 )
 from tunespec.app.gui.wizard.step_page import StepPage
-from tunespec.app.gui.workers import ProcessWorker, Worker
+from tunespec.app.gui.workers import Worker
 
 __all__ = ["ExportPage"]
 

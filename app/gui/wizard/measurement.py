@@ -54,6 +54,8 @@ from tunespec.app.pipeline.folder import (
 )
 from tunespec.core.datasets import resource_path
 from tunespec.core.errors import InputError
+from tunespec.core.io.cht import load_layout
+from tunespec.core.io.spectral import read_spectra_csv
 from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import dumps_json
 from tunespec.core.progress import (
@@ -61,10 +63,7 @@ from tunespec.core.progress import (
     ProgressFn,
     StopFn,
 )
-from tunespec.core.spectra import (
-    Spectra,
-    read_spectra_csv,
-)
+from tunespec.core.spectra import Spectra
 
 __all__ = [  # the results and folder names are re-exported from app.pipeline.folder
     "CALIBRATION_DIR",
@@ -495,7 +494,7 @@ class Measurement(QObject):
 def _load_layout(path: str, shipped: str) -> TargetLayout:
     if path:
         try:
-            return TargetLayout.load(path)
+            return load_layout(path)
         except InputError as exc:
             log.warning(
                 "cannot load the remembered layout, using the shipped one: %s", exc

@@ -12,7 +12,7 @@ The stages (each a plain function of picklable arguments, so that
    precision, :data:`STACK_DTYPE`)
    (``3 n_i`` planes, illuminant-major as Eq. 5's ``c``); clipped cells become NaN.
    The white board ``A_B`` is smoothed (block means, interpolated back
-   bilinearly; :func:`flat_block_px`): the light field is smooth at that scale,
+   bilinearly; :func:`tunespec.core.image_planes.flat_block_px`): the light field is smooth at that scale,
    and dividing by the raw white pixels would add the white frame's noise to every
    pixel. Blocks of :data:`PTC_BLOCK_PX` also give photon-transfer points (noise
    variance vs. level);
@@ -30,9 +30,12 @@ The stages (each a plain function of picklable arguments, so that
    each pixel gets Eq. 5 from its bin (:func:`tunespec.core.image.estimate_pixels`),
    and the cube, XYZ, L*a*b* and uncertainty rows are written
    (:class:`tunespec.core.io.image_formats.ImageOutputs`). With a rectification
-   (:class:`Rectification`) the block's rows are those of the target plane and the
+   (:class:`tunespec.core.image_planes.Rectification`) the block's rows are those of the target plane and the
    responses are resampled through the target's homography first (bilinear; Eq. 5
    is linear, so this equals resampling the unclipped estimates).
+
+The numerics without file I/O (dark smoothing, rectification, the systematic
+table) are :mod:`tunespec.core.image_planes`.
 
 Memory is that of one frame (stage 2) or one block (stage 4), whatever the image
 size: the response stack lives on disk (``3 n_i x 4`` bytes per pixel, 1.5 GB for
@@ -73,6 +76,15 @@ from tunespec.core.image import (
     scratch,
     srgb8_from_xyz_d50,
 )
+from tunespec.core.image_planes import (
+    _LAB_CELLS,
+    DARK_MODES,
+    DARK_SMOOTH_PX,
+    Rectification,
+    SystematicTable,
+    flat_block_px,
+    smooth_dark,
+)
 from tunespec.core.io.image_formats import ImageOutputs, pwrite_all, write_array
 from tunespec.core.io.raw import load_raw
 from tunespec.core.io.session import Session, find_darks, frames_by_channel
@@ -81,33 +93,23 @@ from tunespec.core.processing import BRACKET_CLIP_LEVEL, exposure_groups
 from tunespec.core.spectra import Grid, Spectra
 
 __all__ = [
-    "DARK_MODES",
-    "FLAT_BLOCK_PX",
     "PTC_BLOCK_PX",
     "ChannelResult",
     "ImageJob",
-    "Rectification",
-    "SystematicTable",
     "block_rows_for",
     "estimate_block",
-    "flat_block_px",
     "illuminants_of",
     "lighting_for",
     "plan_image_job",
     "prepare_channel",
     "prepare_darks",
     "read_response_rows",
-    "rectification_for",
     "release_buffers",
     "setup_estimation",
-    "smooth_dark",
     "systematic_table",
     "warm_up",
 ]
 
-#: Largest side of the blocks (plane pixels) the white board is smoothed over
-#: (Eq. 2's ``A_B``), see :func:`flat_block_px`.
-FLAT_BLOCK_PX = 16
 #: Side of the photon-transfer blocks, plane pixels.
 PTC_BLOCK_PX = 16
 #: Side of the centre window whose mean normalises Eq. 2 (as processing's).
@@ -131,43 +133,6 @@ class _Frame:
     path: str
     exposure_s: float
     iso: int
-
-
-@dataclass(frozen=True)
-class Rectification:
-    """Output pixels in the target's plane: a homography from output to plane pixels.
-
-    Parameters
-    ----------
-    H_out_to_plane : (3, 3)
-        Maps output pixel ``(x, y, 1)`` to plane pixel coordinates of the frames.
-    shape
-        ``(rows, cols)`` of the rectified images.
-    """
-
-    H_out_to_plane: tuple[tuple[float, ...], ...]
-    shape: tuple[int, int]
-
-    def source_rows(self, row0: int, row1: int, plane_rows: int) -> tuple[int, int]:
-        """The plane rows the output rows ``row0:row1`` read from (with margin)."""
-        H = np.asarray(self.H_out_to_plane)
-        cols = self.shape[1]
-        x = np.array([0, cols - 1, 0, cols - 1, (cols - 1) / 2], dtype=np.float64)
-        y = np.array([row0, row0, row1 - 1, row1 - 1, (row0 + row1) / 2])
-        p = H @ np.stack([x, y, np.ones_like(x)])
-        v = p[1] / p[2]
-        lo = max(math.floor(v.min()) - 2, 0)
-        hi = min(math.ceil(v.max()) + 3, plane_rows)
-        return lo, max(hi, lo + 1)
-
-    def maps(self, row0: int, row1: int) -> tuple[NDArray[np.float32], ...]:
-        """Plane coordinates (x, y) of every output pixel of rows ``row0:row1``."""
-        H = np.asarray(self.H_out_to_plane)
-        yy, xx = np.mgrid[row0:row1, 0 : self.shape[1]].astype(np.float64)
-        w = H[2, 0] * xx + H[2, 1] * yy + H[2, 2]
-        u = (H[0, 0] * xx + H[0, 1] * yy + H[0, 2]) / w
-        v = (H[1, 0] * xx + H[1, 1] * yy + H[1, 2]) / w
-        return u.astype(np.float32), v.astype(np.float32)
 
 
 @dataclass(frozen=True)
@@ -322,57 +287,6 @@ def _planes(
         )
     out = scratch(f"planes_{slot}", (3, h, w)) if slot else None
     return raw.planes_in(0, h, 0, w, out=out), raw.saturated
-
-
-#: Side of the box the dark planes are smoothed over with ``dark="smooth"``.
-DARK_SMOOTH_PX = 15
-#: With ``dark="smooth"``, a pixel further than this many robust standard
-#: deviations from the smoothed dark keeps its own dark value (hot pixels, strong
-#: fixed pattern).
-DARK_OUTLIER_SIGMA = 5.0
-DARK_MODES = ("pixel", "smooth")
-
-
-def smooth_dark(plane: NDArray[np.float32]) -> NDArray[np.float32]:
-    """A dark plane without its temporal noise: the :data:`DARK_SMOOTH_PX` box mean,
-    except where the pixel departs from it by more than :data:`DARK_OUTLIER_SIGMA`
-    robust standard deviations (1.4826 x the median absolute departure), which
-    keep their own value.
-
-    Subtracting a dark frame pixel by pixel adds its read noise to every pixel (with
-    one dark frame, the read-noise variance doubles); its smooth level and its hot
-    pixels are what the subtraction is for. The box mean keeps linear gradients
-    (amplifier glow, a warm corner) and removes ``1 - 1/15^2`` of the noise
-    variance; a fixed pattern below the read noise is not corrected (it cannot be
-    told from noise in one frame).
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> rng = np.random.default_rng(0)
-    >>> d = (0.01 + 1e-3 * rng.standard_normal((64, 64))).astype(np.float32)
-    >>> d[10, 20] = 0.5  # a hot pixel
-    >>> s = smooth_dark(d)
-    >>> float(s[10, 20]), bool(np.std(s[30:, 30:]) < 2e-4)
-    (0.5, True)
-    """
-    import cv2
-
-    k = DARK_SMOOTH_PX
-    plane = np.ascontiguousarray(plane, dtype=np.float32)
-    box = cv2.blur(plane, (k, k), borderType=cv2.BORDER_REFLECT)
-    dev = plane - box
-    sigma = 1.4826 * float(np.median(np.abs(dev)))
-    far = np.abs(dev) > DARK_OUTLIER_SIGMA * max(sigma, 1e-12)
-    if far.any():
-        # the smooth level around hot pixels without them: the box mean again,
-        # over the other pixels only
-        keep = (~far).astype(np.float32)
-        num = cv2.blur(plane * keep, (k, k), borderType=cv2.BORDER_REFLECT)
-        den = cv2.blur(keep, (k, k), borderType=cv2.BORDER_REFLECT)
-        box = np.where(den > 0, num / np.maximum(den, 1e-6), box)
-        box[far] = plane[far]
-    return box.astype(np.float32, copy=False)
 
 
 def prepare_darks(job: ImageJob, index: int) -> str:
@@ -567,23 +481,6 @@ def prepare_channel(job: ImageJob, j: int) -> ChannelResult:
     )  # fmt: skip
 
 
-def flat_block_px(width_px: int) -> int:
-    """Smoothing block for planes ``width_px`` wide: at most :data:`FLAT_BLOCK_PX`,
-    and at most 1/96 of the width (at least 4).
-
-    Block means interpolated bilinearly miss the light field's curvature by about
-    ``f'' B^2 / 6`` (relative); the curvature per plane pixel grows as the image
-    shrinks (0.4 % at 192 px wide with 16 px blocks on the simulated bench), so small
-    images take small blocks. At full resolution (2880 px) it is 16.
-
-    Examples
-    --------
-    >>> flat_block_px(2880), flat_block_px(192)
-    (16, 4)
-    """
-    return int(max(4, min(FLAT_BLOCK_PX, width_px // 96)))
-
-
 def _window(shape: tuple[int, int]) -> tuple[int, int, int, int]:
     from tunespec.core.processing import flat_window
 
@@ -636,8 +533,8 @@ def _read_phi(job: ImageJob, row0: int, row1: int) -> NDArray[np.float32]:
 def illuminants_of(job: ImageJob) -> Spectra:
     """Each channel's measured SPD x its target exposure (as processing's), on the
     first SPD's wavelengths."""
+    from tunespec.core.io.spectral import read_spectra_csv
     from tunespec.core.processing import ILLUMINANT_UNIT
-    from tunespec.core.spectra import read_spectra_csv
 
     wl: NDArray[np.float64] | None = None
     rows = []
@@ -737,7 +634,7 @@ def _corrected_for(
     """The illuminants corrected as ``tunespec estimate`` corrects them (per-LED
     corrections on the SPDs' own grid), and both illuminants and sensitivities on
     the integration grid (:func:`tunespec.core.wiener.integration_grid`)."""
-    from tunespec.core.sensitivity import correct_illuminants_from_meta
+    from tunespec.core.calibration import correct_illuminants_from_meta
     from tunespec.core.wiener import on_integration_grid
 
     corrected = correct_illuminants_from_meta(illuminants_of(job), meta)
@@ -847,89 +744,11 @@ def block_rows_for(cols: int) -> int:
     return max(1, BLOCK_PIXELS // max(cols, 1))
 
 
-def rectification_for(
-    corners_px: Any, width_mm: float, height_mm: float
-) -> Rectification:
-    """The rectification of a target whose outer corners are at ``corners_px``.
-
-    Parameters
-    ----------
-    corners_px : (4, 2)
-        TL, TR, BR, BL of the target in mosaic pixels (a layout's ``corners_px``).
-    width_mm, height_mm
-        The target's size.
-
-    Returns
-    -------
-    Rectification
-        Output pixels square on the target, at the scale the planes have along
-        the target's top and bottom edges.
-
-    Examples
-    --------
-    >>> r = rectification_for([[0.5, 0.5], [200.5, 0.5], [200.5, 100.5], [0.5, 100.5]],
-    ...                       100.0, 50.0)
-    >>> r.shape
-    (50, 100)
-    """
-    from tunespec.core.io.raw import full_to_plane_px
-    from tunespec.core.layout import homography_from_corners
-
-    plane = full_to_plane_px(np.asarray(corners_px, dtype=np.float64).reshape(4, 2))
-    if not (width_mm > 0 and height_mm > 0):
-        raise InputError(f"target size {width_mm} x {height_mm} mm must be positive")
-    top = np.linalg.norm(plane[1] - plane[0])
-    bottom = np.linalg.norm(plane[2] - plane[3])
-    s = 0.5 * (top + bottom) / width_mm  # output px per mm
-    shape = (max(1, round(height_mm * s)), max(1, round(width_mm * s)))
-    mm = np.array(
-        [[0.0, 0.0], [width_mm, 0.0], [width_mm, height_mm], [0.0, height_mm]]
-    )
-    H_mm = homography_from_corners(mm, plane)
-    # output pixel centres at (x + 0.5) / s mm
-    to_mm = np.array([[1 / s, 0, 0.5 / s], [0, 1 / s, 0.5 / s], [0, 0, 1.0]])
-    H = H_mm @ to_mm
-    return Rectification(tuple(tuple(float(v) for v in row) for row in H), shape)
-
-
 #: Region samples (8 x 8 superpixel means) whose full uncertainty
 #: (:func:`tunespec.core.uncertainty.reflectance_uncertainty`) is computed.
 N_SYSTEMATIC_SAMPLES = 128
 #: Side of a sample region, plane pixels.
 SAMPLE_PX = 8
-#: CIELAB cells of the systematic-uncertainty table: L* 0-100, a*, b* -100-100.
-_LAB_CELLS = (10, 10, 10)
-
-
-@dataclass(frozen=True)
-class SystematicTable:
-    """What a pixel's own noise does not cover, by CIELAB cell (see
-    :func:`systematic_table`).
-
-    Parameters
-    ----------
-    var_l, var_rms : (n_L, n_a, n_b)
-        Added variance of L* and of the RMS spectral uncertainty.
-    n_samples : int
-        Regions the table was computed from.
-    """
-
-    var_l: NDArray[np.float64]
-    var_rms: NDArray[np.float64]
-    n_samples: int = 0
-
-    def lookup(self, lab: NDArray[np.floating]) -> tuple[NDArray[np.float64], ...]:
-        """The added variances at CIELAB values (3, n)."""
-        idx = _lab_cell(np.asarray(lab, dtype=np.float64))
-        return self.var_l[idx], self.var_rms[idx]
-
-
-def _lab_cell(lab: NDArray[np.float64]) -> tuple[NDArray[np.int64], ...]:
-    nl, na, nb = _LAB_CELLS
-    il = np.clip((lab[0] / (100.0 / nl)).astype(np.int64), 0, nl - 1)
-    ia = np.clip(((lab[1] + 100.0) / (200.0 / na)).astype(np.int64), 0, na - 1)
-    ib = np.clip(((lab[2] + 100.0) / (200.0 / nb)).astype(np.int64), 0, nb - 1)
-    return il, ia, ib
 
 
 def _samples(
@@ -996,10 +815,10 @@ def systematic_table(
     SystematicTable
         Zeros when no region is free of clipping.
     """
+    from tunespec.core.calibration import Calibration
     from tunespec.core.datasets import read_sensitivities
     from tunespec.core.image import _u_lightness
     from tunespec.core.responses import Responses
-    from tunespec.core.sensitivity import calibration_from_files
     from tunespec.core.uncertainty import reflectance_uncertainty
     from tunespec.core.wiener import wiener_reflectance
 
@@ -1018,7 +837,7 @@ def systematic_table(
     sensitivity = read_sensitivities(sensitivity_csv)
     L, S, _ = _corrected_for(job, sensitivity, meta, grid)
     est = wiener_reflectance(resp, L, S, prior)
-    calibration = calibration_from_files(sensitivity_csv, meta)
+    calibration = Calibration.from_meta(sensitivity, meta)
     unc = reflectance_uncertainty(est, resp, illuminants_of(job), calibration)
     bins = bank.bins_of(c.astype(np.float32), phi)
     y = unc.xyz[:, 1]
