@@ -470,21 +470,22 @@ def extract(
 ) -> Extraction:
     """Patch responses of a chart in one photograph (``tunespec extract``).
 
-    ``layout`` a layout file or :class:`~tunespec.core.layout.TargetLayout`;
-    ``corners_px`` (4, 2) its corners TL, TR, BR, BL in pixels (default found);
-    ``reflectances`` the chart's reference, for the check; ``force`` keeps an
+    ``layout`` a layout file, a shipped layout's name or a
+    :class:`~tunespec.core.layout.TargetLayout`; ``corners_px`` (4, 2) its corners
+    TL, TR, BR, BL in pixels (default found); ``reflectances`` the chart's reference
+    for the check (default the layout's own, as the command's); ``force`` keeps an
     extraction that fails its check. ``Extraction.responses`` are the responses;
     :func:`tunespec.app.pipeline.extract.write_extraction` writes them.
     """
-    from tunespec.app.pipeline.extract import extract_chart
+    from tunespec.app.pipeline.extract import extract_chart, layout_reference
     from tunespec.core.layout import TargetLayout
 
     lay = layout if isinstance(layout, TargetLayout) else TargetLayout.load(layout)
-    refl = (
-        None
-        if reflectances is None
-        else _spectra(reflectances, "reflectance", "reflectances")
-    )
+    if reflectances is None:
+        where = None if isinstance(layout, TargetLayout) else layout
+        refl = layout_reference(lay, None, where)
+    else:
+        refl = _spectra(reflectances, "reflectance", "reflectances")
     if corners_px is not None:
         corners_px = np.asarray(corners_px, dtype=np.float64)
         if corners_px.shape != (4, 2) or not np.all(np.isfinite(corners_px)):

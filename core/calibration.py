@@ -85,7 +85,7 @@ class Calibration:
         :func:`~tunespec.core.forward_model.render_rgb` with the *corrected*
         illuminants (:meth:`correct_illuminants`) predict the responses (response per
         power unit and nm). Their grid (:attr:`grid`) is the one Eq. 1 is integrated
-        on when estimating (:meth:`estimation_inputs`).
+        on when estimating (:func:`~tunespec.core.wiener.on_integration_grid`).
     method
         The estimator, a key of :data:`~tunespec.core.sensitivity.SENSITIVITY_METHODS`
         (``"unknown"`` for sensitivities read without their estimator's name).
@@ -148,23 +148,6 @@ class Calibration:
         return undo_metering(
             suppress_meter_floor(illuminants), self.led_correction, self.spd_shift_nm
         )
-
-    def estimation_inputs(
-        self, illuminants: Spectra, grid: Grid
-    ) -> tuple[Spectra, Spectra]:
-        """Illuminants and sensitivities for a reflectance estimate on ``grid``.
-
-        The reported ``illuminants`` corrected on their own grid
-        (:meth:`correct_illuminants`), then both on the integration grid
-        (:func:`~tunespec.core.wiener.on_integration_grid`: the finer of the
-        sensitivities' and ``grid``), as ``estimate`` and ``run`` do.
-        """
-        from tunespec.core.wiener import on_integration_grid
-
-        illum, sens, _ = on_integration_grid(
-            self.correct_illuminants(illuminants), self.sensitivity, grid
-        )
-        return illum, sens
 
     def side_meta(self) -> dict[str, Any]:
         """The calibration as :func:`correct_illuminants_from_meta` and the side-file
@@ -239,11 +222,11 @@ class Calibration:
             The side file is missing (and ``without_side_file`` not set), either
             file is malformed, or the sensitivities are in relative units.
         """
-        from tunespec.core.errors import read_json
         from tunespec.core.io.export import (
             parse_sensitivity_meta,
             sensitivity_meta_path,
         )
+        from tunespec.core.limits import read_json
 
         path = Path(path)
         if path.suffix.lower() == ".json" and path.is_file():

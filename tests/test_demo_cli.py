@@ -116,7 +116,10 @@ def test_capture_input_errors_exit_2(tmp_path, capsys) -> None:
 @pytest.mark.slow
 def test_demo_command_prints_both_tables(tmp_path, capsys) -> None:
     out = tmp_path / "demo"
-    rc = main(["demo", "--out", str(out), "--resolution", "512x340", "--no-report"])
+    record = ["--operator", "Kim", "--sample-id", "CMY-1", "--temperature-c", "23"]
+    rc = main(
+        ["demo", "--out", str(out), "--resolution", "512x340", "--no-report", *record]
+    )
     text = capsys.readouterr().out
     assert rc == 0
     assert "Table 1" in text and "Table 2" in text and "average" in text
@@ -137,3 +140,17 @@ def test_demo_command_prints_both_tables(tmp_path, capsys) -> None:
     held = checked["held_out"]
     assert held["prediction"]["RGB"]["mean"] < 1.5 * held["training"]["RGB"]["mean"]
     assert not any("self-check" in w for w in summary["warnings"])
+    # the measurement record (issue 27): kept in the folder, in summary.json with
+    # the devices' serials and the software
+    prov = summary["provenance"]
+    assert (prov["operator"], prov["sample_id"], prov["temperature_c"]) == (
+        "Kim",
+        "CMY-1",
+        "23",
+    )
+    assert prov["chart"] == "ColorChecker SG" and prov["chart_serial"] == ""
+    assert [i["serial_source"] for i in prov["instruments"]] == ["device"] * 3
+    assert prov["settings"]["sensitivity method"] == "bayes"
+    light = prov["light_status"]  # the simulated light's own status
+    assert float(light["light source case temperature at the run's start (°C)"]) > 15
+    assert json.loads((out / "record.json").read_text())["operator"] == "Kim"

@@ -42,6 +42,7 @@ def test_example_is_every_section_and_makes_a_plan(tmp_path) -> None:
         "calibrate",
         "estimate",
         "export",
+        "provenance",
     }
     path = tmp_path / "run.toml"
     path.write_text(example_config(), encoding="utf-8")

@@ -19,6 +19,7 @@ from tunespec.app.cli.common import (
     add_output_options,
     add_sensitivities_option,
 )
+from tunespec.app.cli.record_opts import add_record_options, record_from_args
 from tunespec.core.calibration import absolute_sensitivities
 from tunespec.core.datasets import read_sensitivities
 from tunespec.core.errors import InputError
@@ -138,6 +139,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     p.add_argument("--session-id", help="session identifier shown in the report")
     add_grid_option(p, _RESAMPLE_GRID_HELP)
+    add_record_options(p)
     add_output_options(p)
     p.set_defaults(func=cmd_report, output_dirs=("out",))
 
@@ -310,7 +312,11 @@ def cmd_report(args: argparse.Namespace) -> int:
     from tunespec.core.io.responses_csv import read_responses_csv
 
     grid = args.grid
-    data: dict[str, Any] = {"title": args.title, "session_id": args.session_id}
+    data: dict[str, Any] = {
+        "title": args.title,
+        "session_id": args.session_id,
+        "record": record_from_args(args),
+    }
     if args.reflectances:
         data["reflectance"] = read_spectral(args.reflectances, grid, kind="reflectance")
     if args.reference:

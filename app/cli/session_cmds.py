@@ -14,6 +14,7 @@ from tunespec.app.cli.common import (
     resolution_arg,
     seed_arg,
 )
+from tunespec.app.cli.record_opts import add_record_options, record_from_args
 from tunespec.core.errors import InputError
 from tunespec.core.io.cht import load_layout
 from tunespec.core.io.session import Session
@@ -95,6 +96,7 @@ def _add_demo(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="leave out the report's chart comparison (a ColorChecker 24 and the SG "
         "each calibrated on a bench of the same seed, about 20 s more)",
     )
+    add_record_options(p)
     add_output_options(p)
     p.set_defaults(func=cmd_demo, output_dirs=("out",))
 
@@ -269,6 +271,7 @@ def _add_run(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "dask.distributed address in the configuration is used only when given here "
         "too",
     )
+    add_record_options(p)
     add_output_options(p)
     p.set_defaults(func=cmd_run, output_dirs=("out",))
 
@@ -326,6 +329,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         resolution=args.resolution,
         report_files=not args.no_report,
         chart_choice=not args.no_chart_choice,
+        record=record_from_args(args),
     )
     _print_result(out, result, time.perf_counter() - t0)
     return 0
@@ -471,6 +475,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         progress=out.progress("run"),
         out=args.out,
         scheduler=args.scheduler,
+        record=record_from_args(args),
     )
     _print_result(out, result, time.perf_counter() - t0)
     return 0

@@ -218,6 +218,8 @@ class MainWindow(QMainWindow):
         file_menu.addAction(self.new_action)
         file_menu.addAction(self.open_action)
         file_menu.addMenu(self.wizard_panel.recent_menu)
+        self.record_action = QAction("Measurement &record…", self)
+        file_menu.addAction(self.record_action)
         file_menu.addSeparator()
         self.open_image_action = QAction("Spectral &image…", self)
         self.open_image_action.setToolTip("Show a folder of per-pixel images")
@@ -263,6 +265,7 @@ class MainWindow(QMainWindow):
         self.all_off_action.triggered.connect(self._on_all_off_action_triggered)
         about.triggered.connect(self._on_about_action_triggered)
         self.gonio_plan_action.triggered.connect(self._on_gonio_plan_action_triggered)
+        self.record_action.triggered.connect(self._on_record_action_triggered)
 
     # -- settings ---------------------------------------------------------------------
     def _restore_settings(self) -> None:
@@ -385,6 +388,13 @@ class MainWindow(QMainWindow):
             self.gonio_plan_editor = GonioPlanEditor(parent=self)
         self.gonio_plan_editor.show()
         self.gonio_plan_editor.raise_()
+
+    @Slot()
+    def _on_record_action_triggered(self) -> None:
+        """The open measurement's record (operator, sample ID, instruments)."""
+        from tunespec.app.gui.panels.provenance import MeasurementRecordDialog
+
+        MeasurementRecordDialog(self.measurement.folder, parent=self).exec()
 
     @Slot()
     def _on_about_action_triggered(self) -> None:

@@ -655,6 +655,7 @@ def export_job(
     again, from the same numbers), or, for a folder of an older version,
     processed again from the sessions with the corners used then.
     """
+    from tunespec.app.pipeline.record import read_record
     from tunespec.devices.registry import layout_reflectances
 
     folder, calibration, estimated = inputs.folder, inputs.calibration, inputs.estimate
@@ -717,6 +718,7 @@ def export_job(
         sessions={"chart": folder / CHART_DIR, "sample": folder / SAMPLE_DIR},
         input_files=[folder / MEASUREMENT_FILE, *inputs.input_files],
         threshold_rgb_mean=calibration.threshold,
+        record=read_record(folder),  # the "Measurement record..." dialog's fields
     )
     report(progress, 1.0)
     return ExportResult({k: Path(p) for k, p in files.items()}, Path(inputs.out_dir))

@@ -16,6 +16,11 @@ from os import PathLike
 from pathlib import Path
 from typing import Any
 
+from tunespec.app.pipeline.record import (
+    RECORD_FIELDS,
+    MeasurementRecord,
+    record_from_mapping,
+)
 from tunespec.core.datasets import resource_path
 from tunespec.core.errors import InputError
 from tunespec.core.io.cht import load_layout
@@ -135,6 +140,10 @@ class Plan:
         Charts (keys of :data:`tunespec.app.pipeline.chart_choice.CHARTS`) each
         calibrated on a fresh simulated bench of the same seed for the report's
         "Chart choice" section (``export/chart_choice.json``); simulated light only.
+    record
+        The operator's measurement record (``[provenance]``, the command line's
+        ``--operator``...; :mod:`tunespec.app.pipeline.record`): kept in the folder's
+        ``record.json``, shown in the report and ``summary.json``.
     """
 
     out_dir: Path
@@ -162,6 +171,7 @@ class Plan:
     input_files: tuple[Path, ...] = ()
     chart_choice: tuple[str, ...] = ()
     force: bool = False
+    record: MeasurementRecord = field(default_factory=MeasurementRecord)
 
 
 #: The charts ``tunespec demo`` compares for the report (24 vs 140 patches).
@@ -175,6 +185,7 @@ def demo_plan(
     resolution: tuple[int, int] = DEMO_RESOLUTION,
     report: bool = True,
     chart_choice: tuple[str, ...] = (),
+    record: MeasurementRecord | None = None,
 ) -> Plan:
     """The plan of ``tunespec demo``: the simulated bench, SG then the CMY target."""
     return Plan(
@@ -185,6 +196,7 @@ def demo_plan(
         reference=sample_reference(),
         report=report,
         chart_choice=tuple(chart_choice),
+        record=record if record is not None else MeasurementRecord(),
     )
 
 
@@ -218,8 +230,10 @@ def load_config(path: str | PathLike[str]) -> dict[str, Any]:
     Sections: ``bench``, ``capture``, ``chart`` (``layout``, ``reflectances``),
     ``sample`` (``layout``, ``reflectances``, ``reference``), ``calibrate``
     (``method``, ``grid``), ``estimate`` (``prior``, ``grid``), ``export``
-    (``report``, ``images``); top-level ``out`` and ``scheduler``
-    (:func:`check_scheduler`).
+    (``report``, ``images``), ``provenance`` (the measurement record: ``operator``,
+    ``sample_id``, ``chart_serial``, instruments' serials and calibration dates...;
+    :data:`tunespec.app.pipeline.record.RECORD_FIELDS`); top-level ``out`` and
+    ``scheduler`` (:func:`check_scheduler`).
 
     Raises
     ------
@@ -245,6 +259,7 @@ def load_config(path: str | PathLike[str]) -> dict[str, Any]:
         "calibrate": {"method", "grid"},
         "estimate": {"prior", "grid"},
         "export": {"report", "images"},
+        "provenance": set(RECORD_FIELDS),
     }
     for key, value in cfg.items():
         if key not in known:
@@ -361,6 +376,7 @@ def plan_from_config(
         images=cfg.get("export", {}).get("images", False),
         scheduler=scheduler if scheduler is not None else cfg.get("scheduler"),
         force=cfg.get("force", False),
+        record=record_from_mapping(cfg.get("provenance", {}), path=src),
         input_files=tuple(
             p
             for p in (
@@ -556,6 +572,7 @@ def check_config(
             raise InputError(
                 f"export.{key}: expected true or false, got {shown(flag)}", path=src
             )
+    record_from_mapping(cfg.get("provenance", {}), path=src)
     _check_confirmed_scheduler(cfg, scheduler)
 
 

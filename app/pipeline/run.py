@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from os import PathLike
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -40,6 +40,12 @@ from tunespec.app.pipeline.plan import (
     Plan,
     demo_plan,
     plan_from_config,
+)
+from tunespec.app.pipeline.record import (
+    MeasurementRecord,
+    light_status_items,
+    record_summary,
+    update_record,
 )
 from tunespec.app.pipeline.steps import (
     Calibration,
@@ -96,6 +102,7 @@ class RunResult:
     timings_s: dict[str, float] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
     truth: dict[str, Any] = field(default_factory=dict)
+    provenance: dict[str, Any] = field(default_factory=dict)
 
     @property
     def table1(self) -> PredictionStats:
@@ -127,6 +134,8 @@ class RunResult:
             out["table2_spectral_rms_mean"] = self.table2.mean_spectral_rms
             out["table2"] = self.table2.as_dict()
         out.update(self.truth)  # plain floats, per session or channel
+        if self.provenance:  # the measurement record (app.pipeline.record)
+            out["provenance"] = self.provenance
         return out
 
     def format_text(self) -> str:
@@ -311,6 +320,8 @@ def _run_on(
     hooks = (stages, on_frame)
     folder = MeasurementFolder.at(plan.out_dir)
     _write_plan(folder, plan)
+    record = update_record(folder.root, plan.record)
+    light_state = light_status_items(bench.light)  # its warm-up, before capturing
     # a simulated bench is opened showing the chart; hardware shows what the
     # operator puts there (the stage asks)
     chart_session = _capture(folder, plan, "chart", bench, plan.exposure, hooks)
@@ -386,12 +397,13 @@ def _run_on(
             settings=settings,
             warnings=warnings,
             report=plan.report,
-            provenance=_provenance(folder, plan, bench),
+            provenance={**_provenance(folder, plan, bench), **light_state},
             sessions={"chart": folder.chart_dir, "sample": folder.sample_dir},
             input_files=plan.input_files,
             threshold_rgb_mean=DEFAULT_THRESHOLD_RGB_MEAN,
             chart_reflectances=plan.chart_reflectances,
             chart_choice=choice,
+            record=record,
         ),
     )
     if plan.images:
@@ -410,6 +422,15 @@ def _run_on(
         timings_s=dict(stages.timings_s),
         warnings=warnings,
         truth=truth,
+        provenance={
+            **record_summary(
+                record,
+                chart_session.devices,
+                chart_layout=chart.layout,
+                settings=settings,
+            ),
+            "light_status": light_state,
+        },
     )
     files["summary_json"] = folder.write_summary(result.summary())
     report(progress, 1.0)
@@ -536,6 +557,7 @@ def run_demo(
     report_files: bool = True,
     on_frame: FrameCallback | None = None,
     chart_choice: bool = False,
+    record: MeasurementRecord | None = None,
 ) -> RunResult:
     """The full measurement on the simulated bench, compared with its truth.
 
@@ -546,11 +568,12 @@ def run_demo(
     Re-running on the same folder resumes the sessions there. ``chart_choice``:
     the report also compares calibrating on a ColorChecker 24 with the SG
     (:data:`~tunespec.app.pipeline.plan.DEMO_CHART_CHOICE`, on benches of the same
-    seed).
+    seed). ``record``: the operator's fields (``--operator``...) for the folder's
+    measurement record.
     """
     plan = demo_plan(
         out_dir, seed=seed, resolution=resolution, report=report_files,
-        chart_choice=DEMO_CHART_CHOICE if chart_choice else (),
+        chart_choice=DEMO_CHART_CHOICE if chart_choice else (), record=record,
     )  # fmt: skip
     return run(plan, progress=progress, should_stop=should_stop, on_frame=on_frame)
 
@@ -564,11 +587,16 @@ def run_config(
     on_frame: FrameCallback | None = None,
     out: str | PathLike[str] | None = None,
     scheduler: str | None = None,
+    record: MeasurementRecord | None = None,
 ) -> RunResult:
     """``run(plan_from_config(config))`` (``tunespec run CONFIG``); ``out`` and
-    ``scheduler`` are the command line's ``--out`` and ``--scheduler``."""
+    ``scheduler`` are the command line's ``--out`` and ``--scheduler``, ``record``
+    its ``--operator``... (replacing the fields of ``[provenance]`` it gives)."""
+    plan = plan_from_config(config, out=out, scheduler=scheduler)
+    if record is not None:
+        plan = replace(plan, record=plan.record.updated(record))
     return run(
-        plan_from_config(config, out=out, scheduler=scheduler),
+        plan,
         progress=progress,
         should_stop=should_stop,
         prompt=prompt,

@@ -588,6 +588,7 @@ def export(
     threshold_rgb_mean: float | None = None,
     chart_reflectances: Spectra | None = None,
     chart_choice: Mapping[str, Any] | None = None,
+    record: Any = None,
 ) -> dict[str, Path]:
     """Write every export (``core.io.export``) and, if asked, the HTML/PDF report
     (with the "Chart choice" section when ``chart_choice``, a
@@ -609,7 +610,8 @@ def export(
     The report's provenance: ``provenance`` (seed, resolution, configuration...),
     the ``sessions`` (:func:`session_provenance`) and the SHA-256 of every file of
     ``input_files`` (layouts, references, the configuration). Its verdict compares
-    Table 1's RGB mean with ``threshold_rgb_mean``.
+    Table 1's RGB mean with ``threshold_rgb_mean``; ``record`` (the folder's
+    :class:`~tunespec.app.pipeline.record.MeasurementRecord`) is its first page.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -673,6 +675,7 @@ def export(
             input_files=input_files,
             threshold_rgb_mean=threshold_rgb_mean,
             chart_choice=chart_choice,
+            record=record,
         )
     if chart_choice is not None and (out / CHART_CHOICE_FILE).is_file():
         files["chart_choice_json"] = out / CHART_CHOICE_FILE
@@ -698,8 +701,11 @@ def _write_report(
     input_files: Sequence[str | PathLike[str]],
     threshold_rgb_mean: float | None,
     chart_choice: Mapping[str, Any] | None,
+    record: Any = None,
 ) -> tuple[Path, Path]:
-    """``report.html`` and ``report.pdf`` of :func:`export` (``app.report``)."""
+    """``report.html`` and ``report.pdf`` of :func:`export` (``app.report``); the
+    LED spectra shown as spectral radiance (measured radiance x exposure over the
+    sample session's exposure per LED)."""
     from tunespec.app.report.report import ReportData, write_report
     from tunespec.core.io.session import sha256_file
     from tunespec.core.uncertainty import budget_summary
@@ -707,11 +713,16 @@ def _write_report(
     unc = estimation.uncertainty
     items, exposures, inputs = session_provenance(sessions)
     inputs += [(str(Path(f).resolve()), sha256_file(f)) for f in input_files]
+    sample_dir = sessions.get("sample")
+    _, sample_exposures, _ = session_provenance(
+        {} if sample_dir is None else {"sample": sample_dir}
+    )
     data = ReportData(
         title="TuneSpec measurement report",
         devices={k: dict(v) for k, v in devices.items()},
         settings=dict(settings),
         illuminants=sample.illuminants,
+        illuminant_exposures_s=sample_exposures,
         sensitivity=calibration.sensitivity,
         sensitivity_reference=truth_sensitivity,
         sensitivity_reference_label="simulation truth",
@@ -739,5 +750,6 @@ def _write_report(
         exposures_s=exposures,
         input_files=tuple(inputs),
         chart_choice=chart_choice,
+        record=record,
     )
     return write_report(out, data)

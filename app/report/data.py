@@ -8,7 +8,6 @@ figures are in :mod:`.figures`, the tables in :mod:`.tables`, the HTML and PDF i
 
 from __future__ import annotations
 
-import platform
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -20,7 +19,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tunespec.core.errors import InputError
-from tunespec.core.io.export import tunespec_version
 from tunespec.core.responses import Responses
 from tunespec.core.spectra import Spectra
 
@@ -38,6 +36,9 @@ PAPER_TABLE1: dict[str, tuple[float, float, float]] = {
 #: The paper's Table 2 average over the eight Neugebauer primaries: (CIEDE2000 D50,
 #: spectral RMS).
 PAPER_TABLE2_AVERAGE: tuple[float, float] = (0.67, 0.0286)
+
+#: The unit of the light source's spectra (the CAL1's, and the GUI's SPD plot).
+RADIANCE_UNIT = "W sr⁻¹ m⁻² nm⁻¹"
 
 #: Saturated stimuli listed one by one in the flags (the rest are counted).
 MAX_LISTED = 12
@@ -162,6 +163,16 @@ class ReportData:
         Exposure per LED (s).
     input_files
         (file, SHA-256) of every file the measurement read.
+    record
+        The operator's :class:`~tunespec.app.pipeline.record.MeasurementRecord`
+        (operator, sample ID, chart serial, instruments' serials and calibration
+        dates): the first page's "Measurement record", with the ``devices``' serials
+        where the operator gave none.
+    illuminant_exposures_s
+        The exposure (s) each of ``illuminants`` was measured for: given, the LED
+        spectra are ``illuminants`` (radiance x exposure) over it, in
+        :data:`RADIANCE_UNIT`; else ``illuminants`` as they are, in the units of
+        their file.
     """
 
     title: str = "TuneSpec measurement report"
@@ -200,6 +211,8 @@ class ReportData:
     provenance: Mapping[str, str] = field(default_factory=dict)
     exposures_s: Mapping[str, float] = field(default_factory=dict)
     input_files: Sequence[tuple[str, str]] = ()
+    record: Any = None
+    illuminant_exposures_s: Mapping[str, float] = field(default_factory=dict)
 
 
 def shipped_datasets() -> list[DatasetInfo]:
@@ -226,24 +239,6 @@ def shipped_datasets() -> list[DatasetInfo]:
         # Markdown emphasis and code marks are for the file, not the report.
         name, what, licence = (re.sub(r"[`*]", "", c) for c in cells)
         out.append(DatasetInfo(name, what, licence))
-    return out
-
-
-def _software_versions() -> dict[str, str]:
-    from importlib.metadata import PackageNotFoundError, version
-
-    out = {"TuneSpec": tunespec_version(), "Python": platform.python_version()}
-    for dist, label in (
-        ("numpy", "NumPy"),
-        ("scipy", "SciPy"),
-        ("colour-science", "colour-science"),
-        ("matplotlib", "Matplotlib"),
-    ):
-        try:
-            out[label] = version(dist)
-        except PackageNotFoundError:
-            out[label] = "not installed"
-    out["Platform"] = platform.platform(terse=True)
     return out
 
 
@@ -434,8 +429,9 @@ def verdict(report: ReportData) -> tuple[str, str] | None:
     """``(outcome, why)``, ``outcome`` one of :data:`VERDICTS`, or ``None`` without
     Table 1 or the threshold.
 
-    Without a self-check: ``PASS`` or ``FAIL`` from Table 1's RGB mean against the
-    threshold. With one (:mod:`tunespec.core.selfcheck`), ``PASS`` needs Table 1
+    Without a self-check: ``FAIL`` from Table 1's RGB mean over the threshold, else
+    ``PASS with warnings`` (Table 1 alone cannot pass: no left-out patches were
+    predicted and no residuals checked against the noise model). With one (:mod:`tunespec.core.selfcheck`), ``PASS`` needs Table 1
     *and* the prediction of the patches a second calibration left out within the
     threshold, *and* no finding of the self-check (residuals against the noise
     model, the LED corrections, the light's reading noise); a prediction over the
@@ -453,7 +449,12 @@ def verdict(report: ReportData) -> tuple[str, str] | None:
             f"Table 1 RGB mean error {mean:.4f} of full scale is "
             f"{'within' if ok else 'over'} the threshold {limit:.4f}"
         )
-        return ("PASS" if ok else "FAIL"), why
+        if not ok:
+            return "FAIL", why
+        return "PASS with warnings", (
+            f"{why}; but: no self-check of the calibration (no left-out patches "
+            "predicted, no residual check against the noise model)"
+        )
     over = [] if ok else [f"Table 1 RGB mean error {mean:.4f}"]
     within = [f"Table 1 RGB mean error {mean:.4f}"] if ok else []
     findings = _self_check_findings(checked)
@@ -488,3 +489,16 @@ def _table1_parts(report: ReportData) -> tuple[Any, Any]:
     if t1 is not None and hasattr(t1, "training"):  # core.stats.CalibrationReport
         return t1.training, held if held is not None else t1.held_out
     return t1, held
+
+
+def led_radiance(report: ReportData) -> tuple[Spectra, str | None]:
+    """The LED spectra as the report draws them, and their unit: spectral radiance
+    (:data:`RADIANCE_UNIT`) when every LED's exposure is known
+    (``illuminant_exposures_s``), else as given (unit ``None``)."""
+    s = report.illuminants
+    assert s is not None
+    t = report.illuminant_exposures_s
+    if not t or not all(t.get(n, 0.0) > 0 for n in s.names):
+        return s, None
+    per_s = np.array([1.0 / t[n] for n in s.names])
+    return s.with_values(s.values * per_s[:, None]), RADIANCE_UNIT

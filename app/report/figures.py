@@ -6,26 +6,23 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
-from tunespec.core.errors import InputError
-from tunespec.core.responses import Responses
-from tunespec.core.spectra import Spectra
-
-if TYPE_CHECKING:
-    pass
-
 from tunespec.app.report.data import (
     PAPER_TABLE1,
     PAPER_TABLE2_AVERAGE,
     ReportData,
     _as_dict,
+    led_radiance,
 )
+from tunespec.core.errors import InputError
+from tunespec.core.responses import Responses
+from tunespec.core.spectra import Spectra
 
 #: Patches per page of the Figure 6 grid (4 columns x 6 rows on A4 portrait).
 PATCHES_PER_FIGURE = 24
@@ -79,7 +76,8 @@ def _axes_in(fig: Figure, left: float, bottom: float, width: float, height: floa
     return fig.add_axes((left / w, bottom / h, width / w, height / h))
 
 
-def _draw_spd(ax: Any, illuminants: Spectra) -> None:
+def _draw_spd(ax: Any, report: ReportData) -> None:
+    illuminants, unit = led_radiance(report)
     wl = illuminants.wavelength_nm
     n_broad = 0
     for name, v in zip(illuminants.names, illuminants.values, strict=True):
@@ -96,8 +94,14 @@ def _draw_spd(ax: Any, illuminants: Spectra) -> None:
             n_broad += 1
         ax.plot(wl, v, color=colour, ls=style, lw=1.0, label=name)
     ax.set_xlabel("wavelength (nm)")
-    ax.set_ylabel("relative spectral power")
-    ax.set_title(f"LED spectral power distributions ({len(illuminants)} channels)")
+    ax.set_ylabel(
+        f"spectral radiance ({unit})"
+        if unit
+        else "spectral power (units of the LED spectra's file)"
+    )
+    ax.set_title(
+        f"LED spectra measured by the spectroradiometer ({len(illuminants)} channels)"
+    )
     ax.set_xlim(wl[0], wl[-1])
     ax.set_ylim(bottom=0)
     ax.grid(alpha=0.3)
@@ -136,7 +140,7 @@ def _draw_sensitivity(ax: Any, report: ReportData) -> None:
     band = ", 95 % bands" if report.sensitivity_std is not None else ""
     ax.set_title(f"Camera sensitivities{method}, normalised to peak 1{band}")
     ax.set_xlabel("wavelength (nm)")
-    ax.set_ylabel("relative sensitivity")
+    ax.set_ylabel("sensitivity (peak = 1)")
     ax.set_xlim(est.wavelength_nm[0], est.wavelength_nm[-1])
     ax.grid(alpha=0.3)
     ax.legend(
@@ -152,7 +156,7 @@ def _light_camera_figure(report: ReportData) -> Figure:
     """Page: the LED spectra above the camera sensitivities."""
     fig = _page("Light source and camera")
     if report.illuminants is not None:
-        _draw_spd(_axes_in(fig, 0.9, 7.1, 6.9, 3.6), report.illuminants)
+        _draw_spd(_axes_in(fig, 0.9, 7.1, 6.9, 3.6), report)
     if report.sensitivity is not None:
         _draw_sensitivity(_axes_in(fig, 0.9, 1.3, 6.9, 4.0), report)
     return fig
@@ -294,12 +298,19 @@ def _display_colours(report: ReportData) -> dict[str, NDArray[np.float64]]:
 
 @dataclass
 class _Grid:
-    """What the cells of the reflectance pages share, and what they collect."""
+    """What the cells of the reflectance pages share, and what they collect.
+
+    Drawn on one axes whose data units are inches from its lower left corner;
+    ``cell_in`` is a cell's (width, height), ``fs`` the tick labels' font size.
+    """
 
     report: ReportData
     de: dict[str, float]
     swatches: dict[str, NDArray[np.float64]]
     y_top: float
+    cols: int = 4
+    cell_in: tuple[float, float] = (1.4, 1.0)
+    fs: float = 5.0
     est_lines: list[Any] = field(default_factory=list)
     ref_lines: list[Any] = field(default_factory=list)
     bands: list[Any] = field(default_factory=list)
@@ -315,65 +326,85 @@ class _Grid:
     def span(self) -> float:
         return float(self.wl[-1] - self.wl[0]) or 1.0
 
+    @property
+    def gaps_in(self) -> tuple[float, float]:
+        """(left of a cell: tick labels and the reflectance label; below it: tick
+        labels, the wavelength label and the next cell's title), inches."""
+        pt = self.fs / 72.0
+        return 0.12 + 4.2 * pt, 0.16 + 5.6 * pt
 
-#: Cell gaps of the reflectance pages, in cell units (room for tick labels, titles).
-_GAP_X, _GAP_Y = 0.30, 0.62
+
+#: The reflectance pages' plot area (left, bottom, width, height), inches on A4.
+_GRID_AREA_IN = (0.45, 0.85, 7.45, 9.85)
+
+
+def _grid_shape(n: int) -> tuple[int, int, float]:
+    """(columns, rows, font size) of a page of ``n`` patches: few patches get
+    fewer columns and larger plots, so that a small set fills its page."""
+    cols = 2 if n <= 8 else 3 if n <= 12 else _GRID_COLS
+    rows = max(1, math.ceil(n / cols))
+    return cols, rows, {2: 7.5, 3: 6.5}.get(cols, 5.0)
 
 
 def _grid_cell(ax: Any, g: _Grid, i: int, x0: float, y0: float) -> None:
-    """One patch: estimate, band, reference, frame, tick labels, title, swatch."""
+    """One patch at (x0, y0) inches: estimate, band, reference, frame, ticks with
+    their labels, axis labels with units, title, swatch."""
     from matplotlib.patches import Rectangle
 
     est, ref, report = g.report.reflectance, g.report.reflectance_reference, g.report
     assert est is not None
     wl, span, y_top = g.wl, g.span, g.y_top
+    w, h = g.cell_in
     name = est.names[i]
-    x = x0 + (wl - wl[0]) / span
-    g.est_lines.append(np.column_stack([x, y0 + est.values[i] / y_top]))
+    pad, fs = 0.04, g.fs
+    x = x0 + w * (wl - wl[0]) / span
+    g.est_lines.append(np.column_stack([x, y0 + h * est.values[i] / y_top]))
     if report.reflectance_std is not None:
         u = 1.96 * report.reflectance_std[i]
-        lo = np.clip(est.values[i] - u, 0.0, y_top) / y_top
-        hi = np.clip(est.values[i] + u, 0.0, y_top) / y_top
+        lo = y0 + h * np.clip(est.values[i] - u, 0.0, y_top) / y_top
+        hi = y0 + h * np.clip(est.values[i] + u, 0.0, y_top) / y_top
         g.bands.append(
-            np.concatenate(
-                [np.column_stack([x, y0 + lo]), np.column_stack([x, y0 + hi])[::-1]]
-            )
+            np.concatenate([np.column_stack([x, lo]), np.column_stack([x, hi])[::-1]])
         )
     if ref is not None and name in ref.names:
-        xr = x0 + (ref.wavelength_nm - wl[0]) / span
-        keep = (xr >= x0 - 1e-9) & (xr <= x0 + 1 + 1e-9)
-        g.ref_lines.append(np.column_stack([xr[keep], y0 + ref[name][keep] / y_top]))
-    g.frames.append([(x0, y0), (x0 + 1, y0), (x0 + 1, y0 + 1), (x0, y0 + 1), (x0, y0)])
-    ticks_nm = [t for t in (400.0, 500.0, 600.0, 700.0) if wl[0] <= t <= wl[-1]]
+        xr = x0 + w * (ref.wavelength_nm - wl[0]) / span
+        keep = (xr >= x0 - 1e-9) & (xr <= x0 + w + 1e-9)
+        g.ref_lines.append(
+            np.column_stack([xr[keep], y0 + h * ref[name][keep] / y_top])
+        )
+    g.frames.append([(x0, y0), (x0 + w, y0), (x0 + w, y0 + h), (x0, y0 + h), (x0, y0)])
+    step_nm = 50.0 if w > 2.5 else 100.0
+    ticks_nm = np.arange(math.ceil(wl[0] / step_nm) * step_nm, wl[-1] + 1e-9, step_nm)
+    grey = {"fontsize": fs, "color": "0.3"}
     for t in ticks_nm:
-        gx = x0 + (t - wl[0]) / span
-        g.grid.append([(gx, y0), (gx, y0 + 1)])
-        ax.text(gx, y0 - 0.03, f"{t:g}", fontsize=5, ha="center", va="top", color="0.3")
-    for v in (0.0, 0.5, 1.0):
-        if v <= y_top:
-            g.grid.append([(x0, y0 + v / y_top), (x0 + 1, y0 + v / y_top)])
-            ax.text(
-                x0 - 0.03,
-                y0 + v / y_top,
-                f"{v:g}",
-                fontsize=5,
-                ha="right",
-                va="center",
-                color="0.3",
-            )
+        gx = x0 + w * (t - wl[0]) / span
+        g.grid.append([(gx, y0), (gx, y0 + h)])
+        ax.text(gx, y0 - pad, f"{t:g}", ha="center", va="top", **grey)
+    ax.text(
+        x0 + w / 2, y0 - pad - 1.3 * fs / 72, "wavelength (nm)", ha="center", va="top",
+        **grey,
+    )  # fmt: skip
+    for v in np.arange(0.0, y_top + 1e-9, 0.25 if h > 1.2 else 0.5):
+        gy = y0 + h * v / y_top
+        g.grid.append([(x0, gy), (x0 + w, gy)])
+        ax.text(x0 - pad, gy, f"{v:g}", ha="right", va="center", **grey)
+    ax.text(
+        x0 - pad - 2.6 * fs / 72, y0 + h / 2, "reflectance factor", rotation=90,
+        ha="right", va="center", **grey,
+    )  # fmt: skip
     if name in g.swatches:
         ax.add_patch(
             Rectangle(
-                (x0 + 0.82, y0 + 1.04),
-                0.18,
-                0.2,
+                (x0 + 0.82 * w, y0 + h + pad),
+                0.18 * w,
+                1.6 * fs / 72,
                 facecolor=tuple(g.swatches[name]),
                 edgecolor="0.3",
                 lw=0.4,
             )
         )
     title = name if name not in g.de else f"{name}   ΔE00 {g.de[name]:.2f}"
-    ax.text(x0, y0 + 1.04, title, fontsize=6.5, va="bottom", ha="left")
+    ax.text(x0, y0 + h + pad, title, fontsize=fs + 1.5, va="bottom", ha="left")
 
 
 def _grid_draw(ax: Any, g: _Grid) -> list[Any]:
@@ -407,9 +438,12 @@ def _grid_draw(ax: Any, g: _Grid) -> list[Any]:
 
 def _patch_grid_figures(report: ReportData) -> Iterator[tuple[str, Figure]]:
     """Estimated vs. reference reflectance of every patch (paper's Figure 6), on A4
-    portrait pages of :data:`PATCHES_PER_FIGURE`, each cell with its tick labels.
+    portrait pages of at most :data:`PATCHES_PER_FIGURE`; a set of a few patches
+    gets larger plots that fill its page (:func:`_grid_shape`). Each cell has its
+    ticks and axis labels with units, and the 95 % band when the uncertainty is
+    known.
 
-    All cells of a page are drawn on one axes in cell units with line collections:
+    All cells of a page are drawn on one axes (in inches) with line collections:
     matplotlib needs about 25 ms per axes, so a 140-patch chart drawn as subplots
     took seconds per page; this takes a fraction of a second.
     """
@@ -420,35 +454,46 @@ def _patch_grid_figures(report: ReportData) -> Iterator[tuple[str, Figure]]:
     y_top = max(1.0, float(np.max(est.values)))
     if ref is not None:
         y_top = max(y_top, float(np.max(ref.values)))
+    names = est.names
+    n_fig = math.ceil(len(names) / PATCHES_PER_FIGURE)
+    cols, rows, fs = _grid_shape(min(len(names), PATCHES_PER_FIGURE))
     g0 = _Grid(
         report,
         {} if t2 is None else {k: v["delta_e00"] for k, v in t2["patches"].items()},
         _display_colours(report),
         y_top,
+        cols=cols,
+        fs=fs,
     )
-    names = est.names
-    cols, rows = _GRID_COLS, PATCHES_PER_FIGURE // _GRID_COLS
-    n_fig = math.ceil(len(names) / PATCHES_PER_FIGURE)
+    left, bottom, width, height = _GRID_AREA_IN
+    gap_x, gap_y = g0.gaps_in
+    title_in = 0.06 + 1.6 * (fs + 1.5) / 72  # above a cell; the rest of gap_y below
+    cell_w = (width - cols * gap_x) / cols
+    cell_h = min((height - rows * gap_y) / rows, 0.75 * cell_w)
     what = (
         "Estimated vs. reference reflectance"
         if ref is not None
         else "Estimated reflectance"
     )
     for k in range(n_fig):
-        g = replace(g0, est_lines=[], ref_lines=[], bands=[], frames=[], grid=[])
+        g = replace(
+            g0, cell_in=(cell_w, cell_h), est_lines=[], ref_lines=[], bands=[],
+            frames=[], grid=[],
+        )  # fmt: skip
         part = f" ({k + 1}/{n_fig})" if n_fig > 1 else ""
         fig = _page(f"{what}{part}")
-        ax = _axes_in(fig, 0.55, 0.85, 7.35, 9.85)
+        ax = _axes_in(fig, left, bottom, width, height)
         ax.set_axis_off()
         first = k * PATCHES_PER_FIGURE
         for pos, i in enumerate(
             range(first, min(len(names), first + PATCHES_PER_FIGURE))
         ):
             r, c = divmod(pos, cols)
-            _grid_cell(ax, g, i, c * (1 + _GAP_X), (rows - 1 - r) * (1 + _GAP_Y))
+            y0 = height - title_in - cell_h - r * (cell_h + gap_y)
+            _grid_cell(ax, g, i, gap_x + c * (cell_w + gap_x), y0)
         handles = _grid_draw(ax, g)
-        ax.set_xlim(-_GAP_X + 0.05, cols * (1 + _GAP_X) - _GAP_X + 0.02)
-        ax.set_ylim(-0.25, rows * (1 + _GAP_Y) - _GAP_Y + 0.3)
+        ax.set_xlim(0.0, width)
+        ax.set_ylim(0.0, height)
         fig.legend(
             handles=handles,
             loc="upper right",
@@ -457,15 +502,17 @@ def _patch_grid_figures(report: ReportData) -> Iterator[tuple[str, Figure]]:
             frameon=False,
             ncol=3,
         )
-        wl = g.wl
         fig.text(
             0.08,
             0.035,
-            f"Each cell: wavelength {wl[0]:g}-{wl[-1]:g} nm across, reflectance factor "
-            f"0-{y_top:.2g} up. Swatch: sRGB of the estimate under D50. "
-            "Compare the paper's Figure 6.",
+            "Reflectance factor (1 = a perfect white diffuser) against wavelength. "
+            + ("Grey band: 95 % interval of the estimate. " if g.bands else "")
+            + "Swatch: sRGB of the estimate under D50"
+            + ("; ΔE00: CIEDE2000 against the reference" if g0.de else "")
+            + ". Compare the paper's Figure 6.",
             fontsize=7,
             color="0.3",
+            wrap=True,
         )
         yield f"reflectance_grid_{k + 1}", fig
 

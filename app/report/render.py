@@ -13,30 +13,30 @@ from dataclasses import replace
 from datetime import UTC, datetime
 from os import PathLike
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from matplotlib.backends.backend_pdf import PdfPages
 from matplotlib.figure import Figure
-
-from tunespec.core.io.export import tunespec_version
-
-if TYPE_CHECKING:
-    pass
+from matplotlib.lines import Line2D
 
 from tunespec.app.report.data import (
     Flag,
     ReportData,
     _created_text,
+    led_radiance,
     quality_flags,
     verdict,
 )
 from tunespec.app.report.figures import _A4_PORTRAIT_IN, _page, report_figures
 from tunespec.app.report.tables import (
+    _instruments_table,
     _key_numbers,
     _provenance_tables,
+    _record_table,
     _result_tables,
     _Table,
 )
+from tunespec.core.io.export import tunespec_version
 
 
 def _verdict_colours(outcome: str) -> tuple[str, str, str]:
@@ -161,16 +161,29 @@ def render_html(
         + (f" · session {e(report.session_id)}" if report.session_id else "")
         + f" · TuneSpec {e(tunespec_version())}</p>",
     ]
+    record = [x for x in (_record_table(report), _instruments_table(report)) if x]
+    if record:
+        parts.append("<h2>Measurement record</h2>")  # the first table's heading
+        parts += [
+            _html_table(replace(record[0], title="")),
+            *map(_html_table, record[1:]),
+        ]
     parts += _html_summary(report, flags)
     captions = {
-        "light_camera": "LED spectral power distributions (the light source's "
-        "spectroradiometer) and the estimated camera sensitivities"
+        "light_camera": "LED spectra as the light source's spectroradiometer "
+        "measured them"
+        + (
+            " (spectral radiance)"
+            if report.illuminants is not None and led_radiance(report)[1]
+            else ""
+        )
+        + ", and the estimated camera sensitivities"
         + (
             f" (solid) with {report.sensitivity_reference_label} (dashed)"
             if report.sensitivity_reference is not None
             else ""
         )
-        + ", each set normalised to its peak.",
+        + ", normalised to their peak.",
         "patch_errors": "Table 1's RGB error of every fitted patch where it sits on "
         "the chart, its histogram, and Table 2's CIEDE2000 per patch.",
         "response_map": "Largest of the R, G, B responses per patch (rows) and LED "
@@ -239,6 +252,9 @@ _LINES_PER_PAGE = 84
 #: Marks a table's title among the lines of a flowed page.
 _TITLE_MARK = "\x00"
 _WRAP = 110
+#: A table of at least this many lines may start on a page with room left and go
+#: on on the next.
+_SPLIT_LINES = 30
 
 
 def _text_table(t: _Table) -> list[str]:
@@ -273,13 +289,25 @@ def _text_table(t: _Table) -> list[str]:
 
 
 def _summary_page(report: ReportData) -> Figure:
-    """Page 1: what was measured, the verdict, the key numbers, the warnings."""
+    """Page 1: the measurement record (who, what, with which instruments), the
+    verdict, the key numbers, the warnings; lines to sign when there is a record."""
     fig = _page(report.title)
     meta = f"Created {_created_text(report.created)} · TuneSpec {tunespec_version()}"
     if report.session_id:
         meta += f" · session {report.session_id}"
     fig.text(0.08, 0.935, meta, fontsize=8.5, color="0.3", va="top")
-    y = 0.90
+    y = 0.905
+    signed = report.record is not None
+    for t, xs, wrap in (
+        (_record_table(report), (0.08, 0.36), (34, 78)),
+        (
+            _instruments_table(report),
+            (0.08, 0.24, 0.56, 0.70, 0.80),
+            (20, 40, 17, 11, 26),
+        ),
+    ):
+        if t is not None:
+            y = _draw_table(fig, y, t, xs, wrap, size=8.0, step=0.0145)
     v = verdict(report)
     if v is not None:
         from matplotlib.patches import FancyBboxPatch
@@ -310,16 +338,17 @@ def _summary_page(report: ReportData) -> Figure:
         )
         fig.text(0.22, y - height / 2, "\n".join(lines), fontsize=9, va="center")
         y -= height + 0.025
-    y = _draw_key_numbers(fig, y, _key_numbers(report))
+    y = _draw_table(fig, y, _key_numbers(report), (0.08, 0.62, 0.80), (70, 24, 16))
     if report.notes:
         notes = textwrap.wrap(report.notes, 100)
         fig.text(0.08, y, "\n".join(notes), fontsize=8.5, va="top")
         y -= 0.014 * len(notes) + 0.01
     fig.text(0.08, y, "Warnings and checks", fontsize=11, weight="bold", va="top")
     y -= 0.025
+    bottom = 0.085 if signed else 0.04
     for f in quality_flags(report):
         wrapped = textwrap.wrap(f.text, 105)
-        if y - 0.0135 * len(wrapped) < 0.04:
+        if y - 0.0135 * len(wrapped) < bottom:
             fig.text(0.08, y, "… (all in the HTML report)", fontsize=8, va="top")
             break
         mark = "⚠" if f.level == "warning" else "✓"
@@ -327,41 +356,57 @@ def _summary_page(report: ReportData) -> Figure:
         fig.text(0.08, y, mark, fontsize=9, va="top", color=colour)
         fig.text(0.105, y, "\n".join(wrapped), fontsize=8, va="top")
         y -= 0.0135 * len(wrapped) + 0.006
+    if signed:  # the record is signed on paper
+        for x, label in ((0.08, "Operator: signature, date"), (0.52, "Reviewed by")):
+            fig.add_artist(Line2D([x, x + 0.38], [0.05, 0.05], color="0.3", lw=0.6))
+            fig.text(x, 0.043, label, fontsize=7.5, color="0.35", va="top")
     return fig
 
 
-def _draw_key_numbers(fig: Figure, y: float, t: _Table) -> float:
-    """The key numbers as a table in the page's font; returns the y below it."""
-    from matplotlib.lines import Line2D
-
-    fig.text(0.08, y, t.title, fontsize=11, weight="bold", va="top")
-    y -= 0.028
-    xs = (0.08, 0.62, 0.80)
-    step = 0.019
-    for j, h in enumerate(t.header):
-        fig.text(xs[j], y, h, fontsize=9, weight="bold", va="top", ha="left")
+def _draw_table(
+    fig: Figure,
+    y: float,
+    t: _Table,
+    xs: Sequence[float],
+    wrap: Sequence[int],
+    *,
+    size: float = 9.0,
+    step: float = 0.017,
+) -> float:
+    """A table in the page's font, columns at ``xs`` (figure units), each cell
+    wrapped at ``wrap`` characters; returns the y below it."""
+    fig.text(0.08, y, t.title, fontsize=size + 2, weight="bold", va="top")
+    y -= 0.026
+    for x, h in zip(xs, t.header, strict=True):
+        fig.text(x, y, h, fontsize=size, weight="bold", va="top", ha="left")
     y -= step
     fig.add_artist(Line2D([0.08, 0.92], [y + 0.004, y + 0.004], color="0.6", lw=0.6))
     for row in t.rows:
-        for j, cell in enumerate(row):
-            fig.text(xs[j], y - 0.003, cell, fontsize=9, va="top")
-        y -= step
-    note = textwrap.wrap(t.note, 110)
-    fig.text(0.08, y - 0.006, "\n".join(note), fontsize=7.5, color="0.35", va="top")
-    return y - 0.013 * len(note) - 0.03
+        cells = [textwrap.wrap(c, w) or [""] for c, w in zip(row, wrap, strict=True)]
+        for x, lines in zip(xs, cells, strict=True):
+            fig.text(x, y - 0.003, "\n".join(lines), fontsize=size, va="top")
+        y -= step * max(len(c) for c in cells)
+    note = textwrap.wrap(t.note, 120)
+    fig.text(0.08, y - 0.005, "\n".join(note), fontsize=7, color="0.35", va="top")
+    return y - 0.012 * len(note) - 0.022
 
 
 def _flow_pages(title: str, tables: Sequence[_Table]) -> Iterator[Figure]:
-    """Tables flowed onto A4 pages: a table that fits on a page is not split, a
-    longer one is split between rows, its header repeated."""
+    """Tables flowed onto A4 pages: a short table that fits on a page is not split;
+    a long one (:data:`_SPLIT_LINES`) that does not fit the rest of a page with
+    room left, or one longer than a page, is split between rows, its header
+    repeated (no page left half empty before a long table)."""
     pages: list[list[str]] = [[]]
     for t in tables:
         lines = _text_table(t)
         lines[0] = _TITLE_MARK + lines[0]  # drawn as a heading
         room = _LINES_PER_PAGE - len(pages[-1])
-        if len(lines) > room and len(lines) <= _LINES_PER_PAGE:
+        split = len(lines) > _LINES_PER_PAGE or (
+            len(lines) > room and len(lines) >= _SPLIT_LINES and room >= 20
+        )
+        if len(lines) > room and not split:
             pages.append([])
-        elif len(lines) > _LINES_PER_PAGE:
+        elif split:
             head, body = lines[:4], lines[4:]
             while body:
                 room = _LINES_PER_PAGE - len(pages[-1]) - len(head)

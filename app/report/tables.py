@@ -8,12 +8,11 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from tunespec.core.io.export import tunespec_version
-
-if TYPE_CHECKING:
-    from tunespec.core.colorimetry import ReflectanceStats
-    from tunespec.core.stats import PredictionStats
-
+from tunespec.app.pipeline.record import (
+    chart_reference,
+    instrument_rows,
+    software_versions,
+)
 from tunespec.app.report.data import (
     COLORIMETRY_DATA,
     PAPER_TABLE1,
@@ -22,12 +21,16 @@ from tunespec.app.report.data import (
     _as_dict,
     _created_text,
     _self_check,
-    _software_versions,
     _table1_parts,
     export_label,
     quality_flags,
     shipped_datasets,
 )
+from tunespec.core.io.export import tunespec_version
+
+if TYPE_CHECKING:
+    from tunespec.core.colorimetry import ReflectanceStats
+    from tunespec.core.stats import PredictionStats
 
 
 @dataclass(frozen=True)
@@ -85,7 +88,7 @@ def _key_numbers(report: ReportData) -> _Table:
         rows.append(("Table 2 max. CIEDE2000", f"{d['max']['delta_e00']:.2f}", "-"))
         rows.append(
             (
-                "Table 2 mean spectral RMS",
+                "Table 2 mean spectral RMS (reflectance factor)",
                 f"{d['average']['spectral_rms']:.4f}",
                 f"{rms:.4f}",
             )
@@ -106,15 +109,16 @@ def _worst_patches_table(report: ReportData, n: int = 10) -> _Table | None:
     errors = report.table1_patches
     if not errors:
         return None
-    paper = PAPER_TABLE1["RGB"][0]
+    mean = sum(errors.values()) / len(errors) or 1.0
     worst = sorted(errors.items(), key=lambda kv: -kv[1])[:n]
-    rows = tuple((name, f"{e:.4f}", f"{e / paper:.1f}") for name, e in worst)
+    rows = tuple((name, f"{e:.4f}", f"{e / mean:.2f}") for name, e in worst)
     return _Table(
         f"Table 1: the {len(worst)} worst patches",
-        ("Patch", "RGB error (mean over LEDs)", "x paper mean"),
+        ("Patch", "RGB error (mean over LEDs, full scale)", "x mean of all patches"),
         rows,
         "Per patch: the mean over its LEDs of the RMS over R, G, B of measured minus "
-        "predicted (Eq. 1); full-scale units.",
+        f"predicted (Eq. 1), full-scale units; the last column is that error over "
+        f"the mean of the {len(errors)} fitted patches ({mean:.4f}).",
     )
 
 
@@ -126,20 +130,81 @@ def _table1_patch_table(report: ReportData) -> _Table | None:
     return _Table(
         "Table 1 per patch (RGB error, mean over the LEDs, full scale)",
         ("Patch", "Error") * 3,
-        _side_by_side([(k, f"{v:.4f}") for k, v in errors.items()]),
+        # read across: a page break between rows keeps the order
+        _side_by_side([(k, f"{v:.4f}") for k, v in errors.items()], down=False),
+    )
+
+
+def _record_table(report: ReportData) -> _Table | None:
+    """The operator's record: who, what sample, which chart and its reference data,
+    the room, the software; ``None`` without a record."""
+    rec = report.record
+    if rec is None:
+        return None
+    missing = "not recorded"
+    layout = report.chart_layout
+    chart = str(getattr(layout, "name", "") or "chart not named")
+    rows = [
+        ("Operator", rec.operator or missing),
+        ("Sample ID", rec.sample_id or missing),
+        ("Chart", f"{chart}, serial {rec.chart_serial or missing}"),
+        ("Chart reference data", chart_reference(rec, layout)),
+        (
+            "Room temperature, light warm-up",
+            f"{rec.temperature_c + ' °C' if rec.temperature_c else missing}, "
+            f"{rec.warm_up_min + ' min' if rec.warm_up_min else missing}",
+        ),
+        (
+            "Software",
+            f"TuneSpec {tunespec_version()}; versions and settings under Provenance",
+        ),
+    ]
+    if rec.notes:
+        rows.append(("Notes", rec.notes))
+    return _Table(
+        "Measurement record",
+        ("Item", "Value"),
+        tuple(rows),
+        "Filled by the operator: [provenance] of the run configuration, --operator, "
+        "--sample-id ... on the command line, or Measurement record... in the GUI "
+        "(record.json in the measurement folder).",
+    )
+
+
+def _instruments_table(report: ReportData) -> _Table | None:
+    """Light source, spectroradiometer and camera with serials and calibration
+    dates (the operator's, else the devices')."""
+    if report.record is None:
+        return None
+    rows = tuple(
+        (
+            r["instrument"],
+            r["model"],
+            r["serial"] + (" (device)" if r["serial_source"] == "device" else ""),
+            r["firmware"],
+            r["calibration"],
+        )
+        for r in instrument_rows(report.record, report.devices)
+    )
+    return _Table(
+        "Instruments",
+        ("Instrument", "Model", "Serial", "Firmware", "Calibrated"),
+        rows,
+        "(device): the serial the device reported; the others the operator's.",
     )
 
 
 def _side_by_side(
-    pairs: Sequence[tuple[str, str]], per_row: int = 3
+    pairs: Sequence[tuple[str, str]], per_row: int = 3, *, down: bool = True
 ) -> tuple[tuple[str, ...], ...]:
-    """(name, value) pairs in ``per_row`` column pairs, read down, then across."""
+    """(name, value) pairs in ``per_row`` column pairs, read down, then across
+    (``down``), or across, then down."""
     n_rows = math.ceil(len(pairs) / per_row)
     rows = []
     for r in range(n_rows):
         cells: list[str] = []
         for c in range(per_row):
-            k = c * n_rows + r
+            k = c * n_rows + r if down else r * per_row + c
             cells += list(pairs[k]) if k < len(pairs) else ["", ""]
         rows.append(tuple(cells))
     return tuple(rows)
@@ -180,7 +245,12 @@ def _budget_table(budget: Mapping[str, Mapping[str, float]]) -> _Table:
     )
     return _Table(
         "Uncertainty budget",
-        ("Term", "Share of u(L*)²", "Median u(L*) alone", "Share of u(reflectance)²"),
+        (
+            "Term",
+            "Share of u(L*)²",
+            "Median u(L*) alone (L* units)",
+            "Share of u(reflectance)²",
+        ),
         rows,
         note="Variances add: each share is the term's part of the summed variance "
         "over the sample's patches (and wavelengths). Prior mismatch: what the LEDs "
@@ -210,7 +280,7 @@ def _table2(stats: ReflectanceStats | Mapping[str, Any]) -> _Table:
     rows.append(("paper average", f"{de:.2f}", f"{rms:.4f}"))
     return _Table(
         "Table 2: reflectance accuracy",
-        ("Patch", "CIEDE2000 [D50]", "Spectral RMS"),
+        ("Patch", "CIEDE2000 [D50]", "Spectral RMS (reflectance factor)"),
         tuple(rows),
         "CIE 1931 2° observer, CIE D50, ASTM E308, ICC D50 white. Paper: Table 2, "
         "eight Neugebauer primaries of a 3D printer.",
@@ -306,8 +376,6 @@ def _result_tables(report: ReportData) -> list[_Table]:
     ]
     if report.table2 is not None:
         tables.append(_table2(report.table2))
-    if report.chart_choice is not None:
-        tables.append(_chart_choice_table(report.chart_choice))
     if (
         report.lab is not None
         and report.lab_std is not None
@@ -355,6 +423,8 @@ def _result_tables(report: ReportData) -> list[_Table]:
                 f"uncertainty; common offset {corr.common_shift_nm:+.2f} nm.",
             )
         )
+    if report.chart_choice is not None:  # the method's background: last
+        tables.append(_chart_choice_table(report.chart_choice))
     return tables
 
 
@@ -477,7 +547,7 @@ def _provenance_tables(report: ReportData) -> list[_Table]:
     if report.settings:
         rows = tuple((str(k), str(v)) for k, v in report.settings.items())
         tables.append(_Table("Settings", ("Setting", "Value"), rows))
-    sw = tuple(_software_versions().items())
+    sw = tuple(software_versions().items())
     tables.append(_Table("Software", ("Component", "Version"), sw))
     datasets = report.datasets
     if datasets is None:

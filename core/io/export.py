@@ -48,7 +48,7 @@ from dataclasses import dataclass
 from datetime import UTC, datetime
 from os import PathLike
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -65,7 +65,16 @@ from tunespec.core.spectra import Grid, Spectra
 
 if TYPE_CHECKING:
     from tunespec.core.colorimetry import ReflectanceStats
-    from tunespec.core.stats import CalibrationReport, PredictionStats
+
+
+class TableStats(Protocol):
+    """Table 1's statistics as the writers take them: ``core.stats``'
+    ``PredictionStats`` or ``CalibrationReport`` (typed by what they offer, so this
+    writer does not import the statistics, which import the calibration, which
+    reads and writes through this module)."""
+
+    def as_dict(self) -> dict[str, Any]: ...
+
 
 __all__ = [
     "CAMERA_EXPORT_NAMES",
@@ -502,7 +511,7 @@ def _write_rows(path: Path, header: list[str], rows: list[list[str]]) -> Path:
 
 
 def write_prediction_stats_csv(
-    stats: PredictionStats | CalibrationReport | Mapping[str, Any],
+    stats: TableStats | Mapping[str, Any],
     path: str | PathLike[str],
 ) -> Path:
     """Table 1 as CSV: ``patches,channel,mean,max,p95,n_stimuli``.
@@ -728,7 +737,7 @@ def export_measurement(
     sensitivity: Spectra | None = None,
     reflectance: Spectra | None = None,
     responses: Responses | None = None,
-    table1: PredictionStats | CalibrationReport | Mapping[str, Any] | None = None,
+    table1: TableStats | Mapping[str, Any] | None = None,
     table2: ReflectanceStats | Mapping[str, Any] | None = None,
     reference: Spectra | None = None,
     illuminants: Spectra | None = None,

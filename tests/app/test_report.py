@@ -324,7 +324,13 @@ def test_summary_verdict_per_patch_errors_and_provenance(
         "FAIL",
         "Table 1 RGB mean error 0.0021 of full scale is over the threshold 0.0020",
     )
-    assert verdict(replace(full, threshold_rgb_mean=0.005))[0] == "PASS"
+    # Table 1 alone never passes outright: the self-check is missing (issue 27)
+    assert verdict(replace(full, threshold_rgb_mean=0.005)) == (
+        "PASS with warnings",
+        "Table 1 RGB mean error 0.0021 of full scale is within the threshold 0.0050; "
+        "but: no self-check of the calibration (no left-out patches predicted, no "
+        "residual check against the noise model)",
+    )
     html_path, pdf_path = write_report(tmp_path, full)
     text = html_path.read_text(encoding="utf-8")
     assert "<b>FAIL</b>" in text
@@ -438,3 +444,66 @@ def test_verdict_needs_the_self_check(report: ReportData, tmp_path: Path) -> Non
     assert "Self-check of the calibration" in text
     assert "R 2.50, G 0.50, B 0.70 (1 ± 0.03, 3080 stimuli)" in text
     assert "<td>over: R</td>" in text
+
+
+def test_a_small_sample_set_fills_its_page_with_labelled_plots(
+    report: ReportData,
+) -> None:
+    from tunespec.app.report.figures import _GRID_AREA_IN, _grid_shape
+
+    assert _grid_shape(8)[:2] == (2, 4) and _grid_shape(24)[:2] == (4, 6)
+    assert _grid_shape(12)[:2] == (3, 4)
+    (_, fig), *_ = [f for f in report_figures(report) if "grid" in f[0]]
+    ax = fig.axes[0]
+    texts = [t.get_text() for t in ax.texts]
+    assert texts.count("wavelength (nm)") == 8 == texts.count("reflectance factor")
+    # the cells' frames span most of the page's plot area (eight patches, 2 x 4)
+    frames = ax.collections[1].get_segments()
+    top = max(seg[:, 1].max() for seg in frames)
+    bottom = min(seg[:, 1].min() for seg in frames)
+    assert (top - bottom) > 0.8 * _GRID_AREA_IN[3]
+
+
+def test_worst_patches_column_compares_with_the_measurement_itself() -> None:
+    from tunespec.app.report.tables import _worst_patches_table
+
+    errors = {"A1": 0.001, "A2": 0.003, "A3": 0.002}
+    t = _worst_patches_table(ReportData(table1_patches=errors))
+    assert t is not None and "paper" not in " ".join(t.header)
+    assert [r[2] for r in t.rows] == ["1.50", "1.00", "0.50"]  # over the mean 0.002
+
+
+def test_led_spectra_are_shown_as_radiance(report: ReportData) -> None:
+    from dataclasses import replace
+
+    from tunespec.app.report.data import RADIANCE_UNIT, led_radiance
+
+    leds = report.illuminants
+    assert leds is not None
+    assert led_radiance(report) == (leds, None)  # exposures unknown: as given
+    exposures = {n: 2.0 * (k + 1) for k, n in enumerate(leds.names)}
+    shown, unit = led_radiance(replace(report, illuminant_exposures_s=exposures))
+    assert unit == RADIANCE_UNIT
+    np.testing.assert_allclose(shown.values[1], leds.values[1] / 4.0)
+    fig = dict(report_figures(replace(report, illuminant_exposures_s=exposures)))
+    assert (
+        fig["light_camera"].axes[0].get_ylabel()
+        == f"spectral radiance ({RADIANCE_UNIT})"
+    )
+
+
+def test_a_long_table_fills_the_page_before_it() -> None:
+    """No half-empty page before a long table: it starts where room is left."""
+    from tunespec.app.report.render import _flow_pages
+    from tunespec.app.report.tables import _Table
+
+    short = _Table("A", ("k", "v"), tuple((f"a{i}", "1") for i in range(40)))
+    long = _Table("B", ("k", "v"), tuple((f"b{i}", "2") for i in range(100)))
+    # 46 + 106 lines at 84 a page: two pages (three if B started on a new one)
+    assert len(list(_flow_pages("Results", [short, long]))) == 2
+    # a short table still moves whole to the next page
+    first = _Table("X", ("k", "v"), tuple((f"x{i}", "1") for i in range(70)))
+    small = _Table("C", ("k", "v"), tuple((f"c{i}", "3") for i in range(15)))
+    pages = list(_flow_pages("Results", [first, small]))
+    text = ["\n".join(x.get_text() for x in fig.texts) for fig in pages]
+    assert len(pages) == 2 and "c0" not in text[0] and "c14" in text[1]
