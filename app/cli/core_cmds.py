@@ -288,20 +288,19 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     )
     # the estimators (scipy) are imported once the inputs are known to be good: an
     # error in them is reported at once
-    from tunespec.core.sensitivity import estimate_camera_sensitivity
-    from tunespec.core.stats import calibration_report, split_patches
+    from tunespec.app.pipeline.jobs import fit_calibration
 
-    held: tuple[str, ...] = ()
-    fit = responses
-    if args.hold_out_every:
-        fit_names, held = split_patches(
-            responses.patches, every=args.hold_out_every, offset=args.hold_out_every - 1
-        )
-        fit = responses.subset(list(fit_names))
-    kwargs = _fit_options(args)
-    est = estimate_camera_sensitivity(
-        fit, illuminants, reflectances, progress=out.progress("calibrating"), **kwargs
+    cal = fit_calibration(
+        responses,
+        illuminants,
+        reflectances,
+        reported_illuminants=illum_in,
+        hold_out_every=args.hold_out_every,
+        check=args.self_check,
+        progress=out.progress("calibrating"),
+        **_fit_options(args),
     )
+    est, report, checked = cal.estimate, cal.report, cal.self_check
     sensitivity = est.sensitivity
     if checks.overridden:
         meta = {**sensitivity.meta, "forced": dumps_json(checks.overridden)}
@@ -309,25 +308,13 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             sensitivity.wavelength_nm, sensitivity.values, sensitivity.names, meta
         )
     write_sensitivities_csv(args.output, sensitivity, est.covariance)
-    report = calibration_report(
-        est, responses, illuminants, reflectances, held_out_patches=held
-    )
     _print_calibration(out, est, report)
     fit_warning = pl.calibration_fit_warning(
         float(report.training.as_dict()["RGB"]["mean"]), responses.rgb
     )
     if fit_warning:
         out.warn(fit_warning)
-    checked = None
-    if args.self_check:
-        checked = _self_check(
-            est,
-            fit,
-            (responses, illuminants, reflectances, illum_in),
-            held,
-            args,
-            kwargs,
-        )
+    if checked is not None:
         out.say(checked.format_text())
         for w in checked.warnings:
             out.warn(f"self-check: {w}")
@@ -416,40 +403,6 @@ def _fit_options(args: argparse.Namespace) -> dict[str, Any]:
     return kwargs
 
 
-def _self_check(
-    est: Any,
-    fit: Responses,
-    chart: tuple[Responses, Spectra, Spectra, Spectra],
-    held: tuple[str, ...],
-    args: argparse.Namespace,
-    kwargs: dict[str, Any],
-) -> Any:
-    """The calibration's self-check (``core.selfcheck``): with ``--hold-out-every``
-    the calibration's own held-aside patches are the left-out ones, else a second
-    calibration leaves out 1 in 5."""
-    from tunespec.core.selfcheck import held_out_of, self_check
-    from tunespec.core.sensitivity import estimate_camera_sensitivity
-
-    responses, illuminants, reflectances, reported = chart
-    held_out = None
-    if held:
-        held_out = held_out_of(
-            est, responses, illuminants, reflectances, held, args.hold_out_every
-        )
-    refit = {**kwargs, "method": est.method}
-    return self_check(
-        est,
-        fit,
-        illuminants,
-        reflectances,
-        reported_illuminants=reported,
-        fit=lambda r: estimate_camera_sensitivity(
-            r, illuminants, reflectances, **refit
-        ),
-        held_out=held_out,
-    )
-
-
 def _print_calibration(out: Console, est: Any, report: Any) -> None:
     """Table 1 and the light source's corrections, as text."""
     if est.excluded_patches:
@@ -521,34 +474,41 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         grid_nm=grid.wavelength_nm,
     )
     # imported after the inputs are read (scipy): an error in them is reported at once
-    from tunespec.core.calibration import correct_illuminants_from_meta
-    from tunespec.core.wiener import on_integration_grid, wiener_reflectance
+    from tunespec.app.pipeline.jobs import estimate_reflectance, write_uncertainty
 
     _check_names(
         responses, reported, "illuminant", args.illuminants, responses.illuminants
     )
-    # corrected on the spectra's own grid, then resampled: as the main job does;
-    # Eq. 1 integrated on the sensitivities' (finer) grid, reflectance on `grid`
-    corrected = correct_illuminants_from_meta(reported, meta, args.spd_shift_nm)
-    illum_fine, sens_fine, _ = on_integration_grid(corrected, sensitivity, grid)
-    pl.check_estimate_inputs(
-        checks, responses, illum_fine, sens_fine, responses_path=args.responses
+    # uncertainties with the calibration's covariance, for its own corrections only
+    uncertain = (
+        "covariance" in meta and args.spd_shift_nm is None and args.noise_std is None
     )
-    est = wiener_reflectance(
+    estimation = estimate_reflectance(
         responses,
-        illum_fine,
-        sens_fine,
-        _resampled(prior, grid),
+        reported,
+        sensitivity,
+        prior,
+        grid,
+        meta=meta,
+        spd_shift_nm=args.spd_shift_nm,
+        uncertainty_from_meta=uncertain,
+        checks=checks,
+        responses_path=args.responses,
         noise_std=args.noise_std,
         center_prior=not args.uncentred_prior,
         clip=not args.no_clip,
     )
+    est = estimation.wiener
     write_spectra_csv(est.reflectance, args.output)
     files = {"reflectances": str(args.output)}
-    if "covariance" in meta and args.spd_shift_nm is None and args.noise_std is None:
-        files.update(
-            _write_uncertainty(args, meta, est, responses, reported, sensitivity)
+    if estimation.uncertainty is not None:
+        u_path, lab_path = write_uncertainty(
+            estimation,
+            args.output.with_name(args.output.stem + "_uncertainty.csv"),
+            args.output.with_name(args.output.stem + "_colorimetry.csv"),
         )
+        out.say(f"standard uncertainties written to {u_path} and {lab_path}")
+        files.update({"uncertainty": str(u_path), "colorimetry": str(lab_path)})
     doc: dict[str, Any] = {
         "grid": str(grid),
         "sensitivities": str(args.sensitivities),
@@ -604,30 +564,6 @@ def _corrections(args: argparse.Namespace, out: Console) -> dict[str, Any]:
 
 def _meta_path(path: Path) -> Path:
     return path.with_name(path.name + ".meta.json")
-
-
-def _write_uncertainty(
-    args: argparse.Namespace,
-    meta: dict[str, Any],
-    est: Any,
-    responses: Responses,
-    reported: Spectra,
-    sensitivity: Spectra,
-) -> dict[str, str]:
-    """Standard uncertainties beside the reflectances (see docs/user-guide.md, "Uncertainty");
-    ``sensitivity`` as read, on its own grid (its covariance's)."""
-    from tunespec.core.calibration import Calibration
-    from tunespec.core.io.export import write_colorimetry_csv
-    from tunespec.core.uncertainty import reflectance_uncertainty
-
-    calibration = Calibration.from_meta(sensitivity, meta)
-    unc = reflectance_uncertainty(est, responses, reported, calibration)
-    u_path = args.output.with_name(args.output.stem + "_uncertainty.csv")
-    write_spectra_csv(est.reflectance.with_values(unc.reflectance_std), u_path)
-    lab_path = args.output.with_name(args.output.stem + "_colorimetry.csv")
-    write_colorimetry_csv(lab_path, est.reflectance.names, unc)
-    Console(args).say(f"standard uncertainties written to {u_path} and {lab_path}")
-    return {"uncertainty": str(u_path), "colorimetry": str(lab_path)}
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:

@@ -358,12 +358,8 @@ def cmd_report(args: argparse.Namespace) -> int:
 def _table1_from_files(
     args: argparse.Namespace, data: dict[str, Any], grid: Grid | None
 ) -> Any:
-    from tunespec.core.calibration import (
-        correct_illuminants_from_meta,
-        predict_responses,
-    )
+    from tunespec.app.pipeline.jobs import predicted_table1
     from tunespec.core.io.export import read_sensitivity_meta
-    from tunespec.core.stats import prediction_stats
 
     need = [n for n in ("sensitivity", "illuminants", "responses") if n not in data]
     if need:
@@ -384,7 +380,5 @@ def _table1_from_files(
     # The SPD shift fitted with the sensitivities (their .meta.json) is undone on the
     # LED spectra, as 'calibrate' did for its Table 1 and 'estimate' does.
     meta = read_sensitivity_meta(args.sensitivities)
-    illum = correct_illuminants_from_meta(illum, meta)
     sens = sens.resample(work, source=str(args.sensitivities))
-    predicted = predict_responses(sens, illum, chart)
-    return prediction_stats(responses.rgb, predicted.rgb)
+    return predicted_table1(responses, sens, illum, chart, meta)

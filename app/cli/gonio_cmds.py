@@ -298,20 +298,17 @@ def cmd_gonio_run(args: argparse.Namespace) -> int:
     from tunespec.core.io.export import read_sensitivity_meta
     from tunespec.core.io.spectral import read_spectra_csv
     from tunespec.core.limits import valid_number
-    from tunespec.core.sensitivity_bayes import LedCorrection
     from tunespec.devices.protocols import DeviceError
 
     valid_number(args.iso, "--iso", lo=50, hi=102400, integer=True)
     layout = _session_layout(args)
-    saved, corr, S = args.out / "calibration.csv", None, None
+    saved, side, S = args.out / "calibration.csv", None, None
     # every input read before the session folder gets its plan
     if saved.exists():
         S = read_spectra_csv(saved, allow_negative=True)
     elif args.sensitivities is not None:
         S = absolute_sensitivities(args.sensitivities)
-        side = read_sensitivity_meta(args.sensitivities)
-        if "led_correction" in side:
-            corr = LedCorrection.from_dict(side["led_correction"], side["meta_path"])
+        side = read_sensitivity_meta(args.sensitivities)  # its LED corrections
     _start_plan(args, needs=("plan", "sensitivities", "layout"))
     if layout is None:  # a resumed session from before layout.json was kept
         raise InputError(f"{args.out} has no layout.json: give --layout")
@@ -321,7 +318,7 @@ def cmd_gonio_run(args: argparse.Namespace) -> int:
     try:
         s = run_gonio_session(
             args.out, light=args.light, camera=args.camera, gonio=args.gonio,
-            sensitivity=S, layout=layout, led_correction=corr,
+            sensitivity=S, layout=layout, sensitivity_meta=side,
             layout_path=args.layout or args.out / SESSION_LAYOUT,
             resolution=args.resolution, iso=args.iso,
             seed=args.seed,

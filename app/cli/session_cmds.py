@@ -17,7 +17,7 @@ from tunespec.app.cli.common import (
 from tunespec.app.cli.record_opts import add_record_options, record_from_args
 from tunespec.core.errors import InputError
 from tunespec.core.io.cht import load_layout
-from tunespec.core.io.session import Session, SessionLock
+from tunespec.core.io.session import Session
 from tunespec.core.limits import check_output_file
 
 __all__ = ["register"]
@@ -336,97 +336,41 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 
 def cmd_capture(args: argparse.Namespace) -> int:
-    resume = args.resume or bool(args.retake)
-    exists = (args.out / "manifest.json").is_file()
-    if resume and not exists:
-        raise InputError("no session to resume here", path=args.out)
-    # held from before the session is created until the capture ends
-    with SessionLock(args.out):
-        return _capture_cmd(args, resume)
-
-
-def _capture_cmd(args: argparse.Namespace, resume: bool) -> int:
-    out = Console(args)
-    from tunespec.app.pipeline.folder import (
-        add_capture_warnings,
-        clear_capture_warnings,
+    from tunespec.app.pipeline.jobs import (
+        CaptureInputs,
+        CaptureSettings,
+        Resume,
+        capture_job,
     )
-    from tunespec.devices.capture import capture, new_session, recorded_sim_camera
-    from tunespec.devices.registry import open_bench
 
-    exists = (args.out / "manifest.json").is_file()
-    if exists and not resume:
-        raise InputError(
-            "a session exists here; add --resume to continue it", path=args.out
-        )
-    if resume and not exists:
-        raise InputError("no session to resume here", path=args.out)
-    session = Session.open(args.out) if exists else None
-    layout = None
-    if args.layout is not None:
-        layout = load_layout(args.layout)
-    elif session is not None:
-        layout = session.layout
-    if layout is None:
-        raise InputError("--layout is needed for a new session")
-
-    def warned(text: str) -> None:
-        # kept beside the session the moment it arises, as the pipeline does: the
-        # GUI's steps and the report show the warnings of a CLI capture too
-        add_capture_warnings(args.out, [text])
-        out.warn(text)
-
-    resolution, seed = args.resolution, args.seed
-    if session is not None:
-        # the missing frames are taken as the others were (issue 24, item 3)
-        recorded = recorded_sim_camera(session)
-        for key, flag in (("resolution", "--resolution"), ("seed", "--seed")):
-            given = getattr(args, key)
-            if key in recorded and given is not None and given != recorded[key]:
-                shown = "x".join(map(str, given)) if key == "resolution" else given
-                was = recorded[key]
-                was = "x".join(map(str, was)) if key == "resolution" else was
-                raise InputError(
-                    f"{flag} {shown} differs from the session's {was}: leave "
-                    f"{flag} out to resume with the session's",
-                    path=args.out,
-                )
-        resolution = recorded.get("resolution", resolution)
-        seed = recorded.get("seed", seed)
-    with open_bench(
-        args.light,
-        args.camera,
-        layout=layout.with_corners(None),
-        layout_path=args.layout,
-        resolution=resolution,
-        seed=0 if seed is None else seed,
-    ) as bench:
-        if session is None:
-            clear_capture_warnings(args.out)  # of an earlier session in this folder
-            session = new_session(
-                args.out,
-                bench.light,
-                bench.camera,
-                layout=layout,
+    out = Console(args)
+    # resume and retake are the pipeline's (pipeline.capture.open_for_capture): the
+    # missing frames are taken with the session's own settings and camera
+    resume = args.resume or bool(args.retake)
+    result = capture_job(
+        CaptureInputs(
+            args.out,
+            load_layout(args.layout) if args.layout is not None else None,
+            CaptureSettings(
                 exposure=args.exposure,
                 iso=args.iso,
-                channels=args.channels.split(",") if args.channels else None,
+                brackets=tuple(args.brackets),
                 n_darks=args.darks,
-                brackets=args.brackets,
                 repeats=args.repeats,
-            )
-        result = capture(
-            session,
-            bench.light,
-            bench.camera,
-            bench.stage,
-            resume=resume,
-            retake=args.retake,
-            max_exposure_s=args.max_exposure,
-            progress=out.progress("capturing"),
-            on_warning=warned,
-            strict=args.strict,
-        )
+                channels=tuple(args.channels.split(",")) if args.channels else None,
+                max_exposure_s=args.max_exposure,
+                strict=args.strict,
+            ),
+            Resume("continue" if resume else "new", retake=tuple(args.retake)),
+            light=args.light,
+            camera=args.camera,
+            layout_path=args.layout,
+            resolution=args.resolution,
+            seed=args.seed,
+        ),
+        progress=out.progress("capturing"),
+        on_warning=out.warn,
+    )
     out.say(
         f"{len(result.captured)} frame(s) captured, {result.skipped} already there; "
         f"session {args.out} is complete"
@@ -457,8 +401,6 @@ def _corners_arg(text: str | None) -> object:
 
 
 def cmd_process(args: argparse.Namespace) -> int:
-    from tunespec.app.pipeline.processing import process_session, write_processed
-
     illum = args.illuminants_out or args.output.with_name(
         args.output.stem + "_illuminants.csv"
     )
@@ -466,12 +408,8 @@ def cmd_process(args: argparse.Namespace) -> int:
     out = Console(args)
     session = Session.open(args.session)
     layout = load_layout(args.layout) if args.layout else None
-    from tunespec.app.pipeline.extract import (
-        flag_forced_csv,
-        layout_reference_xyz,
-        session_preview,
-    )
-    from tunespec.app.pipeline.steps import refuse_failed_check
+    from tunespec.app.pipeline.extract import layout_reference_xyz
+    from tunespec.app.pipeline.jobs import ProcessInputs, process_job
 
     use = layout or session.layout
     ref = (
@@ -479,21 +417,22 @@ def cmd_process(args: argparse.Namespace) -> int:
         if use is not None
         else None
     )
-    processed = process_session(
-        session,
-        layout=layout,
-        corners=_corners_arg(args.corners),  # type: ignore[arg-type]
-        roi_fraction=args.roi_fraction,
-        allow_incomplete=args.allow_incomplete,
-        verify=args.verify,
+    processed = process_job(
+        ProcessInputs(
+            args.session,
+            args.output,
+            illum,
+            layout=layout,
+            corners=_corners_arg(args.corners),
+            roi_fraction=args.roi_fraction,
+            allow_incomplete=args.allow_incomplete,
+            verify=args.verify,
+            reference_xyz=ref,
+            preview=args.preview,
+            force=args.force,
+        ),
         progress=out.progress("processing"),
-    ).checked(ref)
-    if args.preview is not None:
-        session_preview(session, processed, args.preview)
-    refuse_failed_check(processed, session.root, force=args.force)
-    write_processed(processed, args.output, illum)
-    if processed.check is not None and not processed.check.ok:
-        flag_forced_csv(args.output, processed.check)
+    )
     for w in processed.warnings:
         out.warn(w)
     r = processed.responses

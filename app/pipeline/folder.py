@@ -587,7 +587,7 @@ def write_estimate(
 
 
 def read_estimate(folder: Path, sample_root: Path) -> EstimateResult | None:
-    from tunespec.app.pipeline.steps import evaluate  # scipy-free, but heavy
+    from tunespec.core.colorimetry import reflectance_stats  # scipy-free, but heavy
 
     try:
         doc = read_json(own_file(folder, "estimate.json"))
@@ -600,7 +600,7 @@ def read_estimate(folder: Path, sample_root: Path) -> EstimateResult | None:
         table2 = (
             None
             if reference is None
-            else evaluate(reflectance.select(reference.names), reference)
+            else reflectance_stats(reflectance.select(reference.names), reference)
         )
         layout = doc.get("layout")
         return EstimateResult(
@@ -678,44 +678,3 @@ def read_processed(
         corners_source="layout",
         warnings=warnings,
     )
-
-
-def restore_calibration_steps(
-    result_dir: Path, result: CalibrationResult, grid: Any = None
-) -> tuple[Any, Any] | None:
-    """The processed chart and the ``pipeline.Calibration`` of a restored result.
-
-    Nothing is estimated again: the sensitivities, their covariance and LED
-    corrections come from the files (``core.calibration.Calibration.load``),
-    Table 1 is recomputed from them (``core.stats.calibration_report``). ``None``
-    when the processed chart is not in ``result_dir``.
-    """
-    from dataclasses import replace
-
-    from tunespec.app.pipeline.steps import Calibration
-    from tunespec.core.calibration import Calibration as FileCalibration
-    from tunespec.core.spectra import CALIBRATION_GRID
-    from tunespec.core.stats import calibration_report
-    from tunespec.devices.registry import layout_reflectances
-
-    chart = read_processed(result_dir, result.layout, result.warnings)
-    if chart is None:
-        return None
-    csv = result_dir / "sensitivity.csv"
-    est = FileCalibration.load(csv)
-    # the sensitivities as restored (with the SPD shift in their meta) and what the
-    # CSV cannot say: the method and the patches the fit left out
-    est = replace(
-        est,
-        sensitivity=result.sensitivity,
-        method=result.method,
-        excluded_patches=result.excluded_patches,
-    )
-    work = grid or CALIBRATION_GRID
-    refl = layout_reflectances(result.layout, grid=work).resample(work)
-    from tunespec.app.pipeline.steps import table1_by_patch
-
-    illum = chart.illuminants.resample(work, average=True)
-    report = calibration_report(est, chart.responses, illum, refl)
-    per_patch = table1_by_patch(est, chart.responses, illum, refl)
-    return chart, Calibration(est, report, per_patch, self_check=result.self_check)

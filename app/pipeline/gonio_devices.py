@@ -22,6 +22,7 @@ then :func:`tunespec.app.pipeline.gonio_process.process_gonio`); what differs:
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from contextlib import closing
 from pathlib import Path
 from typing import Any
@@ -120,6 +121,7 @@ def run_gonio_session(
     sensitivity: Spectra,
     layout: TargetLayout,
     led_correction: Any = None,
+    sensitivity_meta: Mapping[str, Any] | None = None,
     layout_path: str | Path | None = None,
     resolution: tuple[int, int] | None = None,
     iso: int = 100,
@@ -135,7 +137,9 @@ def run_gonio_session(
     :class:`~tunespec.core.sensitivity_bayes.LedCorrection`: metering errors of the
     light's spectroradiometer that the calibration separated from the sensitivities)
     are saved with the session (``calibration.csv``, ``led_correction.json``) and a
-    resumed session uses those; the corrections are applied to every illuminant of
+    resumed session uses those (``sensitivity_meta``, the sensitivities' side file
+    as ``core.io.export.read_sensitivity_meta`` reads it, gives them when
+    ``led_correction`` is not given); the corrections are applied to every illuminant of
     Eq. 1, the mix's through its LEDs
     (:func:`~tunespec.app.pipeline.gonio_process.calibration_correction`). The
     layout is kept as ``layout.json`` (:data:`SESSION_LAYOUT`), which a resumed
@@ -153,6 +157,11 @@ def run_gonio_session(
     from tunespec.devices.goniometer_registry import open_goniometer
     from tunespec.devices.registry import open_bench
 
+    side = sensitivity_meta or {}
+    if led_correction is None and "led_correction" in side:
+        led_correction = LedCorrection.from_dict(
+            side["led_correction"], side.get("meta_path")
+        )
     root = Path(out)
     plan = GonioPlan.load(root / "plan.json")
     cal, corr_path = root / "calibration.csv", root / "led_correction.json"

@@ -13,7 +13,6 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
-from functools import partial
 from os import PathLike
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -24,15 +23,16 @@ from tunespec.app.pipeline.engine import connect
 from tunespec.app.pipeline.folder import (
     CHART_CHOICE_FILE,
     DEFAULT_THRESHOLD_RGB_MEAN,
-    CalibrationResult,
-    EstimateResult,
     MeasurementFolder,
     self_check_dict,
-    session_fingerprint,
-    step_warnings,
-    write_calibration,
-    write_estimate,
     write_measurement_doc,
+)
+from tunespec.app.pipeline.jobs import (
+    CalibrateInputs,
+    EstimateInputs,
+    Stages,
+    calibrate_job,
+    estimate_job,
 )
 from tunespec.app.pipeline.plan import (
     DEMO_CHART_CHOICE,
@@ -51,22 +51,13 @@ from tunespec.app.pipeline.steps import (
     Calibration,
     Estimation,
     bench_for_target,
-    calibrate,
     capture_target,
-    estimate,
     export,
-    process,
 )
 from tunespec.core.errors import InputError
 from tunespec.core.io.session import Session
 from tunespec.core.processing import ProcessedSession
-from tunespec.core.progress import (
-    ProgressFn,
-    StopFn,
-    progress_ranges,
-    report,
-    sub_progress,
-)
+from tunespec.core.progress import ProgressFn, StopFn, report
 from tunespec.core.spectra import Grid, Spectra
 from tunespec.devices.capture import FrameCallback
 from tunespec.devices.registry import Bench, open_bench
@@ -179,26 +170,6 @@ DemoResult = RunResult
 
 
 # -- orchestration ---------------------------------------------------------------------
-class _Stages:
-    """One progress callback split over weighted stages, and each stage's wall time."""
-
-    def __init__(
-        self, progress: ProgressFn | None, weights: Mapping[str, float]
-    ) -> None:
-        self._progress = progress
-        self._ranges = progress_ranges(weights)
-        self.timings_s: dict[str, float] = {}
-
-    def timed(self, name: str, func: Callable[[ProgressFn | None], Any]) -> Any:
-        start, stop = self._ranges[name]
-        t0 = time.perf_counter()
-        try:
-            return func(sub_progress(self._progress, start, stop))
-        finally:
-            self.timings_s[name] = time.perf_counter() - t0
-            report(self._progress, stop)
-
-
 _STAGE_WEIGHTS = {
     "capture_chart": 30.0,
     "process_chart": 6.0,
@@ -284,43 +255,6 @@ def _write_plan(folder: MeasurementFolder, plan: Plan) -> None:
     )
 
 
-def _write_results(
-    folder: MeasurementFolder,
-    plan: Plan,
-    cal: Calibration,
-    chart: ProcessedSession,
-    est: Estimation,
-    sample: ProcessedSession,
-) -> tuple[tuple[str, ...], tuple[str, ...]]:
-    """The calibration and the estimate, by the writers the GUI wizard uses.
-
-    Returns the warnings written with each (:func:`step_warnings`).
-    """
-    excluded = tuple(cal.estimate.excluded_patches)
-    cal_warnings = step_warnings(folder.chart_dir, chart, excluded)
-    cal_result = CalibrationResult.from_step(
-        cal, chart, threshold=DEFAULT_THRESHOLD_RGB_MEAN, warnings=cal_warnings
-    )
-    write_calibration(
-        folder.calibration_dir, cal_result, session_fingerprint(folder.chart_dir)
-    )
-    cal_warnings = cal_result.warnings  # with the self-check's findings
-    reference = None
-    if plan.reference is not None:
-        names = [n for n in est.reflectance.names if n in plan.reference.names]
-        reference = plan.reference.select(names) if names else None
-    est_warnings = step_warnings(folder.sample_dir, sample) + tuple(
-        f"accepted with force = true: {f}" for f in est.forced
-    )
-    est_result = EstimateResult.from_step(
-        est, sample, reference=reference, warnings=est_warnings
-    )
-    write_estimate(
-        folder.estimate_dir, est_result, session_fingerprint(folder.sample_dir)
-    )
-    return cal_warnings, est_warnings
-
-
 def _provenance(folder: MeasurementFolder, plan: Plan, bench: Bench) -> dict[str, str]:
     """The plan's choices the report's provenance lists."""
     out = {
@@ -335,25 +269,17 @@ def _provenance(folder: MeasurementFolder, plan: Plan, bench: Bench) -> dict[str
     return out
 
 
-@dataclass
-class _Hooks:
-    """The callbacks of one run (not part of the plan: they belong to the caller)."""
-
-    stages: _Stages
-    should_stop: StopFn | None
-    on_frame: FrameCallback | None
-
-
-def _capture_and_process(
-    hooks: _Hooks,
+def _capture(
     folder: MeasurementFolder,
     plan: Plan,
     which: str,
     bench: Bench,
-    layout: Any,
     exposure: Any,
-) -> tuple[Session, ProcessedSession]:
-    """Capture (or resume) and process one session of the measurement."""
+    hooks: tuple[Stages, FrameCallback | None],
+) -> Session:
+    """Capture (or resume) one session of the measurement (``steps.capture_target``)."""
+    stages, on_frame = hooks
+    layout = plan.chart_layout if which == "chart" else plan.sample_layout
 
     def capturing(p: ProgressFn | None) -> Session:
         session, _ = capture_target(
@@ -366,61 +292,13 @@ def _capture_and_process(
             n_darks=plan.n_darks,
             iso=plan.iso,
             progress=p,
-            should_stop=hooks.should_stop,
-            on_frame=hooks.on_frame,
+            should_stop=stages.should_stop,
+            on_frame=on_frame,
         )
         return session
 
-    session: Session = hooks.stages.timed(f"capture_{which}", capturing)
-    # the chart's extraction is checked against its reference data too
-    ref = None
-    if which == "chart" and plan.chart_reflectances is not None:
-        from tunespec.app.pipeline.extract import reference_xyz
-
-        ref = reference_xyz(layout, plan.chart_reflectances)
-    processed: ProcessedSession = hooks.stages.timed(
-        f"process_{which}",
-        lambda p: process(
-            session, progress=p, should_stop=hooks.should_stop, reference_xyz=ref
-        ),
-    )
-    return session, processed
-
-
-def _calibrate(
-    plan: Plan,
-    chart: ProcessedSession,
-    should_stop: StopFn | None,
-    progress: ProgressFn | None,
-) -> Calibration:
-    """The calibrate step of ``plan`` on the processed chart."""
-    return calibrate(
-        chart,
-        plan.chart_reflectances,
-        method=plan.method,
-        grid=plan.grid,
-        check=True,
-        progress=progress,
-        should_stop=should_stop,
-    )
-
-
-def _estimate(
-    plan: Plan, sample: ProcessedSession, cal: Calibration, _progress: Any
-) -> Estimation:
-    """The estimate step of ``plan`` on the processed sample (closed form: no
-    progress to report)."""
-    from tunespec.core.plausibility import Checks
-
-    return estimate(
-        sample,
-        cal.sensitivity,
-        prior=plan.prior,
-        reference=plan.reference,
-        grid=plan.estimation_grid,
-        calibration=cal.estimate,
-        checks=Checks(force=plan.force, force_hint="force = true in the configuration"),
-    )
+    session: Session = stages.timed(f"capture_{which}", capturing)
+    return session
 
 
 def _run_on(
@@ -438,35 +316,58 @@ def _run_on(
         **({"images": 20.0} if plan.images else {}),
         **({"chart choice": 90.0} if plan.chart_choice and plan.report else {}),
     }
-    hooks = _Hooks(_Stages(progress, weights), should_stop, on_frame)
+    stages = Stages(progress, weights, should_stop)
+    hooks = (stages, on_frame)
     folder = MeasurementFolder.at(plan.out_dir)
     _write_plan(folder, plan)
     record = update_record(folder.root, plan.record)
     light_state = light_status_items(bench.light)  # its warm-up, before capturing
     # a simulated bench is opened showing the chart; hardware shows what the
     # operator puts there (the stage asks)
-    chart_session, chart = _capture_and_process(
-        hooks, folder, plan, "chart", bench, plan.chart_layout, plan.exposure
+    chart_session = _capture(folder, plan, "chart", bench, plan.exposure, hooks)
+    # the chart's extraction is checked against its reference data too
+    calibrated = calibrate_job(
+        CalibrateInputs(
+            folder.chart_dir,
+            folder.calibration_dir,
+            method=plan.method,
+            threshold=DEFAULT_THRESHOLD_RGB_MEAN,
+            reflectances=plan.chart_reflectances,
+            check_extraction=plan.chart_reflectances is not None,
+            grid=plan.grid,
+        ),
+        should_stop=should_stop,
+        stages=stages,
     )
-    cal: Calibration = hooks.stages.timed(
-        "calibrate", partial(_calibrate, plan, chart, should_stop)
-    )
+    cal: Calibration = calibrated.calibration
+    chart: ProcessedSession = calibrated.chart
     sample_bench = bench_for_target(
         bench, plan.sample_layout, plan.sample_reflectances, seed=plan.seed + 1
     )
     # the same board and LEDs: the chart's metered exposures suit the sample too
     chart_exposures = {c: t[0] for c, t in chart_session.settings.exposures_s.items()}
     sample_exposure = chart_exposures if plan.exposure == "auto" else plan.exposure
-    _, sample = _capture_and_process(
-        hooks, folder, plan, "sample", sample_bench, plan.sample_layout, sample_exposure
+    _capture(folder, plan, "sample", sample_bench, sample_exposure, hooks)
+    estimated = estimate_job(
+        EstimateInputs(
+            folder.sample_dir,
+            folder.estimate_dir,
+            cal.sensitivity,
+            reference=plan.reference,
+            calibration=cal.estimate,
+            prior=plan.prior,
+            grid=plan.estimation_grid,
+            force=plan.force,
+            force_hint="force = true in the configuration",
+        ),
+        should_stop=should_stop,
+        stages=stages,
     )
-    est: Estimation = hooks.stages.timed(
-        "estimate", partial(_estimate, plan, sample, cal)
-    )
-    cal_warnings, est_warnings = _write_results(folder, plan, cal, chart, est, sample)
+    est: Estimation = estimated.estimation
+    sample: ProcessedSession = estimated.sample
     warnings = (
-        *(f"chart: {w}" for w in cal_warnings),
-        *(f"sample: {w}" for w in est_warnings),
+        *(f"chart: {w}" for w in calibrated.warnings),
+        *(f"sample: {w}" for w in estimated.warnings),
     )
     truth, truth_sens = _score_truth(
         folder, plan, (bench, sample_bench), (chart, sample), cal
@@ -481,10 +382,8 @@ def _run_on(
     }
     choice = None
     if plan.chart_choice and plan.report:
-        choice = hooks.stages.timed(
-            "chart choice", lambda p: _chart_choice(folder, plan, p)
-        )
-    files: dict[str, Path] = hooks.stages.timed(
+        choice = stages.timed("chart choice", lambda p: _chart_choice(folder, plan, p))
+    files: dict[str, Path] = stages.timed(
         "export",
         lambda p: export(
             folder.export_dir,
@@ -508,7 +407,7 @@ def _run_on(
         ),
     )
     if plan.images:
-        files["images_provenance"] = hooks.stages.timed(
+        files["images_provenance"] = stages.timed(
             "images", lambda p: _images(folder, plan, scheduler, p, should_stop)
         )
     if sample_bench is not bench:
@@ -520,7 +419,7 @@ def _run_on(
         chart=chart,
         sample=sample,
         files=files,
-        timings_s=dict(hooks.stages.timings_s),
+        timings_s=dict(stages.timings_s),
         warnings=warnings,
         truth=truth,
         provenance={

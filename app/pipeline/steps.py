@@ -7,18 +7,23 @@ time accept ``progress`` and ``should_stop`` (``core.progress``):
    under every LED (dark, white, target), resumed where it exists;
 2. :func:`process` - dark, flat field (Eq. 2), corners, ROI statistics -> responses
    and illuminants (measured SPD x exposure);
-3. :func:`calibrate` - camera sensitivities (``core.sensitivity``) and Table 1;
+3. :func:`calibrate` - camera sensitivities (``core.sensitivity``) and Table 1; the
+   calibrate chain on responses (fit, Table 1, self-check) is :func:`fit_calibration`;
 4. :func:`estimate` - Wiener reflectances (Eq. 5-6, the SG as prior) and, with a
-   reference, Table 2 (:func:`evaluate`);
+   reference, Table 2 (:func:`evaluate`); the estimate chain on responses (correct
+   the illuminants, integrate, Wiener, uncertainty) is :func:`estimate_reflectance`;
 5. :func:`export` - CSV, rawtoaces JSON, Argyll ``.ti3`` and the HTML/PDF report.
 
-:func:`tunespec.app.pipeline.run.run` loops over them for a
-:class:`~tunespec.app.pipeline.plan.Plan`.
+The capture step and the one place resume and retake are decided
+(:func:`~tunespec.app.pipeline.capture.open_for_capture`) are in
+:mod:`tunespec.app.pipeline.capture` (named here too). The front ends call these steps
+through :mod:`tunespec.app.pipeline.jobs`; :func:`tunespec.app.pipeline.run.run`
+loops over them for a :class:`~tunespec.app.pipeline.plan.Plan`.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from os import PathLike
 from pathlib import Path
@@ -26,13 +31,22 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from tunespec.app.pipeline.capture import (
+    CaptureSettings,
+    Resume,
+    bench_for_target,
+    capture_chart,
+    capture_sample,
+    capture_session,
+    capture_target,
+    open_for_capture,
+    recorded_bench_options,
+)
 from tunespec.app.pipeline.folder import (
     CHART_CHOICE_FILE,
-    add_capture_warnings,
-    clear_capture_warnings,
     write_exports_index,
 )
-from tunespec.app.pipeline.plan import ESTIMATION_GRID, chart_layout, sample_layout
+from tunespec.app.pipeline.plan import ESTIMATION_GRID
 from tunespec.app.pipeline.processing import process_session, write_processed
 from tunespec.core.colorimetry import ReflectanceStats, reflectance_stats
 from tunespec.core.datasets import load_colorchecker_sg
@@ -42,24 +56,17 @@ from tunespec.core.io.export import (
     export_measurement,
     write_colorimetry_csv,
 )
-from tunespec.core.io.session import Session
+from tunespec.core.io.session import MANIFEST_NAME, Session
 from tunespec.core.io.spectral_csv import write_spectra_csv
-from tunespec.core.layout import TargetLayout
 from tunespec.core.processing import ProcessedSession
 from tunespec.core.progress import ProgressFn, StopFn, sub_progress
 from tunespec.core.spectra import CALIBRATION_GRID, Grid, Spectra
-from tunespec.devices.capture import (
-    FrameCallback,
-    capture,
-    new_session,
-    recorded_sim_camera,
-)
-from tunespec.devices.registry import Bench, sim_scene
 
 if TYPE_CHECKING:
     # the estimators import scipy (a third of a second): imported where they run,
     # so that loading a configuration (and failing on it) answers at once
     from tunespec.core.plausibility import Checks
+    from tunespec.core.responses import Responses
     from tunespec.core.selfcheck import SelfCheck
     from tunespec.core.sensitivity import SensitivityEstimate
     from tunespec.core.stats import CalibrationReport, PredictionStats
@@ -68,18 +75,26 @@ if TYPE_CHECKING:
 
 __all__ = [
     "Calibration",
+    "CaptureSettings",
     "Estimation",
+    "Resume",
     "bench_for_target",
     "calibrate",
     "capture_chart",
     "capture_sample",
+    "capture_session",
     "capture_target",
     "estimate",
+    "estimate_reflectance",
     "evaluate",
     "export",
+    "fit_calibration",
+    "open_for_capture",
     "process",
+    "recorded_bench_options",
     "session_provenance",
     "table1_by_patch",
+    "write_uncertainty",
 ]
 
 
@@ -132,148 +147,6 @@ class Estimation:
 
 
 # -- steps -----------------------------------------------------------------------------
-def bench_for_target(
-    bench: Bench,
-    layout: TargetLayout,
-    reflectances: Spectra | None = None,
-    *,
-    seed: int = 1,
-) -> Bench:
-    """The bench with ``layout`` in front of the camera.
-
-    On hardware the operator changes the target (the stage asks them), so the bench is
-    returned as it is. A simulated bench gets the same simulated camera (same
-    constants, light and clock; :meth:`SimCamera.looking_at`) looking at a scene with
-    ``layout`` on the same board under the same light field
-    (:meth:`SimScene.bench_options`).
-    """
-    if not bench.simulated:
-        return bench
-    # the same bench: camera pose, field of view, the light's fall-off, the white
-    # board and the camera's sensor constants stay; only the target changes (a
-    # scene or camera rebuilt from defaults would change the flat field and the
-    # sensitivities between the calibration and the sample)
-    same: dict[str, Any] = bench.sim_stage.bench_options()
-    scene = sim_scene(layout, reflectances, **same)
-    camera = bench.sim_camera.looking_at(scene, seed=seed)
-    return Bench(bench.light, camera, scene, camera.truth())
-
-
-def bench_as_recorded(bench: Bench, session: Session) -> Bench:
-    """``bench`` with the simulated camera ``session`` was captured with (its
-    resolution and seed: ``devices.capture.recorded_sim_camera``); hardware, or a
-    camera already so, as it is. The one rule the CLI's and the GUI's resume and
-    retake share."""
-    recorded = recorded_sim_camera(session)
-    if not bench.simulated or not recorded:
-        return bench
-    camera = bench.sim_camera
-    seed = recorded.get("seed")
-    resolution = recorded.get("resolution")
-    same_seed = seed is None or camera.identity.serial == f"SIM-{seed}"
-    if same_seed and resolution in (None, camera.resolution):
-        return bench
-    camera = camera.looking_at(bench.sim_stage, seed=seed, resolution=resolution)
-    return Bench(bench.light, camera, bench.stage, camera.truth())
-
-
-def capture_target(
-    bench: Bench,
-    session_dir: str | PathLike[str],
-    layout: TargetLayout,
-    *,
-    exposure: str | float | Mapping[str, float] = "auto",
-    iso: int = 100,
-    brackets: Sequence[float] = (1.0,),
-    n_darks: int = 1,
-    repeats: int = 1,
-    resume: bool = True,
-    progress: ProgressFn | None = None,
-    should_stop: StopFn | None = None,
-    on_frame: FrameCallback | None = None,
-    on_warning: Callable[[str], None] | None = None,
-    on_stage: Callable[[str], None] | None = None,
-) -> tuple[Session, tuple[str, ...]]:
-    """Capture (or resume) one session of ``layout`` on ``bench``.
-
-    Every warning is kept beside the session the moment it arises
-    (:func:`~tunespec.app.pipeline.folder.add_capture_warnings`), so the calibrate
-    and estimate steps report it even when the capture was resumed, by another
-    front end, or interrupted.
-
-    Parameters
-    ----------
-    on_warning, on_stage
-        ``devices.capture.capture``'s hooks: each warning as it arises, and the
-        stage that starts (``"metering LED495, 7 of 22"``).
-
-    Returns
-    -------
-    (session, warnings)
-        ``warnings``: those of this run.
-    """
-    root = Path(session_dir)
-
-    def warned(text: str) -> None:
-        add_capture_warnings(root, [text])
-        if on_warning is not None:
-            on_warning(text)
-
-    if (root / "manifest.json").is_file():
-        if not resume:
-            raise InputError("a session already exists here", path=root)
-        session = Session.open(root)
-        if session.layout is None:
-            session.set_layout(layout.with_corners(None))
-        # the missing frames are taken as the others were: a simulated camera
-        # gets the session's resolution and seed back (a camera that differs
-        # otherwise is refused by capture() before its first frame)
-        bench = bench_as_recorded(bench, session)
-    else:
-        clear_capture_warnings(root)  # of an earlier session in this folder
-        session = new_session(
-            root,
-            bench.light,
-            bench.camera,
-            layout=layout.with_corners(None),
-            exposure=exposure,
-            iso=iso,
-            brackets=brackets,
-            n_darks=n_darks,
-            repeats=repeats,
-        )
-    result = capture(
-        session,
-        bench.light,
-        bench.camera,
-        bench.stage,
-        resume=True,
-        progress=progress,
-        should_stop=should_stop,
-        on_frame=on_frame,
-        on_warning=warned,
-        on_stage=on_stage,
-    )
-    return session, result.warnings
-
-
-def capture_chart(
-    bench: Bench, session_dir: str | PathLike[str], **kwargs: Any
-) -> tuple[Session, tuple[str, ...]]:
-    """:func:`capture_target` of the ColorChecker SG (:func:`chart_layout`)."""
-    return capture_target(bench, session_dir, chart_layout(), **kwargs)
-
-
-def capture_sample(
-    bench: Bench,
-    session_dir: str | PathLike[str],
-    layout: TargetLayout | None = None,
-    **kwargs: Any,
-) -> tuple[Session, tuple[str, ...]]:
-    """:func:`capture_target` of the sample target (default :func:`sample_layout`)."""
-    return capture_target(bench, session_dir, layout or sample_layout(), **kwargs)
-
-
 def process(
     session: Session,
     *,
@@ -282,6 +155,7 @@ def process(
     should_stop: StopFn | None = None,
     force: bool = False,
     reference_xyz: Any = None,
+    preview: str | PathLike[str] | None = None,
     **kwargs: Any,
 ) -> ProcessedSession:
     """:func:`tunespec.core.processing.process_session`; with ``out_dir``, also write
@@ -291,11 +165,16 @@ def process(
     (:func:`tunespec.core.extraction.check_extraction`: ROIs across patch edges,
     patches out of the reference's order, with ``reference_xyz``: the chart's
     reference XYZ in layout order) is refused with an ``InputError``; ``force``
-    keeps it (the failure stays in ``ProcessedSession.warnings``).
+    keeps it (the failure stays in ``ProcessedSession.warnings``). ``preview``: a
+    PNG of the outline and the ROIs, written before a refusal (it shows why).
     """
     processed = process_session(
         session, progress=progress, should_stop=should_stop, **kwargs
     ).checked(reference_xyz)
+    if preview is not None:
+        from tunespec.app.pipeline.extract import session_preview
+
+        session_preview(session, processed, preview)
     refuse_failed_check(processed, session.root, force=force)
     if out_dir is not None:
         out = Path(out_dir)
@@ -350,42 +229,102 @@ def calibrate(
     options
         More arguments for ``estimate_camera_sensitivity``.
     """
-    from tunespec.core.sensitivity import estimate_camera_sensitivity
-    from tunespec.core.stats import calibration_report
-
     refl = reflectances if reflectances is not None else load_colorchecker_sg(grid)
     refl = refl.resample(grid)
     illum = chart.illuminants.resample(grid, average=True)
     if method is not None:
         options["method"] = method
-    responses = _with_reference(chart.responses, refl)
-    est = estimate_camera_sensitivity(
-        responses,
+    return fit_calibration(
+        _with_reference(chart.responses, refl),
         illum,
         refl,
+        reported_illuminants=chart.illuminants,
+        check=check,
+        progress=progress,
+        should_stop=should_stop,
+        **options,
+    )
+
+
+def fit_calibration(
+    responses: Responses,
+    illuminants: Spectra,
+    reflectances: Spectra,
+    *,
+    reported_illuminants: Spectra | None = None,
+    hold_out_every: int | None = None,
+    check: bool = False,
+    progress: ProgressFn | None = None,
+    should_stop: StopFn | None = None,
+    **options: Any,
+) -> Calibration:
+    """The calibrate chain, written once: fit the sensitivities
+    (``core.sensitivity.estimate_camera_sensitivity``), Table 1 (and the held-aside
+    patches' statistics), Table 1 per patch and, with ``check``, the self-check.
+
+    :func:`calibrate` (``run``, ``demo``, the wizard) and ``tunespec calibrate``
+    call it.
+
+    Parameters
+    ----------
+    responses
+        The chart's responses.
+    illuminants, reflectances
+        On the working grid (the illuminants band-averaged onto it).
+    reported_illuminants
+        The illuminants as the spectroradiometer reported them (the self-check's
+        reading noise).
+    hold_out_every
+        Fit without every N-th patch (``split_patches``, offset N-1); Table 1's
+        held-out rows and the self-check's left-out patches are those.
+    options
+        More arguments for ``estimate_camera_sensitivity``.
+    """
+    from tunespec.core.sensitivity import estimate_camera_sensitivity
+    from tunespec.core.stats import calibration_report, split_patches
+
+    held: tuple[str, ...] = ()
+    fit = responses
+    if hold_out_every:
+        fit_names, held = split_patches(
+            responses.patches, every=hold_out_every, offset=hold_out_every - 1
+        )
+        fit = responses.subset(list(fit_names))
+    est = estimate_camera_sensitivity(
+        fit,
+        illuminants,
+        reflectances,
         progress=sub_progress(progress, 0.0, 0.5) if check else progress,
         should_stop=should_stop,
         **options,
     )
-    rep = calibration_report(est, responses, illum, refl)
+    rep = calibration_report(
+        est, responses, illuminants, reflectances, held_out_patches=held
+    )
     checked = None
     if check:
-        from tunespec.core.selfcheck import self_check
+        from tunespec.core.selfcheck import held_out_of, self_check
 
+        held_out = None
+        if held:
+            held_out = held_out_of(
+                est, responses, illuminants, reflectances, held, hold_out_every
+            )
         refit = {**options, "method": est.method}
         checked = self_check(
             est,
-            responses,
-            illum,
-            refl,
-            reported_illuminants=chart.illuminants,
+            fit,
+            illuminants,
+            reflectances,
+            reported_illuminants=reported_illuminants,
             fit=lambda r: estimate_camera_sensitivity(
-                r, illum, refl, should_stop=should_stop, **refit
+                r, illuminants, reflectances, should_stop=should_stop, **refit
             ),
+            held_out=held_out,
             progress=sub_progress(progress, 0.5, 1.0),
             should_stop=should_stop,
         )
-    per_patch = table1_by_patch(est, responses, illum, refl)
+    per_patch = table1_by_patch(est, fit, illuminants, reflectances)
     return Calibration(est, rep, per_patch, self_check=checked)
 
 
@@ -453,7 +392,7 @@ def session_provenance(
         chart's exposure per LED (s, first bracket); every manifest with its
         SHA-256 (a manifest lists the SHA-256 of each of its frames).
     """
-    from tunespec.core.io.session import MANIFEST_NAME, sha256_file
+    from tunespec.core.io.session import sha256_file
 
     items: dict[str, str] = {}
     exposures: dict[str, float] = {}
@@ -503,28 +442,126 @@ def estimate(
     ``checks`` (default: refuse, no override) runs the plausibility checks of the
     responses against Eq. 1 first (:func:`tunespec.core.plausibility.check_estimate_inputs`).
     """
+    prior = prior if prior is not None else load_colorchecker_sg(grid)
+    est = estimate_reflectance(
+        sample.responses,
+        sample.illuminants,
+        sensitivity,
+        prior,
+        grid,
+        spd_shift_nm=spd_shift_nm,
+        calibration=calibration,
+        checks=checks,
+    )
+    if reference is None:
+        return est
+    return Estimation(
+        est.wiener, evaluate(est.reflectance, reference), est.uncertainty, est.forced
+    )
+
+
+def estimate_reflectance(
+    responses: Responses,
+    illuminants: Spectra,
+    sensitivity: Spectra,
+    prior: Spectra,
+    grid: Grid,
+    *,
+    meta: Mapping[str, Any] | None = None,
+    spd_shift_nm: float | None = None,
+    calibration: SensitivityEstimate | None = None,
+    uncertainty_from_meta: bool = False,
+    checks: Checks | None = None,
+    responses_path: str | PathLike[str] | None = None,
+    noise_std: float | None = None,
+    center_prior: bool = True,
+    clip: bool = True,
+) -> Estimation:
+    """The estimate chain, written once: undo the light source's metering errors
+    the calibration found on the illuminants
+    (:func:`~tunespec.core.calibration.correct_illuminants_from_meta`), put them and
+    the sensitivities on the integration grid (``on_integration_grid``), check the
+    responses against Eq. 1 (``check_estimate_inputs``), Wiener (Eq. 5-6) and, with
+    a ``calibration`` carrying a covariance, the standard uncertainties.
+
+    :func:`estimate` (``run``, ``demo``, the wizard) and ``tunespec estimate`` call
+    it.
+
+    Parameters
+    ----------
+    responses, illuminants
+        The sample's responses and its illuminants as measured (any grid).
+    sensitivity
+        Absolute sensitivities, on their own grid.
+    prior
+        Training reflectances (resampled onto ``grid`` here).
+    grid
+        The reflectances' grid.
+    meta
+        The calibration's corrections (``sensitivity.meta`` when ``None``; the
+        side file's as ``read_sensitivity_meta`` gives it; ``{}`` for none).
+    spd_shift_nm
+        A wavelength shift to undo instead of the calibration's.
+    calibration, uncertainty_from_meta
+        The calibration whose covariance gives the standard uncertainties, or
+        (``uncertainty_from_meta``) the one ``meta`` holds (``calibrate``'s side
+        file: ``core.calibration.Calibration.from_meta``).
+    checks
+        The plausibility checks (default: refuse, no override).
+    noise_std, center_prior, clip
+        :func:`~tunespec.core.wiener.wiener_reflectance`'s.
+    """
     from tunespec.core.calibration import correct_illuminants_from_meta
     from tunespec.core.plausibility import Checks, check_estimate_inputs
     from tunespec.core.uncertainty import reflectance_uncertainty
     from tunespec.core.wiener import on_integration_grid, wiener_reflectance
 
-    prior = prior if prior is not None else load_colorchecker_sg(grid)
-    illuminants = correct_illuminants_from_meta(
-        sample.illuminants, sensitivity.meta, spd_shift_nm
+    corrected = correct_illuminants_from_meta(
+        illuminants, sensitivity.meta if meta is None else meta, spd_shift_nm
     )
-    illum_fine, sens_fine, _ = on_integration_grid(illuminants, sensitivity, grid)
+    # corrected on the spectra's own grid, then resampled; Eq. 1 integrated on the
+    # sensitivities' (finer) grid, the reflectances on `grid`
+    illum_fine, sens_fine, _ = on_integration_grid(corrected, sensitivity, grid)
     checks = checks if checks is not None else Checks()
-    check_estimate_inputs(checks, sample.responses, illum_fine, sens_fine)
-    est = wiener_reflectance(
-        sample.responses, illum_fine, sens_fine, prior.resample(grid)
+    check_estimate_inputs(
+        checks, responses, illum_fine, sens_fine, responses_path=responses_path
     )
-    table2 = None if reference is None else evaluate(est.reflectance, reference)
+    est = wiener_reflectance(
+        responses,
+        illum_fine,
+        sens_fine,
+        prior.resample(grid, source=prior.meta.get("source")),
+        noise_std=noise_std,
+        center_prior=center_prior,
+        clip=clip,
+    )
+    if calibration is None and uncertainty_from_meta:
+        from tunespec.core.calibration import Calibration as FileCalibration
+
+        calibration = FileCalibration.from_meta(
+            sensitivity, sensitivity.meta if meta is None else meta
+        )
     unc = None
     if calibration is not None and calibration.covariance is not None:
-        unc = reflectance_uncertainty(
-            est, sample.responses, sample.illuminants, calibration
-        )
-    return Estimation(est, table2, unc, tuple(checks.overridden))
+        unc = reflectance_uncertainty(est, responses, illuminants, calibration)
+    return Estimation(est, None, unc, tuple(checks.overridden))
+
+
+def write_uncertainty(
+    estimation: Estimation,
+    reflectances_std_csv: str | PathLike[str],
+    colorimetry_csv: str | PathLike[str],
+) -> tuple[Path, Path]:
+    """The reflectances' standard uncertainties (a spectra CSV) and their XYZ and
+    CIELAB with theirs (``write_colorimetry_csv``): the one writer ``export`` and
+    ``tunespec estimate`` share. ``estimation.uncertainty`` must be there."""
+    unc = estimation.uncertainty
+    assert unc is not None
+    std = Path(reflectances_std_csv)
+    write_spectra_csv(estimation.reflectance.with_values(unc.reflectance_std), std)
+    return std, write_colorimetry_csv(
+        Path(colorimetry_csv), estimation.reflectance.names, unc
+    )
 
 
 def evaluate(estimated: Spectra, reference: Spectra) -> ReflectanceStats:
@@ -612,16 +649,13 @@ def export(
             illuminants=chart.illuminants,
         ).paths
     )
-    unc = estimation.uncertainty
-    if unc is not None:
-        names = estimation.reflectance.names
-        files["reflectances_uncertainty_csv"] = out / "reflectances_uncertainty.csv"
-        write_spectra_csv(
-            estimation.reflectance.with_values(unc.reflectance_std),
-            files["reflectances_uncertainty_csv"],
-        )
-        files["colorimetry_csv"] = write_colorimetry_csv(
-            out / "colorimetry.csv", names, unc
+    if estimation.uncertainty is not None:
+        files["reflectances_uncertainty_csv"], files["colorimetry_csv"] = (
+            write_uncertainty(
+                estimation,
+                out / "reflectances_uncertainty.csv",
+                out / "colorimetry.csv",
+            )
         )
     if report:
         files["report_html"], files["report_pdf"] = _write_report(

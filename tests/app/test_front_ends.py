@@ -60,8 +60,8 @@ def test_a_cli_measurement_opens_in_the_wizard_with_its_results(
     )
     # the wizard exports the restored results without processing a raw frame or
     # estimating the sensitivities again
-    from tunespec.app.gui.wizard import measurement
-    from tunespec.app.pipeline.folder import restore_calibration_steps
+    from tunespec.app.pipeline import jobs
+    from tunespec.app.pipeline.jobs import restore_calibration_steps
 
     restored = restore_calibration_steps(folder / "calibration", cal)
     assert restored is not None
@@ -72,8 +72,8 @@ def test_a_cli_measurement_opens_in_the_wizard_with_its_results(
     def no_processing(*_args, **_kwargs):
         raise AssertionError("raw frames processed again")
 
-    monkeypatch.setattr(measurement, "_process", no_processing)
-    exported = measurement.export_job(folder / "export", folder, cal, est, {})
+    monkeypatch.setattr(jobs, "_process_session", no_processing)
+    exported = jobs.export_job(jobs.ExportInputs(folder / "export", folder, cal, est))
     assert exported.paths["reflectances_csv"].is_file()
     assert exported.paths["sensitivities_csv"].is_file()
 
@@ -127,7 +127,7 @@ def test_the_cli_and_the_wizard_jobs_write_identical_results(tmp_path):
     import filecmp
     import json
 
-    from tunespec.app.gui.wizard import measurement
+    from tunespec.app.pipeline import jobs
     from tunespec.app.pipeline.plan import chart_layout, sample_layout
     from tunespec.core.io.session import Session
     from tunespec.devices.registry import layout_reflectances
@@ -135,18 +135,23 @@ def test_the_cli_and_the_wizard_jobs_write_identical_results(tmp_path):
     cli = tmp_path / "cli"
     run_demo(cli, resolution=SIM["resolution"], report_files=False)
     wiz = tmp_path / "wizard"
-    cal = measurement.calibrate_job(cli / "chart", wiz / "calibration", chart_layout())
-    est = measurement.estimate_job(
-        cli / "sample",
-        wiz / "estimate",
-        sample_layout(),
-        cal.sensitivity,
-        layout_reflectances(sample_layout()),
-        calibration=cal.calibration.estimate,  # as the wizard's estimate page does
+    # the wizard pages' jobs, with the inputs the pages give them
+    cal = jobs.calibrate_job(
+        jobs.CalibrateInputs(cli / "chart", wiz / "calibration", chart_layout())
+    )
+    est = jobs.estimate_job(
+        jobs.EstimateInputs(
+            cli / "sample",
+            wiz / "estimate",
+            cal.sensitivity,
+            sample_layout(),
+            reference=layout_reflectances(sample_layout()),
+            calibration=cal.calibration.estimate,
+        )
     )
     # the export page's job, with the devices of the session as the page passes them
     devices = Session.open(cli / "sample").devices
-    measurement.export_job(wiz / "export", cli, cal, est, devices)
+    jobs.export_job(jobs.ExportInputs(wiz / "export", cli, cal, est, devices))
     report = {"report.html", "report.pdf"}  # the CLI run wrote none (report_files)
     for sub in ("calibration", "estimate", "export"):
         names = sorted(p.name for p in (cli / sub).iterdir())

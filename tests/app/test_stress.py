@@ -89,7 +89,7 @@ def test_closing_the_window_mid_job(qtbot, tmp_path, busy_core, key):
 def test_a_job_that_raises_is_one_line_and_the_step_runs_again(
     window, qtbot, tmp_path, monkeypatch
 ):
-    import tunespec.app.pipeline.steps as steps
+    import tunespec.app.pipeline.jobs as steps  # the wizard runs the jobs
 
     real = steps.capture_target
 

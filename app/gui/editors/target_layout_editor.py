@@ -98,15 +98,14 @@ def find_target_corners(
     searched, which finds a target only against an evenly lit background.
     """
     from tunespec.core.errors import InputError
-    from tunespec.core.io.session import MANIFEST_NAME, Session
+    from tunespec.core.io.session import MANIFEST_NAME
 
     root = Path(session_root) if session_root else None
     if root is not None and (root / MANIFEST_NAME).is_file():
-        from tunespec.core.processing import find_session_corners
+        from tunespec.app.pipeline.jobs import find_session_corners
 
-        session = Session.open(root)
         try:
-            found, target = find_session_corners(session, target_layout)
+            found, target = find_session_corners(root, target_layout)
         except InputError as exc:
             if frame is None or "white-background and a target" not in str(exc):
                 raise

@@ -12,7 +12,6 @@ from tunespec.app.gui.wizard.measurement import (
     CALIBRATION_DIR,
     CHART_DIR,
     CalibrationResult,
-    calibrate_job,
 )
 from tunespec.app.gui.wizard.step_page import StepPage
 from tunespec.app.gui.workers import Worker
@@ -27,17 +26,9 @@ CORNER_CHOICES = (
 
 def _methods() -> tuple[tuple[str, ...], str]:
     """The sensitivity methods and the library's default one."""
-    import inspect
+    from tunespec.app.pipeline.jobs import sensitivity_methods
 
-    from tunespec.core.sensitivity import (
-        SENSITIVITY_METHODS,
-        estimate_camera_sensitivity,
-    )
-
-    default = (
-        inspect.signature(estimate_camera_sensitivity).parameters["method"].default
-    )
-    return tuple(SENSITIVITY_METHODS), str(default)
+    return sensitivity_methods()
 
 
 class CalibratePage(StepPage):
@@ -107,14 +98,18 @@ class CalibratePage(StepPage):
         m.method = self.method_combo.currentData()
         m.threshold = self.threshold_spin.value()
         m.save()
+        from tunespec.app.pipeline.jobs import CalibrateInputs, calibrate_job
+
         return ProcessWorker(
             calibrate_job,
-            m.path(CHART_DIR),
-            m.path(CALIBRATION_DIR),
-            m.chart_layout,
-            corners=self.corners_combo.currentData(),
-            method=m.method,
-            threshold=m.threshold,
+            CalibrateInputs(
+                m.path(CHART_DIR),
+                m.path(CALIBRATION_DIR),
+                m.chart_layout,
+                corners=self.corners_combo.currentData(),
+                method=m.method,
+                threshold=m.threshold,
+            ),
         )
 
     def accept_result(self, result: CalibrationResult) -> str:

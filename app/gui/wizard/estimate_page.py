@@ -23,7 +23,6 @@ from tunespec.app.gui.wizard.measurement import (
     ESTIMATE_DIR,
     SAMPLE_DIR,
     EstimateResult,
-    estimate_job,
 )
 from tunespec.app.gui.wizard.step_page import StepPage
 from tunespec.app.gui.workers import Worker
@@ -92,15 +91,19 @@ class EstimatePage(StepPage):
         text = self.reference_edit.text().strip()
         m.reference_path = Path(text) if text else None
         m.save()
+        from tunespec.app.pipeline.jobs import EstimateInputs, estimate_job
+
         return ProcessWorker(
             estimate_job,
-            m.path(SAMPLE_DIR),
-            m.path(ESTIMATE_DIR),
-            m.sample_layout,
-            m.calibration.sensitivity,
-            m.reference(),
-            corners=self.corners_combo.currentData(),
-            calibration=getattr(m.calibration.calibration, "estimate", None),
+            EstimateInputs(
+                m.path(SAMPLE_DIR),
+                m.path(ESTIMATE_DIR),
+                m.calibration.sensitivity,
+                m.sample_layout,
+                corners=self.corners_combo.currentData(),
+                reference=m.reference(),
+                calibration=getattr(m.calibration.calibration, "estimate", None),
+            ),
         )
 
     def accept_result(self, result: EstimateResult) -> str:

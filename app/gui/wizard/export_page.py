@@ -12,7 +12,6 @@ from tunespec.app.gui.processes import ProcessWorker
 from tunespec.app.gui.wizard.measurement import (
     EXPORT_DIR,
     ExportResult,
-    export_job,
 )
 from tunespec.app.gui.wizard.step_page import StepPage
 from tunespec.app.gui.workers import Worker
@@ -65,15 +64,19 @@ class ExportPage(StepPage):
             for k, v in sim.items()
             if k in ("seed", "resolution")
         }
+        from tunespec.app.pipeline.jobs import ExportInputs, export_job
+
         return ProcessWorker(
             export_job,
-            m.path(EXPORT_DIR),
-            m.require_folder(),
-            m.calibration,
-            m.estimate,
-            devices,
-            provenance=provenance,
-            input_files=[p for p in (m.reference_path,) if p is not None],
+            ExportInputs(
+                m.path(EXPORT_DIR),
+                m.require_folder(),
+                m.calibration,
+                m.estimate,
+                devices,
+                provenance=provenance,
+                input_files=tuple(p for p in (m.reference_path,) if p is not None),
+            ),
         )
 
     def accept_result(self, result: ExportResult) -> str:

@@ -10,10 +10,11 @@ A measurement folder holds everything of one operator run::
       estimate/          estimated reflectances and Table 2 (estimate step)
       export/            the exports and the report (export step)
 
-The job functions at the bottom run off the GUI thread (device jobs on the device
-thread, the others on the pool). They only call the documented APIs of
-``tunespec.devices`` and ``tunespec.core`` and return frozen results; the pages store
-those in :class:`Measurement` on the GUI thread.
+The pages run the pipeline's jobs (:mod:`tunespec.app.pipeline.jobs`: calibrate,
+estimate, export) off the GUI thread, and the capture job at the bottom on the
+device thread: it drives ``pipeline.capture_target`` and adds what the page shows
+(the phase's progress and time left, the frames, the SPDs). They return frozen
+results; the pages store those in :class:`Measurement` on the GUI thread.
 """
 
 from __future__ import annotations
@@ -49,12 +50,6 @@ from tunespec.app.pipeline.folder import (
     read_estimate,
     read_exports_index,
     read_measurement_doc,
-    read_processed,
-    restore_calibration_steps,
-    session_fingerprint,
-    step_warnings,
-    write_calibration,
-    write_estimate,
     write_measurement_doc,
 )
 from tunespec.core.datasets import resource_path
@@ -67,10 +62,8 @@ from tunespec.core.progress import (
     Cancelled,
     ProgressFn,
     StopFn,
-    check_stop,
-    sub_progress,
 )
-from tunespec.core.spectra import CALIBRATION_GRID, Spectra
+from tunespec.core.spectra import Spectra
 
 __all__ = [  # the results and folder names are re-exported from app.pipeline.folder
     "CALIBRATION_DIR",
@@ -525,7 +518,7 @@ def _bench_showing(context: DeviceContext, target_layout: TargetLayout) -> Any:
     on the simulated bench ``pipeline.bench_for_target`` gives a camera looking at a
     scene of that target, which then becomes the controller's bench.
     """
-    from tunespec.app.pipeline.steps import bench_for_target
+    from tunespec.app.pipeline.jobs import bench_for_target
 
     bench = context.bench
     shown = getattr(bench.stage, "layout", None)
@@ -730,9 +723,10 @@ def capture_job(
     ``pipeline.capture_target`` runs the capture sequence (resuming the session) and
     is stopped as soon as every frame of ``kind`` is in: a cancelled capture keeps
     its frames and the next phase resumes from there. A phase that is already
-    complete is taken again (its frames are marked bad first). What it does now
-    (``"metering LED495, 7 of 22"``) and its warnings go to the page as they
-    happen (``context.set_stage``, ``context.warn``). Device thread.
+    complete is taken again (``pipeline.capture.Resume.retake_phase``: the one
+    rule of resume and retake, which ``tunespec capture`` and ``run`` share). What
+    it does now (``"metering LED495, 7 of 22"``) and its warnings go to the page as
+    they happen (``context.set_stage``, ``context.warn``). Device thread.
 
     Parameters
     ----------
@@ -740,7 +734,7 @@ def capture_job(
         Overrides ``options.exposure`` (e.g. the chart's metered exposures for the
         sample: same board, same LEDs).
     """
-    from tunespec.app.pipeline.steps import capture_target
+    from tunespec.app.pipeline.jobs import capture_target
     from tunespec.core.io.session import MANIFEST_NAME, Session
 
     t0 = time.monotonic()
@@ -763,10 +757,6 @@ def capture_job(
         remaining=context.set_remaining,
         session_now=session_now,
     )
-    if session is not None and session.settings.resolved and meter.frames_left == 0:
-        retake = [f.id for f in session.frames if kind in (None, f.kind)]
-        session.mark_bad(retake, "retaken by the operator")
-        log.info("retaking %d %s frame(s)", len(retake), kind or "")
     phase_done = [False]
     captured: list[str] = []
 
@@ -801,7 +791,7 @@ def capture_job(
             iso=options.iso,
             n_darks=options.n_darks,
             repeats=options.repeats,
-            resume=True,
+            retake_phase=kind or "all",
             progress=lambda _f: meter.step(),
             should_stop=stop,
             on_frame=on_frame,
@@ -817,215 +807,3 @@ def capture_job(
     return PhaseResult(
         kind or "all", tuple(captured), n_frames, warnings, time.monotonic() - t0
     )
-
-
-def _process(
-    session_root: Path,
-    target_layout: TargetLayout,
-    corners: str,
-    progress: ProgressFn | None = None,
-    should_stop: StopFn | None = None,
-) -> Any:
-    """``pipeline.process`` with corners ``"auto"`` (found) or ``"editor"`` (given).
-
-    Nothing is written: the processed session goes to disk with the result that
-    uses it (``pipeline.folder.write_calibration`` / ``write_estimate``).
-    """
-    from tunespec.app.pipeline.steps import process
-    from tunespec.core.io.session import Session
-
-    given = corners == "editor"
-    processed = process(
-        Session.open(session_root),
-        out_dir=None,
-        layout=target_layout if given else target_layout.with_corners(None),
-        corners="layout" if given else "auto",
-        progress=progress,
-        should_stop=should_stop,
-    )
-    check_stop(should_stop)
-    return processed
-
-
-def calibrate_job(
-    chart_root: Path,
-    out_dir: Path,
-    chart_layout: TargetLayout,
-    *,
-    corners: str = "auto",
-    method: str | None = None,
-    threshold: float = 0.005,
-    progress: ProgressFn | None = None,
-    should_stop: StopFn | None = None,
-) -> CalibrationResult:
-    """Process the chart session and estimate the sensitivities (Table 1). Pool.
-
-    Parameters
-    ----------
-    corners
-        ``"auto"`` (found in the images) or ``"editor"`` (the layout's corners).
-    """
-    from tunespec.app.pipeline.steps import calibrate
-    from tunespec.devices.registry import layout_reflectances
-
-    t0 = time.monotonic()
-    chart = _process(
-        chart_root, chart_layout, corners, sub_progress(progress, 0, 0.6), should_stop
-    )
-    cal = calibrate(
-        chart,
-        layout_reflectances(chart_layout, grid=CALIBRATION_GRID),
-        method=method,
-        check=True,
-        progress=sub_progress(progress, 0.6, 1.0),
-        should_stop=should_stop,
-    )
-    result = CalibrationResult.from_step(
-        cal,
-        chart,
-        threshold=threshold,
-        warnings=step_warnings(chart_root, chart, cal.estimate.excluded_patches),
-        elapsed_s=time.monotonic() - t0,
-    )
-    write_calibration(out_dir, result, session_fingerprint(chart_root))
-    return result
-
-
-def estimate_job(
-    sample_root: Path,
-    out_dir: Path,
-    sample_layout: TargetLayout,
-    sensitivity: Spectra,
-    reference: Spectra | None,
-    *,
-    corners: str = "auto",
-    progress: ProgressFn | None = None,
-    should_stop: StopFn | None = None,
-    calibration: Any = None,
-) -> EstimateResult:
-    """Process the sample session, estimate reflectances (Wiener) and Table 2. Pool.
-
-    ``calibration`` (a ``SensitivityEstimate`` with a covariance) adds the
-    reflectances' standard uncertainties (``result.estimation.uncertainty``).
-    """
-    from tunespec.app.pipeline.steps import estimate
-
-    t0 = time.monotonic()
-    sample = _process(
-        sample_root, sample_layout, corners, sub_progress(progress, 0, 0.8), should_stop
-    )
-    ref = None
-    if reference is not None:
-        names = [n for n in sample.responses.patches if n in reference.names]
-        ref = reference.select(names) if names else None
-    est = estimate(sample, sensitivity, reference=None, calibration=calibration)
-    table2 = None
-    if ref is not None:
-        from tunespec.app.pipeline.steps import evaluate
-
-        table2 = evaluate(est.reflectance.select(ref.names), ref)
-    if progress is not None:
-        progress(1.0)
-    result = EstimateResult.from_step(
-        type(est)(est.wiener, table2, est.uncertainty),
-        sample,
-        reference=ref,
-        warnings=step_warnings(sample_root, sample),
-        elapsed_s=time.monotonic() - t0,
-    )
-    write_estimate(out_dir, result, session_fingerprint(sample_root))
-    return result
-
-
-def export_job(
-    out_dir: Path,
-    folder: Path,
-    calibration: CalibrationResult,
-    estimated: EstimateResult,
-    devices: dict[str, dict[str, str]],
-    *,
-    provenance: dict[str, str] | None = None,
-    input_files: list[Path] | tuple[Path, ...] = (),
-    progress: ProgressFn | None = None,
-    should_stop: StopFn | None = None,
-) -> ExportResult:
-    """Write every export and the report (``pipeline.export``). Pool.
-
-    ``provenance`` (the simulated bench's seed and resolution...) and the files
-    read (``input_files``, with ``measurement.json``) go into the report.
-
-    Results restored from disk lack the processed sessions; they are recomputed
-    from the sessions with the corners used then.
-    """
-    from tunespec.app.pipeline.record import read_record
-    from tunespec.app.pipeline.steps import calibrate, estimate, export
-    from tunespec.devices.registry import layout_reflectances
-
-    chart, cal = calibration.chart, calibration.calibration
-    if (chart is None or cal is None) and (
-        restored := restore_calibration_steps(folder / CALIBRATION_DIR, calibration)
-    ) is not None:
-        chart, cal = restored
-    if chart is None or cal is None:  # a folder of an older version: process again
-        chart = _process(
-            folder / CHART_DIR, calibration.layout, "editor", should_stop=should_stop
-        )
-        cal = calibrate(
-            chart,
-            layout_reflectances(calibration.layout, grid=CALIBRATION_GRID),
-            method=calibration.method,
-            should_stop=should_stop,
-        )
-    if progress is not None:
-        progress(0.3)
-    sample, est = estimated.sample, estimated.estimation
-    if sample is None or est is None:
-        assert estimated.layout is not None
-        # the processed sample beside the estimate; only the (closed-form) Wiener
-        # estimate is computed again, from the same numbers
-        sample = read_processed(
-            folder / ESTIMATE_DIR, estimated.layout, estimated.warnings
-        ) or _process(
-            folder / SAMPLE_DIR, estimated.layout, "editor", should_stop=should_stop
-        )
-        est = estimate(sample, cal.sensitivity, reference=None)
-        est = type(est)(est.wiener, estimated.table2)
-    if progress is not None:
-        progress(0.5)
-    check_stop(should_stop)
-    files = export(
-        out_dir,
-        calibration=cal,
-        estimation=est,
-        chart=chart,
-        sample=sample,
-        # the exports need a reference for every patch; Table 2 may cover fewer
-        reference=(
-            estimated.reference
-            if estimated.reference is not None
-            and set(estimated.reflectance.names) <= set(estimated.reference.names)
-            else None
-        ),
-        devices=devices,
-        settings={
-            "sensitivity method": calibration.method,
-            "Table 1 threshold (RGB mean)": f"{calibration.threshold:g}",
-            "chart corners": chart.corners_source,
-            "sample corners": sample.corners_source,
-        },
-        warnings=(
-            *(f"chart: {w}" for w in calibration.warnings),
-            *(f"sample: {w}" for w in estimated.warnings),
-        ),
-        provenance={
-            "measurement folder": str(Path(folder).resolve()),
-            **(provenance or {}),
-        },
-        sessions={"chart": folder / CHART_DIR, "sample": folder / SAMPLE_DIR},
-        input_files=[folder / MEASUREMENT_FILE, *input_files],
-        threshold_rgb_mean=calibration.threshold,
-        record=read_record(folder),  # the "Measurement record..." dialog's fields
-    )
-    if progress is not None:
-        progress(1.0)
-    return ExportResult({k: Path(p) for k, p in files.items()}, Path(out_dir))
