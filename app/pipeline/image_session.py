@@ -634,11 +634,9 @@ def _corrected_for(
     """The illuminants corrected as ``tunespec estimate`` corrects them (per-LED
     corrections on the SPDs' own grid), and both illuminants and sensitivities on
     the integration grid (:func:`tunespec.core.wiener.integration_grid`)."""
-    from tunespec.core.calibration import correct_illuminants_from_meta
-    from tunespec.core.wiener import on_integration_grid
+    from tunespec.app.pipeline.steps import estimation_lighting
 
-    corrected = correct_illuminants_from_meta(illuminants_of(job), meta)
-    return on_integration_grid(corrected, sensitivity, grid)
+    return estimation_lighting(illuminants_of(job), sensitivity, meta, grid)
 
 
 def lighting_for(

@@ -86,6 +86,7 @@ __all__ = [
     "capture_target",
     "estimate",
     "estimate_reflectance",
+    "estimation_lighting",
     "evaluate",
     "export",
     "fit_calibration",
@@ -511,17 +512,14 @@ def estimate_reflectance(
     noise_std, center_prior, clip
         :func:`~tunespec.core.wiener.wiener_reflectance`'s.
     """
-    from tunespec.core.calibration import correct_illuminants_from_meta
     from tunespec.core.plausibility import Checks, check_estimate_inputs
     from tunespec.core.uncertainty import reflectance_uncertainty
-    from tunespec.core.wiener import on_integration_grid, wiener_reflectance
+    from tunespec.core.wiener import wiener_reflectance
 
-    corrected = correct_illuminants_from_meta(
-        illuminants, sensitivity.meta if meta is None else meta, spd_shift_nm
-    )
-    # corrected on the spectra's own grid, then resampled; Eq. 1 integrated on the
-    # sensitivities' (finer) grid, the reflectances on `grid`
-    illum_fine, sens_fine, _ = on_integration_grid(corrected, sensitivity, grid)
+    illum_fine, sens_fine, _ = estimation_lighting(
+        illuminants, sensitivity, sensitivity.meta if meta is None else meta, grid,
+        spd_shift_nm=spd_shift_nm,
+    )  # fmt: skip
     checks = checks if checks is not None else Checks()
     check_estimate_inputs(
         checks, responses, illum_fine, sens_fine, responses_path=responses_path
@@ -545,6 +543,26 @@ def estimate_reflectance(
     if calibration is not None and calibration.covariance is not None:
         unc = reflectance_uncertainty(est, responses, illuminants, calibration)
     return Estimation(est, None, unc, tuple(checks.overridden))
+
+
+def estimation_lighting(
+    illuminants: Spectra,
+    sensitivity: Spectra,
+    meta: Mapping[str, Any],
+    grid: Grid,
+    *,
+    spd_shift_nm: float | None = None,
+) -> tuple[Spectra, Spectra, Grid]:
+    """The first half of the estimate chain, which the per-pixel images share
+    (``image_session``): the illuminants corrected as the calibration found
+    (``meta``; per-LED corrections on the spectra's own grid), then they and the
+    sensitivities on the integration grid (Eq. 1 on the sensitivities' finer grid,
+    the reflectances on ``grid``: ``core.wiener.on_integration_grid``)."""
+    from tunespec.core.calibration import correct_illuminants_from_meta
+    from tunespec.core.wiener import on_integration_grid
+
+    corrected = correct_illuminants_from_meta(illuminants, meta, spd_shift_nm)
+    return on_integration_grid(corrected, sensitivity, grid)
 
 
 def write_uncertainty(
