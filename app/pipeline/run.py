@@ -372,39 +372,18 @@ def _run_on(
     truth, truth_sens = _score_truth(
         folder, plan, (bench, sample_bench), (chart, sample), cal
     )
-    settings = {
-        "calibration grid": str(plan.grid),
-        "estimation grid": str(plan.estimation_grid),
-        "sensitivity method": str(cal.estimate.method),
-        "exposure": str(plan.exposure),
-        "chart corners": chart.corners_source,
-        "sample corners": sample.corners_source,
-    }
-    choice = None
-    if plan.chart_choice and plan.report:
-        choice = stages.timed("chart choice", lambda p: _chart_choice(folder, plan, p))
-    files: dict[str, Path] = stages.timed(
-        "export",
-        lambda p: export(
-            folder.export_dir,
-            calibration=cal,
-            estimation=est,
-            chart=chart,
-            sample=sample,
-            reference=plan.reference,
-            truth_sensitivity=truth_sens,
-            devices=chart_session.devices,
-            settings=settings,
-            warnings=warnings,
-            report=plan.report,
-            provenance={**_provenance(folder, plan, bench), **light_state},
-            sessions={"chart": folder.chart_dir, "sample": folder.sample_dir},
-            input_files=plan.input_files,
-            threshold_rgb_mean=DEFAULT_THRESHOLD_RGB_MEAN,
-            chart_reflectances=plan.chart_reflectances,
-            chart_choice=choice,
-            record=record,
-        ),
+    settings = _settings(plan, cal, chart, sample)
+    files = _export_step(
+        folder,
+        plan,
+        stages,
+        results=(cal, est, chart, sample),
+        truth_sensitivity=truth_sens,
+        devices=chart_session.devices,
+        settings=settings,
+        warnings=warnings,
+        provenance={**_provenance(folder, plan, bench), **light_state},
+        record=record,
     )
     if plan.images:
         files["images_provenance"] = stages.timed(
@@ -435,6 +414,64 @@ def _run_on(
     files["summary_json"] = folder.write_summary(result.summary())
     report(progress, 1.0)
     return result
+
+
+def _settings(
+    plan: Plan, cal: Calibration, chart: ProcessedSession, sample: ProcessedSession
+) -> dict[str, str]:
+    """The run's settings as the report and ``summary.json`` list them."""
+    return {
+        "calibration grid": str(plan.grid),
+        "estimation grid": str(plan.estimation_grid),
+        "sensitivity method": str(cal.estimate.method),
+        "exposure": str(plan.exposure),
+        "chart corners": chart.corners_source,
+        "sample corners": sample.corners_source,
+    }
+
+
+def _export_step(
+    folder: MeasurementFolder,
+    plan: Plan,
+    stages: Stages,
+    *,
+    results: tuple[Calibration, Estimation, ProcessedSession, ProcessedSession],
+    truth_sensitivity: Any,
+    devices: Any,
+    settings: dict[str, str],
+    warnings: tuple[str, ...],
+    provenance: dict[str, Any],
+    record: Any,
+) -> dict[str, Path]:
+    """The chart choice (when asked for with a report) and the exports, timed."""
+    cal, est, chart, sample = results
+    choice = None
+    if plan.chart_choice and plan.report:
+        choice = stages.timed("chart choice", lambda p: _chart_choice(folder, plan, p))
+    files: dict[str, Path] = stages.timed(
+        "export",
+        lambda p: export(
+            folder.export_dir,
+            calibration=cal,
+            estimation=est,
+            chart=chart,
+            sample=sample,
+            reference=plan.reference,
+            truth_sensitivity=truth_sensitivity,
+            devices=devices,
+            settings=settings,
+            warnings=warnings,
+            report=plan.report,
+            provenance=provenance,
+            sessions={"chart": folder.chart_dir, "sample": folder.sample_dir},
+            input_files=plan.input_files,
+            threshold_rgb_mean=DEFAULT_THRESHOLD_RGB_MEAN,
+            chart_reflectances=plan.chart_reflectances,
+            chart_choice=choice,
+            record=record,
+        ),
+    )
+    return files
 
 
 def _chart_choice(
