@@ -183,7 +183,7 @@ def _add_export_camera(
 
 
 def cmd_export_camera(args: argparse.Namespace) -> int:
-    from tunespec.core.io.export import export_camera_characterisation
+    from tunespec.core.io.camera_export import export_camera_characterisation
     from tunespec.core.io.responses_csv import read_responses_csv
 
     out = Console(args)

@@ -51,11 +51,8 @@ from tunespec.app.pipeline.processing import process_session, write_processed
 from tunespec.core.colorimetry import ReflectanceStats, reflectance_stats
 from tunespec.core.datasets import load_colorchecker_sg
 from tunespec.core.errors import InputError
-from tunespec.core.io.export import (
-    export_camera_characterisation,
-    export_measurement,
-    write_colorimetry_csv,
-)
+from tunespec.core.io.camera_export import export_camera_characterisation
+from tunespec.core.io.export import export_measurement, write_colorimetry_csv
 from tunespec.core.io.session import MANIFEST_NAME, Session
 from tunespec.core.io.spectral_csv import write_spectra_csv
 from tunespec.core.processing import ProcessedSession
@@ -615,7 +612,7 @@ def export(
     The chart's camera ``.ti3`` (for ArgyllCMS ``colprof``) and the camera transforms
     (ACES IDT, CCMs for D50/D65/A) come from ``chart_reflectances`` (default: the
     ColorChecker SG) and the calibration
-    (:func:`~tunespec.core.io.export.export_camera_characterisation`).
+    (:func:`~tunespec.core.io.camera_export.export_camera_characterisation`).
 
     Files: the chart's ``chart_responses.csv`` / ``chart_illuminants.csv``, the
     ``core.io.export`` set (sensitivities, reflectances, the sample's responses and

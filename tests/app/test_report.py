@@ -357,7 +357,8 @@ def test_summary_verdict_per_patch_errors_and_provenance(
 
 def test_every_export_kind_has_a_name_for_the_reader() -> None:
     from tunespec.app.report.report import EXPORT_LABELS
-    from tunespec.core.io.export import CAMERA_EXPORT_NAMES, EXPORT_NAMES
+    from tunespec.core.io.camera_export import CAMERA_EXPORT_NAMES
+    from tunespec.core.io.export import EXPORT_NAMES
 
     kinds = {
         *EXPORT_NAMES,
