@@ -38,6 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
+from tunespec.core.intervals import COVERAGE_FACTOR_95
+
 
 class _NoNoise:
     """Stands in for the simulated camera's random generator: every photon and read
@@ -134,8 +136,12 @@ def _evaluate(work: Path, cap: dict, label: str, extra: list[str]) -> None:
     ):
         m = pm[sel]
         de = delta_e_2000(lab[sel], mlab[m])
-        cov_l = np.mean(np.abs(lab[sel][:, 0] - mlab[m][:, 0]) < 1.96 * unc[sel][:, 0])
-        cov_r = np.mean(np.abs(cube[sel] - mats.values[m]) < 1.96 * unc[sel][:, 1:2])
+        cov_l = np.mean(
+            np.abs(lab[sel][:, 0] - mlab[m][:, 0]) < COVERAGE_FACTOR_95 * unc[sel][:, 0]
+        )
+        cov_r = np.mean(
+            np.abs(cube[sel] - mats.values[m]) < COVERAGE_FACTOR_95 * unc[sel][:, 1:2]
+        )
         rms = np.sqrt(np.mean((cube[sel] - mats.values[m]) ** 2))
         print(
             f"  {name:8s} {int(sel.sum()):7d} px: RMS {rms:.4f}, mean dE00 "

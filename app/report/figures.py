@@ -21,6 +21,7 @@ from tunespec.app.report.data import (
     led_radiance,
 )
 from tunespec.core.errors import InputError
+from tunespec.core.intervals import COVERAGE_FACTOR_95
 from tunespec.core.responses import Responses
 from tunespec.core.spectra import Spectra
 
@@ -129,7 +130,7 @@ def _draw_sensitivity(ax: Any, report: ReportData) -> None:
         c = _CHANNEL_COLOURS.get(name)
         ax.plot(est.wavelength_nm, v, color=c, lw=1.6, label=f"{name} estimated")
         if report.sensitivity_std is not None:
-            u = 1.96 * report.sensitivity_std[k] / peak
+            u = COVERAGE_FACTOR_95 * report.sensitivity_std[k] / peak
             ax.fill_between(est.wavelength_nm, v - u, v + u, color=c, alpha=0.25, lw=0)
     if ref is not None:
         for name, v in zip(ref.names, _peak_normalised(ref), strict=True):
@@ -360,7 +361,7 @@ def _grid_cell(ax: Any, g: _Grid, i: int, x0: float, y0: float) -> None:
     x = x0 + w * (wl - wl[0]) / span
     g.est_lines.append(np.column_stack([x, y0 + h * est.values[i] / y_top]))
     if report.reflectance_std is not None:
-        u = 1.96 * report.reflectance_std[i]
+        u = COVERAGE_FACTOR_95 * report.reflectance_std[i]
         lo = y0 + h * np.clip(est.values[i] - u, 0.0, y_top) / y_top
         hi = y0 + h * np.clip(est.values[i] + u, 0.0, y_top) / y_top
         g.bands.append(

@@ -26,6 +26,7 @@ from tunespec.app.report.data import (
     quality_flags,
     shipped_datasets,
 )
+from tunespec.core.intervals import COVERAGE_FACTOR_95
 from tunespec.core.io.export import tunespec_version
 
 if TYPE_CHECKING:
@@ -385,7 +386,7 @@ def _result_tables(report: ReportData) -> list[_Table]:
             (
                 name,
                 *(
-                    f"{report.lab[i, j]:.2f} ± {1.96 * report.lab_std[i, j]:.2f}"
+                    f"{report.lab[i, j]:.2f} ± {COVERAGE_FACTOR_95 * report.lab_std[i, j]:.2f}"
                     for j in range(3)
                 ),
             )

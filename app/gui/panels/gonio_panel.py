@@ -39,6 +39,7 @@ from PySide6.QtWidgets import (
 )
 
 from tunespec.app.gui.processes import ProcessWorker
+from tunespec.core.intervals import COVERAGE_FACTOR_95
 
 __all__ = ["COLUMNS", "GonioPanel"]
 
@@ -334,7 +335,7 @@ class GonioPanel(QWidget):
             "geometry": idx,
             "theta_r": r["theta_r"][idx],
             "lab": r["lab"][patch, idx],
-            "bar": 1.96 * r["u_lab"][patch, idx],
+            "bar": COVERAGE_FACTOR_95 * r["u_lab"][patch, idx],
         }
 
     @Slot()
@@ -347,8 +348,8 @@ class GonioPanel(QWidget):
         wl = r["wavelength_nm"]
         R, u = r["reflectance"][p, g], r["u_reflectance"][p, g]
         self.spectrum_curve.setData(wl, R)
-        self.spectrum_upper.setData(wl, R + 1.96 * u)
-        self.spectrum_lower.setData(wl, R - 1.96 * u)
+        self.spectrum_upper.setData(wl, R + COVERAGE_FACTOR_95 * u)
+        self.spectrum_lower.setData(wl, R - COVERAGE_FACTOR_95 * u)
         self.spectrum_plot.setTitle(
             f"{r['patches'][p]}, geometry {g + 1} (theta_i {r['theta_i'][g]:.3g}, "
             f"theta_r {r['theta_r'][g]:.3g}, phi_r {r['phi_r'][g]:.3g}): "

@@ -35,6 +35,8 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from tunespec.core.intervals import COVERAGE_FACTOR_95
+
 __all__ = ["LAYERS", "ImageView", "Region"]
 
 #: The layers the view shows, in the combo box's order.
@@ -374,8 +376,8 @@ class ImageView(QWidget):
         wl = img.wavelength_nm
         self.pixel = (row, col)
         self.curve.setData(wl, r)
-        self.upper.setData(wl, r + 1.96 * u)
-        self.lower.setData(wl, r - 1.96 * u)
+        self.upper.setData(wl, r + COVERAGE_FACTOR_95 * u)
+        self.lower.setData(wl, r - COVERAGE_FACTOR_95 * u)
         L, a, b = (float(v) for v in img.lab[row, col])
         self.status.setText(
             f"pixel ({col}, {row}): L*a*b* {L:.2f} {a:.2f} {b:.2f}, "

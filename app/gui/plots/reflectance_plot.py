@@ -9,6 +9,7 @@ from PySide6.QtCore import Signal, Slot
 from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QWidget
 
 from tunespec.app.gui.plots.spectra_plot import SpectraPlot
+from tunespec.core.intervals import COVERAGE_FACTOR_95
 
 __all__ = ["ReflectancePlot"]
 
@@ -85,7 +86,7 @@ class ReflectancePlot(SpectraPlot):
         est = self.estimated
         self.add_curve("estimated", est.wavelength_nm, est[name], colour=(31, 119, 180))
         if self.std is not None:
-            u = 1.96 * self.std[est.names.index(name)]
+            u = COVERAGE_FACTOR_95 * self.std[est.names.index(name)]
             self.set_band(
                 "95 %",
                 est.wavelength_nm,

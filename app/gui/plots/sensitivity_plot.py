@@ -8,6 +8,7 @@ import numpy as np
 from PySide6.QtWidgets import QWidget
 
 from tunespec.app.gui.plots.spectra_plot import CHANNEL_COLOURS, SpectraPlot
+from tunespec.core.intervals import COVERAGE_FACTOR_95
 
 __all__ = ["SensitivityPlot"]
 
@@ -49,7 +50,7 @@ class SensitivityPlot(SpectraPlot):
         if std is not None:
             values = np.asarray(sensitivity.values, dtype=float)
             peak = float(np.max(values)) or 1.0
-            u = 1.96 * np.asarray(std, dtype=float) / peak
+            u = COVERAGE_FACTOR_95 * np.asarray(std, dtype=float) / peak
             for name, row, uk in zip(sensitivity.names, values / peak, u, strict=True):
                 self.set_band(
                     f"{name} 95 %",
