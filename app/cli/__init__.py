@@ -117,33 +117,15 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _one_blas_thread() -> None:
-    """One BLAS thread, as the GUI and the Dask tasks use (threadpoolctl).
-
-    The numerics are many small factorisations (a 2 nm calibration's 176 x 176
-    systems, 66 x 66 Wiener solves); OpenBLAS's spinning threads make them several
-    times slower on a loaded two-core machine (the demo took 2 min 12 s instead of
-    17 s). Parallel work (spectral images) runs in Dask tasks instead.
-    """
-    import os
-
-    from threadpoolctl import threadpool_limits
-
-    # BLAS libraries loaded later (scipy's own OpenBLAS) read the variables, those
-    # loaded already (numpy's) are limited by threadpoolctl; a user's setting wins
-    for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ.setdefault(name, "1")
-    if os.environ["OPENBLAS_NUM_THREADS"] == "1":
-        threadpool_limits(limits=1, user_api="blas")
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``tunespec``; returns the exit code."""
     from tunespec.devices.protocols import DeviceError
 
     parser = build_parser()
     args = parser.parse_args(argv)
-    _one_blas_thread()
+    from tunespec.app.pipeline.engine import limit_blas_threads
+
+    limit_blas_threads()
     try:
         check_outputs(args)
         return int(args.func(args) or 0)

@@ -41,7 +41,7 @@ from tunespec.app.gui.plots.image_view import ImageView
 from tunespec.app.gui.plots.reflectance_plot import ReflectancePlot
 from tunespec.app.gui.plots.sensitivity_plot import SensitivityPlot
 from tunespec.app.gui.plots.spd_plot import SpdPlot
-from tunespec.app.gui.processes import one_blas_thread, start_process_server
+from tunespec.app.gui.processes import start_process_server
 from tunespec.app.gui.settings import AppSettings
 from tunespec.app.gui.wizard.measurement import (
     CALIBRATION_DIR,
@@ -58,6 +58,7 @@ from tunespec.app.gui.workers import (
     collect_on_gui_thread,
     gc_paused,
 )
+from tunespec.app.pipeline.engine import limit_blas_threads
 
 __all__ = ["MainWindow"]
 
@@ -197,7 +198,7 @@ class MainWindow(QMainWindow):
         # the first capture would otherwise import (and, without .pyc files, compile)
         # the pipeline on the device thread while the GUI waits for the GIL
         self.preloaded = False
-        one_blas_thread()
+        limit_blas_threads()
         self._preload = Worker(_preload_pipeline, hooks=False)
         self._preload.signals.finished.connect(self._on_preload_finished)
         self._preload.start()
@@ -596,7 +597,7 @@ def _preload_pipeline() -> None:
                 log.debug("not preloaded: %s", exc)
         if freeze:
             gc.freeze()
-    one_blas_thread()  # again: scipy brings its own OpenBLAS
+    limit_blas_threads()  # again: scipy brings its own OpenBLAS
     start_process_server()  # the numerics' processes (it imports on its own)
 
 

@@ -19,13 +19,13 @@ from collections.abc import Callable
 from typing import Any
 
 from tunespec.app.gui.workers import Worker
+from tunespec.app.pipeline.engine import limit_blas_threads
 
 __all__ = [
     "BACKGROUND_NICE",
     "PROCESS_PRELOAD",
     "ProcessWorker",
     "lower_priority",
-    "one_blas_thread",
     "process_context",
     "start_process_server",
 ]
@@ -105,7 +105,7 @@ def _process_main(
     root.handlers[:] = [Relay(messages)]
     root.setLevel(log_level)
     lower_priority()
-    one_blas_thread()
+    limit_blas_threads()
     try:
         result = fn(
             *args,
@@ -121,20 +121,6 @@ def _process_main(
         messages.put(("errored", exc))
     else:
         messages.put(("returned", result))
-
-
-def one_blas_thread() -> None:
-    """One BLAS thread for the numerics of the GUI's workers.
-
-    They run beside the GUI and device threads; OpenBLAS's own threads wait by
-    spinning, and on two cores the 2 nm calibration took 139 s instead of 4 s with
-    the event loop stalled up to 228 ms (``tools/gui_timing.py``). The same limit
-    the pipeline's Dask tasks use (threadpoolctl); it applies to the BLAS libraries
-    loaded when it is called.
-    """
-    from threadpoolctl import threadpool_limits
-
-    threadpool_limits(limits=1, user_api="blas")
 
 
 class ProcessWorker(Worker):

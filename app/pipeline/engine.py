@@ -3,7 +3,8 @@
 :func:`connect` picks the scheduler -- Dask's local one by default (nothing to
 install or start), or a ``dask.distributed`` cluster by address or ``Client`` -- and
 :func:`compute` runs graphs on it with progress and cancel. Tasks that do linear
-algebra run under :func:`one_blas_thread`.
+algebra run under :func:`one_blas_thread`; the CLI and the GUI limit their whole
+process with :func:`limit_blas_threads` (the one BLAS-thread policy).
 """
 
 from __future__ import annotations
@@ -15,10 +16,38 @@ from typing import Any
 from tunespec.core.errors import InputError
 from tunespec.core.progress import Cancelled, ProgressFn, StopFn, report
 
-__all__ = ["LOCAL_SCHEDULERS", "compute", "connect", "one_blas_thread"]
+__all__ = [
+    "LOCAL_SCHEDULERS",
+    "compute",
+    "connect",
+    "limit_blas_threads",
+    "one_blas_thread",
+]
 
 #: Dask's local schedulers, by the names ``dask.compute(scheduler=...)`` takes.
 LOCAL_SCHEDULERS = ("threads", "processes", "sync", "synchronous")
+
+
+def limit_blas_threads() -> None:
+    """One BLAS thread for this process, unless the user set ``OPENBLAS_NUM_THREADS``.
+
+    The numerics are many small factorisations (a 2 nm calibration's 176 x 176
+    systems, 66 x 66 Wiener solves); OpenBLAS's spinning threads make them several
+    times slower on a loaded two-core machine (the demo took 2 min 12 s instead of
+    17 s; in the GUI the 2 nm calibration took 139 s instead of 4 s with the event
+    loop stalled up to 228 ms). Parallel work (spectral images) runs in Dask tasks
+    instead. BLAS libraries loaded later (scipy's own OpenBLAS) read the variables;
+    those loaded already (numpy's) are limited by threadpoolctl, so call it again
+    after importing scipy.
+    """
+    import os
+
+    from threadpoolctl import threadpool_limits
+
+    for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(name, "1")
+    if os.environ["OPENBLAS_NUM_THREADS"] == "1":
+        threadpool_limits(limits=1, user_api="blas")
 
 
 def one_blas_thread(func: Any, *args: Any, **kwargs: Any) -> Any:
