@@ -139,9 +139,9 @@ def main(argv: list[str] | None = None) -> int:
     if not (work / "session" / "manifest.json").is_file():
         work.mkdir(parents=True, exist_ok=True)
         bench_image._capture(work, args.resolution)
-    from tunespec.app.cli import _one_blas_thread
+    from tunespec.app.pipeline.engine import limit_blas_threads
 
-    _one_blas_thread()
+    limit_blas_threads()
     _instrument()
     total = run_stages(
         work / "session",

@@ -46,6 +46,7 @@ from tunespec.core.io.spectral_csv import write_spectra_csv
 from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import dumps_json, read_json
 from tunespec.core.spectra import Spectra
+from tunespec.core.verdict import calibration_verdict
 
 __all__ = [
     "CALIBRATION_DIR",
@@ -166,13 +167,15 @@ class CalibrationResult:
 
     @property
     def verdict(self) -> str:
-        """``"PASS"``, ``"FAIL"`` (Table 1 over the threshold) or ``"PASS with
-        warnings"`` (the self-check found something, see :attr:`warnings`)."""
-        if not self.passed:
-            return "FAIL"
-        if self.self_check is not None and not self.self_check.get("passed", True):
-            return "PASS with warnings"
-        return "PASS"
+        """``"PASS"``, ``"PASS with warnings"`` or ``"FAIL"``: the report's rule
+        (:func:`tunespec.core.verdict.calibration_verdict`), so the wizard, the CLI
+        and the report agree; :attr:`verdict_reason` says why."""
+        return self.verdict_reason[0]
+
+    @property
+    def verdict_reason(self) -> tuple[str, str]:
+        """``(verdict, why)``: Table 1, the left-out patches and the self-check."""
+        return calibration_verdict(self.rgb_mean, self.threshold, self.self_check)
 
     @property
     def rgb_mean(self) -> float:

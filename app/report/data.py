@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 from tunespec.core.errors import InputError
 from tunespec.core.responses import Responses
 from tunespec.core.spectra import Spectra
+from tunespec.core.verdict import calibration_verdict
 
 if TYPE_CHECKING:
     from tunespec.core.colorimetry import ReflectanceStats
@@ -387,97 +388,15 @@ def _self_check(report: ReportData) -> dict[str, Any] | None:
     return d if isinstance(d.get("residual_chi_square"), Mapping) else None
 
 
-def _self_check_findings(checked: Mapping[str, Any]) -> list[str]:
-    """Each check that flagged, in a few words (the warnings say more)."""
-
-    def chi(d: Mapping[str, Any]) -> str:
-        values = ", ".join(f"{c} {d['reduced'][c]:.1f}" for c in d["flagged"])
-        return f"reduced chi-square {values} over {d['limit']:.1f}"
-
-    out = []
-    fitted = checked["residual_chi_square"]
-    if fitted.get("flagged"):
-        out.append(f"calibration residuals beyond the noise model ({chi(fitted)})")
-    held = checked.get("held_out")
-    if held is None:
-        out.append("no prediction of left-out patches was made")
-    elif held["chi_square"].get("flagged"):
-        out.append(
-            f"left-out patches' residuals beyond the noise model ({chi(held['chi_square'])})"
-        )
-    if checked.get("implausible_leds"):
-        out.append(
-            f"implausible LED corrections ({', '.join(checked['implausible_leds'])})"
-        )
-    limit = checked.get("limits", {}).get("meter_noise_fraction")
-    noise = checked.get("meter_noise_fraction", {})
-    if limit is not None and noise and max(noise.values()) > limit:
-        out.append(
-            f"noisy light readings ({100 * max(noise.values()):.2f} % of the peak)"
-        )
-    named = len(out) - (held is None)  # the findings of the checks listed here
-    if checked.get("warnings") and not named:
-        out += [str(w) for w in checked["warnings"]]  # a check this list lacks
-    return out
-
-
-#: The verdict's three outcomes.
-VERDICTS = ("PASS", "PASS with warnings", "FAIL")
-
-
 def verdict(report: ReportData) -> tuple[str, str] | None:
-    """``(outcome, why)``, ``outcome`` one of :data:`VERDICTS`, or ``None`` without
-    Table 1 or the threshold.
-
-    Without a self-check: ``FAIL`` from Table 1's RGB mean over the threshold, else
-    ``PASS with warnings`` (Table 1 alone cannot pass: no left-out patches were
-    predicted and no residuals checked against the noise model). With one (:mod:`tunespec.core.selfcheck`), ``PASS`` needs Table 1
-    *and* the prediction of the patches a second calibration left out within the
-    threshold, *and* no finding of the self-check (residuals against the noise
-    model, the LED corrections, the light's reading noise); a prediction over the
-    threshold fails, a finding gives ``PASS with warnings``, naming each check.
-    """
+    """``(outcome, why)`` of :func:`tunespec.core.verdict.calibration_verdict` for
+    the report's Table 1, threshold and self-check, or ``None`` without Table 1 or the
+    threshold."""
     fitted, _ = _table1_parts(report)
     if fitted is None or report.threshold_rgb_mean is None:
         return None
-    limit = report.threshold_rgb_mean
     mean = float(_as_dict(fitted)["RGB"]["mean"])
-    ok = mean <= limit
-    checked = _self_check(report)
-    if checked is None:
-        why = (
-            f"Table 1 RGB mean error {mean:.4f} of full scale is "
-            f"{'within' if ok else 'over'} the threshold {limit:.4f}"
-        )
-        if not ok:
-            return "FAIL", why
-        return "PASS with warnings", (
-            f"{why}; but: no self-check of the calibration (no left-out patches "
-            "predicted, no residual check against the noise model)"
-        )
-    over = [] if ok else [f"Table 1 RGB mean error {mean:.4f}"]
-    within = [f"Table 1 RGB mean error {mean:.4f}"] if ok else []
-    findings = _self_check_findings(checked)
-    held = checked.get("held_out")
-    if held is not None:
-        held_mean = float(held["prediction"]["RGB"]["mean"])
-        text = f"left-out patches' (1 in {held['every']}) RGB mean {held_mean:.4f}"
-        (within if held_mean <= limit else over).append(text)
-    if over:
-        why = f"{' and '.join(over)} over the threshold {limit:.4f}"
-        if findings:
-            why += f"; self-check: {'; '.join(findings)}"
-        return "FAIL", why
-    why = f"{' and '.join(within)} within the threshold {limit:.4f}"
-    if findings:
-        return "PASS with warnings", f"{why}; but: {'; '.join(findings)}"
-    chi = checked["residual_chi_square"]["reduced"]
-    why += (
-        "; residuals consistent with the noise model (reduced chi-square "
-        + ", ".join(f"{c} {v:.2f}" for c, v in chi.items())
-        + "), light-source corrections and readings plausible"
-    )
-    return "PASS", why
+    return calibration_verdict(mean, report.threshold_rgb_mean, _self_check(report))
 
 
 def _table1_parts(report: ReportData) -> tuple[Any, Any]:

@@ -49,7 +49,6 @@ from tunespec.app.report.data import (
     MAX_LISTED,
     PAPER_TABLE1,
     PAPER_TABLE2_AVERAGE,
-    VERDICTS,
     DatasetInfo,
     Flag,
     ReportData,
@@ -60,6 +59,7 @@ from tunespec.app.report.data import (
 )
 from tunespec.app.report.figures import PATCHES_PER_FIGURE, report_figures
 from tunespec.app.report.render import render_html, write_report
+from tunespec.core.verdict import VERDICTS
 
 __all__ = [
     "COLORIMETRY_DATA",

@@ -132,8 +132,11 @@ class StatsTablePanel(QWidget):
                     item.setForeground(QBrush(_FAIL))
                 self.table.setItem(i, j, item)
 
-    def set_verdict(self, passed: bool | None, text: str) -> None:
-        """Show a PASS/FAIL line (``passed=None``: neutral text)."""
+    def set_verdict(
+        self, passed: bool | None, text: str, *, outcome: str | None = None
+    ) -> None:
+        """Show a PASS/FAIL line (``passed=None``: neutral text); ``outcome`` names
+        it (``"PASS with warnings"``) where plain PASS/FAIL would say too little."""
         self.passed = passed
         if passed is None:
             self.verdict_label.setStyleSheet("")
@@ -141,7 +144,9 @@ class StatsTablePanel(QWidget):
             return
         colour = _PASS if passed else _FAIL
         self.verdict_label.setStyleSheet(f"color: {colour.name()}; font-weight: bold")
-        self.verdict_label.setText(("PASS: " if passed else "FAIL: ") + text)
+        if outcome is None:
+            outcome = "PASS" if passed else "FAIL"
+        self.verdict_label.setText(f"{outcome}: {text}")
 
     def set_note(self, text: str) -> None:
         """A line of context under the verdict (counts, thresholds, exclusions)."""
@@ -191,11 +196,8 @@ def show_table1(panel: StatsTablePanel, calibration: Any) -> None:
     panel.set_table(
         STAT_ROWS, ["Mean", "Maximum", "95th percentile"], values, failing=failing
     )
-    panel.set_verdict(
-        calibration.passed,
-        f"RGB mean {calibration.rgb_mean:.4f} "
-        f"{'≤' if calibration.passed else '>'} threshold {calibration.threshold:.4f}",
-    )
+    outcome, why = calibration.verdict_reason
+    panel.set_verdict(outcome != "FAIL", why, outcome=outcome)
     note = f"{t.n_stimuli} stimuli; method {calibration.method}; paper: RGB mean 0.0024"
     if calibration.excluded_patches:
         note += f"; {len(calibration.excluded_patches)} saturated patch(es) left out"

@@ -120,15 +120,13 @@ class CalibratePage(StepPage):
         m.save()
         m.layout_needed.emit(result.layout)
         m.calibrated.emit(result)
+        outcome, why = result.verdict_reason
         text = (
-            f"{result.verdict}: RGB mean error {result.rgb_mean:.4f} (threshold "
-            f"{result.threshold:.4f}), {result.table1.n_stimuli} stimuli, "
+            f"{outcome}: {why}; {result.table1.n_stimuli} stimuli, "
             f"{result.elapsed_s:.1f} s."
         )
-        if not result.passed:
+        if outcome == "FAIL":
             text += " Check the corners and the saturation, then recalibrate."
-        elif result.verdict != "PASS":
-            text += " The self-check found something: see the warnings."
         return text  # the warnings are in the page's badge
 
     def restore(self) -> bool:
