@@ -59,6 +59,7 @@ from tunespec.core.io.session import Session
 from tunespec.core.processing import ProcessedSession
 from tunespec.core.progress import ProgressFn, StopFn, report
 from tunespec.core.spectra import Grid, Spectra
+from tunespec.core.verdict import calibration_verdict
 from tunespec.devices.capture import FrameCallback
 from tunespec.devices.registry import Bench, open_bench
 
@@ -128,6 +129,10 @@ class RunResult:
         checked = self_check_dict(self.calibration.self_check)
         if checked is not None:
             out["self_check"] = checked
+        outcome, why = calibration_verdict(
+            float(t1.mean[3]), DEFAULT_THRESHOLD_RGB_MEAN, checked
+        )
+        out["verdict"] = {"outcome": outcome, "why": why}
         if self.table2 is not None:
             out["table2_delta_e00_mean"] = self.table2.mean_delta_e00
             out["table2_delta_e00_max"] = self.table2.max_delta_e00
