@@ -43,7 +43,7 @@ from tunespec.devices.cal1.commands import (
     encode_reply,
 )
 from tunespec.devices.clock import Clock, RealClock
-from tunespec.devices.line_io import received_lines
+from tunespec.devices.line_io import LineServer, received_lines
 from tunespec.devices.protocols import ClosesOnExit
 from tunespec.devices.sim.led_physics import LedPhysics
 
@@ -119,7 +119,6 @@ class Cal1Emulator(ClosesOnExit):
         self._poll_s = poll_s
         self._faults: list[_Fault] = []
         self._lock = threading.Lock()
-        self._stop = threading.Event()
         self._client: socket.socket | None = None
         self._threads: list[threading.Thread] = []
         self._handlers: dict[str, Callable[[Request], bytes]] = {
@@ -133,13 +132,11 @@ class Cal1Emulator(ClosesOnExit):
             "measure_spd": self._measure_spd,
             "status": self._status,
         }
-        self._listener = socket.create_server((host, port))
-        self._listener.settimeout(poll_s)
-        self.host, self.port = self._listener.getsockname()[:2]
-        self._accept_thread = threading.Thread(
-            target=self._accept_loop, name=f"cal1-emulator:{self.port}", daemon=True
+        self._server = LineServer(
+            host, port, poll_s, self._accept, name="cal1-emulator"
         )
-        self._accept_thread.start()
+        self._stop = self._server.stop
+        self.host, self.port = self._server.host, self._server.port
         _log.info("CAL1 emulator listening on %s", self.url)
 
     # --- public -----------------------------------------------------------------------
@@ -203,9 +200,7 @@ class Cal1Emulator(ClosesOnExit):
 
     def close(self) -> None:
         """Stop serving, disconnect the client and release the port; idempotent."""
-        self._stop.set()
-        self._accept_thread.join(timeout=5.0)
-        self._listener.close()
+        self._server.close()
         for t in list(self._threads):
             t.join(timeout=5.0)
         self._threads.clear()
@@ -215,29 +210,22 @@ class Cal1Emulator(ClosesOnExit):
 
     # --- serving ----------------------------------------------------------------------
 
-    def _accept_loop(self) -> None:
-        while not self._stop.is_set():
-            try:
-                conn, addr = self._listener.accept()
-            except TimeoutError:
-                continue
-            except OSError:
-                break
-            conn.settimeout(self._poll_s)
-            with self._lock:
-                busy = self._client is not None
-                if not busy:
-                    self._client = conn
-            target = self._reject if busy else self._serve
-            thread = threading.Thread(
-                target=self._guarded,
-                args=(target, conn),
-                name=f"cal1-emulator:{self.port}:{addr[1]}",
-                daemon=True,
-            )
-            self._threads = [t for t in self._threads if t.is_alive()]
-            self._threads.append(thread)
-            thread.start()
+    def _accept(self, conn: socket.socket, address: tuple[str, int]) -> None:
+        """Serve the first client on a thread of its own; answer a second one busy."""
+        with self._lock:
+            busy = self._client is not None
+            if not busy:
+                self._client = conn
+        target = self._reject if busy else self._serve
+        thread = threading.Thread(
+            target=self._guarded,
+            args=(target, conn),
+            name=f"cal1-emulator:{self.port}:{address[1]}",
+            daemon=True,
+        )
+        self._threads = [t for t in self._threads if t.is_alive()]
+        self._threads.append(thread)
+        thread.start()
 
     def _guarded(
         self, target: Callable[[socket.socket], None], conn: socket.socket

@@ -25,7 +25,7 @@ import time
 from dataclasses import dataclass
 from typing import Literal
 
-from tunespec.devices.line_io import received_lines
+from tunespec.devices.line_io import LineServer, received_lines
 from tunespec.devices.protocols import ClosesOnExit
 from tunespec.devices.zaber.protocol import MAX_LINE_BYTES, checksum
 
@@ -98,13 +98,11 @@ class ZaberEmulator(ClosesOnExit):
         self.errors: list[BaseException] = []
         self._faults: list[FaultKind] = []
         self._lock = threading.Lock()
-        self._stop = threading.Event()
-        self._poll_s = poll_s
-        self._listener = socket.create_server((host, port))
-        self._listener.settimeout(poll_s)
-        self.host, self.port = self._listener.getsockname()[:2]
-        self._thread = threading.Thread(target=self._accept, daemon=True)
-        self._thread.start()
+        self._server = LineServer(
+            host, port, poll_s, self._accept, name="zaber-emulator"
+        )
+        self._stop = self._server.stop
+        self.host, self.port = self._server.host, self._server.port
 
     @property
     def url(self) -> str:
@@ -126,27 +124,18 @@ class ZaberEmulator(ClosesOnExit):
 
     def close(self) -> None:
         """Stop serving; idempotent."""
-        self._stop.set()
-        self._thread.join(timeout=5.0)
-        self._listener.close()
+        self._server.close()
 
     # --- serving -------------------------------------------------------------------
 
-    def _accept(self) -> None:
-        while not self._stop.is_set():
-            try:
-                conn, _ = self._listener.accept()
-            except TimeoutError:
-                continue
-            except OSError:
-                return
-            conn.settimeout(self._poll_s)
-            try:
-                self._serve(conn)
-            except Exception as exc:  # kept for tests, never re-raised in the thread
-                self.errors.append(exc)
-            finally:
-                conn.close()
+    def _accept(self, conn: socket.socket, address: tuple[str, int]) -> None:
+        """Serve one client at a time, on the accept loop's thread."""
+        try:
+            self._serve(conn)
+        except Exception as exc:  # kept for tests, never re-raised in the thread
+            self.errors.append(exc)
+        finally:
+            conn.close()
 
     def _serve(self, conn: socket.socket) -> None:
         for raw in received_lines(conn, self._stop, b"\n", MAX_LINE_BYTES):
