@@ -21,8 +21,10 @@ mean ``o_p`` of the patch's other channels under the same LED, ``tau_a`` stray l
 in units of the mean responses ``cbar_i`` under that LED (light: all three channels
 at once), ``tau_c`` a relative error that a patch shares under every LED and
 channel, and ``tau_n`` a non-linearity: a response ``c^(1 + gamma)`` is off by
-``gamma u`` with ``u = c (ln c - mu)``, ``mu`` the chart's mean log response (a
-gain absorbs the rest). The five are found by maximum likelihood
+``gamma u`` with ``u = c (ln c - mu)``, ``mu`` the chart's mean log response under the
+same LED and channel (the per-LED gains and the sensitivities absorb the rest; about one
+mean for all, the shared relative term took a part of it and the fit found a third of
+the injected non-linearity). The five are found by maximum likelihood
 (:func:`fit_excess_variance`, exact Gaussian likelihood: each LED's 3 x 3 block and
 the patch's two shared terms by the matrix determinant lemma and Woodbury). The calibration keeps them (:class:`ExcessVariance`), and :mod:`tunespec.core.uncertainty` adds them to
 every estimated reflectance's response covariance.
@@ -129,9 +131,11 @@ class ExcessVariance:
     its neighbours' signal); ``common_relative`` (``tau_c``): a relative error shared
     by all responses of one patch; ``nonlinearity`` (``tau_n``): a sensor response
     ``c^(1 + gamma)`` with ``gamma`` of that size, whose relative error
-    ``gamma (ln c - log_reference)`` grows with the distance of the response's level
-    from the chart's mean log response ``log_reference`` (the rest of it is a gain the
-    calibration absorbs); ``n_patches`` and ``n_responses``: how many residuals
+    ``gamma (ln c - mu)`` grows with the distance of the response's level from the
+    chart's mean log response ``mu`` under the same LED and channel
+    (``log_reference_by_response``, illuminant-major as the chart's responses;
+    ``log_reference`` their mean, for responses that cannot be matched to them): the
+    rest of it is a gain the calibration absorbs; ``n_patches`` and ``n_responses``: how many residuals
     measured them.
     """
 
@@ -143,18 +147,32 @@ class ExcessVariance:
     crosstalk_relative: float = 0.0
     nonlinearity: float = 0.0
     log_reference: float = 0.0
+    log_reference_by_response: tuple[float, ...] = ()
 
     def covariance(
-        self, rgb: NDArray[np.float64], level: NDArray[np.float64] | None = None
+        self,
+        rgb: NDArray[np.float64],
+        level: NDArray[np.float64] | None = None,
+        log_reference: NDArray[np.float64] | None = None,
     ) -> NDArray[np.float64]:
         """Their response covariance for responses ``rgb`` (n_p, m), (n_p, m, m),
         stacked illuminant-major (three channels per LED); ``level`` (m,): the mean
-        response under each LED and channel (default the mean of ``rgb``'s rows)."""
+        response under each LED and channel (default the mean of ``rgb``'s rows);
+        ``log_reference`` (m,): the chart's mean log response under each (default
+        ``log_reference_by_response`` where it has ``m`` values, else
+        ``log_reference``)."""
         rgb = np.asarray(rgb, dtype=np.float64)
         if level is None:
             level = rgb.mean(axis=0)
+        if log_reference is None:
+            by = self.log_reference_by_response
+            log_reference = (
+                np.asarray(by)
+                if len(by) == rgb.shape[1]
+                else np.asarray(self.log_reference)
+            )
         out = self.common_relative**2 * rgb[:, :, None] * rgb[:, None, :]
-        u = log_profile(rgb, self.log_reference)
+        u = log_profile(rgb, np.asarray(log_reference)[None])
         out += self.nonlinearity**2 * u[:, :, None] * u[:, None, :]
         out += self.level_relative**2 * led_blocks(np.asarray(level)[None])
         idx = np.arange(rgb.shape[1])
@@ -171,6 +189,7 @@ class ExcessVariance:
             "common_relative": self.common_relative,
             "nonlinearity": self.nonlinearity,
             "log_reference": self.log_reference,
+            "log_reference_by_response": list(self.log_reference_by_response),
             "n_patches": self.n_patches,
             "n_responses": self.n_responses,
         }
@@ -201,6 +220,18 @@ class ExcessVariance:
                 f"from {-_LOG_MAX} to {_LOG_MAX}",
                 path=path,
             )
+        by = doc.get("log_reference_by_response", [])
+        if not isinstance(by, list) or any(
+            isinstance(x, bool)
+            or not isinstance(x, int | float)
+            or not -_LOG_MAX <= float(x) <= _LOG_MAX
+            for x in by
+        ):
+            raise InputError(
+                "excess_variance.log_reference_by_response: expected a list of numbers "
+                f"from {-_LOG_MAX} to {_LOG_MAX}",
+                path=path,
+            )
         counts = [doc.get(k, 0) for k in ("n_patches", "n_responses")]
         if any(isinstance(c, bool) or not isinstance(c, int) or c < 0 for c in counts):
             raise InputError(
@@ -215,6 +246,7 @@ class ExcessVariance:
             vals["crosstalk_relative"],
             vals["nonlinearity"],
             float(log_ref),
+            tuple(float(x) for x in by),
         )
 
 
@@ -343,8 +375,12 @@ def fit_excess_variance(
     # each relative error
     pos = c > 0
     w = np.where(pos, c**2 / np.maximum(np.asarray(noise_variance), floor), 0.0)
-    log_ref = float(np.sum(w * np.log(np.where(pos, c, 1.0))) / max(np.sum(w), 1e-300))
-    u3 = log_profile(c, log_ref).reshape(shape)
+    # ... under each LED and channel: the per-LED gains and the sensitivities absorb
+    # each one's own mean (about a single mean the shared relative term took the rest)
+    log_ref = np.sum(w * np.log(np.where(pos, c, 1.0)), axis=0) / np.maximum(
+        np.sum(w, axis=0), 1e-300
+    )
+    u3 = log_profile(c, log_ref[None]).reshape(shape)
 
     def nll(tr: float, ta: float, tx: float, tn: float) -> tuple[float, float]:
         diag = v3 + tr**2 * c2 + tx**2 * other2
@@ -374,5 +410,6 @@ def fit_excess_variance(
         if not moved:
             break
     return ExcessVariance(
-        taus[0], best_c, n_p, n_p * m, taus[1], taus[2], taus[3], log_ref
-    )
+        taus[0], best_c, n_p, n_p * m, taus[1], taus[2], taus[3],
+        float(np.mean(log_ref)), tuple(float(x) for x in log_ref),
+    )  # fmt: skip

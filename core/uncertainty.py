@@ -72,9 +72,8 @@ __all__ = [
 #: a*, b* closest to 95 %) under issue 23's conditions (10 nm readings with 0.1 %
 #: noise, stray light, cross-talk, non-linearity; one camera per family, the CAL1
 #: model) on four reflectance collections: with each left out in turn the choice is
-#: 1.35 for three and 2.0 for the fourth (rawtoaces 190); 1.15 without the systematic
-#: effects.
-PRIOR_MISMATCH_SCALE = 1.35
+#: 1.10 for three and 1.25 for the fourth (rawtoaces 190).
+PRIOR_MISMATCH_SCALE = 1.1
 
 #: Correlation lengths (nm) tried for the generic prior component (Matern 3/2).
 #: Surface reflectances are smooth: a handful of basis functions describe them
@@ -411,7 +410,10 @@ def _response_error_terms(
             (responses.rgb_std**2 / n_pix[..., None]).reshape(n_p, m_rows)
         )
     if calibration.excess is not None:
-        terms["systematic"] = calibration.excess.covariance(np.where(keep, rgb, 0.0))
+        terms["systematic"] = calibration.excess.covariance(
+            np.where(keep, rgb, 0.0),
+            log_reference=_log_reference(calibration, tuple(responses.illuminants)),
+        )
     if calibration.covariance is not None:
         wl, values = reflectance.wavelength_nm, reflectance.values
         unclipped = Spectra(wl, np.clip(values, 0.0, 1.5), reflectance.names)
@@ -419,6 +421,26 @@ def _response_error_terms(
             calibration, illuminants.select(responses.illuminants), unclipped
         )
     return terms
+
+
+def _log_reference(
+    calibration: SensitivityEstimate, illuminants: tuple[str, ...]
+) -> NDArray[np.float64] | None:
+    """The chart's mean log response under each of the target's LEDs and channels
+    (:attr:`ExcessVariance.log_reference_by_response`, matched by the LEDs' names in
+    the calibration's order; one not among them gets the overall mean), or None to
+    leave it to :meth:`ExcessVariance.covariance`."""
+    excess, corr = calibration.excess, calibration.led_correction
+    assert excess is not None
+    by = excess.log_reference_by_response
+    if corr is None or len(by) != 3 * len(corr.names):
+        return None
+    index = {name: j for j, name in enumerate(corr.names)}
+    out = np.full((len(illuminants), 3), excess.log_reference)
+    for i, name in enumerate(illuminants):
+        if name in index:
+            out[i] = by[3 * index[name] : 3 * index[name] + 3]
+    return out.reshape(-1)
 
 
 def reflectance_uncertainty(

@@ -81,3 +81,20 @@ def test_side_file_round_trip_old_files_and_bad_values() -> None:
                 {"crosstalk_relative": True}, {"log_reference": "x"}):  # fmt: skip
         with pytest.raises(InputError, match="excess_variance"):
             ExcessVariance.from_dict(bad, path="S.csv.meta.json")
+
+
+def test_a_non_linearity_whose_gains_the_calibration_absorbed_is_found() -> None:
+    """The per-LED gains and the sensitivities take each LED and channel's mean part
+    of ``c^1.003``; what is left is found about each one's own mean log response."""
+    rng, c, v = _chart(4)
+    measured = c**1.003
+    gain = np.exp(np.mean(np.log(measured / c), axis=0))  # absorbed per column
+    measured = measured / gain + np.sqrt(v) * rng.standard_normal(c.shape)
+    fit = fit_excess_variance(measured, c, v, flat_field_relative=0)
+    assert 0.0022 <= fit.nonlinearity <= 0.0038, fit
+    assert fit.common_relative <= 5e-4, fit
+    assert len(fit.log_reference_by_response) == c.shape[1]
+    cov = fit.covariance(c[:1])
+    own = ExcessVariance(0.0, 0.0, nonlinearity=fit.nonlinearity,
+                         log_reference=fit.log_reference)  # fmt: skip
+    assert not np.allclose(cov, own.covariance(c[:1]))  # the per-column means count
