@@ -115,13 +115,16 @@ def run_stages(session_dir: Path, sensitivities: Path, out: Path) -> np.ndarray:
 
     def block(r0: int) -> Any:
         r1 = min(r0 + rows, shape[0])
-        return st.estimate_block(job, bank, outputs, r0, r1, systematic=systematic)
+        return st.estimate_block(job, bank, outputs, r0, r1, keep_uncertainty=True)
 
     blocks = [
         stage("4 blocks: read, Eq. 5, write", block, r0)
         for r0 in range(0, shape[0], rows)
     ]
-    stage("5 preview, provenance", pim._finish, job, outputs, bank, blocks, prov)
+    stage(
+        "5 uncertainty, preview, provenance", pim._finish, job, outputs, bank,
+        blocks, prov, systematic, None,
+    )  # fmt: skip
     return _now() - t_all
 
 
@@ -136,9 +139,12 @@ def main(argv: list[str] | None = None) -> int:
     work = (
         args.work or Path(tempfile.gettempdir()) / f"tunespec-image-{args.resolution}"
     )
-    if not (work / "session" / "manifest.json").is_file():
-        work.mkdir(parents=True, exist_ok=True)
-        bench_image._capture(work, args.resolution)
+    from raw_session import session_paths
+
+    session_paths(
+        work / "session", work, args.resolution, fresh=False,
+        code=bench_image._capture_code(work, args.resolution),
+    )  # fmt: skip
     from tunespec.app.cli import _one_blas_thread
 
     _one_blas_thread()

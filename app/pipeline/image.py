@@ -174,9 +174,17 @@ def session_graph(
     calibration: _Calibration,
     out_dir: str | PathLike[str],
     settings: ImageSettings,
+    writer: Any = None,
 ) -> Any:
     """The Dask graph of one session: the final task (computing it returns the
-    provenance dict) and the blocks of rows (for progress on a cluster)."""
+    provenance dict) and the blocks of rows (for progress on a cluster).
+
+    The blocks start as soon as the Wiener bank is built: the systematic part of
+    the uncertainty (:func:`~tunespec.app.pipeline.image_session.systematic_table`,
+    only computed for the TIFFs) is added in the final task, while the blocks
+    compute beside it. ``writer``: a
+    :class:`~tunespec.app.pipeline.block_writer.BlockWriter` of this process that
+    writes the blocks' rows (local schedulers only)."""
     from dask import delayed
 
     from tunespec.app.pipeline import image_session as st
@@ -210,10 +218,13 @@ def session_graph(
         calibration.grid, noise=settings.noise, n_levels=settings.n_levels,
         n_phi=settings.n_phi, dask_key_name=f"setup-{job.work}",
     )  # fmt: skip
-    systematic = delayed(st.systematic_table, pure=True)(
-        job, bank, calibration.path, calibration.meta, calibration.prior,
-        calibration.grid, dask_key_name=f"systematic-{job.work}",
-    )  # fmt: skip
+    systematic = None
+    if "tiff" in settings.formats:  # only the uncertainty TIFF holds it
+        systematic = delayed(one_blas_thread, pure=True)(
+            st.systematic_table, job, bank, calibration.path, calibration.meta,
+            calibration.prior, calibration.grid,
+            dask_key_name=f"systematic-{job.work}",
+        )  # fmt: skip
     rows = st.block_rows_for(shape[1])
     provenance = _provenance(session, job, calibration, settings, rect, shape)
     outputs = delayed(_create_outputs, pure=True)(
@@ -230,13 +241,21 @@ def session_graph(
             min(r0 + rows, shape[0]),
             clip=settings.clip,
             rectification=rect,
-            systematic=systematic,
+            writer=writer,
+            keep_uncertainty=True,
             dask_key_name=f"block-{r0}-{job.work}",
         )
         for r0 in range(0, shape[0], rows)
     ]
     final = delayed(_finish, pure=True)(
-        job, outputs, bank, blocks, provenance, dask_key_name=f"finish-{job.work}"
+        job,
+        outputs,
+        bank,
+        blocks,
+        provenance,
+        systematic,
+        writer,
+        dask_key_name=f"finish-{job.work}",
     )
     return final, blocks
 
@@ -285,11 +304,22 @@ def _noise_doc(bank: Any) -> dict[str, Any]:
 
 
 def _finish(
-    job: Any, outputs: Any, bank: Any, blocks: Sequence[Any], provenance: dict[str, Any]
+    job: Any,
+    outputs: Any,
+    bank: Any,
+    blocks: Sequence[Any],
+    provenance: dict[str, Any],
+    systematic: Any,
+    writer: Any,
 ) -> dict[str, Any]:
     import numpy as np
 
-    outputs.write_preview(np.concatenate(blocks, axis=0))
+    from tunespec.app.pipeline.image_session import finish_uncertainty
+
+    finish_uncertainty(outputs, blocks, systematic)
+    outputs.write_preview(np.concatenate([b.srgb for b in blocks], axis=0))
+    if writer is not None:
+        writer.flush()  # every block's rows are in before the provenance
     doc = {
         **provenance,
         "noise_model": _noise_doc(bank),
@@ -416,8 +446,13 @@ def estimate_images(
     """
     grid = settings.grid or _default_grid()
     cal = _load_calibration(sensitivities, grid)
-    with connect(scheduler) as sched, _scratch_released(), _disk_full(out_dir):
-        graph = session_graph(session_dir, cal, out_dir, settings)
+    with (
+        connect(scheduler) as sched,
+        _scratch_released(),
+        _disk_full(out_dir),
+        _writer(sched) as writer,
+    ):
+        graph = session_graph(session_dir, cal, out_dir, settings, writer)
         return compute([graph], sched, progress, should_stop)[0]
 
 
@@ -452,6 +487,25 @@ def _disk_full(*out_dirs: str | PathLike[str]) -> Iterator[None]:
             Path(out_dirs[0]),
         )
         raise DiskFullError(where) from None
+
+
+@contextlib.contextmanager
+def _writer(scheduler: Any) -> Iterator[Any]:
+    """A :class:`~tunespec.app.pipeline.block_writer.BlockWriter` for Dask's
+    threads (a writer thread overlaps the writes with the next blocks' compute);
+    ``None`` for schedulers whose tasks run in other processes."""
+    from tunespec.app.pipeline.block_writer import BlockWriter
+
+    if scheduler not in ("threads", "sync", "synchronous"):
+        yield None
+        return
+    writer = BlockWriter()
+    try:
+        yield writer
+    except BaseException:
+        writer.close(raise_error=False)
+        raise
+    writer.close()
 
 
 @contextlib.contextmanager
@@ -534,7 +588,7 @@ def batch_images(
         else:
             todo.append((s, out))
     group = max(1, int(sessions_at_once))
-    with connect(scheduler) as sched, _scratch_released():
+    with connect(scheduler) as sched, _scratch_released(), _writer(sched) as writer:
         for k in range(0, len(todo), group):
             part = todo[k : k + group]
             base = k / len(todo)
@@ -543,7 +597,9 @@ def batch_images(
                 report(progress, base + f * n / len(todo))
 
             with _disk_full(*(out for _, out in part)):
-                graphs = [session_graph(s, cal, out, settings) for s, out in part]
+                graphs = [
+                    session_graph(s, cal, out, settings, writer) for s, out in part
+                ]
                 compute(graphs, sched, sub, should_stop)
             done.extend(str(s) for s, _ in part)
     report(progress, 1.0)
