@@ -22,6 +22,7 @@ from os import PathLike
 import numpy as np
 from numpy.typing import ArrayLike
 
+from tunespec.app.pipeline.read_ahead import ReadAhead
 from tunespec.core.errors import InputError
 from tunespec.core.io.raw import RawFrame, full_to_plane_px, load_raw
 from tunespec.core.io.session import (
@@ -146,20 +147,28 @@ def process_session(
     }
     total = len(dark_ids) + sum(len(whites[c]) + len(targets[c]) for c in use)
     reader = _FrameReader(session, loader or load_raw, total, progress, should_stop)
-
-    # -- geometry: corners, then ROIs rasterised once ---------------------------------
     first = _detection_channel(use)
-    layout, source, residual, preloaded = _place_corners(
-        session, layout, corners, whites, targets, use, reader
-    )
-    rois, window = _session_rois(layout, whites[first][0], preloaded, reader, window_px)
+    # the frames in the order processing reads them: decoded one ahead on a thread
+    # of their own while this one takes the previous one's statistics
+    reader.read_ahead(_read_order(session, whites, targets, [first, *use]))
 
-    # -- per channel: darks, brackets, Eq. 2, statistics ------------------------------
-    acc = _ChannelStats.empty(layout, use, _RoiGeometry.of(rois, layout.n_patches))
-    for c in [first, *[c for c in use if c != first]]:
-        acc.add(session, c, reader.pixels(whites[c]), reader.pixels(targets[c]))
-        ref = targets[c][0]
-        acc.add_spd(c, suppress_meter_floor(spds[c]), ref.exposure_s)
+    try:
+        # -- geometry: corners, then ROIs rasterised once ---------------------------------
+        layout, source, residual, preloaded = _place_corners(
+            session, layout, corners, whites, targets, use, reader
+        )
+        rois, window = _session_rois(
+            layout, whites[first][0], preloaded, reader, window_px
+        )
+
+        # -- per channel: darks, brackets, Eq. 2, statistics ------------------------------
+        acc = _ChannelStats.empty(layout, use, _RoiGeometry.of(rois, layout.n_patches))
+        for c in [first, *[c for c in use if c != first]]:
+            acc.add(session, c, reader.pixels(whites[c]), reader.pixels(targets[c]))
+            ref = targets[c][0]
+            acc.add_spd(c, suppress_meter_floor(spds[c]), ref.exposure_s)
+    finally:
+        reader.close()
     warnings.extend(acc.warnings())
     n_px = rois.n_pixels
     n_patch = layout.n_patches
@@ -349,6 +358,32 @@ def _place_corners(
     return layout.with_corners(mode), "given", float("nan"), {}
 
 
+def _read_order(
+    session: Session,
+    whites: dict[str, list[FrameRecord]],
+    targets: dict[str, list[FrameRecord]],
+    channels: Sequence[str],
+) -> list[FrameRecord]:
+    """Every frame once, in the order :func:`process_session` reads them: the
+    detection channel's first white and target frames, then per channel its
+    white frames, their darks, its target frames and theirs (a dark once)."""
+    order: dict[str, FrameRecord] = {}
+    if channels:
+        order.update(
+            {r.id: r for r in (whites[channels[0]][0], targets[channels[0]][0])}
+        )
+    seen: set[tuple[float, int]] = set()
+    for c in channels:
+        for records in (whites[c], targets[c]):
+            order.update({r.id: r for r in records if r.id not in order})
+            for r in records:
+                if (r.exposure_s, r.iso) not in seen:
+                    seen.add((r.exposure_s, r.iso))
+                    for d in find_darks(session.frames, r.exposure_s, r.iso):
+                        order.setdefault(d.id, d)
+    return list(order.values())
+
+
 class _FrameReader:
     """Reads a session's frames once each: progress, cancellation, one mosaic geometry,
     darks averaged per (exposure, ISO) and brackets merged (ROI pixels only)."""
@@ -373,7 +408,17 @@ class _FrameReader:
         self._rois: RoiSet | None = None
         self._preloaded: dict[str, RawFrame] = {}
         self._darks: dict[tuple[float, int], _Pixels] = {}
+        self._ahead: ReadAhead | None = None
         self.done = 0
+
+    def read_ahead(self, records: Sequence[FrameRecord]) -> None:
+        """Decode ``records`` in this order on a thread of their own, one ahead."""
+        paths = [self._session.path_of(r) for r in records]
+        self._ahead = ReadAhead(self._load, paths)
+
+    def close(self) -> None:
+        if self._ahead is not None:
+            self._ahead.close()
 
     def step(self) -> None:
         self.done += 1
@@ -382,8 +427,9 @@ class _FrameReader:
 
     def read(self, rec: FrameRecord) -> RawFrame:
         check_stop(self._should_stop)
+        path = self._session.path_of(rec)
         try:
-            frame = self._load(self._session.path_of(rec))
+            frame = self._ahead.get(path) if self._ahead else self._load(path)
         except InputError as exc:
             raise InputError(
                 f"frame {rec.id}: {exc}; {self._retake.format(rec.id)}"
