@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from tunespec.app.pipeline.engine import compute, connect, one_blas_thread
+from tunespec.app.pipeline.heap import reused_heap
 from tunespec.core.errors import InputError
 from tunespec.core.progress import ProgressFn, StopFn, report
 from tunespec.core.spectra import Grid
@@ -448,6 +449,7 @@ def estimate_images(
     cal = _load_calibration(sensitivities, grid)
     with (
         connect(scheduler) as sched,
+        reused_heap(),
         _scratch_released(),
         _disk_full(out_dir),
         _writer(sched) as writer,
@@ -588,7 +590,12 @@ def batch_images(
         else:
             todo.append((s, out))
     group = max(1, int(sessions_at_once))
-    with connect(scheduler) as sched, _scratch_released(), _writer(sched) as writer:
+    with (
+        connect(scheduler) as sched,
+        reused_heap(),
+        _scratch_released(),
+        _writer(sched) as writer,
+    ):
         for k in range(0, len(todo), group):
             part = todo[k : k + group]
             base = k / len(todo)

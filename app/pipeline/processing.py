@@ -15,6 +15,7 @@ section "Capturing and Processing", Eq. 1, 2 and 6.
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Sequence
 from dataclasses import replace
 from os import PathLike
@@ -22,6 +23,7 @@ from os import PathLike
 import numpy as np
 from numpy.typing import ArrayLike
 
+from tunespec.app.pipeline.heap import reused_heap
 from tunespec.app.pipeline.read_ahead import ReadAhead
 from tunespec.core.errors import InputError
 from tunespec.core.io.raw import RawFrame, full_to_plane_px, load_raw
@@ -149,11 +151,11 @@ def process_session(
     reader = _FrameReader(session, loader or load_raw, total, progress, should_stop)
     first = _detection_channel(use)
     # the frames in the order processing reads them: decoded one ahead on a thread
-    # of their own while this one takes the previous one's statistics
-    reader.read_ahead(_read_order(session, whites, targets, [first, *use]))
-
-    try:
-        # -- geometry: corners, then ROIs rasterised once ---------------------------------
+    # of their own while this one takes the previous one's statistics; freed frame
+    # buffers reused, not faulted in again for every frame
+    with reused_heap(), contextlib.closing(reader):
+        reader.read_ahead(_read_order(session, whites, targets, [first, *use]))
+        # -- geometry: corners, then ROIs rasterised once -----------------------------
         layout, source, residual, preloaded = _place_corners(
             session, layout, corners, whites, targets, use, reader
         )
@@ -161,14 +163,12 @@ def process_session(
             layout, whites[first][0], preloaded, reader, window_px
         )
 
-        # -- per channel: darks, brackets, Eq. 2, statistics ------------------------------
+        # -- per channel: darks, brackets, Eq. 2, statistics ------------------------
         acc = _ChannelStats.empty(layout, use, _RoiGeometry.of(rois, layout.n_patches))
         for c in [first, *[c for c in use if c != first]]:
             acc.add(session, c, reader.pixels(whites[c]), reader.pixels(targets[c]))
             ref = targets[c][0]
             acc.add_spd(c, suppress_meter_floor(spds[c]), ref.exposure_s)
-    finally:
-        reader.close()
     warnings.extend(acc.warnings())
     n_px = rois.n_pixels
     n_patch = layout.n_patches
