@@ -132,6 +132,13 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--resolution", default="5760x3840")
     parser.add_argument("--work", type=Path, default=None)
+    parser.add_argument(
+        "--floor-cpu-s",
+        type=float,
+        default=None,
+        help="the decode + write floor's CPU seconds: adds each stage's CPU as a "
+        "multiple of it (bench_image.py --stages passes its own)",
+    )
     args = parser.parse_args(argv)
     sys.path.insert(0, str(Path(__file__).parent))
     import bench_image
@@ -149,18 +156,28 @@ def main(argv: list[str] | None = None) -> int:
 
     _one_blas_thread()
     _instrument()
-    total = run_stages(
-        work / "session",
-        work / "truth" / "truth_sensitivity_absolute.csv",
-        work / "images_stages",
-    )
+    try:  # as estimate_images runs them: freed frame buffers reused
+        from tunespec.app.pipeline.heap import reused_heap
+    except ImportError:  # an older tree
+        from contextlib import nullcontext as reused_heap
+    with reused_heap():
+        total = run_stages(
+            work / "session",
+            work / "truth" / "truth_sensitivity_absolute.csv",
+            work / "images_stages",
+        )
     print(f"{args.resolution}, stages in one thread (steps indented, inside them):")
-    print(f"{'':36s} {'wall s':>7s} {'user s':>7s} {'sys s':>7s} {'faults':>8s}")
+    floor = args.floor_cpu_s
+    head = f"{'':36s} {'wall s':>7s} {'user s':>7s} {'sys s':>7s} {'faults':>8s}"
+    print(head + (" CPU/floor" if floor else ""))
+
+    def row(label: str, v: np.ndarray) -> None:
+        ratio = f" {(v[1] + v[2]) / floor:9.2f}" if floor else ""
+        print(f"{label:36s} {v[0]:7.2f} {v[1]:7.2f} {v[2]:7.2f} {v[3]:8.0f}{ratio}")
+
     for label, v in sorted(_TOTALS.items(), key=lambda kv: kv[0].lstrip()):
-        print(f"{label:36s} {v[0]:7.2f} {v[1]:7.2f} {v[2]:7.2f} {v[3]:8.0f}")
-    print(
-        f"{'total':36s} {total[0]:7.2f} {total[1]:7.2f} {total[2]:7.2f} {total[3]:8.0f}"
-    )
+        row(label, v)
+    row("total", total)
     shutil.rmtree(work / "images_stages", ignore_errors=True)
     return 0
 
