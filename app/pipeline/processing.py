@@ -128,9 +128,8 @@ def process_session(
         )
     if roi_fraction is not None:
         layout = replace(layout, roi_fraction=float(roi_fraction))
-    frames = session.frames
-    whites = frames_by_channel(frames, "white")
-    targets = frames_by_channel(frames, "target")
+    whites = frames_by_channel(session.frames, "white")
+    targets = frames_by_channel(session.frames, "target")
     wanted = list(channels) if channels is not None else list(session.settings.channels)
     use, warnings = _usable_channels(
         session,
@@ -141,20 +140,15 @@ def process_session(
         verify=verify,
     )
     spds = check_spds(session, {c: targets[c][0] for c in use})
-    dark_ids = {
-        d.id
-        for c in use
-        for f in (*whites[c], *targets[c])
-        for d in find_darks(frames, f.exposure_s, f.iso)
-    }
-    total = len(dark_ids) + sum(len(whites[c]) + len(targets[c]) for c in use)
-    reader = _FrameReader(session, loader or load_raw, total, progress, should_stop)
     first = _detection_channel(use)
-    # the frames in the order processing reads them: decoded one ahead on a thread
-    # of their own while this one takes the previous one's statistics; freed frame
-    # buffers reused, not faulted in again for every frame
+    order = _read_order(session, whites, targets, [first, *use])
+    reader = _FrameReader(
+        session, loader or load_raw, len(order), progress, should_stop
+    )
+    # the frames decoded one ahead on a thread of their own while this one takes the
+    # previous one's statistics; freed frame buffers reused, not faulted in again
     with reused_heap(), contextlib.closing(reader):
-        reader.read_ahead(_read_order(session, whites, targets, [first, *use]))
+        reader.read_ahead(order)
         # -- geometry: corners, then ROIs rasterised once -----------------------------
         layout, source, residual, preloaded = _place_corners(
             session, layout, corners, whites, targets, use, reader
