@@ -123,7 +123,7 @@ def run_stages(session_dir: Path, sensitivities: Path, out: Path) -> np.ndarray:
     ]
     stage(
         "5 uncertainty, preview, provenance", pim._finish, job, outputs, bank,
-        blocks, prov, systematic, None,
+        blocks, prov, systematic,
     )  # fmt: skip
     return _now() - t_all
 

@@ -175,7 +175,6 @@ def session_graph(
     calibration: _Calibration,
     out_dir: str | PathLike[str],
     settings: ImageSettings,
-    writer: Any = None,
 ) -> Any:
     """The Dask graph of one session: the final task (computing it returns the
     provenance dict) and the blocks of rows (for progress on a cluster).
@@ -183,9 +182,7 @@ def session_graph(
     The blocks start as soon as the Wiener bank is built: the systematic part of
     the uncertainty (:func:`~tunespec.app.pipeline.image_session.systematic_table`,
     only computed for the TIFFs) is added in the final task, while the blocks
-    compute beside it. ``writer``: a
-    :class:`~tunespec.app.pipeline.block_writer.BlockWriter` of this process that
-    writes the blocks' rows (local schedulers only)."""
+    compute beside it."""
     from dask import delayed
 
     from tunespec.app.pipeline import image_session as st
@@ -242,7 +239,6 @@ def session_graph(
             min(r0 + rows, shape[0]),
             clip=settings.clip,
             rectification=rect,
-            writer=writer,
             keep_uncertainty=True,
             dask_key_name=f"block-{r0}-{job.work}",
         )
@@ -255,7 +251,6 @@ def session_graph(
         blocks,
         provenance,
         systematic,
-        writer,
         dask_key_name=f"finish-{job.work}",
     )
     return final, blocks
@@ -311,7 +306,6 @@ def _finish(
     blocks: Sequence[Any],
     provenance: dict[str, Any],
     systematic: Any,
-    writer: Any,
 ) -> dict[str, Any]:
     import numpy as np
 
@@ -319,8 +313,6 @@ def _finish(
 
     finish_uncertainty(outputs, blocks, systematic)
     outputs.write_preview(np.concatenate([b.srgb for b in blocks], axis=0))
-    if writer is not None:
-        writer.flush()  # every block's rows are in before the provenance
     doc = {
         **provenance,
         "noise_model": _noise_doc(bank),
@@ -452,9 +444,8 @@ def estimate_images(
         reused_heap(),
         _scratch_released(),
         _disk_full(out_dir),
-        _writer(sched) as writer,
     ):
-        graph = session_graph(session_dir, cal, out_dir, settings, writer)
+        graph = session_graph(session_dir, cal, out_dir, settings)
         return compute([graph], sched, progress, should_stop)[0]
 
 
@@ -489,25 +480,6 @@ def _disk_full(*out_dirs: str | PathLike[str]) -> Iterator[None]:
             Path(out_dirs[0]),
         )
         raise DiskFullError(where) from None
-
-
-@contextlib.contextmanager
-def _writer(scheduler: Any) -> Iterator[Any]:
-    """A :class:`~tunespec.app.pipeline.block_writer.BlockWriter` for Dask's
-    threads (a writer thread overlaps the writes with the next blocks' compute);
-    ``None`` for schedulers whose tasks run in other processes."""
-    from tunespec.app.pipeline.block_writer import BlockWriter
-
-    if scheduler not in ("threads", "sync", "synchronous"):
-        yield None
-        return
-    writer = BlockWriter()
-    try:
-        yield writer
-    except BaseException:
-        writer.close(raise_error=False)
-        raise
-    writer.close()
 
 
 @contextlib.contextmanager
@@ -594,7 +566,6 @@ def batch_images(
         connect(scheduler) as sched,
         reused_heap(),
         _scratch_released(),
-        _writer(sched) as writer,
     ):
         for k in range(0, len(todo), group):
             part = todo[k : k + group]
@@ -604,9 +575,7 @@ def batch_images(
                 report(progress, base + f * n / len(todo))
 
             with _disk_full(*(out for _, out in part)):
-                graphs = [
-                    session_graph(s, cal, out, settings, writer) for s, out in part
-                ]
+                graphs = [session_graph(s, cal, out, settings) for s, out in part]
                 compute(graphs, sched, sub, should_stop)
             done.extend(str(s) for s, _ in part)
     report(progress, 1.0)

@@ -62,7 +62,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from tunespec.app.pipeline.block_writer import BlockWriter
 from tunespec.core.errors import InputError
 from tunespec.core.image import (
     DEFAULT_LEVEL_BINS,
@@ -684,13 +683,11 @@ def estimate_block(
     clip: bool = True,
     rectification: Rectification | None = None,
     systematic: SystematicTable | None = None,
-    writer: BlockWriter | None = None,
     keep_uncertainty: bool = False,
 ) -> Any:
     """Stage 4: output rows ``row0:row1`` estimated and written.
 
-    ``writer``: the rows are written on its thread (this one goes on with the next
-    block). ``keep_uncertainty``: the uncertainty TIFF's rows are not written but
+    ``keep_uncertainty``: the uncertainty TIFF's rows are not written but
     returned, without the systematic part, which :func:`finish_uncertainty` adds
     once :func:`systematic_table` is done (so the blocks need not wait for it).
 
@@ -719,27 +716,22 @@ def estimate_block(
         c = scratch("block_pixels", (r * cols, m))
         np.copyto(c, t.view(STACK_DTYPE))
     del planes, t
-    shape = (r * cols, bank.mean.size)
-    buffer = writer.buffer(shape) if writer is not None else None
     est = estimate_pixels(
         bank, c, phi.reshape(-1), clip=clip,
-        out=buffer if buffer is not None else scratch("block_reflectance", shape),
+        out=scratch("block_reflectance", (r * cols, bank.mean.size)),
     )  # fmt: skip
     del c
     unc = np.stack([est.u_lab_l, est.u_rms], axis=1)
     if systematic is not None:
         unc = systematic.add_to(unc, systematic.cells(est.lab.T))
     unc = unc.reshape(r, cols, 2)
-    cube = est.reflectance.reshape(r, cols, -1)
-    xyz, lab = est.xyz.reshape(r, cols, 3), est.lab.reshape(r, cols, 3)
-
-    def write() -> None:
-        outputs.write_rows(row0, cube, xyz, lab, None if keep_uncertainty else unc)
-
-    if writer is not None:
-        writer.put(write, buffer)
-    else:
-        write()
+    outputs.write_rows(
+        row0,
+        est.reflectance.reshape(r, cols, -1),
+        est.xyz.reshape(r, cols, 3),
+        est.lab.reshape(r, cols, 3),
+        None if keep_uncertainty else unc,
+    )
     srgb = srgb8_from_xyz_d50(est.xyz.T).reshape(r, cols, 3)
     if keep_uncertainty:
         cells = SystematicTable.cells(est.lab.T).reshape(r, cols)
