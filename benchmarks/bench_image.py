@@ -5,6 +5,7 @@ Usage::
     python benchmarks/bench_image.py [--resolution 5760x3840] [--repeat 1]
                                      [--work DIR] [--fresh] [--workers N]
                                      [--formats envi,zarr,tiff] [--before SOURCE]
+                                     [--stages]
 
 The first run captures a session on the simulated bench (the ColorChecker SG with a
 CMY halftone and measured-reflectance strokes beside it; one dark frame, then a
@@ -26,6 +27,9 @@ CFA DNGs) into ``--work`` (kept for later runs). Then, side by side in one run:
 - **write floor**: writing as many bytes as the outputs hold into a fresh file, with
   no computing, right after each estimate-image run: what the page cache of this
   machine charges for the outputs alone;
+- **stages** (``--stages``): every stage in one thread
+  (``bench_image_stages.py``), its CPU seconds and their multiple of the floor's
+  (decode CPU + write);
 - **binning error**: binned vs. exact per-pixel solutions (own ``K_e`` per pixel) of
   noisy pixels of the 190 training reflectances, RMS and CIEDE2000.
 """
@@ -34,6 +38,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import subprocess
 import sys
 import tempfile
 import time
@@ -246,6 +251,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--fresh", action="store_true", help="capture again")
     parser.add_argument("--workers", type=int, default=None, help="Dask threads")
     parser.add_argument(
+        "--stages",
+        action="store_true",
+        help="also run every stage in one thread (bench_image_stages.py, a child "
+        "process) and print each one's CPU as a multiple of the decode + write floor",
+    )
+    parser.add_argument(
         "--formats", default=DEFAULT_FORMATS, help="estimate-image --formats"
     )
     parser.add_argument(
@@ -314,6 +325,16 @@ def main(argv: list[str] | None = None) -> int:
         f"peak RSS of estimate-image: {peak / 1e6:.0f} MB  (goal < "
         f"{GOAL_PEAK_BYTES / 1e9:.0f} GB: {'met' if peak < GOAL_PEAK_BYTES else 'NOT met'})"
     )
+    if args.stages:
+        # the floor's CPU: the decode's, and the write's (system time, all of it)
+        print(f"stages (floor: decode CPU {d_cpu:.2f} s + write {floor:.2f} s):")
+        sys.stdout.flush()
+        subprocess.run(
+            [sys.executable, str(Path(__file__).parent / "bench_image_stages.py"),
+             "--resolution", args.resolution, "--work", str(work),
+             "--floor-cpu-s", f"{d_cpu + floor:.3f}"],
+            check=True,
+        )  # fmt: skip
     w = _wiener_vs_matmul()
     print(
         f"Wiener stage, {w['pixels']} px, one BLAS thread: {w['stage_gflops']:.1f} "

@@ -115,13 +115,16 @@ def run_stages(session_dir: Path, sensitivities: Path, out: Path) -> np.ndarray:
 
     def block(r0: int) -> Any:
         r1 = min(r0 + rows, shape[0])
-        return st.estimate_block(job, bank, outputs, r0, r1, systematic=systematic)
+        return st.estimate_block(job, bank, outputs, r0, r1, keep_uncertainty=True)
 
     blocks = [
         stage("4 blocks: read, Eq. 5, write", block, r0)
         for r0 in range(0, shape[0], rows)
     ]
-    stage("5 preview, provenance", pim._finish, job, outputs, bank, blocks, prov)
+    stage(
+        "5 uncertainty, preview, provenance", pim._finish, job, outputs, bank,
+        blocks, prov, systematic,
+    )  # fmt: skip
     return _now() - t_all
 
 
@@ -129,6 +132,13 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--resolution", default="5760x3840")
     parser.add_argument("--work", type=Path, default=None)
+    parser.add_argument(
+        "--floor-cpu-s",
+        type=float,
+        default=None,
+        help="the decode + write floor's CPU seconds: adds each stage's CPU as a "
+        "multiple of it (bench_image.py --stages passes its own)",
+    )
     args = parser.parse_args(argv)
     sys.path.insert(0, str(Path(__file__).parent))
     import bench_image
@@ -136,25 +146,38 @@ def main(argv: list[str] | None = None) -> int:
     work = (
         args.work or Path(tempfile.gettempdir()) / f"tunespec-image-{args.resolution}"
     )
-    if not (work / "session" / "manifest.json").is_file():
-        work.mkdir(parents=True, exist_ok=True)
-        bench_image._capture(work, args.resolution)
+    from raw_session import session_paths
+
+    session_paths(
+        work / "session", work, args.resolution, fresh=False,
+        code=bench_image._capture_code(work, args.resolution),
+    )  # fmt: skip
     from tunespec.app.pipeline.engine import limit_blas_threads
 
     limit_blas_threads()
     _instrument()
-    total = run_stages(
-        work / "session",
-        work / "truth" / "truth_sensitivity_absolute.csv",
-        work / "images_stages",
-    )
+    try:  # as estimate_images runs them: freed frame buffers reused
+        from tunespec.app.pipeline.heap import reused_heap
+    except ImportError:  # an older tree
+        from contextlib import nullcontext as reused_heap
+    with reused_heap():
+        total = run_stages(
+            work / "session",
+            work / "truth" / "truth_sensitivity_absolute.csv",
+            work / "images_stages",
+        )
     print(f"{args.resolution}, stages in one thread (steps indented, inside them):")
-    print(f"{'':36s} {'wall s':>7s} {'user s':>7s} {'sys s':>7s} {'faults':>8s}")
+    floor = args.floor_cpu_s
+    head = f"{'':36s} {'wall s':>7s} {'user s':>7s} {'sys s':>7s} {'faults':>8s}"
+    print(head + (" CPU/floor" if floor else ""))
+
+    def row(label: str, v: np.ndarray) -> None:
+        ratio = f" {(v[1] + v[2]) / floor:9.2f}" if floor else ""
+        print(f"{label:36s} {v[0]:7.2f} {v[1]:7.2f} {v[2]:7.2f} {v[3]:8.0f}{ratio}")
+
     for label, v in sorted(_TOTALS.items(), key=lambda kv: kv[0].lstrip()):
-        print(f"{label:36s} {v[0]:7.2f} {v[1]:7.2f} {v[2]:7.2f} {v[3]:8.0f}")
-    print(
-        f"{'total':36s} {total[0]:7.2f} {total[1]:7.2f} {total[2]:7.2f} {total[3]:8.0f}"
-    )
+        row(label, v)
+    row("total", total)
     shutil.rmtree(work / "images_stages", ignore_errors=True)
     return 0
 

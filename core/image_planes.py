@@ -219,6 +219,23 @@ class SystematicTable:
         idx = _lab_cell(np.asarray(lab, dtype=np.float64))
         return self.var_l[idx], self.var_rms[idx]
 
+    @staticmethod
+    def cells(lab: NDArray[np.floating]) -> NDArray[np.uint16]:
+        """The flat cell index of CIELAB values (3, n): what :meth:`add_to` needs
+        of a pixel, kept while the table is still being computed."""
+        idx = _lab_cell(np.asarray(lab, dtype=np.float64))
+        return np.ravel_multi_index(idx, _LAB_CELLS).astype(np.uint16)
+
+    def add_to(
+        self, uncertainty: NDArray[np.float32], cells: NDArray[np.uint16]
+    ) -> NDArray[np.float32]:
+        """``uncertainty`` (n, 2: u(L*), RMS u) with the cells' added variances."""
+        add = np.stack(
+            [self.var_l.reshape(-1)[cells], self.var_rms.reshape(-1)[cells]], axis=1
+        )
+        total = np.sqrt(uncertainty.astype(np.float64) ** 2 + add)
+        return total.astype(np.float32)
+
 
 def _lab_cell(lab: NDArray[np.float64]) -> tuple[NDArray[np.int64], ...]:
     nl, na, nb = _LAB_CELLS

@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from tunespec.app.pipeline.engine import compute, connect, one_blas_thread
+from tunespec.app.pipeline.heap import reused_heap
 from tunespec.core.errors import InputError
 from tunespec.core.progress import ProgressFn, StopFn, report
 from tunespec.core.spectra import Grid
@@ -176,7 +177,12 @@ def session_graph(
     settings: ImageSettings,
 ) -> Any:
     """The Dask graph of one session: the final task (computing it returns the
-    provenance dict) and the blocks of rows (for progress on a cluster)."""
+    provenance dict) and the blocks of rows (for progress on a cluster).
+
+    The blocks start as soon as the Wiener bank is built: the systematic part of
+    the uncertainty (:func:`~tunespec.app.pipeline.image_session.systematic_table`,
+    only computed for the TIFFs) is added in the final task, while the blocks
+    compute beside it."""
     from dask import delayed
 
     from tunespec.app.pipeline import image_session as st
@@ -210,10 +216,13 @@ def session_graph(
         calibration.grid, noise=settings.noise, n_levels=settings.n_levels,
         n_phi=settings.n_phi, dask_key_name=f"setup-{job.work}",
     )  # fmt: skip
-    systematic = delayed(st.systematic_table, pure=True)(
-        job, bank, calibration.path, calibration.meta, calibration.prior,
-        calibration.grid, dask_key_name=f"systematic-{job.work}",
-    )  # fmt: skip
+    systematic = None
+    if "tiff" in settings.formats:  # only the uncertainty TIFF holds it
+        systematic = delayed(one_blas_thread, pure=True)(
+            st.systematic_table, job, bank, calibration.path, calibration.meta,
+            calibration.prior, calibration.grid,
+            dask_key_name=f"systematic-{job.work}",
+        )  # fmt: skip
     rows = st.block_rows_for(shape[1])
     provenance = _provenance(session, job, calibration, settings, rect, shape)
     outputs = delayed(_create_outputs, pure=True)(
@@ -230,13 +239,19 @@ def session_graph(
             min(r0 + rows, shape[0]),
             clip=settings.clip,
             rectification=rect,
-            systematic=systematic,
+            keep_uncertainty=True,
             dask_key_name=f"block-{r0}-{job.work}",
         )
         for r0 in range(0, shape[0], rows)
     ]
     final = delayed(_finish, pure=True)(
-        job, outputs, bank, blocks, provenance, dask_key_name=f"finish-{job.work}"
+        job,
+        outputs,
+        bank,
+        blocks,
+        provenance,
+        systematic,
+        dask_key_name=f"finish-{job.work}",
     )
     return final, blocks
 
@@ -285,11 +300,19 @@ def _noise_doc(bank: Any) -> dict[str, Any]:
 
 
 def _finish(
-    job: Any, outputs: Any, bank: Any, blocks: Sequence[Any], provenance: dict[str, Any]
+    job: Any,
+    outputs: Any,
+    bank: Any,
+    blocks: Sequence[Any],
+    provenance: dict[str, Any],
+    systematic: Any,
 ) -> dict[str, Any]:
     import numpy as np
 
-    outputs.write_preview(np.concatenate(blocks, axis=0))
+    from tunespec.app.pipeline.image_session import finish_uncertainty
+
+    finish_uncertainty(outputs, blocks, systematic)
+    outputs.write_preview(np.concatenate([b.srgb for b in blocks], axis=0))
     doc = {
         **provenance,
         "noise_model": _noise_doc(bank),
@@ -416,7 +439,12 @@ def estimate_images(
     """
     grid = settings.grid or _default_grid()
     cal = _load_calibration(sensitivities, grid)
-    with connect(scheduler) as sched, _scratch_released(), _disk_full(out_dir):
+    with (
+        connect(scheduler) as sched,
+        reused_heap(),
+        _scratch_released(),
+        _disk_full(out_dir),
+    ):
         graph = session_graph(session_dir, cal, out_dir, settings)
         return compute([graph], sched, progress, should_stop)[0]
 
@@ -534,7 +562,11 @@ def batch_images(
         else:
             todo.append((s, out))
     group = max(1, int(sessions_at_once))
-    with connect(scheduler) as sched, _scratch_released():
+    with (
+        connect(scheduler) as sched,
+        reused_heap(),
+        _scratch_released(),
+    ):
         for k in range(0, len(todo), group):
             part = todo[k : k + group]
             base = k / len(todo)

@@ -94,10 +94,12 @@ from tunespec.core.spectra import Grid, Spectra
 
 __all__ = [
     "PTC_BLOCK_PX",
+    "BlockResult",
     "ChannelResult",
     "ImageJob",
     "block_rows_for",
     "estimate_block",
+    "finish_uncertainty",
     "illuminants_of",
     "lighting_for",
     "plan_image_job",
@@ -657,6 +659,18 @@ def lighting_for(
     )
 
 
+@dataclass(frozen=True)
+class BlockResult:
+    """What :func:`estimate_block` returns with ``keep_uncertainty``: the block's
+    sRGB preview (rows, cols, 3) uint8, its pixels' own uncertainty (rows, cols, 2:
+    u(L*), RMS u) float32 and their CIELAB cells (rows, cols) uint16
+    (:meth:`SystematicTable.cells`), for :func:`finish_uncertainty`."""
+
+    srgb: NDArray[np.uint8]
+    uncertainty: NDArray[np.float32]
+    cells: NDArray[np.uint16]
+
+
 def estimate_block(
     job: ImageJob,
     bank: WienerBank,
@@ -667,12 +681,17 @@ def estimate_block(
     clip: bool = True,
     rectification: Rectification | None = None,
     systematic: SystematicTable | None = None,
-) -> NDArray[np.uint8]:
-    """Stage 4: output rows ``row0:row1`` estimated and written; returns their sRGB.
+    keep_uncertainty: bool = False,
+) -> Any:
+    """Stage 4: output rows ``row0:row1`` estimated and written.
+
+    ``keep_uncertainty``: the uncertainty TIFF's rows are not written but
+    returned, without the systematic part, which :func:`finish_uncertainty` adds
+    once :func:`systematic_table` is done (so the blocks need not wait for it).
 
     Returns
     -------
-    (rows, cols, 3) uint8
+    (rows, cols, 3) uint8, or BlockResult with ``keep_uncertainty``
         The sRGB preview of the block.
     """
     import cv2
@@ -702,17 +721,36 @@ def estimate_block(
     del c
     unc = np.stack([est.u_lab_l, est.u_rms], axis=1)
     if systematic is not None:
-        add_l, add_rms = systematic.lookup(est.lab.T)
-        unc = np.sqrt(unc.astype(np.float64) ** 2 + np.stack([add_l, add_rms], axis=1))
-        unc = unc.astype(np.float32)
+        unc = systematic.add_to(unc, systematic.cells(est.lab.T))
+    unc = unc.reshape(r, cols, 2)
     outputs.write_rows(
         row0,
         est.reflectance.reshape(r, cols, -1),
         est.xyz.reshape(r, cols, 3),
         est.lab.reshape(r, cols, 3),
-        unc.reshape(r, cols, 2),
+        None if keep_uncertainty else unc,
     )
-    return srgb8_from_xyz_d50(est.xyz.T).reshape(r, cols, 3)
+    srgb = srgb8_from_xyz_d50(est.xyz.T).reshape(r, cols, 3)
+    if keep_uncertainty:
+        cells = SystematicTable.cells(est.lab.T).reshape(r, cols)
+        return BlockResult(srgb, unc, cells)
+    return srgb
+
+
+def finish_uncertainty(
+    outputs: ImageOutputs,
+    blocks: Sequence[BlockResult],
+    systematic: SystematicTable | None,
+) -> None:
+    """The uncertainty TIFF from the blocks' own uncertainty and the systematic
+    table (the same sums :func:`estimate_block` makes with ``systematic``)."""
+    unc = np.concatenate([b.uncertainty for b in blocks], axis=0)
+    if systematic is not None:
+        cells = np.concatenate([b.cells for b in blocks], axis=0)
+        rows, cols = cells.shape
+        unc = systematic.add_to(unc.reshape(-1, 2), cells.reshape(-1))
+        unc = unc.reshape(rows, cols, 2)
+    outputs.write_uncertainty(0, unc)
 
 
 def _rectified(

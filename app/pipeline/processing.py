@@ -15,6 +15,7 @@ section "Capturing and Processing", Eq. 1, 2 and 6.
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Sequence
 from dataclasses import replace
 from os import PathLike
@@ -22,6 +23,8 @@ from os import PathLike
 import numpy as np
 from numpy.typing import ArrayLike
 
+from tunespec.app.pipeline.heap import reused_heap
+from tunespec.app.pipeline.read_ahead import ReadAhead
 from tunespec.core.errors import InputError
 from tunespec.core.io.raw import RawFrame, full_to_plane_px, load_raw
 from tunespec.core.io.responses_csv import write_responses_csv
@@ -126,9 +129,8 @@ def process_session(
         )
     if roi_fraction is not None:
         layout = replace(layout, roi_fraction=float(roi_fraction))
-    frames = session.frames
-    whites = frames_by_channel(frames, "white")
-    targets = frames_by_channel(frames, "target")
+    whites = frames_by_channel(session.frames, "white")
+    targets = frames_by_channel(session.frames, "target")
     wanted = list(channels) if channels is not None else list(session.settings.channels)
     use, warnings = _usable_channels(
         session,
@@ -139,28 +141,29 @@ def process_session(
         verify=verify,
     )
     spds = check_spds(session, {c: targets[c][0] for c in use})
-    dark_ids = {
-        d.id
-        for c in use
-        for f in (*whites[c], *targets[c])
-        for d in find_darks(frames, f.exposure_s, f.iso)
-    }
-    total = len(dark_ids) + sum(len(whites[c]) + len(targets[c]) for c in use)
-    reader = _FrameReader(session, loader or load_raw, total, progress, should_stop)
-
-    # -- geometry: corners, then ROIs rasterised once ---------------------------------
     first = _detection_channel(use)
-    layout, source, residual, preloaded = _place_corners(
-        session, layout, corners, whites, targets, use, reader
+    order = _read_order(session, whites, targets, [first, *use])
+    reader = _FrameReader(
+        session, loader or load_raw, len(order), progress, should_stop
     )
-    rois, window = _session_rois(layout, whites[first][0], preloaded, reader, window_px)
+    # the frames decoded one ahead on a thread of their own while this one takes the
+    # previous one's statistics; freed frame buffers reused, not faulted in again
+    with reused_heap(), contextlib.closing(reader):
+        reader.read_ahead(order)
+        # -- geometry: corners, then ROIs rasterised once -----------------------------
+        layout, source, residual, preloaded = _place_corners(
+            session, layout, corners, whites, targets, use, reader
+        )
+        rois, window = _session_rois(
+            layout, whites[first][0], preloaded, reader, window_px
+        )
 
-    # -- per channel: darks, brackets, Eq. 2, statistics ------------------------------
-    acc = _ChannelStats.empty(layout, use, _RoiGeometry.of(rois, layout.n_patches))
-    for c in [first, *[c for c in use if c != first]]:
-        acc.add(session, c, reader.pixels(whites[c]), reader.pixels(targets[c]))
-        ref = targets[c][0]
-        acc.add_spd(c, suppress_meter_floor(spds[c]), ref.exposure_s)
+        # -- per channel: darks, brackets, Eq. 2, statistics ------------------------
+        acc = _ChannelStats.empty(layout, use, _RoiGeometry.of(rois, layout.n_patches))
+        for c in [first, *[c for c in use if c != first]]:
+            acc.add(session, c, reader.pixels(whites[c]), reader.pixels(targets[c]))
+            ref = targets[c][0]
+            acc.add_spd(c, suppress_meter_floor(spds[c]), ref.exposure_s)
     warnings.extend(acc.warnings())
     n_px = rois.n_pixels
     n_patch = layout.n_patches
@@ -350,6 +353,32 @@ def _place_corners(
     return layout.with_corners(mode), "given", float("nan"), {}
 
 
+def _read_order(
+    session: Session,
+    whites: dict[str, list[FrameRecord]],
+    targets: dict[str, list[FrameRecord]],
+    channels: Sequence[str],
+) -> list[FrameRecord]:
+    """Every frame once, in the order :func:`process_session` reads them: the
+    detection channel's first white and target frames, then per channel its
+    white frames, their darks, its target frames and theirs (a dark once)."""
+    order: dict[str, FrameRecord] = {}
+    if channels:
+        order.update(
+            {r.id: r for r in (whites[channels[0]][0], targets[channels[0]][0])}
+        )
+    seen: set[tuple[float, int]] = set()
+    for c in channels:
+        for records in (whites[c], targets[c]):
+            order.update({r.id: r for r in records if r.id not in order})
+            for r in records:
+                if (r.exposure_s, r.iso) not in seen:
+                    seen.add((r.exposure_s, r.iso))
+                    for d in find_darks(session.frames, r.exposure_s, r.iso):
+                        order.setdefault(d.id, d)
+    return list(order.values())
+
+
 class _FrameReader:
     """Reads a session's frames once each: progress, cancellation, one mosaic geometry,
     darks averaged per (exposure, ISO) and brackets merged (ROI pixels only)."""
@@ -374,7 +403,17 @@ class _FrameReader:
         self._rois: RoiSet | None = None
         self._preloaded: dict[str, RawFrame] = {}
         self._darks: dict[tuple[float, int], _Pixels] = {}
+        self._ahead: ReadAhead | None = None
         self.done = 0
+
+    def read_ahead(self, records: Sequence[FrameRecord]) -> None:
+        """Decode ``records`` in this order on a thread of their own, one ahead."""
+        paths = [self._session.path_of(r) for r in records]
+        self._ahead = ReadAhead(self._load, paths)
+
+    def close(self) -> None:
+        if self._ahead is not None:
+            self._ahead.close()
 
     def step(self) -> None:
         self.done += 1
@@ -383,8 +422,9 @@ class _FrameReader:
 
     def read(self, rec: FrameRecord) -> RawFrame:
         check_stop(self._should_stop)
+        path = self._session.path_of(rec)
         try:
-            frame = self._load(self._session.path_of(rec))
+            frame = self._ahead.get(path) if self._ahead else self._load(path)
         except InputError as exc:
             raise InputError(
                 f"frame {rec.id}: {exc}; {self._retake.format(rec.id)}"

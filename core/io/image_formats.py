@@ -9,7 +9,8 @@ One folder per session (:class:`ImageOutputs`)::
                          with named dimensions (``y``, ``x``, ``wavelength``), the
                          ``wavelength`` coordinate in nm, CF-style attributes
                          (``units``, ``long_name``) and the provenance in the
-                         group's attributes; chunked by row blocks for parallel writes
+                         group's attributes; a chunk is a whole block of rows (all
+                         columns and bands), one file written in one piece
     xyz.tif              CIE XYZ (D50, Y of the white 100), float32 (rows, cols, 3),
                          photometric RGB (TIFF tag 262 = 2) whose three samples are
                          X, Y, Z as the ImageDescription's ``samples`` says (TIFF has
@@ -74,8 +75,6 @@ LAB_TIF = "lab.tif"
 UNC_TIF = "uncertainty.tif"
 SRGB_PNG = "srgb.png"
 PROVENANCE = "provenance.json"
-#: Columns of a Zarr chunk (rows are the block height).
-ZARR_CHUNK_COLS = 512
 #: The cube's array in ``cube.zarr`` and its dimension names (xarray's).
 ZARR_CUBE = "reflectance"
 ZARR_DIMENSIONS = ("y", "x", "wavelength")
@@ -163,7 +162,7 @@ class ImageOutputs:
         cube: NDArray[np.float32],
         xyz: NDArray[np.float32],
         lab: NDArray[np.float32],
-        uncertainty: NDArray[np.float32],
+        uncertainty: NDArray[np.float32] | None,
     ) -> None:
         """Write a block of rows starting at ``row0`` into every file.
 
@@ -171,7 +170,9 @@ class ImageOutputs:
         ----------
         cube : (r, cols, n_bands)
         xyz, lab : (r, cols, 3)
-        uncertainty : (r, cols, 2)
+        uncertainty : (r, cols, 2), optional
+            ``None`` leaves the uncertainty TIFF's rows to
+            :meth:`write_uncertainty`.
         """
         _, cols, n_bands = cube.shape
         if row0 % self.block_rows or cols != self.shape[1] or n_bands != self.n_bands:
@@ -187,36 +188,43 @@ class ImageOutputs:
             self._write_zarr_chunks(row0, bip)
         if "tiff" in self.formats:
             for name, data in ((XYZ_TIF, xyz), (LAB_TIF, lab), (UNC_TIF, uncertainty)):
-                samples = data.shape[2]
-                pix = np.ascontiguousarray(data, dtype="<f4")
-                self._pwrite(name, self.offsets[name] + row0 * cols * samples * 4, pix)
+                if data is not None:
+                    self._write_tiff_rows(name, row0, data)
+
+    def write_uncertainty(self, row0: int, uncertainty: NDArray[np.float32]) -> None:
+        """Rows of the uncertainty TIFF (r, cols, 2) from ``row0`` (any row: the
+        TIFF is one strip), when :meth:`write_rows` left them out."""
+        if "tiff" in self.formats:
+            self._write_tiff_rows(UNC_TIF, row0, uncertainty)
+
+    def _write_tiff_rows(self, name: str, row0: int, data: NDArray[np.float32]) -> None:
+        cols, samples = data.shape[1], data.shape[2]
+        pix = np.ascontiguousarray(data, dtype="<f4")
+        self._pwrite(name, self.offsets[name] + row0 * cols * samples * 4, pix)
 
     def _pwrite(self, name: str, offset: int, data: NDArray[Any]) -> None:
         pwrite_all(self.folder / name, offset, data)
 
     def _write_zarr_chunks(self, row0: int, bip: NDArray[np.float32]) -> None:
-        """The block's Zarr chunks, each one file written whole.
+        """The block's Zarr chunk: one file, written whole.
 
-        The cube's array is uncompressed (codecs: ``bytes``, little endian), so a
-        chunk file is its values in C order, edge chunks padded with the fill
-        value (NaN) to the full chunk shape, at key ``c/<row>/<col>/0`` (Zarr v3's
-        default chunk key encoding): what zarr-python writes, without its
-        per-chunk machinery (which cost more than twice the bytes' writing).
+        The cube's array is uncompressed (codecs: ``bytes``, little endian) and a
+        chunk is a whole block of rows, so the chunk file is the block's values in
+        C order -- the same bytes as the block's rows of the ENVI (BIP) file -- at
+        key ``c/<block>/0/0`` (Zarr v3's default chunk key encoding); the last
+        block is padded with the fill value (NaN) to the full chunk height: what
+        zarr-python writes, without its per-chunk machinery (which cost more than
+        twice the bytes' writing).
         """
-        rows, cols = self.block_rows, min(self.shape[1], ZARR_CHUNK_COLS)
+        rows = self.block_rows
         r = bip.shape[0]
-        base = self.folder / CUBE_ZARR / ZARR_CUBE / "c" / str(row0 // rows)
-        for j, c0 in enumerate(range(0, self.shape[1], cols)):
-            part = bip[:, c0 : c0 + cols]
-            if part.shape[:2] != (rows, cols):
-                full = np.full((rows, cols, self.n_bands), np.nan, dtype="<f4")
-                full[:r, : part.shape[1]] = part
-                part = full
-            folder = base / str(j)
-            folder.mkdir(parents=True, exist_ok=True)
-            # the chunk's rows are contiguous runs of the block: gathered by the
-            # kernel (writev), not copied here
-            _write_rows_file(folder / "0", part)
+        if r != rows:
+            full = np.full((rows, *bip.shape[1:]), np.nan, dtype="<f4")
+            full[:r] = bip
+            bip = full
+        folder = self.folder / CUBE_ZARR / ZARR_CUBE / "c" / str(row0 // rows) / "0"
+        folder.mkdir(parents=True, exist_ok=True)
+        _write_file(folder / "0", bip)
 
     def write_preview(self, srgb: NDArray[np.uint8]) -> Path:
         """The sRGB preview (rows, cols, 3) as PNG."""
@@ -335,7 +343,8 @@ def _create_zarr(
     group.create_array(
         ZARR_CUBE,
         shape=(rows, cols, wl.size),
-        chunks=(block_rows, min(cols, ZARR_CHUNK_COLS), wl.size),
+        # a chunk per block of rows: the order the blocks are written in
+        chunks=(block_rows, cols, wl.size),
         dtype="float32",
         # uncompressed: lz4 + bitshuffle saved a fifth of the bytes for more CPU
         # than writing them takes (see ImageOutputs._write_zarr_chunks)
@@ -406,25 +415,16 @@ def _create_tiffs(
     return offsets
 
 
-def _write_rows_file(path: Path, data: NDArray[np.float32]) -> None:
-    """A new file holding ``data`` (rows, cols, n) in C order, from its rows as
-    they lie in memory (each row contiguous), in one ``writev`` where it can."""
-    views = [memoryview(np.ascontiguousarray(row, dtype="<f4")).cast("B")
-             for row in data]  # fmt: skip
+def _write_file(path: Path, data: NDArray[np.float32]) -> None:
+    """A new file holding ``data``'s bytes (C order), in one ``write`` where it can."""
+    view = memoryview(np.ascontiguousarray(data, dtype="<f4")).cast("B")
     fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
     try:
-        total = sum(v.nbytes for v in views)
-        done = os.writev(fd, views[:_IOV_MAX])
-        if done < total:  # a short write (a signal, a full disk) or many rows
-            rest = memoryview(b"".join(views)).cast("B")
-            while done < total:
-                done += os.pwrite(fd, rest[done:], done)
+        done = 0
+        while done < view.nbytes:  # a short write: a signal, a full disk
+            done += os.pwrite(fd, view[done:], done)
     finally:
         os.close(fd)
-
-
-#: Buffers one ``writev`` takes (POSIX IOV_MAX is at least 1024 on Linux).
-_IOV_MAX = 1024
 
 
 def pwrite_all(path: str | PathLike[str], offset: int, data: NDArray[Any]) -> None:

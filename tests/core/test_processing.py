@@ -375,3 +375,36 @@ def test_flat_window_is_centred_and_cut_to_the_planes() -> None:
     assert flat_window((60, 400)) == (0, 60, 170, 230)
     with pytest.raises(InputError):
         flat_window((300, 400), 0)
+
+
+@pytest.mark.parametrize(("corners", "brackets"), [("auto", (1.0,)),
+                                                   ("layout", (1.0, 0.25))])  # fmt: skip
+def test_frames_are_decoded_ahead_in_the_order_processing_reads_them(
+    tmp_path, monkeypatch, corners, brackets
+) -> None:
+    """Every frame is read once, and on the read-ahead thread (its plan is the
+    order processing asks for them in); the responses are those read in turn."""
+    import threading
+
+    session, _ = _make_session(
+        tmp_path / "s", brackets=brackets, with_corners=corners == "layout"
+    )
+    loads: list[tuple[str, str]] = []
+
+    def loader(path: Path) -> RawFrame:
+        loads.append((path.name, threading.current_thread().name))
+        return _npy_loader(path)
+
+    out = process_session(session, loader=loader, corners=corners)
+    names = [n for n, _ in loads]
+    assert sorted(names) == sorted({p.name for p in session.root.rglob("*.npy")})
+    assert len(names) == len(set(names)) == out.stats["frames_read"]
+    assert all(t.startswith("tunespec-read-ahead") for _, t in loads)
+
+    from tunespec.app.pipeline import processing as pp
+
+    # no read-ahead: the same frames read in turn on this thread
+    monkeypatch.setattr(pp._FrameReader, "read_ahead", lambda self, records: None)
+    in_turn = process_session(session, loader=_npy_loader, corners=corners)
+    np.testing.assert_array_equal(out.responses.rgb, in_turn.responses.rgb)
+    np.testing.assert_array_equal(out.responses.rgb_std, in_turn.responses.rgb_std)
