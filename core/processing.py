@@ -66,8 +66,9 @@ from tunespec.core.io.session import (
     frames_by_channel,
 )
 from tunespec.core.layout import TargetLayout
+from tunespec.core.metering import suppress_meter_floor
 from tunespec.core.responses import Responses
-from tunespec.core.spectra import Spectra
+from tunespec.core.spectra import Grid, Spectra
 
 __all__ = [
     "BRACKET_CLIP_LEVEL",
@@ -92,6 +93,39 @@ DETECT_MAX_WIDTH_PX = 1000
 SATURATION_TOLERANCE = 0.0
 #: Unit of the illuminants written by processing.
 ILLUMINANT_UNIT = "W sr^-1 m^-2 nm^-1 s (measured radiance x exposure)"
+
+
+def illuminants_from_spds(
+    spds: Sequence[Spectra],
+    exposures_s: Sequence[float],
+    names: Sequence[str],
+    *,
+    source: str | None = None,
+    factor: float = 1.0,
+    grid: Grid | None = None,
+) -> Spectra:
+    """Eq. 1's illuminants from the light's readings: each channel's measured SPD,
+    its meter floor suppressed (:func:`tunespec.core.metering.suppress_meter_floor`,
+    at the instrument's own sampling), times its exposure (and ``factor``: the gonio's
+    cos theta_i), on the first SPD's wavelengths -- or on ``grid``, band-averaged.
+
+    The one chain processing, the per-pixel images and the gonio sessions use.
+    """
+    rows: list[NDArray[np.float64]] = []
+    wl: NDArray[np.float64] | None = None
+    for spd, t in zip(spds, exposures_s, strict=True):
+        spd = suppress_meter_floor(spd)
+        if grid is not None:
+            spd = spd.resample(grid, average=True)
+        if wl is None:
+            wl = spd.wavelength_nm
+        rows.append(np.interp(wl, spd.wavelength_nm, spd.values[0]) * t * factor)
+    if wl is None:
+        raise InputError("no light readings (SPDs) to build the illuminants from")
+    meta = {"unit": ILLUMINANT_UNIT, **({"source": source} if source else {})}
+    return Spectra(wl, np.stack(rows), tuple(names), meta)
+
+
 _FLAT = "__flat_field_window__"
 
 
@@ -715,8 +749,7 @@ class _ChannelStats:
     rgb: NDArray[np.float64]
     std: NDArray[np.float64]
     sat: NDArray[np.float64]
-    spds: dict[str, NDArray[np.float64]] = field(default_factory=dict)
-    wl_nm: NDArray[np.float64] | None = None
+    spds: dict[str, tuple[Spectra, float]] = field(default_factory=dict)
     flagged: list[tuple[str, str]] = field(default_factory=list)
     n_borrowed: int = 0
 
@@ -755,14 +788,8 @@ class _ChannelStats:
             self.flagged.append((self.layout.patch_names[i], c))
 
     def add_spd(self, c: str, spd: Spectra, exposure_s: float) -> None:
-        """The illuminant of channel ``c``: measured SPD x exposure (first grid kept)."""
-        if self.wl_nm is None:
-            self.wl_nm = spd.wavelength_nm
-            self.spds[c] = spd.values[0] * exposure_s
-        else:
-            self.spds[c] = (
-                np.interp(self.wl_nm, spd.wavelength_nm, spd.values[0]) * exposure_s
-            )
+        """Channel ``c``'s measured SPD and its exposure (:meth:`illuminants`)."""
+        self.spds[c] = (spd, exposure_s)
 
     def warnings(self) -> list[str]:
         if not self.flagged:
@@ -785,10 +812,10 @@ class _ChannelStats:
         )
 
     def illuminants(self, session: Session) -> Spectra:
-        assert self.wl_nm is not None
-        return Spectra(
-            self.wl_nm,
-            np.stack([self.spds[c] for c in self.use]),
-            tuple(self.use),
-            {"unit": ILLUMINANT_UNIT, "source": str(session.root)},
+        """Eq. 1's illuminants, in channel order (:func:`illuminants_from_spds`)."""
+        return illuminants_from_spds(
+            [self.spds[c][0] for c in self.use],
+            [self.spds[c][1] for c in self.use],
+            self.use,
+            source=str(session.root),
         )

@@ -35,6 +35,7 @@ from tunespec.core.io.spectral import read_spectra_csv
 from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import read_json
 from tunespec.core.metering import suppress_meter_floor
+from tunespec.core.processing import illuminants_from_spds
 from tunespec.core.progress import (
     ProgressFn,
     StopFn,
@@ -216,17 +217,18 @@ def _geometry_data(gdir: Path, index: int, plan: GonioPlan, layout: TargetLayout
     cos_i = math.cos(math.radians(abs(float(position["theta_i"]))))
     names = [MIX] + (leds if step.spectral else [])
     merged: list[list[HdrImage]] = [[] for _ in rois]
-    spectra = []
     for name in names:
         stack = np.stack([_load(gdir, name, k) - dark for k in range(len(rel))])
         for p, (yy, xx) in enumerate(rois):
             merged[p].append(merge_brackets(stack[:, :, yy, xx], rel))
-        spd = suppress_meter_floor(read_spectra_csv(gdir / f"spd_{name}.csv")).resample(
-            DEFAULT_GRID, average=True
-        )
-        spectra.append(spd.values[0] * float(exposures[name]) * cos_i)
     responses = hdr_patch_responses(merged, layout.patch_names, names)
-    illum = Spectra(DEFAULT_GRID.wavelength_nm, np.array(spectra), tuple(names))
+    illum = illuminants_from_spds(
+        [read_spectra_csv(gdir / f"spd_{name}.csv") for name in names],
+        [float(exposures[name]) for name in names],
+        names,
+        factor=cos_i,
+        grid=DEFAULT_GRID,
+    )
     if correct is not None:
         illum = correct(illum)
     return GeometryData(index, position, responses, illum, corners)

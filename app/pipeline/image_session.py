@@ -88,7 +88,6 @@ from tunespec.core.image_planes import (
 from tunespec.core.io.image_formats import ImageOutputs, pwrite_all, write_array
 from tunespec.core.io.raw import load_raw
 from tunespec.core.io.session import Session, find_darks, frames_by_channel
-from tunespec.core.metering import suppress_meter_floor
 from tunespec.core.processing import BRACKET_CLIP_LEVEL, exposure_groups
 from tunespec.core.spectra import Grid, Spectra
 
@@ -533,23 +532,17 @@ def _read_phi(job: ImageJob, row0: int, row1: int) -> NDArray[np.float32]:
 
 
 def illuminants_of(job: ImageJob) -> Spectra:
-    """Each channel's measured SPD x its target exposure (as processing's), on the
-    first SPD's wavelengths."""
+    """Each channel's measured SPD x its target exposure, as processing's
+    (:func:`tunespec.core.processing.illuminants_from_spds`)."""
     from tunespec.core.io.spectral import read_spectra_csv
-    from tunespec.core.processing import ILLUMINANT_UNIT
+    from tunespec.core.processing import illuminants_from_spds
 
-    wl: NDArray[np.float64] | None = None
-    rows = []
-    for path, t in zip(job.spd_files, job.spd_exposures_s, strict=True):
-        spd = suppress_meter_floor(read_spectra_csv(path))
-        if wl is None:
-            wl = spd.wavelength_nm
-        rows.append(np.interp(wl, spd.wavelength_nm, spd.values[0]) * t)
-    assert wl is not None
-    return Spectra(
-        wl, np.stack(rows), job.channels,
-        {"unit": ILLUMINANT_UNIT, "source": job.session_root},
-    )  # fmt: skip
+    return illuminants_from_spds(
+        [read_spectra_csv(path) for path in job.spd_files],
+        job.spd_exposures_s,
+        job.channels,
+        source=job.session_root,
+    )
 
 
 def setup_estimation(

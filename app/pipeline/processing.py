@@ -36,7 +36,6 @@ from tunespec.core.io.session import (
 )
 from tunespec.core.io.spectral_csv import write_spectra_csv
 from tunespec.core.layout import TargetLayout
-from tunespec.core.metering import suppress_meter_floor
 from tunespec.core.processing import (
     _FLAT,
     FLAT_WINDOW_PX,
@@ -163,7 +162,7 @@ def process_session(
         for c in [first, *[c for c in use if c != first]]:
             acc.add(session, c, reader.pixels(whites[c]), reader.pixels(targets[c]))
             ref = targets[c][0]
-            acc.add_spd(c, suppress_meter_floor(spds[c]), ref.exposure_s)
+            acc.add_spd(c, spds[c], ref.exposure_s)
     warnings.extend(acc.warnings())
     n_px = rois.n_pixels
     n_patch = layout.n_patches
