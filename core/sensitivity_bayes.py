@@ -120,6 +120,20 @@ class LedCorrection:
     gain_std: tuple[float, ...] = ()
     shift_std_nm: tuple[float, ...] = ()
 
+    def lookup(
+        self, names: Sequence[str]
+    ) -> tuple[NDArray[np.intp], NDArray[np.float64], NDArray[np.float64]]:
+        """For each LED of ``names``, by name: its row here (-1: not fitted), its gain
+        (1 when not fitted) and its wavelength shift (the common shift when not
+        fitted) -- the one lookup that applying, propagating and matching the
+        corrections use."""
+        index = {n: j for j, n in enumerate(self.names)}
+        rows = np.array([index.get(n, -1) for n in names], dtype=np.intp)
+        # row -1 picks the value appended for an LED that was not fitted
+        gain = np.append(np.asarray(self.gain, float), 1.0)[rows]
+        shift = np.append(np.asarray(self.shift_nm, float), self.common_shift_nm)[rows]
+        return rows, gain, shift
+
     def apply(self, illuminants: Spectra) -> Spectra:
         """``illuminants`` with the corrections undone (same names and grid).
 
@@ -132,16 +146,7 @@ class LedCorrection:
         >>> round(float(fix.apply(led).values.max()), 3)
         1.1
         """
-        index = {n: j for j, n in enumerate(self.names)}
-        gain = np.array(
-            [self.gain[index[n]] if n in index else 1.0 for n in illuminants.names]
-        )
-        shift = np.array(
-            [
-                self.shift_nm[index[n]] if n in index else self.common_shift_nm
-                for n in illuminants.names
-            ]
-        )
+        _, gain, shift = self.lookup(illuminants.names)
         if np.all(gain == 1.0) and np.all(shift == 0.0):
             return illuminants
         values = apply_led_corrections(

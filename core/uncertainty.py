@@ -285,18 +285,11 @@ def calibration_response_covariance(
     corr = calibration.led_correction
     names = list(illuminants.names)
     n_i = len(names)
-    gains = np.ones(n_i)
-    shifts = np.full(n_i, calibration.spd_shift_nm)
-    rows = np.full(n_i, -1)
     if corr is not None:
-        index = {name: j for j, name in enumerate(corr.names)}
-        for j, name in enumerate(names):
-            if name in index:
-                rows[j] = index[name]
-                gains[j] = corr.gain[index[name]]
-                shifts[j] = corr.shift_nm[index[name]]
-            else:
-                shifts[j] = corr.common_shift_nm
+        rows, gains, shifts = corr.lookup(names)
+    else:
+        rows, gains = np.full(n_i, -1), np.ones(n_i)
+        shifts = np.full(n_i, calibration.spd_shift_nm)
     Lc, dL = _corrected(wl, rep, gains, shifts)
     R = _hold_resample(reflectance.wavelength_nm, reflectance.values, wl)
     n_p = R.shape[0]
@@ -435,11 +428,11 @@ def _log_reference(
     by = excess.log_reference_by_response
     if corr is None or len(by) != 3 * len(corr.names):
         return None
-    index = {name: j for j, name in enumerate(corr.names)}
+    rows, _, _ = corr.lookup(illuminants)
     out = np.full((len(illuminants), 3), excess.log_reference)
-    for i, name in enumerate(illuminants):
-        if name in index:
-            out[i] = by[3 * index[name] : 3 * index[name] + 3]
+    for i, j in enumerate(rows):
+        if j >= 0:
+            out[i] = by[3 * j : 3 * j + 3]
     return out.reshape(-1)
 
 
