@@ -61,6 +61,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tunespec.core.errors import InputError, SingularSystemError
+from tunespec.core.wiener import solve_with_noise
 
 __all__ = [
     "DEFAULT_LEVEL_BINS",
@@ -656,14 +657,7 @@ def _bin_solutions(
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Per bin ``(G + diag K_e)^-1 F K`` (n_bins, m, n_wl) and the posterior
     covariance ``K - K F^T (G + K_e)^-1 F K`` (n_bins, n_wl, n_wl), symmetrised."""
-    n_bins, m = Ke.shape
-    A = np.repeat(G[None], n_bins, axis=0)
-    idx = np.arange(m)
-    A[:, idx, idx] += Ke
-    try:
-        sol = np.linalg.solve(A, np.broadcast_to(FK, (n_bins, *FK.shape)))
-    except np.linalg.LinAlgError as exc:
-        raise SingularSystemError(f"F K F^T + K_e is singular: {exc}") from None
+    sol = solve_with_noise(G, Ke, FK)
     P_post = K[None] - np.einsum("jl,bjk->blk", FK, sol)
     return sol, 0.5 * (P_post + P_post.transpose(0, 2, 1))
 
@@ -931,15 +925,12 @@ def wiener_pixels_exact(
     (n, n_wl) float64
     """
     c64, var, FK, G = _exact_system(bank, c, phi)
-    n, m = c64.shape
+    n = c64.shape[0]
     out = np.empty((n, bank.mean.size))
-    idx = np.arange(m)
     resid = c64 - bank.F @ bank.mean
     for lo in range(0, n, _EXACT_CHUNK):
         hi = min(lo + _EXACT_CHUNK, n)
-        A = np.repeat(G[None], hi - lo, axis=0)
-        A[:, idx, idx] += var[lo:hi]
-        x = np.linalg.solve(A, resid[lo:hi, :, None])[..., 0]
+        x = solve_with_noise(G, var[lo:hi], resid[lo:hi, :, None])[..., 0]
         out[lo:hi] = bank.mean + x @ FK
     return out
 
@@ -949,15 +940,12 @@ def _posterior_exact(
 ) -> NDArray[np.float64]:
     """Posterior covariances (n, n_wl, n_wl) of exactly solved pixels."""
     _, var, FK, G = _exact_system(bank, c, phi)
-    n, m = var.shape
-    idx = np.arange(m)
+    n = var.shape[0]
     n_wl = bank.K.shape[0]
     out = np.empty((n, n_wl, n_wl))
     for lo in range(0, n, _EXACT_CHUNK):
         hi = min(lo + _EXACT_CHUNK, n)
-        A = np.repeat(G[None], hi - lo, axis=0)
-        A[:, idx, idx] += var[lo:hi]
-        sol = np.linalg.solve(A, np.broadcast_to(FK, (hi - lo, *FK.shape)))
+        sol = solve_with_noise(G, var[lo:hi], FK)
         out[lo:hi] = bank.K[None] - np.einsum("jl,pjk->plk", FK, sol)
     return out
 

@@ -40,6 +40,7 @@ __all__ = [
     "integrated_lighting_matrix",
     "integration_grid",
     "on_integration_grid",
+    "solve_with_noise",
     "wiener_reflectance",
 ]
 
@@ -373,6 +374,30 @@ def integrated_lighting_matrix(
     return F @ resampling_matrix(estimate_nm, wavelength_nm)
 
 
+def solve_with_noise(
+    G: NDArray[np.float64],
+    noise: NDArray[np.float64],
+    rhs: NDArray[np.float64],
+    *,
+    where: str = "",
+) -> NDArray[np.float64]:
+    """``X_k`` with ``(G + diag noise_k) X_k = rhs_k`` for every ``k``: Eq. 5's system
+    ``F K F^T + K_e`` with each patch's (or pixel's, or noise bin's) own diagonal
+    ``K_e``, in one batched LAPACK call; no inverse is formed.
+
+    ``G`` is (m, m), ``noise`` (k, m), ``rhs`` (k, m, r) or (m, r) for all ``k``.
+    A singular system raises :class:`SingularSystemError` (``where`` names it).
+    """
+    k, m = noise.shape
+    A = np.repeat(G[None], k, axis=0)
+    idx = np.arange(m)
+    A[:, idx, idx] += noise
+    try:
+        return np.linalg.solve(A, np.broadcast_to(rhs, (k, *rhs.shape[-2:])))
+    except np.linalg.LinAlgError as exc:
+        raise SingularSystemError(f"F K F^T + K_e is singular{where}: {exc}") from None
+
+
 def _solve_patchwise(
     G: NDArray[np.float64],
     FK: NDArray[np.float64],
@@ -384,27 +409,20 @@ def _solve_patchwise(
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Eq. 5-6 per patch with its own noise ``K_e``: the estimates and the diagonal
     of their posterior covariance, solved in batches."""
-    m_rows = G.shape[0]
     n_p = resid.shape[0]
     est = np.empty((n_p, mean.size))
     post_var = np.empty((n_p, mean.size))
-    diag_idx = np.arange(m_rows)
     for lo in range(0, n_p, _CHUNK):
         hi = min(lo + _CHUNK, n_p)
-        A = np.repeat(G[None], hi - lo, axis=0)
-        A[:, diag_idx, diag_idx] += noise[lo:hi]
         # One batched solve for the data and for F K (the posterior covariance);
         # right-hand sides (chunk, 3 n_i, 1 + n_wl).
         rhs = np.concatenate(
             [resid[lo:hi, :, None], np.broadcast_to(FK, (hi - lo, *FK.shape))],
             axis=2,
         )
-        try:
-            sol = np.linalg.solve(A, rhs)
-        except np.linalg.LinAlgError as exc:
-            raise SingularSystemError(
-                f"F K F^T + K_e is singular for patches {lo}..{hi - 1}: {exc}"
-            ) from None
+        sol = solve_with_noise(
+            G, noise[lo:hi], rhs, where=f" for patches {lo}..{hi - 1}"
+        )
         est[lo:hi] = mean + sol[:, :, 0] @ FK
         post_var[lo:hi] = prior_var - np.einsum("jl,pjl->pl", FK, sol[:, :, 1:])
     if not np.all(np.isfinite(est)):
