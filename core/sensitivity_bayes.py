@@ -123,13 +123,10 @@ class LedCorrection:
     def lookup(
         self, names: Sequence[str]
     ) -> tuple[NDArray[np.intp], NDArray[np.float64], NDArray[np.float64]]:
-        """For each LED of ``names``, by name: its row here (-1: not fitted), its gain
-        (1 when not fitted) and its wavelength shift (the common shift when not
-        fitted) -- the one lookup that applying, propagating and matching the
-        corrections use."""
+        """For each LED of ``names``: its row here, its gain and its shift; an LED not
+        fitted has row -1, which picks the appended gain 1 and the common shift."""
         index = {n: j for j, n in enumerate(self.names)}
         rows = np.array([index.get(n, -1) for n in names], dtype=np.intp)
-        # row -1 picks the value appended for an LED that was not fitted
         gain = np.append(np.asarray(self.gain, float), 1.0)[rows]
         shift = np.append(np.asarray(self.shift_nm, float), self.common_shift_nm)[rows]
         return rows, gain, shift
