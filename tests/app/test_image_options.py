@@ -112,3 +112,23 @@ def test_settings_doc_survives_json_and_tells_settings_apart() -> None:
     for d in docs:
         assert json.loads(json.dumps(d)) == d
     assert len({json.dumps(d, sort_keys=True) for d in docs}) == len(docs)
+
+
+def test_sensitivities_without_their_side_file_are_said_never_silently(
+    tmp_path, capsys
+) -> None:
+    """estimate-image and batch go on without the LED corrections only saying so."""
+    import argparse
+
+    from tunespec.app.cli.common import Console
+    from tunespec.app.cli.image_cmds import _warn_without_corrections
+
+    sens = tmp_path / "S.csv"
+    sens.write_text("wavelength,R,G,B\n")
+    console = Console(argparse.Namespace(quiet=False, json=False))
+    _warn_without_corrections(console, sens)
+    err = capsys.readouterr().err
+    assert err.startswith("warning: no LED corrections next to S.csv (S.csv.meta.json)")
+    (tmp_path / "S.csv.meta.json").write_text("{}")
+    _warn_without_corrections(console, sens)
+    assert capsys.readouterr().err == ""
