@@ -467,6 +467,8 @@ def test_disk_full_in_estimate_image_leaves_no_work_folder(
     s = _session_copy(captured, tmp_path)
     cam = tmp_path / "cam.csv"
     write_spectra_csv(load_camera(), cam)
+    # its side file (no LED corrections): else estimate-image warns that it is missing
+    (tmp_path / "cam.csv.meta.json").write_text('{"spd_shift_nm": 0.0}')
     out = tmp_path / "img"
     real = fmt.os.pwrite
     calls = {"n": 0}
