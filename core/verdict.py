@@ -14,7 +14,12 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-__all__ = ["VERDICTS", "calibration_verdict", "self_check_findings"]
+__all__ = [
+    "VERDICTS",
+    "calibration_verdict",
+    "checked_self_check",
+    "self_check_findings",
+]
 
 #: The verdict's three outcomes.
 VERDICTS = ("PASS", "PASS with warnings", "FAIL")
@@ -54,19 +59,26 @@ def self_check_findings(checked: Mapping[str, Any]) -> list[str]:
     return out
 
 
+def checked_self_check(check: Any) -> dict[str, Any] | None:
+    """A self-check as the verdict reads it: its ``as_dict()`` form (a mapping read
+    back from ``calibration.json`` as it is), or ``None`` -- also for a document that
+    lacks its residual check (a ``calibration.json`` edited by hand)."""
+    if check is None:
+        return None
+    d = dict(check) if isinstance(check, Mapping) else check.as_dict()
+    return d if isinstance(d.get("residual_chi_square"), Mapping) else None
+
+
 def calibration_verdict(
-    rgb_mean: float, threshold: float, self_check: Mapping[str, Any] | None
+    rgb_mean: float, threshold: float, check: Any
 ) -> tuple[str, str]:
     """``(outcome, why)``, ``outcome`` one of :data:`VERDICTS`.
 
-    ``rgb_mean`` is Table 1's RGB mean error (of full scale), ``self_check`` the
-    self-check's ``as_dict()`` (``None``, or one without its residual check, counts
-    as not self_check).
+    ``rgb_mean`` is Table 1's RGB mean error (of full scale), ``check`` the
+    self-check or its ``as_dict()``; ``None``, or one without its residual check,
+    counts as no self-check (:func:`checked_self_check`).
     """
-    if self_check is not None and not isinstance(
-        self_check.get("residual_chi_square"), Mapping
-    ):
-        self_check = None
+    self_check = checked_self_check(check)
     limit, mean = float(threshold), float(rgb_mean)
     ok = mean <= limit
     if self_check is None:

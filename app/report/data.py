@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 from tunespec.core.errors import InputError
 from tunespec.core.responses import Responses
 from tunespec.core.spectra import Spectra
-from tunespec.core.verdict import calibration_verdict
+from tunespec.core.verdict import calibration_verdict, checked_self_check
 
 if TYPE_CHECKING:
     from tunespec.core.colorimetry import ReflectanceStats
@@ -379,13 +379,8 @@ def export_label(key: str) -> str:
 
 
 def _self_check(report: ReportData) -> dict[str, Any] | None:
-    """The self-check's ``as_dict()`` form, or ``None`` (also for a document that
-    lacks its residual check: a ``calibration.json`` edited by hand)."""
-    c = report.self_check
-    if c is None:
-        return None
-    d = dict(c) if isinstance(c, Mapping) else c.as_dict()
-    return d if isinstance(d.get("residual_chi_square"), Mapping) else None
+    """The report's self-check as the verdict reads it (:func:`checked_self_check`)."""
+    return checked_self_check(report.self_check)
 
 
 def verdict(report: ReportData) -> tuple[str, str] | None:
@@ -396,7 +391,7 @@ def verdict(report: ReportData) -> tuple[str, str] | None:
     if fitted is None or report.threshold_rgb_mean is None:
         return None
     mean = float(_as_dict(fitted)["RGB"]["mean"])
-    return calibration_verdict(mean, report.threshold_rgb_mean, _self_check(report))
+    return calibration_verdict(mean, report.threshold_rgb_mean, report.self_check)
 
 
 def _table1_parts(report: ReportData) -> tuple[Any, Any]:
