@@ -104,8 +104,15 @@ print(json.dumps({{"wall_s": wall, "peak_rss_bytes": rss, "user_s": ru.ru_utime,
 
 
 def _output_bytes(out: Path) -> int:
-    """Bytes of the files ``estimate-image`` wrote (cube twice, TIFFs, PNG)."""
-    return sum(p.stat().st_size for p in out.rglob("*") if p.is_file())
+    """Bytes of the files ``estimate-image`` wrote (cube, TIFFs, PNG), each file
+    once (``cube.img`` is a hard link to the Zarr shard: the cube is written once)
+    and without holes (the padding of the shard's last chunk)."""
+    seen: dict[tuple[int, int], int] = {}
+    for p in out.rglob("*"):
+        if p.is_file():
+            st = p.stat()
+            seen[(st.st_dev, st.st_ino)] = min(st.st_size, st.st_blocks * 512)
+    return sum(seen.values())
 
 
 def _write_floor(folder: Path, n_bytes: int) -> float:
@@ -288,7 +295,6 @@ def main(argv: list[str] | None = None) -> int:
                 _images(work, work / "images", args.workers, DEFAULT_FORMATS,
                         args.before)
             )  # fmt: skip
-            floors.append(_write_floor(work, _output_bytes(work / "images")))
         images.append(_images(work, work / "images", args.workers, args.formats))
         floors.append(_write_floor(work, _output_bytes(work / "images")))
     d, d_cpu = min(decode)
