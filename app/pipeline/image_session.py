@@ -587,6 +587,10 @@ def setup_estimation(
     """
     import cv2
 
+    # the LEDs are done: their frame buffers (about 0.3 GB a thread at full
+    # resolution) and the dark planes go back to the heap, where the blocks' buffers
+    # find them, instead of fresh pages beside them
+    release_buffers()
     if isinstance(noise, SensorFigures):
         n_darks = int(job.meta.get("n_darks", 1))
         if job.meta.get("dark") == "smooth":  # the box mean's noise is negligible
