@@ -36,7 +36,12 @@ number of processes can write disjoint row blocks at the same time and memory
 stays that of a block. The Zarr chunks are whole row blocks for the same reason.
 The ENVI file may be longer than the cube (the shard's index, and the padding of
 the last chunk as a hole that reads as zeros): ENVI readers read the header's
-lines x samples x bands from offset 0.
+lines x samples x bands from offset 0. The cube's and the TIFFs' rows go to the
+disk directly (``O_DIRECT`` where the system and file system have it,
+:func:`pwrite_direct`): through the page cache, the cube's 1.35 GB cost 2-3 s of
+system time on the development machine (pages allocated, copied into, written
+back), directly 0.05 s and the disk's own time, which the other blocks' computing
+overlaps.
 
 References
 ----------
@@ -48,6 +53,7 @@ from __future__ import annotations
 
 import json
 import os
+import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
 from os import PathLike
@@ -68,6 +74,7 @@ __all__ = [
     "SpectralImage",
     "open_image_outputs",
     "pwrite_all",
+    "pwrite_direct",
     "read_provenance",
     "remove_partial_outputs",
     "valid_formats",
@@ -205,7 +212,7 @@ class ImageOutputs:
         # shard's chunks in row order hold the same bytes at the same offsets
         bip = np.ascontiguousarray(cube, dtype="<f4")
         for name in self.cube_files:
-            self._pwrite(name, row0 * n_bands * cols * 4, bip)
+            pwrite_direct(self.folder / name, row0 * n_bands * cols * 4, bip)
         if "tiff" in self.formats:
             for name, data in ((XYZ_TIF, xyz), (LAB_TIF, lab), (UNC_TIF, uncertainty)):
                 if data is not None:
@@ -220,10 +227,9 @@ class ImageOutputs:
     def _write_tiff_rows(self, name: str, row0: int, data: NDArray[np.float32]) -> None:
         cols, samples = data.shape[1], data.shape[2]
         pix = np.ascontiguousarray(data, dtype="<f4")
-        self._pwrite(name, self.offsets[name] + row0 * cols * samples * 4, pix)
-
-    def _pwrite(self, name: str, offset: int, data: NDArray[Any]) -> None:
-        pwrite_all(self.folder / name, offset, data)
+        pwrite_direct(
+            self.folder / name, self.offsets[name] + row0 * cols * samples * 4, pix
+        )
 
     def write_preview(self, srgb: NDArray[np.uint8]) -> Path:
         """The sRGB preview (rows, cols, 3) as PNG."""
@@ -467,6 +473,84 @@ def pwrite_all(path: str | PathLike[str], offset: int, data: NDArray[Any]) -> No
             done += os.pwrite(fd, view[done:], offset + done)
     finally:
         os.close(fd)
+
+
+#: Alignment of direct writes: file offset, length and memory address (4 KiB: the
+#: logical block size of common disks and file systems, a multiple of the others).
+DIRECT_ALIGN = 4096
+#: Bytes per direct write (the bounce buffer's size, per thread).
+DIRECT_CHUNK = 16 << 20
+#: Smaller writes go through the page cache (a direct write waits for the disk).
+DIRECT_MIN = 1 << 20
+_BOUNCE = threading.local()
+
+
+def pwrite_direct(path: str | PathLike[str], offset: int, data: NDArray[Any]) -> None:
+    """:func:`pwrite_all`, with the :data:`DIRECT_ALIGN`-aligned middle of the range
+    written past the page cache (``O_DIRECT``, through a page-aligned buffer of
+    this thread); the unaligned head and tail, and everything where the system
+    (not Linux) or the file system (tmpfs) has no direct I/O, go through the cache.
+
+    Large outputs written once: the cache's pages would only be allocated, filled
+    and written back, at a cost in system time above the disk's own, and would
+    push other files out of the cache.
+    """
+    direct = getattr(os, "O_DIRECT", 0)
+    view = memoryview(np.ascontiguousarray(data)).cast("B")
+    head = -offset % DIRECT_ALIGN
+    end = (offset + view.nbytes) // DIRECT_ALIGN * DIRECT_ALIGN - offset
+    if not direct or end - head < DIRECT_MIN:
+        pwrite_all(path, offset, data)
+        return
+    fd = os.open(path, os.O_WRONLY)
+    try:
+        _pwrite_view(fd, view[:head], offset)
+        _pwrite_view(fd, view[end:], offset + end)
+        try:
+            dfd = os.open(path, os.O_WRONLY | direct)
+        except OSError:  # no direct I/O on this file system
+            _pwrite_view(fd, view[head:end], offset + head)
+            return
+        try:
+            done = _pwrite_aligned(dfd, view[head:end], offset + head)
+        finally:
+            os.close(dfd)
+        _pwrite_view(fd, view[head + done : end], offset + head + done)
+    finally:
+        os.close(fd)
+
+
+def _pwrite_aligned(fd: int, view: memoryview, offset: int) -> int:
+    """Write ``view`` (aligned offset and length) with ``fd`` opened ``O_DIRECT``
+    through this thread's page-aligned bounce buffer; returns the bytes written
+    (fewer where the file system refuses direct writes: the caller writes the
+    rest through the cache)."""
+    import errno
+    import mmap
+
+    bounce = getattr(_BOUNCE, "buffer", None)
+    if bounce is None:
+        bounce = _BOUNCE.buffer = mmap.mmap(-1, DIRECT_CHUNK)  # page-aligned
+    done = 0
+    while done < view.nbytes:
+        n = min(DIRECT_CHUNK, view.nbytes - done)
+        bounce[:n] = view[done : done + n]
+        try:
+            got = os.pwrite(fd, memoryview(bounce)[:n], offset + done)
+        except OSError as exc:
+            if exc.errno != errno.EINVAL:  # a full disk, ...: the caller's error
+                raise
+            return done
+        if got <= 0 or got % DIRECT_ALIGN:  # short, off the alignment: rest cached
+            return done + max(got, 0)
+        done += got
+    return done
+
+
+def _pwrite_view(fd: int, view: memoryview, offset: int) -> None:
+    done = 0
+    while done < view.nbytes:
+        done += os.pwrite(fd, view[done:], offset + done)
 
 
 def read_provenance(folder: str | PathLike[str]) -> dict[str, Any] | None:

@@ -178,6 +178,58 @@ def test_without_hard_links_the_cube_is_written_to_both(tmp_path, monkeypatch) -
     np.testing.assert_array_equal(da.values, cube)
 
 
+@pytest.mark.parametrize("how", ["direct", "no direct open", "direct write refused"])
+def test_cube_rows_written_past_the_cache_read_back(tmp_path, monkeypatch, how) -> None:
+    """Blocks of 5 MB at offsets off the 4 KiB alignment: the aligned middle goes
+    to the disk directly (O_DIRECT), head and tail through the cache, and where the
+    file system has no direct I/O (at open or at the write) all of it cached."""
+    import errno
+    import os
+
+    import spectral
+    import zarr
+
+    import tunespec.core.io.image_formats as fmt
+
+    direct = getattr(os, "O_DIRECT", 0)
+    opened, real_open, real_pwrite = [], os.open, os.pwrite
+
+    def watch_open(path, flags, *args, **kwargs):
+        if flags & direct:
+            opened.append(path)
+            if how == "no direct open":
+                raise OSError(errno.EINVAL, "no direct I/O here")
+        return real_open(path, flags, *args, **kwargs)
+
+    def refuse(fd, data, offset):
+        if how == "direct write refused" and _is_direct(fd):
+            raise OSError(errno.EINVAL, "Invalid argument")
+        return real_pwrite(fd, data, offset)
+
+    def _is_direct(fd):
+        import fcntl
+
+        return bool(fcntl.fcntl(fd, fcntl.F_GETFL) & direct)
+
+    monkeypatch.setattr(os, "open", watch_open)
+    monkeypatch.setattr(os, "pwrite", refuse)
+    rng = np.random.default_rng(5)
+    rows, cols, wl = 45, 1030, np.arange(400.0, 705.0, 5.0)  # 5 MB per 20 rows
+    cube = rng.uniform(0, 1, (rows, cols, wl.size)).astype(np.float32)
+    assert (20 * cols * wl.size * 4) % fmt.DIRECT_ALIGN  # offsets off the alignment
+    out = ImageOutputs.create(tmp_path / "d", (rows, cols), wl, block_rows=20,
+                              provenance=PROV, formats=("envi", "zarr"))  # fmt: skip
+    for r0 in (40, 0, 20):
+        sl = slice(r0, r0 + 20)
+        out.write_rows(r0, cube[sl], cube[sl, :, :3], cube[sl, :, :3], None)
+    envi = spectral.open_image(str(tmp_path / "d" / "cube.hdr"))
+    np.testing.assert_array_equal(envi.open_memmap(), cube)
+    z = zarr.open_array(str(tmp_path / "d" / "cube.zarr" / "reflectance"), mode="r")
+    np.testing.assert_array_equal(z[:], cube)
+    if direct:  # Linux: the two full blocks' middles were sent direct
+        assert len(opened) >= 2
+
+
 def test_formats_option_is_checked_by_the_parser(capsys) -> None:
     from tunespec.app.cli import build_parser
 
