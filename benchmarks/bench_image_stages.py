@@ -49,8 +49,6 @@ def _timed(owner: Any, name: str, label: str) -> None:
 
 
 def _instrument() -> None:
-    import zarr
-
     import tunespec.app.pipeline.image_session as st
     from tunespec.core.io import image_formats, raw
 
@@ -62,11 +60,14 @@ def _instrument() -> None:
         (st, "pwrite_all", "  response stack: write"),
         (st, "_read_stack_rows", "  response stack: read"),
         (st, "estimate_pixels", "  Wiener, colour, uncertainty"),
-        (image_formats, "pwrite_all", "  ENVI + TIFF writes"),
-        (zarr.Array, "__setitem__", "  Zarr write (lz4 threads)"),
+        # the outputs' writes (direct where large; all cached in older trees)
+        (image_formats, "pwrite_direct", "  cube + TIFF writes"),
+        (image_formats, "_write_file", "  Zarr chunk writes"),  # older trees
     ):
         if hasattr(owner, name):  # older trees lack some steps
             _timed(owner, name, label)
+    if not hasattr(image_formats, "pwrite_direct"):
+        _timed(image_formats, "pwrite_all", "  cube + TIFF writes")
 
 
 def run_stages(session_dir: Path, sensitivities: Path, out: Path) -> np.ndarray:

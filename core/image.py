@@ -761,11 +761,12 @@ def estimate_pixels(
     if ok.all():
         bins = bank.bins_of_level(rho, phi)
         _apply_bins(bank, c, bins, est)
-    else:
-        if ok.any():
-            b = bank.bins_of_level(rho[ok], phi[ok])
-            est[ok] = _apply_bins(bank, c[ok], b)
-            bins[ok] = b
+    elif ok.any():
+        # every pixel through its bin (no copies of the unclipped ones); a clipped
+        # pixel's row (NaN) is replaced by its exact solution below
+        b = bank.bins_of_level(np.where(ok, rho, np.float32(0.0)), phi)
+        _apply_bins(bank, c, b, est)
+        bins[ok] = b[ok]
     rest = np.flatnonzero(~ok)
     if rest.size:
         est[rest] = wiener_pixels_exact(bank, c[rest], phi[rest])
@@ -784,6 +785,11 @@ def estimate_pixels(
     return PixelEstimate(est, xyz, np.ascontiguousarray(lab), u_l, u_rms, sat, bins)
 
 
+#: Pixels per product in :func:`_apply_bins`: their responses (gathered) fit in
+#: the core's L2 cache beside the bin's matrix, so the product reads them there.
+APPLY_ROWS = 4096
+
+
 def _apply_bins(
     bank: WienerBank,
     c: NDArray[np.float32],
@@ -792,27 +798,32 @@ def _apply_bins(
 ) -> NDArray[np.float32]:
     """``r = offset_b + c W_b^T`` for every pixel (row), bin by bin.
 
-    The pixels are sorted by bin once (a row gather: each pixel's responses are
-    contiguous), every bin is one matrix product on a contiguous slice, written
-    in place, and one more gather puts the rows back in order. The sorted
-    buffers are kept per thread: large fresh arrays cost a page fault per 4 kB,
-    as much as the products themselves.
+    The pixels are ordered by bin (a stable radix sort of the small bin numbers);
+    for each run of up to :data:`APPLY_ROWS` pixels of one bin, their rows of ``c``
+    are gathered into a small buffer that stays in the L2 cache, multiplied by the
+    bin's matrix straight into the sorted results (sequential writes), and the
+    offset added while those rows are still cached; one gather at the end puts the
+    rows back in pixel order. The sorted results are kept per thread (:func:`scratch`):
+    large fresh arrays cost a page fault per 4 kB, as much as the products.
     """
     n, m = c.shape
     n_wl = bank.mean.size
     # bins are small integers: a stable sort of int16 is numpy's radix sort, O(n)
     order = np.argsort(bins.astype(np.int16), kind="stable")
     counts = np.bincount(bins, minlength=bank.Wt.shape[0])
-    cs = scratch("sorted_c", (n, m))
-    # indices from argsort are in range: "clip" skips numpy's bounds checks (2x)
-    np.take(c, order, axis=0, out=cs, mode="clip")
+    rows = scratch("bin_rows", (min(APPLY_ROWS, n), m))
     es = scratch("sorted_r", (n, n_wl))
     start = 0
     for b in np.flatnonzero(counts):
-        sl = slice(start, start + int(counts[b]))
-        start += int(counts[b])
-        np.matmul(cs[sl], bank.Wt[b], out=es[sl])
-        es[sl] += bank.offset[b]
+        end = start + int(counts[b])
+        for lo in range(start, end, APPLY_ROWS):
+            hi = min(lo + APPLY_ROWS, end)
+            part = rows[: hi - lo]
+            # indices from argsort are in range: "clip" skips the bounds checks (2x)
+            np.take(c, order[lo:hi], axis=0, out=part, mode="clip")
+            np.matmul(part, bank.Wt[b], out=es[lo:hi])
+            es[lo:hi] += bank.offset[b]
+        start = end
     inverse = np.empty_like(order)
     inverse[order] = np.arange(order.size)
     return np.take(es, inverse, axis=0, mode="clip", out=out)

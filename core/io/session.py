@@ -136,9 +136,11 @@ _fsync_dir = fsync_dir
 def sha256_file(path: str | PathLike[str], *, chunk_bytes: int = 1 << 20) -> str:
     """Hex SHA-256 of a file, read in chunks (raw files are tens of MB)."""
     h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        while block := fh.read(chunk_bytes):
-            h.update(block)
+    buf = bytearray(chunk_bytes)  # one buffer, not a fresh 1 MB object per read
+    view = memoryview(buf)
+    with open(path, "rb", buffering=0) as fh:
+        while n := fh.readinto(buf):
+            h.update(view[:n])
     return h.hexdigest()
 
 

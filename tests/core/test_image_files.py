@@ -111,36 +111,123 @@ def test_formats_choose_the_files(tmp_path) -> None:
                             provenance={}, formats=("envi", "hdf5"))  # fmt: skip
 
 
-def test_zarr_chunks_written_whole_are_what_zarr_writes(tmp_path) -> None:
-    """The cube's chunk files (a whole block of rows each, written directly in one
-    piece) hold the bytes zarr-python writes for the same array, the last block
-    padded with NaN."""
+def test_zarr_shard_is_what_zarr_writes_and_the_envi_file(tmp_path) -> None:
+    """The cube's Zarr shard (row-block chunks in order, then the index), written
+    by blocks at their offsets, holds the bytes zarr-python writes for the same
+    array (but for the last chunk's padding beyond the image, a hole here, NaN
+    there), and with ENVI too, cube.img is that file (one write of the cube)."""
+    import os
+
+    import spectral
     import zarr
 
     rng = np.random.default_rng(3)
     rows, cols, wl = 5, 1030, WL[:3]  # the last block holds 1 of 2 rows
     cube = rng.uniform(0, 1, (rows, cols, wl.size)).astype(np.float32)
     out = ImageOutputs.create(tmp_path / "ours", (rows, cols), wl, block_rows=2,
-                              provenance=PROV, formats=("zarr",))  # fmt: skip
+                              provenance=PROV, formats=("envi", "zarr"))  # fmt: skip
     for r0 in (4, 0, 2):
         sl = slice(r0, r0 + 2)
         out.write_rows(r0, cube[sl], cube[sl, :, :3], cube[sl, :, :3], cube[sl, :, :2])
     ours = zarr.open_group(str(tmp_path / "ours" / "cube.zarr"), mode="r")
     np.testing.assert_array_equal(ours["reflectance"][:], cube)
     ref = zarr.open_array(str(tmp_path / "ours" / "cube.zarr" / "reflectance"))
+    assert ref.chunks == (2, cols, wl.size)  # the order the blocks are written in
+    assert ref.shards == (6, cols, wl.size)
     theirs = zarr.create_array(
         store=str(tmp_path / "theirs.zarr"), shape=ref.shape, chunks=ref.chunks,
-        dtype="float32", compressors=None, fill_value=float("nan"),
+        shards=ref.shards, dtype="float32", compressors=None,
+        fill_value=float("nan"),
     )  # fmt: skip
     theirs[:] = cube
-    assert ref.chunks == (2, cols, wl.size)  # the order the blocks are written in
-    for block in ("0", "2"):  # a full block and the padded last one
-        chunk = ("c", block, "0", "0")
-        mine = (tmp_path / "ours" / "cube.zarr" / "reflectance").joinpath(*chunk)
-        theirs_chunk = (tmp_path / "theirs.zarr").joinpath(*chunk)
-        assert mine.read_bytes() == theirs_chunk.read_bytes()
-    chunk_files = (tmp_path / "ours" / "cube.zarr" / "reflectance" / "c").rglob("0")
-    assert len([p for p in chunk_files if p.is_file()]) == 3
+    shard = ("c", "0", "0", "0")
+    mine = (tmp_path / "ours" / "cube.zarr" / "reflectance").joinpath(*shard)
+    want = (tmp_path / "theirs.zarr").joinpath(*shard).read_bytes()
+    got = mine.read_bytes()
+    image = rows * cols * wl.size * 4
+    assert len(got) == len(want)
+    assert got[:image] == want[:image]  # the image's rows
+    assert got[-(3 * 16 + 4) :] == want[-(3 * 16 + 4) :]  # the index and its CRC32C
+    # the ENVI cube is the shard file: the header's rows from offset 0
+    assert os.path.samefile(tmp_path / "ours" / "cube.img", mine)
+    envi = spectral.open_image(str(tmp_path / "ours" / "cube.hdr"))
+    np.testing.assert_array_equal(envi.open_memmap(), cube)
+
+
+def test_without_hard_links_the_cube_is_written_to_both(tmp_path, monkeypatch) -> None:
+    import os
+
+    import spectral
+    import xarray as xr
+
+    link = os.link
+
+    def no_link(src, dst, **kwargs):  # the cube's link fails (zarr's own do not)
+        if os.path.basename(dst).startswith("cube.img"):
+            raise OSError("no hard links here")
+        link(src, dst, **kwargs)
+
+    monkeypatch.setattr(os, "link", no_link)
+    cube, *_ = _write(tmp_path / "img")
+    folder = tmp_path / "img"
+    assert (folder / "cube.img").stat().st_nlink == 1
+    assert not list(folder.glob("*.link"))
+    envi = spectral.open_image(str(folder / "cube.hdr"))
+    np.testing.assert_array_equal(envi.open_memmap(), cube)
+    da = xr.open_zarr(folder / "cube.zarr")["reflectance"]
+    np.testing.assert_array_equal(da.values, cube)
+
+
+@pytest.mark.parametrize("how", ["direct", "no direct open", "direct write refused"])
+def test_cube_rows_written_past_the_cache_read_back(tmp_path, monkeypatch, how) -> None:
+    """Blocks of 5 MB at offsets off the 4 KiB alignment: the aligned middle goes
+    to the disk directly (O_DIRECT), head and tail through the cache, and where the
+    file system has no direct I/O (at open or at the write) all of it cached."""
+    import errno
+    import os
+
+    import spectral
+    import zarr
+
+    import tunespec.core.io.image_formats as fmt
+
+    direct = getattr(os, "O_DIRECT", 0)
+    opened, real_open, real_pwrite = [], os.open, os.pwrite
+
+    def watch_open(path, flags, *args, **kwargs):
+        if flags & direct:
+            opened.append(path)
+            if how == "no direct open":
+                raise OSError(errno.EINVAL, "no direct I/O here")
+        return real_open(path, flags, *args, **kwargs)
+
+    def refuse(fd, data, offset):
+        if how == "direct write refused" and _is_direct(fd):
+            raise OSError(errno.EINVAL, "Invalid argument")
+        return real_pwrite(fd, data, offset)
+
+    def _is_direct(fd):
+        import fcntl
+
+        return bool(fcntl.fcntl(fd, fcntl.F_GETFL) & direct)
+
+    monkeypatch.setattr(os, "open", watch_open)
+    monkeypatch.setattr(os, "pwrite", refuse)
+    rng = np.random.default_rng(5)
+    rows, cols, wl = 45, 1030, np.arange(400.0, 705.0, 5.0)  # 5 MB per 20 rows
+    cube = rng.uniform(0, 1, (rows, cols, wl.size)).astype(np.float32)
+    assert (20 * cols * wl.size * 4) % fmt.DIRECT_ALIGN  # offsets off the alignment
+    out = ImageOutputs.create(tmp_path / "d", (rows, cols), wl, block_rows=20,
+                              provenance=PROV, formats=("envi", "zarr"))  # fmt: skip
+    for r0 in (40, 0, 20):
+        sl = slice(r0, r0 + 20)
+        out.write_rows(r0, cube[sl], cube[sl, :, :3], cube[sl, :, :3], None)
+    envi = spectral.open_image(str(tmp_path / "d" / "cube.hdr"))
+    np.testing.assert_array_equal(envi.open_memmap(), cube)
+    z = zarr.open_array(str(tmp_path / "d" / "cube.zarr" / "reflectance"), mode="r")
+    np.testing.assert_array_equal(z[:], cube)
+    if direct:  # Linux: the two full blocks' middles were sent direct
+        assert len(opened) >= 2
 
 
 def test_formats_option_is_checked_by_the_parser(capsys) -> None:

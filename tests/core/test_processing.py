@@ -284,6 +284,23 @@ def test_missing_frames_fail_or_are_left_out(tmp_path) -> None:
     assert any("L1" in w for w in out.warnings)
 
 
+def test_a_file_failing_its_checksum_fails_or_is_left_out(tmp_path) -> None:
+    """The checksums are computed beside the processing, not before it: the result
+    is the same as checking first (the error, or the channel left out)."""
+    session, _ = _make_session(tmp_path / "s", with_corners=True)
+    path = session.path_of(next(f for f in session.frames if f.id == "target_L1"))
+    mosaic = np.load(path)
+    mosaic[0, 0] += 1  # still a readable frame, but not the one recorded
+    np.save(path, mosaic)
+    with pytest.raises(InputError, match=r"L1: raw file .* fails its checksum"):
+        process_session(session, loader=_npy_loader)
+    out = process_session(session, loader=_npy_loader, allow_incomplete=True)
+    assert out.responses.illuminants == ("WHITE",)
+    assert any("L1" in w for w in out.warnings)
+    full = process_session(session, loader=_npy_loader, verify=False)
+    assert full.responses.illuminants == ("L1", "WHITE")
+
+
 def test_outputs_are_what_calibrate_reads(tmp_path) -> None:
     session, _ = _make_session(tmp_path / "s", with_corners=True)
     out = process_session(session, loader=_npy_loader)
