@@ -80,8 +80,8 @@ from tunespec.core.sensitivity_bayes import (
 from tunespec.core.simulate import NoiseModel, scale_to_exposure, simulate_responses
 from tunespec.core.spectra import CALIBRATION_GRID, Grid, Spectra
 from tunespec.core.stats import calibration_report, sensitivity_rms
-from tunespec.core.uncertainty import PRIOR_MISMATCH_SCALE, reflectance_uncertainty
-from tunespec.core.wiener import on_integration_grid, wiener_reflectance
+from tunespec.core.uncertainty import PRIOR_MISMATCH_SCALE, wiener_with_uncertainty
+from tunespec.core.wiener import on_integration_grid
 
 WORK = CALIBRATION_GRID
 EST = Grid(400.0, 700.0, 5.0)
@@ -113,6 +113,8 @@ class Score:
     # |estimate - truth| / standard uncertainty of the sensitivities, every sample
     # where the true curve is above 1 % of its channel's peak (the report's bands)
     sens_z: list[float] = field(default_factory=list)
+    # the flat-field residual the calibration fitted (bayes)
+    fitted_flat_field: float | None = None
     seconds: float = 0.0
 
 
@@ -296,10 +298,11 @@ def run_camera(
     report_step_nm: float = 1.0,
     report_slit: bool = False,
     systematic: bool = False,
+    flat_field: float = NoiseModel.flat_field_residual,
 ) -> list[Score]:
     chart_fine, test_fine, chart_work, prior_est, db, test_est = setup
     scaled = scale_to_exposure(chart_fine, leds, cam.truth, target=0.8)
-    noise = NoiseModel()
+    noise = NoiseModel(flat_field_residual=flat_field)
     resp = simulate_responses(chart_fine, scaled, cam.truth, noise=noise, rng=rng)
     resp_t = simulate_responses(test_fine, scaled, cam.truth, noise=noise, rng=rng)
     if metering:
@@ -334,7 +337,9 @@ def run_camera(
         illum, sens, _ = on_integration_grid(
             est.correct_illuminants(used), est.sensitivity, EST
         )
-        w = wiener_reflectance(resp_t, illum, sens, prior_est)
+        # the product's estimate chain: Eq. 5 with the error model as K_e where the
+        # calibration carries one, and its uncertainty
+        w, unc = wiener_with_uncertainty(resp_t, illum, sens, prior_est, reported, est)
         st = reflectance_stats(w.reflectance, test_est)
         sc = Score(
             cam.name,
@@ -348,9 +353,10 @@ def run_camera(
             st.mean_spectral_rms,
             seconds=secs,
         )
+        if est.excess is not None:
+            sc.fitted_flat_field = est.excess.flat_field_relative
         if est.covariance is not None:
             sc.sens_z = sensitivity_z(est, truth_work)
-            unc = reflectance_uncertainty(w, resp_t, reported, est)
             sc.coverage_counts = coverage_counts(
                 w, unc, test_est.values, lab_true, test_est.names
             )
@@ -481,6 +487,13 @@ def main(argv: list[str] | None = None) -> int:
         help="stray light and cross-talk (0.2 %% per patch and LED) and a "
         "non-linearity (signal^1.003) on the responses, beside the flat-field residual",
     )
+    ap.add_argument(
+        "--flat-field",
+        type=float,
+        default=NoiseModel.flat_field_residual,
+        help="the flat field's residual (relative, one draw per patch and LED) in the "
+        "simulated responses (default %(default)s; the calibration fits its size)",
+    )
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument(
         "--grid",
@@ -532,6 +545,7 @@ def main(argv: list[str] | None = None) -> int:
                 report_step_nm=args.report_step_nm,
                 report_slit=args.report_slit,
                 systematic=args.systematic,
+                flat_field=args.flat_field,
             )
     summary = summarise(scores)
     print_summary(summary, variants)

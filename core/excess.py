@@ -135,8 +135,12 @@ class ExcessVariance:
     chart's mean log response ``mu`` under the same LED and channel
     (``log_reference_by_response``, illuminant-major as the chart's responses;
     ``log_reference`` their mean, for responses that cannot be matched to them): the
-    rest of it is a gain the calibration absorbs; ``n_patches`` and ``n_responses``: how many residuals
-    measured them.
+    rest of it is a gain the calibration absorbs; ``flat_field_relative`` (``f``):
+    the flat field's residual, one relative error of the irradiance under each LED
+    that all three channels of a patch share (the default, :data:`FLAT_FIELD_RESIDUAL`,
+    is what side files written before it was fitted assumed; :mod:`tunespec.core.uncertainty`
+    adds it, :meth:`covariance` does not); ``n_patches`` and ``n_responses``: how many
+    residuals measured them.
     """
 
     response_relative: float
@@ -148,6 +152,7 @@ class ExcessVariance:
     nonlinearity: float = 0.0
     log_reference: float = 0.0
     log_reference_by_response: tuple[float, ...] = ()
+    flat_field_relative: float = FLAT_FIELD_RESIDUAL
 
     def covariance(
         self,
@@ -188,6 +193,7 @@ class ExcessVariance:
             "crosstalk_relative": self.crosstalk_relative,
             "common_relative": self.common_relative,
             "nonlinearity": self.nonlinearity,
+            "flat_field_relative": self.flat_field_relative,
             "log_reference": self.log_reference,
             "log_reference_by_response": list(self.log_reference_by_response),
             "n_patches": self.n_patches,
@@ -200,8 +206,10 @@ class ExcessVariance:
         if not isinstance(doc, dict):
             raise InputError("excess_variance: expected an object", path=path)
         vals = {}
-        for key in _KEYS:
-            v = doc.get(key, 0.0)
+        for key in (*_KEYS, "flat_field_relative"):
+            v = doc.get(
+                key, FLAT_FIELD_RESIDUAL if key == "flat_field_relative" else 0.0
+            )
             if isinstance(v, bool) or not isinstance(v, int | float):
                 raise InputError(f"excess_variance.{key}: expected a number", path=path)
             if not 0.0 <= float(v) <= _TAU_MAX:
@@ -247,6 +255,7 @@ class ExcessVariance:
             vals["nonlinearity"],
             float(log_ref),
             tuple(float(x) for x in by),
+            vals["flat_field_relative"],
         )
 
 
@@ -314,14 +323,14 @@ def fit_excess_variance(
     predicted: NDArray[np.float64],
     noise_variance: NDArray[np.float64],
     *,
-    flat_field_relative: float = FLAT_FIELD_RESIDUAL,
+    weight_variance: NDArray[np.float64] | None = None,
     n_channels: int = 3,
 ) -> ExcessVariance:
-    """Maximum-likelihood ``(tau_r, tau_a, tau_x, tau_n, tau_c)`` of the chart's
+    """Maximum-likelihood ``(tau_r, tau_a, tau_x, tau_n, f, tau_c)`` of the chart's
     residuals.
 
     The likelihood is exact and Gaussian; ``tau_c`` is profiled over
-    :data:`TAU_GRID` at every step and the other four are found on that grid
+    :data:`TAU_GRID` at every step and the other five are found on that grid
     by coordinate descent from zero (each in turn at its best given the others,
     every fourth grid value and then the neighbours of the best, until none moves). ``log_reference`` is the chart's mean log response, weighted
     as the calibration weights its relative errors (``c^2 / v``).
@@ -332,10 +341,13 @@ def fit_excess_variance(
         Each patch's stacked responses (illuminant-major, ``n_channels`` per LED)
         and what the calibration predicts for them.
     noise_variance : (n_p, m)
-        Their known variances (ROI mean noise and the flat-field residual,
-        ``(flat_field_relative * measured)**2``). The flat-field part is one error of
-        the irradiance under one LED, shared by that LED's channels; it is counted
-        so.
+        Their known variances (the ROI means' noise). The flat-field residual ``f``
+        is not assumed but fitted: one error of the irradiance under one LED, shared
+        by that LED's channels, in units of the measured responses.
+    weight_variance : (n_p, m), optional
+        The variances the calibration weighted its rows with (default
+        ``noise_variance``): they say which gain it absorbed, about which mean log
+        response the non-linearity is measured.
 
     Examples
     --------
@@ -345,11 +357,11 @@ def fit_excess_variance(
     >>> v = (1e-3 * c) ** 2
     >>> e = c * (0.004 * rng.standard_normal((140, 1)) + 0.002 * rng.standard_normal(c.shape))
     >>> e += 0.003 * c.mean(axis=0) * np.repeat(rng.standard_normal((140, 22)), 3, axis=1)
-    >>> fit = fit_excess_variance(c + e + np.sqrt(v) * rng.standard_normal(c.shape), c, v,
-    ...                           flat_field_relative=0.0)
+    >>> fit = fit_excess_variance(c + e + np.sqrt(v) * rng.standard_normal(c.shape), c, v)
     >>> [round(x, 4) for x in (fit.common_relative, fit.response_relative,
-    ...                        fit.level_relative, fit.crosstalk_relative, fit.nonlinearity)]
-    [0.0046, 0.0021, 0.0028, 0.0, 0.0]
+    ...                        fit.level_relative, fit.crosstalk_relative, fit.nonlinearity,
+    ...                        fit.flat_field_relative)]
+    [0.0046, 0.0021, 0.0028, 0.0, 0.0, 0.0]
     """
     c = np.asarray(predicted, dtype=np.float64)
     meas = np.asarray(measured, dtype=np.float64)
@@ -357,8 +369,7 @@ def fit_excess_variance(
     n_p, m = c.shape
     k = n_channels
     n_i = m // k
-    ff2 = (flat_field_relative * meas) ** 2
-    v = np.asarray(noise_variance, dtype=np.float64) - ff2
+    v = np.asarray(noise_variance, dtype=np.float64)
     floor = 1e-12 * max(float(np.max(np.abs(c))), 1e-300) ** 2
     v = np.maximum(v, floor)
     level = np.broadcast_to(c.mean(axis=0).reshape(n_i, k), (n_p, n_i, k))
@@ -370,11 +381,12 @@ def fit_excess_variance(
         v.reshape(shape),
         c.reshape(shape) ** 2,
     )
-    ffu = flat_field_relative * meas.reshape(shape)
+    meas3 = meas.reshape(shape)
     # the gain a weighted least-squares calibration absorbs: precision c^2 / v of
     # each relative error
     pos = c > 0
-    w = np.where(pos, c**2 / np.maximum(np.asarray(noise_variance), floor), 0.0)
+    wv = noise_variance if weight_variance is None else weight_variance
+    w = np.where(pos, c**2 / np.maximum(np.asarray(wv), floor), 0.0)
     # ... under each LED and channel: the per-LED gains and the sensitivities absorb
     # each one's own mean (about a single mean the shared relative term took the rest)
     log_ref = np.sum(w * np.log(np.where(pos, c, 1.0)), axis=0) / np.maximum(
@@ -382,17 +394,19 @@ def fit_excess_variance(
     )
     u3 = log_profile(c, log_ref[None]).reshape(shape)
 
-    def nll(tr: float, ta: float, tx: float, tn: float) -> tuple[float, float]:
+    def nll(
+        tr: float, ta: float, tx: float, tn: float, tf: float
+    ) -> tuple[float, float]:
         diag = v3 + tr**2 * c2 + tx**2 * other2
-        return _profile_common(r3, c3, u3, tn, diag, ffu, ta * level)
+        return _profile_common(r3, c3, u3, tn, diag, tf * meas3, ta * level)
 
-    taus = [0.0, 0.0, 0.0, 0.0]
+    taus = [0.0, 0.0, 0.0, 0.0, 0.0]
     best_nll, best_c = nll(*taus)
     seen = {tuple(taus): best_nll}
     coarse = list(range(0, TAU_GRID.size, 4))
     for _ in range(20):
         moved = False
-        for j in range(4):
+        for j in range(len(taus)):
             # every 4th value of the grid, then the neighbours of the best one
             for pass_ in (coarse, None):
                 if pass_ is None:
@@ -411,5 +425,5 @@ def fit_excess_variance(
             break
     return ExcessVariance(
         taus[0], best_c, n_p, n_p * m, taus[1], taus[2], taus[3],
-        float(np.mean(log_ref)), tuple(float(x) for x in log_ref),
+        float(np.mean(log_ref)), tuple(float(x) for x in log_ref), taus[4],
     )  # fmt: skip

@@ -65,7 +65,6 @@ from tunespec.core.calibration import (
 from tunespec.core.datasets import load_camera_database
 from tunespec.core.errors import InputError, SingularSystemError
 from tunespec.core.excess import (
-    FLAT_FIELD_RESIDUAL,
     ExcessVariance,
     fit_excess_variance,
 )
@@ -877,21 +876,20 @@ def _excess_variance(
 ) -> ExcessVariance:
     """The chart's residuals beyond its known noise (:func:`fit_excess_variance`):
     Eq. 1 with the fitted corrections against the responses, the known variance
-    the ROI noise and the flat-field residual."""
+    the ROI noise (the flat-field residual is fitted there)."""
     L = undo_metering(
         Spectra(problem.wavelength_nm, problem.L, tuple(illuminant_names)),
         correction,
         shift_nm,
     )
     pred = stimulus_matrix(L.values, problem.R, problem.step_nm) @ S.T
-    noise = (
-        problem.var
-        - (SMOOTH_RELATIVE_ERROR * problem.C) ** 2
-        + (FLAT_FIELD_RESIDUAL * problem.C) ** 2
-    )
+    noise = problem.var - (SMOOTH_RELATIVE_ERROR * problem.C) ** 2
     n_p = len(problem.patches)
     return fit_excess_variance(
-        problem.C.reshape(n_p, -1), pred.reshape(n_p, -1), noise.reshape(n_p, -1)
+        problem.C.reshape(n_p, -1),
+        pred.reshape(n_p, -1),
+        noise.reshape(n_p, -1),
+        weight_variance=problem.var.reshape(n_p, -1),
     )
 
 

@@ -86,7 +86,8 @@ class WienerEstimate:
         i.e. the squared uncertainty of each reflectance sample. It describes the
         unclipped estimate and is only as good as the prior and ``K_e``.
     noise_variance : (n_p, n_i, 3)
-        The diagonal of ``K_e`` that was used (Eq. 6), after the ridge floor.
+        The diagonal of ``K_e`` that was used (Eq. 6, or of ``noise_covariance``),
+        after the ridge floor.
     ridge : float
         The noise-variance floor ``RIDGE_RELATIVE * mean(diag(F K F^T))`` applied to
         entries of ``K_e`` below it, or 0.0 when no entry needed it.
@@ -97,6 +98,9 @@ class WienerEstimate:
         ``F`` of Eq. 5 as used (:func:`integrated_lighting_matrix`).
     prior_mean, prior_covariance : (n_wl,), (n_wl, n_wl)
         ``m`` and ``K`` of the prior as used.
+    noise_covariance : (n_p, 3 n_i, 3 n_i) or None
+        The whole ``K_e`` of each patch where one was given (its diagonal is
+        ``noise_variance``), else None (diagonal, Eq. 6).
     """
 
     reflectance: Spectra
@@ -109,6 +113,7 @@ class WienerEstimate:
     lighting: NDArray[np.float64] | None = None
     prior_mean: NDArray[np.float64] | None = None
     prior_covariance: NDArray[np.float64] | None = None
+    noise_covariance: NDArray[np.float64] | None = None
 
     @property
     def std(self) -> NDArray[np.float64]:
@@ -126,6 +131,7 @@ def wiener_reflectance(
     noise_from: Literal["pixel", "mean"] = "pixel",
     center_prior: bool = True,
     clip: bool = True,
+    noise_covariance: NDArray[np.float64] | None = None,
 ) -> WienerEstimate:
     """Estimate reflectances from multi-illuminant RGB responses by Wiener estimation.
 
@@ -164,6 +170,11 @@ def wiener_reflectance(
         classic Wiener estimate.
     clip : bool
         Limit the estimate to the physical range [0, 1].
+    noise_covariance : (n_p, 3 n_i, 3 n_i), optional
+        Each patch's whole response error covariance, stacked illuminant-major (the
+        error model of :func:`tunespec.core.uncertainty.wiener_with_uncertainty`):
+        used as ``K_e`` instead of Eq. 6's diagonal (saturated responses are still
+        removed, small variances still floored).
 
     Returns
     -------
@@ -212,16 +223,15 @@ def wiener_reflectance(
     )
     m_rows = F.shape[0]
     FK, G, scale = _gram(F, K)
-    var, ridge_floor, n_ridged = _ridged(
-        _noise_variance(responses, noise_std, noise_from), scale
-    )
     patches, n_p = responses.patches, len(responses.patches)
-    resid = responses.rgb.reshape(n_p, m_rows) - F @ mean
-    est, post_var = _solve_patchwise(
-        G, FK, mean, resid, var.reshape(n_p, m_rows), np.diag(K), patches
+    var, noise, ridge_floor, n_ridged = _k_e(
+        responses, noise_std, noise_from, noise_covariance, m_rows, scale
     )
+    resid = responses.rgb.reshape(n_p, m_rows) - F @ mean
+    est, post_var = _solve_patchwise(G, FK, mean, resid, noise, np.diag(K), patches)
     est, clipped, n_clipped = _clip_estimate(est, patches, clip)
-    params = {"noise": "global" if noise_std is not None else "patch",
+    kind = "covariance" if noise_covariance is not None else "patch"
+    params = {"noise": "global" if noise_std is not None else kind,
               "noise_from": noise_from, "center_prior": center_prior, "clip": clip,
               "n_prior": len(prior), "n_ridged": n_ridged}  # fmt: skip
     return WienerEstimate(
@@ -229,7 +239,55 @@ def wiener_reflectance(
         clipped=clipped, n_clipped_samples=n_clipped, variance=post_var,
         noise_variance=var, ridge=ridge_floor if n_ridged else 0.0, params=params,
         lighting=F, prior_mean=mean, prior_covariance=K,
+        noise_covariance=noise if noise_covariance is not None else None,
     )  # fmt: skip
+
+
+def _k_e(
+    responses: Responses,
+    noise_std: float | None,
+    noise_from: str,
+    noise_covariance: NDArray[np.float64] | None,
+    m_rows: int,
+    scale: float,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], float, int]:
+    """``K_e`` of every patch as Eq. 5 uses it: its diagonal (n_p, n_i, 3) floored
+    (:func:`_ridged`), the system's noise ((n_p, m) diagonal, or (n_p, m, m) whole
+    with that diagonal), the floor and how many entries it raised."""
+    n_p = len(responses.patches)
+    if noise_covariance is None:
+        var = _noise_variance(responses, noise_std, noise_from)
+    else:
+        full = _checked_covariance(noise_covariance, responses, m_rows)
+        var = np.diagonal(full, axis1=1, axis2=2).reshape(responses.rgb.shape)
+    var, ridge_floor, n_ridged = _ridged(var, scale)
+    noise = var.reshape(n_p, m_rows)
+    if noise_covariance is not None:
+        idx = np.arange(m_rows)
+        full[:, idx, idx] = noise
+        noise = full
+    return var, noise, ridge_floor, n_ridged
+
+
+def _checked_covariance(
+    cov: NDArray[np.float64], responses: Responses, m_rows: int
+) -> NDArray[np.float64]:
+    """A copy of a whole ``K_e`` per patch, its shape and values checked, with
+    saturated responses removed as Eq. 6 removes them (:data:`SATURATED_VARIANCE`)."""
+    n_p = len(responses.patches)
+    full = np.array(cov, dtype=np.float64)
+    if full.shape != (n_p, m_rows, m_rows) or not np.all(np.isfinite(full)):
+        raise InputError(
+            f"noise covariance: expected finite ({n_p}, {m_rows}, {m_rows}) "
+            f"values, got shape {full.shape}"
+        )
+    if responses.saturated is not None:
+        sat = np.nan_to_num(responses.saturated, nan=0.0) > 0
+        rows = np.repeat(sat, 3, axis=1).reshape(n_p, m_rows)
+        full[rows[:, :, None] | rows[:, None, :]] = 0.0
+        p, r = np.nonzero(rows)
+        full[p, r, r] = SATURATED_VARIANCE
+    return full
 
 
 def _default_prior(wl: NDArray[np.float64]) -> Spectra:
@@ -383,15 +441,21 @@ def solve_with_noise(
 ) -> NDArray[np.float64]:
     """``X_k`` with ``(G + diag noise_k) X_k = rhs_k`` for every ``k``: Eq. 5's system
     ``F K F^T + K_e`` with each patch's (or pixel's, or noise bin's) own diagonal
-    ``K_e``, in one batched LAPACK call; no inverse is formed.
+    ``K_e`` (or whole ``K_e``: ``noise`` (k, m, m)), in one batched LAPACK call; no
+    inverse is formed.
 
-    ``G`` is (m, m), ``noise`` (k, m), ``rhs`` (k, m, r) or (m, r) for all ``k``.
+    ``G`` is (m, m), ``noise`` (k, m) or (k, m, m), ``rhs`` (k, m, r) or (m, r) for
+    all ``k``.
     A singular system raises :class:`SingularSystemError` (``where`` names it).
     """
-    k, m = noise.shape
-    A = np.repeat(G[None], k, axis=0)
-    idx = np.arange(m)
-    A[:, idx, idx] += noise
+    if noise.ndim == 3:
+        k, m = noise.shape[:2]
+        A = G[None] + noise
+    else:
+        k, m = noise.shape
+        A = np.repeat(G[None], k, axis=0)
+        idx = np.arange(m)
+        A[:, idx, idx] += noise
     try:
         return np.linalg.solve(A, np.broadcast_to(rhs, (k, *rhs.shape[-2:])))
     except np.linalg.LinAlgError as exc:
@@ -407,8 +471,8 @@ def _solve_patchwise(
     prior_var: NDArray[np.float64],
     patches: tuple[str, ...],
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Eq. 5-6 per patch with its own noise ``K_e``: the estimates and the diagonal
-    of their posterior covariance, solved in batches."""
+    """Eq. 5-6 per patch with its own noise ``K_e`` (diagonal, or whole): the
+    estimates and the diagonal of their posterior covariance, solved in batches."""
     n_p = resid.shape[0]
     est = np.empty((n_p, mean.size))
     post_var = np.empty((n_p, mean.size))

@@ -79,11 +79,11 @@ def test_noisy_coarse_readings_and_sensor_effects_keep_numbers_and_error_bars(
     assert len(fams) == 10
     for fam, per in fams.items():
         bayes, truth = per["bayes"], per["truth-read"]
-        # 0.098-0.126 measured (issue 23 asks at most 0.2 at 0.3 % noise)
+        # 0.083-0.101 measured (issue 23 asks at most 0.2 at 0.3 % noise)
         assert bayes["de00_mean"] <= 0.2, (fam, bayes["de00_mean"])
         assert bayes["de00_mean"] <= truth["de00_mean"], fam
         # neither too narrow nor too wide. Measured per family: reflectance
-        # 0.948-0.960, L* 0.950-0.997, a* 0.918-0.975, b* 0.937-0.978 (0.982-0.998
+        # 0.952-0.958, L* 0.940-0.978, a* 0.915-0.975, b* 0.940-0.987 (0.982-0.998
         # reflectance and up to 1.0 for L*, a*, b* before cross-talk, stray light,
         # the non-linearity and the shared flat field were modelled)
         lo = {"reflectance": 0.93, "L": 0.93, "a": 0.90, "b": 0.92}
@@ -91,3 +91,27 @@ def test_noisy_coarse_readings_and_sensor_effects_keep_numbers_and_error_bars(
         for k in lo:
             c = bayes[f"coverage_{k}"]
             assert lo[k] <= c <= hi[k], (fam, k, c)
+
+
+@pytest.mark.slow
+def test_a_flat_field_worse_than_nominal_is_measured_not_assumed(
+    tmp_path_factory,
+) -> None:
+    """A lab whose flat field leaves 1 % (not the nominal 0.3 %): the calibration
+    fits the residual from the chart, so the intervals still hold. Assuming 0.3 %
+    (as before) gave a* 0.849-0.943 and b* 0.865-0.959 per family here."""
+    run = _run(
+        tmp_path_factory,
+        "--variants", "bayes", "--report-step-nm", "10", "--meter-noise", "0.001",
+        "--systematic", "--flat-field", "0.01",
+    )  # fmt: skip
+    for score in run["scores"]:
+        # 0.0102 on every camera measured
+        assert 0.008 <= score["fitted_flat_field"] <= 0.012, score["camera"]
+    for fam, per in run["summary"].items():
+        # measured per family: reflectance 0.953-0.965, L* 0.943-0.972, a*
+        # 0.947-0.984, b* 0.950-0.994; mean dE00 0.130-0.150
+        assert per["bayes"]["de00_mean"] <= 0.17, fam
+        for k in ("reflectance", "L", "a", "b"):
+            c = per["bayes"][f"coverage_{k}"]
+            assert 0.93 <= c <= 0.999, (fam, k, c)

@@ -510,8 +510,7 @@ def estimate_reflectance(
         :func:`~tunespec.core.wiener.wiener_reflectance`'s.
     """
     from tunespec.core.plausibility import Checks, check_estimate_inputs
-    from tunespec.core.uncertainty import reflectance_uncertainty
-    from tunespec.core.wiener import wiener_reflectance
+    from tunespec.core.uncertainty import wiener_with_uncertainty
 
     illum_fine, sens_fine, _ = estimation_lighting(
         illuminants, sensitivity, sensitivity.meta if meta is None else meta, grid,
@@ -521,24 +520,23 @@ def estimate_reflectance(
     check_estimate_inputs(
         checks, responses, illum_fine, sens_fine, responses_path=responses_path
     )
-    est = wiener_reflectance(
-        responses,
-        illum_fine,
-        sens_fine,
-        prior.resample(grid, source=prior.meta.get("source")),
-        noise_std=noise_std,
-        center_prior=center_prior,
-        clip=clip,
-    )
     if calibration is None and uncertainty_from_meta:
         from tunespec.core.calibration import Calibration as FileCalibration
 
         calibration = FileCalibration.from_meta(
             sensitivity, sensitivity.meta if meta is None else meta
         )
-    unc = None
-    if calibration is not None and calibration.covariance is not None:
-        unc = reflectance_uncertainty(est, responses, illuminants, calibration)
+    est, unc = wiener_with_uncertainty(
+        responses,
+        illum_fine,
+        sens_fine,
+        prior.resample(grid, source=prior.meta.get("source")),
+        illuminants,
+        calibration,
+        noise_std=noise_std,
+        center_prior=center_prior,
+        clip=clip,
+    )
     return Estimation(est, None, unc, tuple(checks.overridden))
 
 
