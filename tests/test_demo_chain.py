@@ -95,14 +95,17 @@ def test_readme_chain_reproduces_the_demo_exactly(demo, chain) -> None:
     # the demo's rawtoaces JSON gives nearly the estimate of its CSV: rawtoaces' schema
     # holds 380-780 nm at 5 nm, the calibration 2 nm (CALIBRATION_MAX_STEP_NM); the
     # 5 nm samples move Eq. 1's weak off-channel responses by up to 7 %, whichever
-    # interpolation fills them in (demo: 0.12 against 0.07 mean CIEDE2000, spectral
-    # RMS 0.0249 against 0.0233)
+    # interpolation fills them in. Demo: 0.070 against 0.036 mean CIEDE2000, spectral
+    # RMS 0.0218 against 0.0106 (Eq. 5 weighs the responses by the ROI means' noise and
+    # the calibration's error model, which the interpolation's error is not part of;
+    # 0.12 against 0.07 and 0.0249 against 0.0233 with Eq. 6's per-pixel variance)
     _estimate_and_evaluate(chain, demo / "export/sensitivities.json", "from_json.csv",
                            demo / "export/reference_reflectances.csv", "table2_json.json")  # fmt: skip
     from_json = json.loads((chain / "table2_json.json").read_text())
     got, want = from_json["average"], summary["table2"]["average"]
     assert abs(got["delta_e00"] - want["delta_e00"]) < 0.08, (got, want)
-    assert abs(got["spectral_rms"] - want["spectral_rms"]) < 0.003, (got, want)
+    assert abs(got["spectral_rms"] - want["spectral_rms"]) < 0.015, (got, want)
+    assert got["spectral_rms"] < 0.025, got
 
 
 #: Files the commands write, by kind (relative to the demo or the chain folder).

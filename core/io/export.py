@@ -180,7 +180,9 @@ def sensitivity_meta_document(
             "parameters": "s_R, s_G, s_B at wavelength_nm, then log gain and "
             "shift_nm of each LED in led_correction order",
             "wavelength_nm": [float(x) for x in wl],
-            "values": [[float(f"{v:.7g}") for v in row] for row in covariance],
+            # every digit: the estimate weighs the responses by it (Eq. 5's K_e), so
+            # a calibration read back gives the numbers the one in memory gave
+            "values": [[float(v) for v in row] for row in covariance],
         }
     return doc
 
