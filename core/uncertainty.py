@@ -51,10 +51,12 @@ from tunespec.core.spectra import Spectra, resampling_matrix
 from tunespec.core.wiener import WienerEstimate, solve_with_noise, wiener_reflectance
 
 __all__ = [
+    "BLIND_EDGE_SCALE",
     "BUDGET_TERMS",
     "FLAT_FIELD_RESIDUAL",
     "PRIOR_MISMATCH_SCALE",
     "ReflectanceUncertainty",
+    "blind_edge_factor",
     "budget_summary",
     "calibration_response_covariance",
     "fit_generic_prior",
@@ -68,14 +70,25 @@ __all__ = [
 #: deviation relative to what a target's own responses support. The responses
 #: cannot show what a target does where camera and LEDs are blind (the red edge of
 #: foliage past an IR cut), so the fitted term is too narrow by a factor no single
-#: target reveals. Chosen by ``benchmarks/generalisation.py`` (with the estimate of
-#: :func:`wiener_with_uncertainty`; ``tune_prior_scale``: the coverage of
+#: target reveals. Chosen with :data:`BLIND_EDGE_SCALE` by
+#: ``benchmarks/generalisation.py`` (with the estimate of
+#: :func:`wiener_with_uncertainty`; ``tune_prior_scale``'s criterion: the coverage of
 #: the 95 % intervals of the reflectance at every wavelength and of L*, a*, b*
 #: closest to 95 %) under issue 23's conditions (10 nm readings with 0.1 % noise,
 #: stray light, cross-talk, non-linearity; one camera per family, the CAL1 model) on
-#: four reflectance collections: with each left out in turn the choice is 1.15,
-#: 1.20 and 1.25 for three and 1.40 for the fourth (rawtoaces 190); 1.20 on all.
-PRIOR_MISMATCH_SCALE = 1.2
+#: four reflectance collections: with each left out in turn the choice is
+#: (1.10, 0.50) for CIE 1995 and NIST CQS and (1.15, 0.25) for CIE 2017; (1.15, 0.25)
+#: on all four.
+PRIOR_MISMATCH_SCALE = 1.15
+#: ``gamma``: at a wavelength where Eq. 1 sees nothing (:func:`blind_edge_factor`)
+#: the prior-mismatch term's standard deviation is ``1 + gamma`` times the rest's:
+#: there the estimate is the prior's extrapolation alone, and surfaces depart from
+#: the prior set's correlations (a paper's UV edge against the SG's) more than the
+#: fitted term can show. Chosen with :data:`PRIOR_MISMATCH_SCALE` (above).
+BLIND_EDGE_SCALE = 0.25
+#: Visibility (the noise-weighted column norm of Eq. 1's ``F`` relative to its
+#: largest) below which a wavelength counts as blind, linearly: fully at 0.
+BLIND_VISIBILITY = 0.1
 
 #: Correlation lengths (nm) tried for the generic prior component (Matern 3/2).
 #: Surface reflectances are smooth: a handful of basis functions describe them
@@ -461,15 +474,14 @@ def reflectance_uncertainty(
     Haneishi et al., Applied Optics 39(35), 2000):
     ``K_e`` the responses' true error covariance (noise, flat field, and the
     calibration's covariance propagated through Eq. 1), ``K_mis`` the prior
-    mismatch fitted to this target's responses and scaled by ``prior_scale``.
+    mismatch fitted to this target's responses, scaled by ``prior_scale`` and
+    widened where Eq. 1 is blind (:func:`blind_edge_factor`).
 
     Parameters
     ----------
     wiener
-        The estimate, computed by :func:`~tunespec.core.wiener.wiener_reflectance`
-        with ``calibration.correct_illuminants(illuminants)`` and
-        ``calibration.sensitivity`` (on one grid, the estimate's or a finer one) and
-        ``prior``.
+        The estimate (:func:`wiener_with_uncertainty`, or
+        :func:`~tunespec.core.wiener.wiener_reflectance` with the calibration's).
     responses
         The responses it was computed from (``rgb_std`` and ``n_pixels`` give the
         noise; without them only the calibration and prior terms count).
@@ -510,8 +522,8 @@ def reflectance_uncertainty(
     G = FK @ F.T
     n = wl.size
     kappa2 = float(PRIOR_MISMATCH_SCALE if prior_scale is None else prior_scale) ** 2
-    cov = np.empty((n_p, n, n))
-    cov_prior = np.empty((n_p, n, n))
+    cov, cov_prior = np.empty((n_p, n, n)), np.empty((n_p, n, n))
+    edge = blind_edge_factor(F, wiener.noise_variance.reshape(n_p, m_rows))
     # each term's share of every reflectance variance, and its XYZ covariance
     term_var = {t: np.empty((n_p, n)) for t in terms}
     term_xyz = {t: np.empty((n_p, 3, 3)) for t in terms}
@@ -531,6 +543,7 @@ def reflectance_uncertainty(
             )
             @ IWF.transpose(0, 2, 1)
         )
+        P *= edge[lo:hi, :, None] * edge[lo:hi, None, :]
         E = P.copy()  # + W N W' term by term: the budget's parts add up to it
         for t, N in terms.items():
             Et = W @ N[lo:hi] @ Wt
@@ -630,6 +643,25 @@ def wiener_with_uncertainty(
             noise_covariance=sum(terms.values()),
         )  # fmt: skip
     return est, reflectance_uncertainty(est, responses, illuminants, calibration)
+
+
+def blind_edge_factor(
+    F: NDArray[np.float64], noise_variance: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """Per target and wavelength, ``1 + gamma b`` (:data:`BLIND_EDGE_SCALE`): ``b``
+    is 1 where Eq. 1 sees nothing of the wavelength and falls linearly to 0 at the
+    visibility :data:`BLIND_VISIBILITY`.
+
+    The visibility of wavelength ``l`` for a target is ``sqrt(sum_j F_jl^2 / v_j)``
+    (``v_j`` its responses' noise variances as Eq. 5 used them) relative to its
+    largest over the wavelengths: what one unit of reflectance there adds to the
+    responses, in units of their noise. (n_p, n_wl)."""
+    vis = np.sqrt(
+        np.einsum("jl,pj->pl", F**2, 1.0 / np.maximum(noise_variance, 1e-300))
+    )
+    vis /= np.maximum(vis.max(axis=1, keepdims=True), 1e-300)
+    blind = np.clip(1.0 - vis / BLIND_VISIBILITY, 0.0, 1.0)
+    return 1.0 + BLIND_EDGE_SCALE * blind
 
 
 def _budget_terms(

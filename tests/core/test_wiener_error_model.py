@@ -95,3 +95,20 @@ def test_an_error_the_responses_share_is_weighted_as_shared(system) -> None:
         )
     # measured: whole 0.0039, diagonal 0.0095
     assert err["whole"] < 0.6 * err["diagonal"], err
+
+
+def test_the_prior_term_is_widened_only_where_eq1_is_blind(system) -> None:
+    from tunespec.core.uncertainty import BLIND_EDGE_SCALE, blind_edge_factor
+
+    led, cam, sg, rgb = system
+    w = wiener_reflectance(
+        _responses(sg, led, rgb, [5, 6]), led, cam, sg, noise_std=1e-3
+    )
+    F = w.lighting.copy()
+    F[:, 0] = 0.0  # a wavelength no LED and channel sees
+    F[:, 1] = 0.05 * F[:, 30]  # one they barely see
+    edge = blind_edge_factor(F, w.noise_variance.reshape(2, -1))
+    assert np.allclose(edge[:, 0], 1.0 + BLIND_EDGE_SCALE)
+    assert np.all(edge[:, 1] > 1.0)
+    # where the LEDs see well (the middle of the spectrum) nothing changes
+    assert np.all(edge[:, 20:40] == 1.0)
