@@ -77,8 +77,8 @@ __all__ = [
 #: closest to 95 %) under issue 23's conditions (10 nm readings with 0.1 % noise,
 #: stray light, cross-talk, non-linearity; one camera per family, the CAL1 model) on
 #: four reflectance collections: with each left out in turn the choice is
-#: (1.10, 0.50) for CIE 1995 and NIST CQS and (1.15, 0.25) for CIE 2017; (1.15, 0.25)
-#: on all four.
+#: (1.10, 0.50) for CIE 1995 and NIST CQS, (1.15, 0.25) for CIE 2017 and (1.25, 1.25)
+#: for rawtoaces 190; (1.15, 0.25) on all four.
 PRIOR_MISMATCH_SCALE = 1.15
 #: ``gamma``: at a wavelength where Eq. 1 sees nothing (:func:`blind_edge_factor`)
 #: the prior-mismatch term's standard deviation is ``1 + gamma`` times the rest's:
