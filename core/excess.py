@@ -137,10 +137,10 @@ class ExcessVariance:
     ``log_reference`` their mean, for responses that cannot be matched to them): the
     rest of it is a gain the calibration absorbs; ``flat_field_relative`` (``f``):
     the flat field's residual, one relative error of the irradiance under each LED
-    that all three channels of a patch share (the default, :data:`FLAT_FIELD_RESIDUAL`,
-    is what side files written before it was fitted assumed; :mod:`tunespec.core.uncertainty`
-    adds it, :meth:`covariance` does not); ``n_patches`` and ``n_responses``: how many
-    residuals measured them.
+    that all three channels of a patch share (the default,
+    :data:`FLAT_FIELD_RESIDUAL`, is what side files written before it was fitted
+    assumed; :mod:`tunespec.core.uncertainty` adds it, :meth:`covariance` does not);
+    ``n_patches`` and ``n_responses``: how many residuals measured them.
     """
 
     response_relative: float

@@ -605,7 +605,8 @@ def wiener_with_uncertainty(
     covariance (Kay, *Fundamentals of Statistical Signal Processing I*, 1993, ch.
     12). On ``benchmarks/generalisation.py`` under issue 23's conditions it lowers
     the mean CIEDE2000 of every family (see docs/validation.md). The model is
-    evaluated at a first, Eq. 6 estimate (the calibration term depends on the reflectance through Eq. 1).
+    evaluated at a first, Eq. 6 estimate (the calibration term depends on the
+    reflectance through Eq. 1).
 
     Without such a calibration, without per-pixel deviations, or with one noise
     level for all (``noise_std``) it is Eq. 5-6 as the paper has it.
