@@ -71,6 +71,15 @@ class Responses:
                     raise InputError(f"{name} shape {arr.shape}, expected {want}")
                 object.__setattr__(self, name, arr)
 
+    @property
+    def clipped(self) -> NDArray[np.bool_]:
+        """(n_p, n_i): which patch's responses under which illuminant had clipped
+        pixels (a ``saturated`` fraction above 0; unknown, NaN, counts as not; all
+        False without ``saturated``)."""
+        if self.saturated is None:
+            return np.zeros((len(self.patches), len(self.illuminants)), dtype=bool)
+        return np.nan_to_num(self.saturated, nan=0.0) > 0
+
     def subset(
         self, patches: list[str] | None = None, illuminants: list[str] | None = None
     ) -> Responses:

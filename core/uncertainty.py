@@ -397,10 +397,7 @@ def _response_error_terms(
     A term the inputs do not carry is left out."""
     n_p, m_rows = len(responses.patches), 3 * len(responses.illuminants)
     rgb = responses.rgb.reshape(n_p, m_rows)
-    keep = np.ones((n_p, m_rows), dtype=bool)
-    if responses.saturated is not None:
-        sat = (np.nan_to_num(responses.saturated, nan=0.0) > 0)[..., None]
-        keep = ~np.broadcast_to(sat, responses.rgb.shape).reshape(n_p, m_rows)
+    keep = ~np.repeat(responses.clipped, 3, axis=1)  # (n_p, m_rows)
     idx = np.arange(m_rows)
 
     def diagonal(var: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -508,11 +505,8 @@ def reflectance_uncertainty(
     assert F is not None and K is not None and mean is not None
     m_rows = F.shape[0]
     n_p = len(responses.patches)
-    used = (
-        wiener.noise_variance.reshape(n_p, m_rows)
-        if wiener.noise_covariance is None
-        else wiener.noise_covariance
-    )
+    diag = wiener.noise_variance.reshape(n_p, m_rows)
+    used = diag if wiener.noise_covariance is None else wiener.noise_covariance
     rgb = responses.rgb.reshape(n_p, m_rows)
     terms = _response_error_terms(responses, illuminants, calibration, refl)
     noise_all = sum(terms.values())
@@ -523,7 +517,7 @@ def reflectance_uncertainty(
     n = wl.size
     kappa2 = float(PRIOR_MISMATCH_SCALE if prior_scale is None else prior_scale) ** 2
     cov, cov_prior = np.empty((n_p, n, n)), np.empty((n_p, n, n))
-    edge = blind_edge_factor(F, wiener.noise_variance.reshape(n_p, m_rows))
+    edge = blind_edge_factor(F, diag)
     # each term's share of every reflectance variance, and its XYZ covariance
     term_var = {t: np.empty((n_p, n)) for t in terms}
     term_xyz = {t: np.empty((n_p, 3, 3)) for t in terms}

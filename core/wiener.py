@@ -281,12 +281,10 @@ def _checked_covariance(
             f"noise covariance: expected finite ({n_p}, {m_rows}, {m_rows}) "
             f"values, got shape {full.shape}"
         )
-    if responses.saturated is not None:
-        sat = np.nan_to_num(responses.saturated, nan=0.0) > 0
-        rows = np.repeat(sat, 3, axis=1).reshape(n_p, m_rows)
-        full[rows[:, :, None] | rows[:, None, :]] = 0.0
-        p, r = np.nonzero(rows)
-        full[p, r, r] = SATURATED_VARIANCE
+    rows = np.repeat(responses.clipped, 3, axis=1)  # (n_p, m_rows)
+    full[rows[:, :, None] | rows[:, None, :]] = 0.0
+    p, r = np.nonzero(rows)
+    full[p, r, r] = SATURATED_VARIANCE
     return full
 
 
@@ -449,7 +447,7 @@ def solve_with_noise(
     A singular system raises :class:`SingularSystemError` (``where`` names it).
     """
     if noise.ndim == 3:
-        k, m = noise.shape[:2]
+        k = noise.shape[0]
         A = G[None] + noise
     else:
         k, m = noise.shape
@@ -582,8 +580,7 @@ def _noise_variance(
         # A clipped ROI has a tiny std (every pixel at the white level), so Eq. 6
         # would trust it most; it carries no information about r, so give it a
         # variance that removes it from the estimate instead.
-        clipped = np.nan_to_num(responses.saturated, nan=0.0) > 0
-        var = np.where(clipped[..., None], SATURATED_VARIANCE, var)
+        var = np.where(responses.clipped[..., None], SATURATED_VARIANCE, var)
     return var
 
 

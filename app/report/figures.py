@@ -174,7 +174,7 @@ def _response_map_figure(responses: Responses) -> Figure:
     vmax = max(1.0, float(peak.max()))
     im = ax.imshow(peak, aspect="auto", cmap="viridis", vmin=0.0, vmax=vmax)
     if responses.saturated is not None:
-        pi = np.argwhere(np.nan_to_num(responses.saturated) > 0)
+        pi = np.argwhere(responses.clipped)
         if pi.size:
             ax.scatter(pi[:, 1], pi[:, 0], marker="x", color="red", s=18)
             title += "; x = saturated pixels"

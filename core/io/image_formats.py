@@ -467,10 +467,7 @@ def pwrite_all(path: str | PathLike[str], offset: int, data: NDArray[Any]) -> No
     number of writers may fill disjoint ranges of one file at the same time)."""
     fd = os.open(path, os.O_WRONLY)
     try:
-        view = memoryview(np.ascontiguousarray(data)).cast("B")
-        done = 0
-        while done < view.nbytes:
-            done += os.pwrite(fd, view[done:], offset + done)
+        _pwrite_view(fd, memoryview(np.ascontiguousarray(data)).cast("B"), offset)
     finally:
         os.close(fd)
 
@@ -548,6 +545,8 @@ def _pwrite_aligned(fd: int, view: memoryview, offset: int) -> int:
 
 
 def _pwrite_view(fd: int, view: memoryview, offset: int) -> None:
+    """All of ``view`` at ``offset`` of ``fd`` (a short write, from a signal or a
+    full disk, is continued)."""
     done = 0
     while done < view.nbytes:
         done += os.pwrite(fd, view[done:], offset + done)
