@@ -30,6 +30,7 @@ __all__ = [
     "Spectra",
     "grid_from_data",
     "resampling_matrix",
+    "spline_matrix",
 ]
 
 _WL_TOL_NM = 1e-6
@@ -321,6 +322,29 @@ def grid_from_data(
 _MIN_SPLINE_SAMPLES = 4
 
 
+def spline_matrix(
+    wl: NDArray[np.float64], target: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """``W`` (n_target, n_data): the cubic spline (not-a-knot) through samples at
+    ``wl``, evaluated at ``target`` and held at the end values outside ``wl``, as a
+    linear operator (its weights are the spline of each unit vector). Linear
+    interpolation with fewer than four samples.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> W = spline_matrix(np.arange(400.0, 701.0, 10.0), np.array([405.0, 800.0]))
+    >>> r = np.cos(np.arange(400.0, 701.0, 10.0) / 40.0)
+    >>> [round(float(x), 4) for x in W @ r], round(float(np.cos(405 / 40)), 4)
+    ([-0.7648, 0.2194], -0.7647)
+    """
+    if wl.size < _MIN_SPLINE_SAMPLES:
+        return resampling_matrix(wl, target)
+    from scipy.interpolate import CubicSpline
+
+    return CubicSpline(wl, np.eye(wl.size), axis=0)(np.clip(target, wl[0], wl[-1]))
+
+
 def resampling_matrix(
     wl: NDArray[np.float64], target: NDArray[np.float64], *, average: bool = False
 ) -> NDArray[np.float64]:
@@ -356,13 +380,8 @@ def resampling_matrix(
     spline = None
     finest = float(np.min(np.diff(target))) if n_t > 1 else np.inf
     if average and wl.size >= _MIN_SPLINE_SAMPLES and finest <= 2.0 * d_data:
-        # light spectra from coarser data: a cubic spline through the samples, as
-        # a linear operator (its weights are the spline of each unit vector)
-        from scipy.interpolate import CubicSpline
-
-        spline = CubicSpline(wl, np.eye(wl.size), axis=0)(
-            np.clip(target, wl[0], wl[-1])
-        )
+        # light spectra from coarser data: a cubic spline through the samples
+        spline = spline_matrix(wl, target)
     trap = np.zeros(wl.size)
     if wl.size > 1:
         dw = np.diff(wl)

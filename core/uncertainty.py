@@ -48,7 +48,12 @@ from tunespec.core.responses import Responses
 from tunespec.core.sensitivity import SensitivityEstimate
 from tunespec.core.sensitivity_bayes import _corrected
 from tunespec.core.spectra import Spectra, resampling_matrix
-from tunespec.core.wiener import WienerEstimate, solve_with_noise, wiener_reflectance
+from tunespec.core.wiener import (
+    WienerEstimate,
+    reflectance_basis,
+    solve_with_noise,
+    wiener_reflectance,
+)
 
 __all__ = [
     "BLIND_EDGE_SCALE",
@@ -270,7 +275,8 @@ def calibration_response_covariance(
         :meth:`SensitivityEstimate.correct_illuminants`), any grid covering the
         calibration's.
     reflectance : Spectra, (n_p, n_wl'')
-        The (estimated) reflectances, any grid; held constant beyond its ends.
+        The (estimated) reflectances, any grid; between samples as
+        :func:`~tunespec.core.wiener.reflectance_basis` has them.
 
     Returns
     -------
@@ -306,7 +312,8 @@ def calibration_response_covariance(
         rows, gains = np.full(n_i, -1), np.ones(n_i)
         shifts = np.full(n_i, calibration.spd_shift_nm)
     Lc, dL = _corrected(wl, rep, gains, shifts)
-    R = _hold_resample(reflectance.wavelength_nm, reflectance.values, wl)
+    # the reflectance between its samples as Eq. 5's F has it
+    R = reflectance.values @ reflectance_basis(reflectance.wavelength_nm, wl).T
     n_p = R.shape[0]
     # Sigma = U U' (U from the eigen-decomposition, rank <= its size).
     e, V = np.linalg.eigh(cov)

@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 from tunespec.core.errors import InputError, SingularSystemError, check_names
 from tunespec.core.forward_model import lighting_matrix
 from tunespec.core.responses import CHANNELS, Responses
-from tunespec.core.spectra import Grid, Spectra, resampling_matrix
+from tunespec.core.spectra import Grid, Spectra, spline_matrix
 
 __all__ = [
     "NOISE_SOURCES",
@@ -40,6 +40,7 @@ __all__ = [
     "integrated_lighting_matrix",
     "integration_grid",
     "on_integration_grid",
+    "reflectance_basis",
     "solve_with_noise",
     "wiener_reflectance",
 ]
@@ -414,20 +415,38 @@ def integrated_lighting_matrix(
     """``F`` of Eq. 5 for reflectances sampled on ``estimate_nm``, (3 n_i, n_est).
 
     Eq. 1 is integrated on the illuminants' and sensitivities' own (finer) grid
-    ``wavelength_nm``, with the reflectance between the estimation samples
-    interpolated linearly (a hat-function basis; end values held outside):
-    ``F = F_int Phi`` with ``Phi`` the interpolation matrix. Integrating a narrow LED
+    ``wavelength_nm``, with the reflectance between the estimation samples as
+    :func:`reflectance_basis` has it: ``F = F_int Phi``. Integrating a narrow LED
     against a steep sensitivity edge on a coarse grid instead misplaces light by
     several per cent (an IR-cut edge within one LED's band), an error no
     reflectance prior can absorb. On one grid ``Phi = I`` and this is
     :func:`~tunespec.core.forward_model.lighting_matrix`.
     """
     F = lighting_matrix(illuminant, sensitivity, _step(wavelength_nm))
+    return F @ reflectance_basis(estimate_nm, wavelength_nm)
+
+
+def reflectance_basis(
+    estimate_nm: NDArray[np.float64], wavelength_nm: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """``Phi`` (n_fine, n_est): a reflectance sampled on ``estimate_nm`` on the
+    integration grid ``wavelength_nm``, the cubic spline through its samples (end
+    values held outside; the identity on one grid).
+
+    Surface reflectances are smooth, and a colour computed from samples (ASTM E308's
+    weights) assumes as much. With a hat basis (linear interpolation) the samples
+    were the hat coefficients of a spectrum that kinks at every one of them, not its
+    values: on ``benchmarks/generalisation.py`` at a 10 nm estimation grid (10 nm
+    readings with 0.3 % noise, the sensor effects on, one camera) the mean CIEDE2000
+    against the targets' colour from their own 10 nm samples was 0.120 and the
+    coverage of the 95 % intervals of L*, a*, b* 0.88 / 0.75 / 0.78, where the
+    spline gives 0.086 and 0.95 / 0.96 / 0.95 (at 5 nm: 0.085 -> 0.084).
+    """
     if estimate_nm.size == wavelength_nm.size and np.allclose(
         estimate_nm, wavelength_nm, rtol=0, atol=_WL_TOL_NM
     ):
-        return F
-    return F @ resampling_matrix(estimate_nm, wavelength_nm)
+        return np.eye(estimate_nm.size)
+    return spline_matrix(estimate_nm, wavelength_nm)
 
 
 def solve_with_noise(
