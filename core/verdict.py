@@ -4,8 +4,8 @@ the GUI: PASS needs more than Table 1.
 Table 1 is a fit to the calibration chart itself. ``PASS`` needs Table 1's RGB mean
 error *and* the prediction of the patches a second calibration left out
 (:mod:`tunespec.core.selfcheck`) within the threshold, *and* no finding of the
-self-check (residuals against the noise model, the LED corrections, the light's
-reading noise). A Table 1 or a prediction over the threshold fails; a finding, or no
+self-check (residuals against the error model, the systematic errors fitted, the
+LED corrections, the light's reading noise). A Table 1 or a prediction over the threshold fails; a finding, or no
 self-check at all, gives ``PASS with warnings``, naming each check.
 """
 
@@ -46,6 +46,10 @@ def self_check_findings(checked: Mapping[str, Any]) -> list[str]:
     if checked.get("implausible_leds"):
         out.append(
             f"implausible LED corrections ({', '.join(checked['implausible_leds'])})"
+        )
+    if checked.get("large_systematic_terms"):
+        out.append(
+            f"large systematic errors ({', '.join(checked['large_systematic_terms'])})"
         )
     limit = checked.get("limits", {}).get("meter_noise_fraction")
     noise = checked.get("meter_noise_fraction", {})

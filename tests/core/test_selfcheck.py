@@ -22,21 +22,26 @@ from tunespec.core.datasets import (
     load_colorchecker_sg,
     load_led_set,
 )
+from tunespec.core.excess import ExcessVariance
 from tunespec.core.responses import Responses
 from tunespec.core.selfcheck import (
     CHI2_LIMIT,
     METER_NOISE_LIMIT,
+    NONLINEARITY_LIMIT,
+    SYSTEMATIC_LIMIT,
     ChiSquare,
     led_correction_warnings,
     meter_noise_fractions,
     residual_chi_square,
     response_variance,
     self_check,
+    systematic_warnings,
 )
 from tunespec.core.sensitivity import SensitivityEstimate, estimate_camera_sensitivity
 from tunespec.core.sensitivity_bayes import LedCorrection
 from tunespec.core.simulate import NoiseModel, scale_to_exposure, simulate_responses
-from tunespec.core.spectra import CALIBRATION_GRID, Grid
+from tunespec.core.spectra import CALIBRATION_GRID, Grid, Spectra
+from tunespec.core.verdict import self_check_findings
 
 FINE = Grid(380.0, 730.0, 1.0)
 
@@ -66,6 +71,17 @@ def _with_noise(chart: Responses, rng: np.random.Generator, rel: float) -> Respo
 
 def _non_linear(chart: Responses, power: float = 1.02) -> Responses:
     return replace(chart, rgb=np.sign(chart.rgb) * np.abs(chart.rgb) ** power)
+
+
+def _sensor_effects(chart: Responses, rng: np.random.Generator) -> Responses:
+    """Stray light (0.2 % of the mean response under the LED, per patch and LED),
+    cross-talk (0.2 % of the other channels, per response) and ``signal^1.003``."""
+    rgb = chart.rgb
+    out = rgb + 0.002 * rng.standard_normal(rgb.shape[:2])[..., None] * rgb.mean(0)
+    out += (
+        0.002 * rng.standard_normal(rgb.shape) * (rgb.sum(2, keepdims=True) - rgb) / 2
+    )
+    return replace(chart, rgb=np.maximum(out, 0.0) ** 1.003)
 
 
 def test_chi_square_is_one_where_the_noise_model_holds(bench) -> None:
@@ -114,6 +130,34 @@ def test_chi_square_limit_and_variance_model() -> None:
     assert response_variance(r)[0, 0] == pytest.approx(
         np.array([1e-6 + 2.25e-6, 1e-6 + 9e-8, 1e-6]) + 1e-12, rel=1e-12
     )
+
+
+def test_the_error_model_with_fitted_terms() -> None:
+    r = Responses(
+        ("A1",),
+        ("L1",),
+        np.array([[[0.5, 0.1, 0.0]]]),
+        rgb_std=np.full((1, 1, 3), 0.02),
+        n_pixels=np.full((1, 1), 400.0),
+    )
+    fitted = ExcessVariance(
+        response_relative=0.004, common_relative=0.0, flat_field_relative=0.001
+    )
+    # the fitted flat field replaces the nominal one, the relative term adds
+    expected = 1e-6 + (0.001**2 + 0.004**2) * np.array([0.25, 0.01, 0.0]) + 1e-12
+    assert response_variance(r, fitted)[0, 0] == pytest.approx(expected, rel=1e-12)
+    est = SensitivityEstimate(
+        Spectra(np.array([500.0]), np.ones((3, 1)), ("R", "G", "B")),
+        "truth",
+        excess=replace(fitted, nonlinearity=0.006, flat_field_relative=0.0051),
+    )
+    found = systematic_warnings(est)
+    assert list(found) == [
+        "flat-field residual",
+        "non-linearity (response^(1 + gamma))",
+    ]
+    assert "flat-field residual of 0.51 % (limit 0.5 %)" in found["flat-field residual"]
+    assert SYSTEMATIC_LIMIT == NONLINEARITY_LIMIT == 0.005
 
 
 def test_led_corrections_far_from_none_are_flagged(bench) -> None:
@@ -175,8 +219,9 @@ def test_a_good_bench_passes_every_check(bench) -> None:
         bench["chart"], bench["leds"], bench["sg"], refit=True
     )
     assert checked.passed, checked.warnings
-    # 1.04-1.07 fitted, 0.90-1.02 left out (28 patches)
-    assert np.all(np.abs(checked.residuals.reduced - 1.0) < 0.15)
+    # against the fitted error model (flat field 0.28 %): 1.12-1.15 fitted, the
+    # maximum-likelihood variance a little low for the parameters the fit spent
+    assert np.all(np.abs(checked.residuals.reduced - 1.0) < 0.2)
     held = checked.held_out
     assert held is not None and len(held.patches) == 28
     assert held.prediction.mean[3] < 2 * held.training.mean[3]
@@ -185,22 +230,58 @@ def test_a_good_bench_passes_every_check(bench) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("problem", ["noise", "non-linear", "led"])
-def test_a_bench_with_a_problem_is_flagged(bench, problem) -> None:
+@pytest.mark.parametrize(
+    ("problem", "terms"),
+    [
+        # fitted 1.02 % (the ROI statistics miss it)
+        ("noise", ("error of each response beyond its ROI noise",)),
+        # gamma 0.0192, and 0.74 % relative that the fit gives it besides
+        ("non-linear", ("non-linearity (response^(1 + gamma))",)),
+        ("flat field", ("flat-field residual",)),  # 1.02 %
+        ("led", ()),
+    ],
+)
+def test_a_bench_with_a_problem_is_flagged(bench, problem, terms) -> None:
     chart, leds = bench["chart"], bench["leds"]
     if problem == "noise":
         chart = _with_noise(chart, np.random.default_rng(5), 0.01)
     elif problem == "non-linear":
         chart = _non_linear(chart)
+    elif problem == "flat field":  # 1 % of the irradiance per patch and LED
+        rng = np.random.default_rng(9)
+        chart = replace(
+            chart,
+            rgb=chart.rgb
+            * (1 + 0.01 * rng.standard_normal(chart.rgb.shape[:2]))[..., None],
+        )
     else:  # LED540's spectrum reported 1.3 times too bright
         values = leds.values.copy()
         values[leds.names.index("LED540")] *= 1.3
         leds = leds.with_values(values)
     _, checked = _calibrated_check(chart, leds, bench["sg"], refit=False)
     assert not checked.passed
+    # the fitted systematic terms take the problem up: the residuals then match the
+    # error model the error bars use (no flag), and the term is named instead
+    assert checked.residuals.flagged == ()
     if problem == "led":
         assert checked.implausible_leds == ("LED540",)
-        assert checked.residuals.flagged == ()  # the gain absorbs it
+        assert checked.large_systematic == ()
     else:
-        assert checked.residuals.flagged == ("R", "G", "B")
-        assert checked.warnings[0].startswith("calibration residuals exceed")
+        assert set(terms) <= set(checked.large_systematic), checked.large_systematic
+        assert checked.warnings[0].startswith("the calibration's residuals show a")
+        findings = self_check_findings(checked.as_dict())
+        assert any(f.startswith("large systematic errors") for f in findings)
+
+
+@pytest.mark.slow
+def test_the_benchmarks_sensor_effects_are_no_finding(bench) -> None:
+    # stray light and cross-talk of 0.2 % and signal^1.003 (the generalisation
+    # benchmark's --systematic): against the 0.3 % flat field alone the residuals'
+    # chi-square was 22-58; the fitted terms (stray 0.21 %, cross-talk 0.18 %,
+    # gamma 0.0028) carry them, and they are below the limits
+    chart = _sensor_effects(bench["chart"], np.random.default_rng(7))
+    _, checked = _calibrated_check(chart, bench["leds"], bench["sg"], refit=False)
+    assert checked.residuals.flagged == ()
+    assert np.all(checked.residuals.reduced < 1.4), checked.residuals.reduced
+    assert checked.large_systematic == ()
+    assert [w for w in checked.warnings if "residuals" in w] == []
