@@ -39,16 +39,16 @@ Three checks look further, each against a model the numbers rest on:
 :func:`self_check` runs them all and returns a :class:`SelfCheck` whose
 :attr:`~SelfCheck.warnings` are one line each, for the console, the GUI and the report.
 
-The limits, on the simulated bench (``tunespec demo``, seeds 0-3, the bench whose
-truth is known to be good): reduced chi-square 0.47-0.75 per channel on the fitted
-patches and 0.40-0.71 on the left-out ones at the default resolution (the noise
-model's 0.3 % flat-field residual is more than the bench has; 0.87-1.07 at 512x340,
-where the ROI noise dominates); per-LED gains within 0.970-1.020 and offsets within
-0.6 nm; a reading noise of at most 0.11 % of an LED's peak. A chi-square of
-:data:`CHI2_LIMIT` = 2 (residuals 1.4 times the noise model's, a 95 % interval that
-covers about 83 %) is well above the bench's worst; 1 % response noise that
-``rgb_std`` does not know gives 5-7 through the demo's calibration, a 2 %
-non-linearity (``c^1.02``) 13-25 (see the tests).
+The limits, on the simulated bench (``tunespec demo``, the bench whose truth is known
+to be good): reduced chi-square against the fitted error model 1.11-1.17 per channel
+on the fitted patches and 0.96-1.09 on the left-out ones (against the nominal 0.3 %
+flat field, which is more than the bench has, it was 0.47-0.75 and 0.40-0.71 on seeds
+0-3); per-LED gains within 0.970-1.020 and offsets within 0.6 nm; a reading noise of
+at most 0.12 % of an LED's peak. A chi-square of :data:`CHI2_LIMIT` = 2 (residuals
+1.4 times the model's, a 95 % interval that covers about 83 %) is well above the
+bench's worst. An effect the fitted terms describe (1 % response noise that
+``rgb_std`` does not know, a non-linearity ``c^1.02``, a 1 % flat field) leaves the
+chi-square near 1 and is named by its term instead (see the tests).
 
 References
 ----------
@@ -107,7 +107,7 @@ __all__ = [
 
 #: A reduced chi-square above this flags a channel (and above ``1 + CHI2_SIGMAS``
 #: times its spread, which matters only for very few stimuli). The simulated bench
-#: gives 0.40-1.07 (module docstring).
+#: gives 0.96-1.17 (module docstring).
 CHI2_LIMIT = 2.0
 #: Standard deviations of the reduced chi-square above 1 that a flag needs at least.
 CHI2_SIGMAS = 5.0

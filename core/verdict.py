@@ -35,13 +35,13 @@ def self_check_findings(checked: Mapping[str, Any]) -> list[str]:
     out = []
     fitted = checked["residual_chi_square"]
     if fitted.get("flagged"):
-        out.append(f"calibration residuals beyond the noise model ({chi(fitted)})")
+        out.append(f"calibration residuals beyond the error model ({chi(fitted)})")
     held = checked.get("held_out")
     if held is None:
         out.append("no prediction of left-out patches was made")
     elif held["chi_square"].get("flagged"):
         out.append(
-            f"left-out patches' residuals beyond the noise model ({chi(held['chi_square'])})"
+            f"left-out patches' residuals beyond the error model ({chi(held['chi_square'])})"
         )
     if checked.get("implausible_leds"):
         out.append(
@@ -94,7 +94,7 @@ def calibration_verdict(
             return "FAIL", why
         return "PASS with warnings", (
             f"{why}; but: no self-check of the calibration (no left-out patches "
-            "predicted, no residual check against the noise model)"
+            "predicted, no residual check against the error model)"
         )
     over = [] if ok else [f"Table 1 RGB mean error {mean:.4f}"]
     within = [f"Table 1 RGB mean error {mean:.4f}"] if ok else []
@@ -114,7 +114,7 @@ def calibration_verdict(
         return "PASS with warnings", f"{why}; but: {'; '.join(findings)}"
     chi = self_check["residual_chi_square"]["reduced"]
     why += (
-        "; residuals consistent with the noise model (reduced chi-square "
+        "; residuals consistent with the error model (reduced chi-square "
         + ", ".join(f"{c} {v:.2f}" for c, v in chi.items())
         + "), light-source corrections and readings plausible"
     )

@@ -306,7 +306,7 @@ def _self_check_table(report: ReportData) -> _Table | None:
         )
 
     rows.append(
-        chi_row("Residuals / noise model (fitted)", checked["residual_chi_square"])
+        chi_row("Residuals / error model (fitted)", checked["residual_chi_square"])
     )
     held = checked.get("held_out")
     if held is not None:
@@ -322,8 +322,19 @@ def _self_check_table(report: ReportData) -> _Table | None:
                 "-" if limit is None else ("ok" if p["mean"] <= limit else "over"),
             )
         )
-        rows.append(chi_row("Residuals / noise model (left out)", held["chi_square"]))
+        rows.append(chi_row("Residuals / error model (left out)", held["chi_square"]))
     limits = checked.get("limits", {})
+    if "systematic_relative" in limits:
+        large = checked.get("large_systematic_terms", [])
+        rows.append(
+            (
+                "Systematic errors fitted to the residuals",
+                ", ".join(large) if large else "all within the limits",
+                f"{100 * limits['systematic_relative']:.1f} %, gamma "
+                f"{limits['nonlinearity']}",
+                "over" if large else "ok",
+            )
+        )
     noise = checked.get("meter_noise_fraction", {})
     if noise:
         name, worst = max(noise.items(), key=lambda kv: kv[1])

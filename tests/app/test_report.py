@@ -329,7 +329,7 @@ def test_summary_verdict_per_patch_errors_and_provenance(
         "PASS with warnings",
         "Table 1 RGB mean error 0.0021 of full scale is within the threshold 0.0050; "
         "but: no self-check of the calibration (no left-out patches predicted, no "
-        "residual check against the noise model)",
+        "residual check against the error model)",
     )
     html_path, pdf_path = write_report(tmp_path, full)
     text = html_path.read_text(encoding="utf-8")
@@ -403,7 +403,7 @@ def test_verdict_needs_the_self_check(report: ReportData, tmp_path: Path) -> Non
     assert ok == (
         "PASS",
         "Table 1 RGB mean error 0.0021 and left-out patches' (1 in 5) RGB mean "
-        "0.0022 within the threshold 0.0050; residuals consistent with the noise "
+        "0.0022 within the threshold 0.0050; residuals consistent with the error "
         "model (reduced chi-square R 0.70, G 0.50, B 0.70), light-source "
         "corrections and readings plausible",
     )
@@ -417,8 +417,8 @@ def test_verdict_needs_the_self_check(report: ReportData, tmp_path: Path) -> Non
     assert warned[1].endswith("but: implausible LED corrections (LED540)")
     chi = _self_check(chi=(2.5, 0.5, 0.7), warnings=["residuals: R"])
     assert verdict(replace(base, self_check=chi))[1].endswith(
-        "but: calibration residuals beyond the noise model (reduced chi-square "
-        "R 2.5 over 2.0); left-out patches' residuals beyond the noise model "
+        "but: calibration residuals beyond the error model (reduced chi-square "
+        "R 2.5 over 2.0); left-out patches' residuals beyond the error model "
         "(reduced chi-square R 2.5 over 2.0)"
     )
     over = verdict(replace(base, self_check=_self_check(held_mean=0.006)))
