@@ -341,8 +341,9 @@ def test_saturated_responses_are_ignored() -> None:
 
 
 def test_integration_on_the_fine_grid_resolves_a_steep_edge() -> None:
-    """Eq. 1 integrated at 1 nm with the reflectance on a 10 nm grid (hat basis)
-    against everything sampled at 10 nm: an IR-cut edge inside LED bands."""
+    """Eq. 1 integrated at 1 nm with the reflectance on a 10 nm grid (a spline
+    through its samples) against everything sampled at 10 nm: an IR-cut edge inside
+    LED bands."""
     fine, coarse = Grid(380.0, 730.0, 1.0), Grid(400.0, 700.0, 10.0)
     led = load_led_set(fine)
     cam = load_camera("Canon EOS 5D Mark III", fine)
@@ -368,3 +369,20 @@ def test_integration_on_the_fine_grid_resolves_a_steep_edge() -> None:
     good = reflectance_stats(integrated.reflectance, truth).mean_delta_e00
     bad = reflectance_stats(sampled.reflectance, truth).mean_delta_e00
     assert good < 0.25 * bad, (good, bad)
+
+
+def test_the_integration_grid_is_never_coarser_than_the_calibrations() -> None:
+    """Sensitivities that come at 5 nm (rawtoaces JSON) are integrated at 2 nm, with
+    the LEDs band-averaged there, not on a 5 nm grid; finer inputs keep their step."""
+    est = Grid(400.0, 700.0, 5.0)
+    sens5 = load_camera("Canon EOS 5D Mark III", Grid(380.0, 780.0, 5.0))
+    assert wiener.integration_grid(sens5, est) == Grid(380.0, 780.0, 2.0)
+    sens1 = load_camera("Canon EOS 5D Mark III", Grid(380.0, 730.0, 1.0))
+    assert wiener.integration_grid(sens1, est).step_nm == 1.0
+    basis = wiener.reflectance_basis(
+        est.wavelength_nm, Grid(380.0, 780.0, 2.0).wavelength_nm
+    )
+    # the spline through the samples passes through them and holds the ends
+    assert basis[10] == pytest.approx(np.eye(est.n)[0])  # 400 nm
+    assert basis[0] == pytest.approx(np.eye(est.n)[0])  # 380 nm: held
+    assert basis.sum(axis=1) == pytest.approx(np.ones(basis.shape[0]))
