@@ -40,11 +40,12 @@ def summary(tmp_path_factory):
 def lab_conditions(tmp_path_factory):
     """Issue 23's conditions: the light's spectra reported every 10 nm with reading
     noise of 0.3 % of each peak (clipped at zero, two readings averaged), stray light,
-    cross-talk and a non-linearity on the responses."""
+    cross-talk and a non-linearity on the responses; estimated on its evaluation's
+    grid, 400:700:10."""
     return _run(
         tmp_path_factory,
         "--variants", "bayes,truth-read", "--report-step-nm", "10",
-        "--meter-noise", "0.003", "--systematic",
+        "--meter-noise", "0.003", "--systematic", "--estimate-grid", "400:700:10",
     )  # fmt: skip
 
 
@@ -79,15 +80,16 @@ def test_noisy_coarse_readings_and_sensor_effects_keep_numbers_and_error_bars(
     assert len(fams) == 10
     for fam, per in fams.items():
         bayes, truth = per["bayes"], per["truth-read"]
-        # 0.083-0.101 measured (issue 23 asks at most 0.2 at 0.3 % noise)
-        assert bayes["de00_mean"] <= 0.2, (fam, bayes["de00_mean"])
+        # 0.085-0.100 measured (issue 23 asks at most 0.2 at 0.3 % noise); with the
+        # reflectance linear between its 10 nm samples, 0.109-0.137
+        assert bayes["de00_mean"] <= 0.12, (fam, bayes["de00_mean"])
         assert bayes["de00_mean"] <= truth["de00_mean"], fam
         # neither too narrow nor too wide. Measured per family: reflectance
-        # 0.948-0.957, L* 0.940-0.978, a* 0.918-0.975, b* 0.940-0.984 (0.982-0.998
-        # reflectance and up to 1.0 for L*, a*, b* before cross-talk, stray light,
-        # the non-linearity and the shared flat field were modelled)
-        lo = {"reflectance": 0.93, "L": 0.93, "a": 0.90, "b": 0.92}
-        hi = {"reflectance": 0.975, "L": 0.999, "a": 0.99, "b": 0.99}
+        # 0.946-0.958, L* 0.937-0.972, a* 0.943-0.981, b* 0.931-0.962 (with linear
+        # hats L* 0.86-0.92, a* 0.68-0.85, b* 0.76-0.90; at 5 nm with the sensor
+        # effects unmodelled, 0.982-0.998 and up to 1.0)
+        lo = {"reflectance": 0.93, "L": 0.92, "a": 0.92, "b": 0.92}
+        hi = {"reflectance": 0.975, "L": 0.99, "a": 0.99, "b": 0.99}
         for k in lo:
             c = bayes[f"coverage_{k}"]
             assert lo[k] <= c <= hi[k], (fam, k, c)
