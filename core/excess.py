@@ -206,10 +206,8 @@ class ExcessVariance:
         if not isinstance(doc, dict):
             raise InputError("excess_variance: expected an object", path=path)
         vals = {}
-        for key in (*_KEYS, "flat_field_relative"):
-            v = doc.get(
-                key, FLAT_FIELD_RESIDUAL if key == "flat_field_relative" else 0.0
-            )
+        for key, default in _DEFAULTS.items():
+            v = doc.get(key, default)
             if isinstance(v, bool) or not isinstance(v, int | float):
                 raise InputError(f"excess_variance.{key}: expected a number", path=path)
             if not 0.0 <= float(v) <= _TAU_MAX:
@@ -259,13 +257,16 @@ class ExcessVariance:
         )
 
 
-_KEYS = (
-    "response_relative",
-    "level_relative",
-    "crosstalk_relative",
-    "common_relative",
-    "nonlinearity",
-)
+#: The relative terms a side file keeps, with what one written before a term was
+#: fitted assumed (none, and the nominal flat field).
+_DEFAULTS = {
+    "response_relative": 0.0,
+    "level_relative": 0.0,
+    "crosstalk_relative": 0.0,
+    "common_relative": 0.0,
+    "nonlinearity": 0.0,
+    "flat_field_relative": FLAT_FIELD_RESIDUAL,
+}
 #: Largest |log_reference| accepted from a side file (a response of e^-50 is none).
 _LOG_MAX = 50.0
 
