@@ -587,6 +587,8 @@ def setup_estimation(
     """
     import cv2
 
+    from tunespec.core.calibration import Calibration
+
     # the LEDs are done: their frame buffers (about 0.3 GB a thread at full
     # resolution) and the dark planes go back to the heap, where the blocks' buffers
     # find them, instead of fresh pages beside them
@@ -610,10 +612,14 @@ def setup_estimation(
         results[brightest].flat_grid, (w, h), interpolation=cv2.INTER_LINEAR
     ).astype(np.float32)
     write_array(job.work_path(PHI), phi)
+    # the flat field's residual as the calibration's chart showed it (its K_e, as
+    # the patches' estimate and uncertainty use it)
+    excess = Calibration.from_meta(sensitivity, meta).excess
     bank = build_wiener_bank(
         F, prior.values, white, noise, grid.wavelength_nm,
         phi_range=(float(phi.min()), float(phi.max())),
         n_levels=n_levels, n_phi=n_phi,
+        flat_residual=None if excess is None else excess.flat_field_relative,
     )  # fmt: skip
     bank.params["noise_source"] = noise.source
     return bank
