@@ -67,6 +67,7 @@ import generalisation_data as gd
 from tunespec.core.colorimetry import lab_d50, reflectance_stats
 from tunespec.core.datasets import load_camera_database, load_colorchecker_sg
 from tunespec.core.metering import suppress_meter_floor
+from tunespec.core.selfcheck import self_check
 from tunespec.core.sensitivity import (
     SensitivityEstimate,
     estimate_camera_sensitivity,
@@ -113,8 +114,11 @@ class Score:
     # |estimate - truth| / standard uncertainty of the sensitivities, every sample
     # where the true curve is above 1 % of its channel's peak (the report's bands)
     sens_z: list[float] = field(default_factory=list)
-    # the flat-field residual the calibration fitted (bayes)
+    # the flat-field residual the calibration fitted, and all its systematic terms
     fitted_flat_field: float | None = None
+    fitted_excess: dict[str, Any] = field(default_factory=dict)
+    # what the product's self-check (without its held-out refit) finds
+    self_check_warnings: list[str] = field(default_factory=list)
     seconds: float = 0.0
 
 
@@ -355,6 +359,12 @@ def run_camera(
         )
         if est.excess is not None:
             sc.fitted_flat_field = est.excess.flat_field_relative
+            sc.fitted_excess = est.excess.as_dict()
+            sc.self_check_warnings = list(
+                self_check(
+                    est, resp, used, chart_work, reported_illuminants=reported_native
+                ).warnings
+            )
         if est.covariance is not None:
             sc.sens_z = sensitivity_z(est, truth_work)
             sc.coverage_counts = coverage_counts(
@@ -551,6 +561,11 @@ def main(argv: list[str] | None = None) -> int:
     print_summary(summary, variants)
     tune_prior_scale([s for s in scores if s.variant == "bayes"])
     tune_band_scale([s for s in scores if s.variant == "bayes"])
+    flagged = [s for s in scores if s.self_check_warnings]
+    print(f"\nself-check findings: {len(flagged)} of {len(scores)} calibrations")
+    for s in flagged:
+        for w in s.self_check_warnings:
+            print(f"  {s.family} ({s.variant}): {w[:110]}")
     corr = shift_correlation([s for s in scores if s.variant == "bayes"])
     if corr is not None:
         print(

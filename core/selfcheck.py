@@ -149,11 +149,11 @@ _SYSTEMATIC_TERMS = {
         "check for flare and for a raw decoding that mixes channels",
     ),
     "response_relative": (
-        "error of each response beyond its ROI noise",
+        "relative error of each response beyond its ROI noise",
         "check the light's stability and the exposures",
     ),
     "common_relative": (
-        "error shared by all of a patch's responses",
+        "relative error shared by all of a patch's responses",
         "check that the chart did not move between frames",
     ),
     "nonlinearity": (

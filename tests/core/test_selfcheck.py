@@ -234,7 +234,7 @@ def test_a_good_bench_passes_every_check(bench) -> None:
     ("problem", "terms"),
     [
         # fitted 1.02 % (the ROI statistics miss it)
-        ("noise", ("error of each response beyond its ROI noise",)),
+        ("noise", ("relative error of each response beyond its ROI noise",)),
         # gamma 0.0192, and 0.74 % relative that the fit gives it besides
         ("non-linear", ("non-linearity (response^(1 + gamma))",)),
         ("flat field", ("flat-field residual",)),  # 1.02 %
