@@ -524,21 +524,20 @@ def systematic_warnings(estimate: SensitivityEstimate) -> dict[str, str]:
     out = {}
     for key, (what, hint) in _SYSTEMATIC_TERMS.items():
         value = float(getattr(excess, key))
-        if key == "nonlinearity":
-            limit, size, cap = (
-                NONLINEARITY_LIMIT,
-                f"{value:.4f}",
-                f"{NONLINEARITY_LIMIT}",
-            )
-        else:
-            limit, size = SYSTEMATIC_LIMIT, f"{100 * value:.2f} %"
-            cap = f"{100 * SYSTEMATIC_LIMIT:.1f} %"
-        if value > limit:
-            out[what] = (
-                f"the calibration's residuals show a {what} of {size} (limit {cap}): "
-                f"the error bars carry it, but the numbers are less precise than the "
-                f"instrument can give; {hint}"
-            )
+        gamma = key == "nonlinearity"
+        limit = NONLINEARITY_LIMIT if gamma else SYSTEMATIC_LIMIT
+        if value <= limit:
+            continue
+        size, cap = (
+            (f"{value:.4f}", f"{limit}")
+            if gamma
+            else (f"{100 * value:.2f} %", f"{100 * limit:.1f} %")
+        )
+        out[what] = (
+            f"the calibration's residuals show a {what} of {size} (limit {cap}): "
+            "the error bars carry it, but the numbers are less precise than the "
+            f"instrument can give; {hint}"
+        )
     return out
 
 
@@ -635,9 +634,9 @@ def _chi_square_warning(chi: ChiSquare, what: str) -> list[str]:
     worst = ", ".join(f"{CHANNELS[i]} {chi.worst_illuminant[i]}" for i in k)
     return [
         f"{what} residuals exceed the noise model: reduced chi-square {values} "
-        f"(limit {chi.limit:.1f}; worst under {worst}): an effect the model lacks "
-        "(non-linearity, noise the ROI statistics miss, a wrong LED spectrum, or "
-        "sensitivities too constrained to fit this camera), so the error bars are "
+        f"(limit {chi.limit:.1f}; worst under {worst}): an effect the fitted error "
+        "model lacks (a wrong LED spectrum, sensitivities too constrained to fit "
+        "this camera, an error beyond the systematic terms), so the error bars are "
         "too narrow"
     ]
 
