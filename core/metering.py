@@ -38,6 +38,8 @@ spline).
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -48,8 +50,10 @@ __all__ = [
     "EMISSION_LIMIT_SD",
     "EMISSION_MARGIN_NM",
     "NOISE_REGION_FRACTION",
+    "READING_NOISE_META",
     "emission_bands",
     "meter_noise_sd",
+    "reading_noise_fractions",
     "reading_noise_rms",
     "suppress_meter_floor",
 ]
@@ -68,6 +72,9 @@ EMISSION_MARGIN_NM = 10.0
 #: Samples below this fraction of a spectrum's peak measure its noise for
 #: :func:`emission_bands` (at 10 nm an LED's flanks fall past 1 % within one sample).
 BAND_NOISE_FRACTION = 0.02
+#: Key of a cleaned spectra's ``meta`` under which :func:`suppress_meter_floor` keeps
+#: each spectrum's reading noise as reported (JSON: name -> fraction of its peak).
+READING_NOISE_META = "reading_noise_fraction"
 #: A spectrum whose low samples are mostly exact zeros has been cleaned already (an
 #: instrument that clips its noise at zero leaves a quarter to a half of them at zero).
 _CLEANED_ZERO_FRACTION = 2.0 / 3.0
@@ -192,6 +199,27 @@ def reading_noise_rms(values: NDArray[np.float64]) -> float:
     return _rms_without_tails(low)
 
 
+def reading_noise_fractions(spectra: Spectra) -> dict[str, float]:
+    """Per spectrum the reading noise as a fraction of its peak, as reported: what
+    :func:`suppress_meter_floor` measured before it cleaned them (``meta``), else
+    :func:`reading_noise_rms` of the spectra as they stand, at their own step.
+
+    Cleaned, a spectrum reported every 5 nm keeps little more than its bands' tails
+    below them, which measured as 0.3-0.9 % of the peak where the instrument's noise
+    was 0.07 % (``benchmarks/generalisation.py``, 0.1 % noise, two readings averaged).
+    """
+    kept = spectra.meta.get(READING_NOISE_META)
+    if kept is not None:
+        doc = json.loads(kept)
+        if isinstance(doc, dict) and set(spectra.names) <= set(doc):
+            return {n: float(doc[n]) for n in spectra.names}
+    out = {}
+    for name, row in zip(spectra.names, spectra.values, strict=True):
+        peak = float(np.max(row)) if row.size else 0.0
+        out[name] = reading_noise_rms(row) / peak if peak > 0 else 0.0
+    return out
+
+
 def emission_bands(
     values: NDArray[np.float64],
     wavelength_nm: NDArray[np.float64],
@@ -265,10 +293,18 @@ def suppress_meter_floor(spectra: Spectra) -> Spectra:
     """
     out = np.array(spectra.values, dtype=np.float64)
     changed = False
-    for row in out:
+    noise = {}
+    for name, row in zip(spectra.names, out, strict=True):
+        peak = float(row.max()) if row.size else 0.0
+        noise[name] = reading_noise_rms(row) / peak if peak > 0 else 0.0
         keep = emission_bands(row, spectra.wavelength_nm)
         cut = row < 0 if keep is None else (row < 0) | (~keep & (row != 0.0))
         if np.any(cut):
             row[cut] = 0.0
             changed = True
-    return spectra.with_values(out) if changed else spectra
+    if not changed:
+        return spectra
+    # cleaned, the spectra no longer show their noise (at 5 nm what is left below
+    # the bands are their tails): it is kept as the instrument reported it
+    meta = {**spectra.meta, READING_NOISE_META: json.dumps(noise)}
+    return Spectra(spectra.wavelength_nm, out, spectra.names, meta)

@@ -72,7 +72,7 @@ from numpy.typing import NDArray
 from tunespec.core.calibration import predict_responses
 from tunespec.core.errors import InputError
 from tunespec.core.excess import ExcessVariance
-from tunespec.core.metering import reading_noise_rms
+from tunespec.core.metering import reading_noise_fractions
 from tunespec.core.progress import ProgressFn, StopFn, check_stop, report
 from tunespec.core.responses import CHANNELS, Responses
 from tunespec.core.sensitivity import SensitivityEstimate
@@ -121,11 +121,11 @@ SHIFT_LIMIT_NM = 2.0
 #: A correction is flagged only if it is also this many of its standard
 #: uncertainties away from no correction (a poorly determined one is no finding).
 CORRECTION_SIGMAS = 5.0
-#: Reading noise (:func:`tunespec.core.metering.reading_noise_rms`, fraction of the
-#: LED's peak) above which the light's readings are flagged: the simulated bench's
-#: instrument (0.1 % a reading, two averaged) shows 0.07 % as reported and at most
-#: 0.12 % in processing's cleaned spectra; the cleaning is validated up to 0.3 %
-#: (``docs/validation.md``).
+#: Reading noise as reported (:func:`tunespec.core.metering.reading_noise_fractions`,
+#: fraction of the LED's peak) above which the light's readings are flagged: the
+#: simulated bench's instrument (0.1 % a reading, two averaged) shows 0.04-0.15 % per
+#: LED at a 1, 5 or 10 nm step, 0.3 % a reading 0.13-0.30 %; the cleaning is
+#: validated up to 0.3 % (``docs/validation.md``).
 METER_NOISE_LIMIT = 0.002
 #: A fitted systematic error (:class:`~tunespec.core.excess.ExcessVariance`: the
 #: flat field's residual, stray light, cross-talk, a relative error of each response
@@ -542,18 +542,11 @@ def systematic_warnings(estimate: SensitivityEstimate) -> dict[str, str]:
 
 
 def meter_noise_fractions(illuminants: Spectra) -> dict[str, float]:
-    """Per spectrum the reading noise, as a fraction of its peak.
-
-    :func:`tunespec.core.metering.reading_noise_rms` on the spectra at the light
-    source's own step (resampled onto a coarser grid the noise is averaged away and
-    cannot be seen); cleaned or not, it measures the noise in the samples far below
-    the peak that are not zero.
-    """
-    out = {}
-    for name, row in zip(illuminants.names, illuminants.values, strict=True):
-        peak = float(np.max(row)) if row.size else 0.0
-        out[name] = reading_noise_rms(row) / peak if peak > 0 else 0.0
-    return out
+    """Per spectrum the reading noise, as a fraction of its peak
+    (:func:`tunespec.core.metering.reading_noise_fractions`: as the light reported
+    it, before its floor was cleaned; at its own step, where a resampled spectrum's
+    noise is averaged away)."""
+    return reading_noise_fractions(illuminants)
 
 
 def hold_out_check(

@@ -7,7 +7,13 @@ import pytest
 
 from tunespec.core.datasets import load_camera_database, load_led_set
 from tunespec.core.forward_model import render_rgb
-from tunespec.core.metering import meter_noise_sd, suppress_meter_floor
+from tunespec.core.metering import (
+    READING_NOISE_META,
+    meter_noise_sd,
+    reading_noise_fractions,
+    suppress_meter_floor,
+)
+from tunespec.core.selfcheck import METER_NOISE_LIMIT
 from tunespec.core.spectra import Grid, Spectra
 
 WL = np.arange(380.0, 781.0)
@@ -123,3 +129,29 @@ def test_coarsely_reported_spectra_lose_their_floor_too(step_nm) -> None:
 
     assert blue(rep) / blue(true) > 1.3
     assert blue(suppress_meter_floor(rep)) / blue(true) == pytest.approx(1.0, abs=0.15)
+
+
+@pytest.mark.parametrize("step_nm", [1.0, 5.0, 10.0])
+def test_the_reading_noise_is_kept_as_reported_when_the_floor_is_cleaned(
+    step_nm,
+) -> None:
+    """Cleaned, a spectrum reported every 5 nm keeps only its bands' tails below
+    them, which measured as noise of 0.3-0.9 % of the peak; the noise measured
+    before the cleaning is kept with the spectra and given instead."""
+    coarse = Grid(380.0, 780.0, step_nm)
+    rng = np.random.default_rng(4)
+    peaks = np.arange(420.0, 700.0, 20.0)
+    true = Spectra(
+        WL, np.stack([_led(p) for p in peaks]), tuple(f"L{p:.0f}" for p in peaks)
+    )
+    true = true.resample(coarse, average=True)
+    rep = true.with_values(np.stack([_reported(v, rng) for v in true.values]))
+    clean = suppress_meter_floor(rep)
+    kept = reading_noise_fractions(clean)
+    # two readings of 0.1 % averaged, clipped: about 0.07 % (0.03-0.15 % per LED)
+    assert list(kept) == list(true.names)
+    assert 0.0002 < np.median(list(kept.values())) < 0.0012, kept
+    assert max(kept.values()) < METER_NOISE_LIMIT, kept
+    assert kept == reading_noise_fractions(rep)  # as reported
+    assert reading_noise_fractions(clean.resample(Grid(400.0, 700.0, 2.0))) == kept
+    assert READING_NOISE_META not in suppress_meter_floor(true).meta  # noise-free
