@@ -287,13 +287,16 @@ def block_noise_stats(
     )
     # float32 (numpy's pairwise sums and two-pass variance keep ~1e-7 relative over
     # a block's 256 values): float64 copies of the rows cost more in fresh pages
-    # than the statistics themselves
-    blocks = np.asarray(x[:, rows], dtype=np.float32)
-    level = blocks.mean(axis=(2, 4), dtype=np.float64).reshape(3, -1)
-    d = np.diff(blocks, axis=4)
+    # than the statistics themselves. Each block's pixels contiguous: the sums run
+    # along the last axis (a third faster than over two strided axes)
+    blocks = np.empty((3, rows.size, wb, block_px, block_px), dtype=np.float32)
+    np.copyto(blocks, x[:, rows].transpose(0, 1, 3, 2, 4))
+    n = rows.size * wb
+    level = blocks.reshape(3, n, -1).mean(axis=2, dtype=np.float64)
+    d = np.diff(blocks, axis=4).reshape(3, n, -1)
     # the variance (not the mean square) of the differences: a gradient of the
     # light field across the block shifts their mean, not their spread
-    var = 0.5 * d.var(axis=(2, 4), dtype=np.float64).reshape(3, -1)
+    var = 0.5 * d.var(axis=2, dtype=np.float64)
     keep = np.ones(rows.size * wb, dtype=bool)
     if saturated is not None:
         s = saturated[: hb * block_px, : wb * block_px].reshape(
