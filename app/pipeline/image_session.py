@@ -544,18 +544,44 @@ def _read_phi(job: ImageJob, row0: int, row1: int) -> NDArray[np.float32]:
     ).reshape(row1 - row0, w)
 
 
+#: The sessions' illuminants read in this process (the warm-up, the setup and the
+#: systematic table each need them: 22 SPD files a session, read once).
+_ILLUMINANTS: dict[tuple[Any, ...], Spectra] = {}
+_ILLUMINANTS_SIZE = 4
+_ILLUMINANTS_LOCK = threading.Lock()
+
+
 def illuminants_of(job: ImageJob) -> Spectra:
     """Each channel's measured SPD x its target exposure, as processing's
-    (:func:`tunespec.core.processing.illuminants_from_spds`)."""
+    (:func:`tunespec.core.processing.illuminants_from_spds`); read once per
+    process while the files are unchanged."""
     from tunespec.core.io.spectral import read_spectra_csv
     from tunespec.core.processing import illuminants_from_spds
 
-    return illuminants_from_spds(
+    stamps = []
+    for path in job.spd_files:
+        try:
+            st = os.stat(path)
+            stamps.append((st.st_mtime_ns, st.st_size))
+        except OSError:
+            stamps.append(None)  # read_spectra_csv names the missing file
+    key = (job.spd_files, job.spd_exposures_s, job.channels, job.session_root,
+           tuple(stamps))  # fmt: skip
+    with _ILLUMINANTS_LOCK:
+        found = _ILLUMINANTS.get(key)
+    if found is not None:
+        return found
+    found = illuminants_from_spds(
         [read_spectra_csv(path) for path in job.spd_files],
         job.spd_exposures_s,
         job.channels,
         source=job.session_root,
     )
+    with _ILLUMINANTS_LOCK:
+        while len(_ILLUMINANTS) >= _ILLUMINANTS_SIZE:
+            _ILLUMINANTS.pop(next(iter(_ILLUMINANTS)))
+        _ILLUMINANTS[key] = found
+    return found
 
 
 def setup_estimation(
@@ -628,16 +654,19 @@ def setup_estimation(
     return bank
 
 
-def warm_up(wavelength_nm: NDArray[np.float64]) -> None:
+def warm_up(wavelength_nm: NDArray[np.float64], job: ImageJob | None = None) -> None:
     """Import what :func:`setup_estimation` and :func:`systematic_table` use and
     compute the D50 weights of the grid (cached per process): run as a task beside
     the LEDs' (:func:`prepare_channel`), so that the two serial stages between the
     LEDs and the blocks do not wait for it (2 s of colour-science and SciPy imports
-    and weight probing at first use)."""
+    and weight probing at first use). With ``job``, its illuminants are read too
+    (:func:`illuminants_of`, cached: the setup's serial path then only finds them)."""
     from tunespec.core import sensitivity, uncertainty, wiener  # noqa: F401
     from tunespec.core.colorimetry import astm_e308_weights_d50
 
     astm_e308_weights_d50(np.asarray(wavelength_nm, dtype=np.float64))
+    if job is not None:
+        illuminants_of(job)
 
 
 def _corrected_for(
