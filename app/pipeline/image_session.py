@@ -659,8 +659,15 @@ def warm_up(wavelength_nm: NDArray[np.float64], job: ImageJob | None = None) -> 
     compute the D50 weights of the grid (cached per process): run as a task beside
     the LEDs' (:func:`prepare_channel`), so that the two serial stages between the
     LEDs and the blocks do not wait for it (2 s of colour-science and SciPy imports
-    and weight probing at first use). With ``job``, its illuminants are read too
-    (:func:`illuminants_of`, cached: the setup's serial path then only finds them)."""
+    and weight probing at first use), and the writers' libraries (0.3 s of Zarr,
+    tifffile and spectral's ENVI imports, which the outputs' creation between the
+    setup and the blocks would wait for). With ``job``, its illuminants are read
+    too (:func:`illuminants_of`, cached: the setup's serial path then only finds
+    them)."""
+    import spectral.io.envi  # noqa: F401
+    import tifffile  # noqa: F401
+    import zarr  # noqa: F401
+
     from tunespec.core import sensitivity, uncertainty, wiener  # noqa: F401
     from tunespec.core.colorimetry import astm_e308_weights_d50
 
