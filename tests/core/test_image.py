@@ -253,3 +253,26 @@ def test_scratch_buffers_are_per_thread_and_released() -> None:
     assert release_scratch() >= 2 * 4 * 5 * 4
     assert scratch("t", (4, 5)).base is not a.base
     assert float(a.sum()) == 20.0  # still valid for whoever holds it
+
+
+@pytest.mark.parametrize("layout", ["neighbours", "shuffled"])
+def test_bins_applied_in_either_write_order(system, layout: str) -> None:
+    # pixels of a bin side by side (as in a photograph: each run's rows are put
+    # straight into pixel order) or scattered (written sorted, gathered back)
+    from tunespec.core.image import _apply_bins
+
+    F, sg = system["F"], system["sg"].values
+    bank = build_wiener_bank(F, sg, system["white"], CAMERA_NOISE, GRID.wavelength_nm,
+                             phi_range=(1.0, 1.5))  # fmt: skip
+    rng = np.random.default_rng(3)
+    n = 3000
+    c = _noisy(F, sg[np.repeat(np.arange(30), n // 30)], np.ones(n), rng)
+    bins = np.repeat(rng.integers(0, bank.Wt.shape[0], 30), n // 30)
+    if layout == "shuffled":
+        perm = rng.permutation(n)
+        c, bins = c[perm], bins[perm]
+    got = _apply_bins(bank, c, bins, clip=True)
+    exact = (
+        np.einsum("pm,pml->pl", c.astype(np.float64), bank.Wt[bins]) + bank.offset[bins]
+    )
+    np.testing.assert_allclose(got, np.clip(exact, 0.0, 1.0), rtol=0, atol=1e-5)
