@@ -258,15 +258,18 @@ def session_graph(
         )
         for r0 in range(0, shape[0], rows)
     ]
-    final = delayed(_finish, pure=True)(
-        job_ref,
-        outputs,
-        bank,
-        blocks,
-        provenance,
-        systematic,
-        dask_key_name=f"finish-{job.work}",
+    # the last, serial part: the uncertainty TIFF (waiting for the systematic
+    # table) and the preview PNG side by side, then the provenance
+    uncertainty = delayed(_uncertainty_tiff, pure=True)(
+        outputs, blocks, systematic, dask_key_name=f"uncertainty-{job.work}"
     )
+    preview = delayed(_preview, pure=True)(
+        outputs, blocks, dask_key_name=f"preview-{job.work}"
+    )
+    final = delayed(_provenance_written, pure=True)(
+        job_ref, outputs, bank, provenance, uncertainty, preview,
+        dask_key_name=f"finish-{job.work}",
+    )  # fmt: skip
     return final, blocks
 
 
@@ -321,12 +324,30 @@ def _finish(
     provenance: dict[str, Any],
     systematic: Any,
 ) -> dict[str, Any]:
-    import numpy as np
+    """The uncertainty TIFF, the preview and the provenance, one after the other
+    (the graph runs the first two as tasks of their own, side by side)."""
+    _uncertainty_tiff(outputs, blocks, systematic)
+    _preview(outputs, blocks)
+    return _provenance_written(job, outputs, bank, provenance)
 
+
+def _uncertainty_tiff(outputs: Any, blocks: Sequence[Any], systematic: Any) -> None:
     from tunespec.app.pipeline.image_session import finish_uncertainty
 
     finish_uncertainty(outputs, blocks, systematic)
+
+
+def _preview(outputs: Any, blocks: Sequence[Any]) -> None:
+    import numpy as np
+
     outputs.write_preview(np.concatenate([b.srgb for b in blocks], axis=0))
+
+
+def _provenance_written(
+    job: Any, outputs: Any, bank: Any, provenance: dict[str, Any], *_done: Any
+) -> dict[str, Any]:
+    """``provenance.json``, last (its presence marks finished images), once
+    ``_done``'s tasks have written the other files; the work folder removed."""
     doc = {
         **provenance,
         "noise_model": _noise_doc(bank),
