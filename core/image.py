@@ -66,6 +66,7 @@ from tunespec.core.wiener import solve_with_noise
 __all__ = [
     "DEFAULT_LEVEL_BINS",
     "DEFAULT_PHI_BINS",
+    "SCRATCH_ALIGN",
     "NoiseModel",
     "PixelEstimate",
     "SensorFigures",
@@ -857,7 +858,17 @@ _SCRATCH: dict[tuple[int, str], NDArray[Any]] = {}
 _SCRATCH_LOCK = threading.Lock()
 
 
-def scratch(name: str, shape: tuple[int, ...], dtype: Any = np.float32) -> NDArray[Any]:
+#: The alignment :func:`scratch`'s ``phase`` refers to (direct I/O's, a page).
+SCRATCH_ALIGN = 4096
+
+
+def scratch(
+    name: str,
+    shape: tuple[int, ...],
+    dtype: Any = np.float32,
+    *,
+    phase: int | None = None,
+) -> NDArray[Any]:
     """A scratch array of ``shape`` for this thread, reused across calls.
 
     Large fresh arrays cost a page fault per page on first touch (and the kernel
@@ -865,17 +876,29 @@ def scratch(name: str, shape: tuple[int, ...], dtype: Any = np.float32) -> NDArr
     buffer kept per thread is faulted once. The contents are undefined and the next
     call with the same ``name`` on this thread overwrites them;
     :func:`release_scratch` drops the buffers when the work is done.
+
+    ``phase``: the array starts ``phase`` bytes past a multiple of
+    :data:`SCRATCH_ALIGN` (a multiple of the item size): written to a file offset
+    with that remainder, its aligned middle can go to the disk directly, without a
+    copy into an aligned buffer
+    (:func:`tunespec.core.io.image_formats.pwrite_direct`).
     """
     dt = np.dtype(dtype)
     size = math.prod(shape)
+    pad = 0 if phase is None else SCRATCH_ALIGN // dt.itemsize
     key = (threading.get_ident(), f"{name}:{dt.str}")
     with _SCRATCH_LOCK:
         buf = _SCRATCH.get(key)
-    if buf is None or buf.size < size:
-        buf = np.empty(size, dtype=dt)
+    if buf is None or buf.size < size + pad:
+        buf = np.empty(size + pad, dtype=dt)
         with _SCRATCH_LOCK:
             _SCRATCH[key] = buf
-    return buf[:size].reshape(shape)
+    start = 0
+    if phase is not None:
+        if phase % dt.itemsize:
+            raise ValueError(f"scratch: phase {phase} is not a multiple of the item")
+        start = (phase - buf.ctypes.data) % SCRATCH_ALIGN // dt.itemsize
+    return buf[start : start + size].reshape(shape)
 
 
 def release_scratch() -> int:

@@ -66,6 +66,7 @@ from tunespec.core.errors import InputError
 from tunespec.core.image import (
     DEFAULT_LEVEL_BINS,
     DEFAULT_PHI_BINS,
+    SCRATCH_ALIGN,
     NoiseModel,
     SensorFigures,
     WienerBank,
@@ -762,9 +763,11 @@ def estimate_block(
         # (NaN and -0 kept) at 1.5x its speed
         cv2.multiply(t.view(STACK_DTYPE), 1.0, dst=c, dtype=cv2.CV_32F)
     del planes, t
+    # placed as the cube's rows fall in its files: written there without a copy
     est = estimate_pixels(
         bank, c, phi.reshape(-1), clip=clip,
-        out=scratch("block_reflectance", (r * cols, bank.mean.size)),
+        out=scratch("block_reflectance", (r * cols, bank.mean.size),
+                    phase=outputs.cube_offset(row0) % SCRATCH_ALIGN),
     )  # fmt: skip
     del c
     unc = np.stack([est.u_lab_l, est.u_rms], axis=1)

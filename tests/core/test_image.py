@@ -276,3 +276,24 @@ def test_bins_applied_in_either_write_order(system, layout: str) -> None:
         np.einsum("pm,pml->pl", c.astype(np.float64), bank.Wt[bins]) + bank.offset[bins]
     )
     np.testing.assert_allclose(got, np.clip(exact, 0.0, 1.0), rtol=0, atol=1e-5)
+
+
+def test_scratch_phase_places_the_array_for_direct_writes(tmp_path) -> None:
+    from tunespec.core.image import SCRATCH_ALIGN, release_scratch, scratch
+    from tunespec.core.io.image_formats import pwrite_direct
+
+    for phase in (0, 2304, 4092):
+        a = scratch("phase_test", (1000, 61), phase=phase)
+        assert a.ctypes.data % SCRATCH_ALIGN == phase and a.flags.c_contiguous
+    with pytest.raises(ValueError, match="phase"):
+        scratch("phase_test", (10,), phase=2)
+    # a placed buffer goes to the file without the bounce copy, the same bytes
+    offset = 5 * SCRATCH_ALIGN + 2304
+    data = scratch("phase_test", (3 << 18,), phase=offset % SCRATCH_ALIGN)
+    data[:] = np.arange(data.size, dtype=np.float32)
+    path = tmp_path / "direct.bin"
+    path.write_bytes(b"")
+    pwrite_direct(path, offset, data)
+    back = np.fromfile(path, dtype=np.float32, offset=offset)
+    np.testing.assert_array_equal(back, data)
+    release_scratch()
