@@ -55,6 +55,7 @@ def _instrument() -> None:
     for owner, name, label in (
         (st, "load_raw", "  raw decode (load_raw)"),
         (raw.RawFrame, "planes_in", "  planes (black, scale)"),
+        (raw.RawFrame, "planes_minus", "  planes (black, scale)"),  # and the dark
         (raw.RawFrame, "saturated_in", "  clipped cells"),
         (st, "block_noise_stats", "  photon-transfer points"),
         (st, "pwrite_all", "  response stack: write"),

@@ -66,6 +66,7 @@ from tunespec.core.wiener import solve_with_noise
 __all__ = [
     "DEFAULT_LEVEL_BINS",
     "DEFAULT_PHI_BINS",
+    "SCRATCH_ALIGN",
     "NoiseModel",
     "PixelEstimate",
     "SensorFigures",
@@ -287,13 +288,16 @@ def block_noise_stats(
     )
     # float32 (numpy's pairwise sums and two-pass variance keep ~1e-7 relative over
     # a block's 256 values): float64 copies of the rows cost more in fresh pages
-    # than the statistics themselves
-    blocks = np.asarray(x[:, rows], dtype=np.float32)
-    level = blocks.mean(axis=(2, 4), dtype=np.float64).reshape(3, -1)
-    d = np.diff(blocks, axis=4)
+    # than the statistics themselves. Each block's pixels contiguous: the sums run
+    # along the last axis (a third faster than over two strided axes)
+    blocks = np.empty((3, rows.size, wb, block_px, block_px), dtype=np.float32)
+    np.copyto(blocks, x[:, rows].transpose(0, 1, 3, 2, 4))
+    n = rows.size * wb
+    level = blocks.reshape(3, n, -1).mean(axis=2, dtype=np.float64)
+    d = np.diff(blocks, axis=4).reshape(3, n, -1)
     # the variance (not the mean square) of the differences: a gradient of the
     # light field across the block shifts their mean, not their spread
-    var = 0.5 * d.var(axis=(2, 4), dtype=np.float64).reshape(3, -1)
+    var = 0.5 * d.var(axis=2, dtype=np.float64)
     keep = np.ones(rows.size * wb, dtype=bool)
     if saturated is not None:
         s = saturated[: hb * block_px, : wb * block_px].reshape(
@@ -758,20 +762,20 @@ def estimate_pixels(
     ):
         raise InputError(f"pixels: output {out.shape} is not ({n}, {bank.mean.size})")
     est = np.empty((n, bank.mean.size), dtype=np.float32) if out is None else out
+    # the binned pixels are limited to [0, 1] while their rows are cached
     if ok.all():
         bins = bank.bins_of_level(rho, phi)
-        _apply_bins(bank, c, bins, est)
+        _apply_bins(bank, c, bins, est, clip=clip)
     elif ok.any():
         # every pixel through its bin (no copies of the unclipped ones); a clipped
         # pixel's row (NaN) is replaced by its exact solution below
         b = bank.bins_of_level(np.where(ok, rho, np.float32(0.0)), phi)
-        _apply_bins(bank, c, b, est)
+        _apply_bins(bank, c, b, est, clip=clip)
         bins[ok] = b[ok]
     rest = np.flatnonzero(~ok)
     if rest.size:
-        est[rest] = wiener_pixels_exact(bank, c[rest], phi[rest])
-    if clip:
-        np.clip(est, 0.0, 1.0, out=est)
+        exact_rows = wiener_pixels_exact(bank, c[rest], phi[rest]).astype(np.float32)
+        est[rest] = np.clip(exact_rows, 0.0, 1.0) if clip else exact_rows
     xyz = est @ bank.T.astype(np.float32)
     lab = lab_from_xyz(xyz.T).T
     var_rms, var_y = _bin_variances(bank, c, phi, bins, rest)
@@ -795,45 +799,76 @@ def _apply_bins(
     c: NDArray[np.float32],
     bins: NDArray[np.int64],
     out: NDArray[np.float32] | None = None,
+    *,
+    clip: bool = False,
 ) -> NDArray[np.float32]:
     """``r = offset_b + c W_b^T`` for every pixel (row), bin by bin.
 
     The pixels are ordered by bin (a stable radix sort of the small bin numbers);
     for each run of up to :data:`APPLY_ROWS` pixels of one bin, their rows of ``c``
     are gathered into a small buffer that stays in the L2 cache, multiplied by the
-    bin's matrix straight into the sorted results (sequential writes), and the
-    offset added while those rows are still cached; one gather at the end puts the
-    rows back in pixel order. The sorted results are kept per thread (:func:`scratch`):
-    large fresh arrays cost a page fault per 4 kB, as much as the products.
+    bin's matrix, and the offset added (and the result limited to [0, 1] with
+    ``clip``) while those rows are still cached. Where the bins follow the image
+    (most pixels of a run are neighbours, as in a photograph) the run's results go
+    from a second cached buffer straight into their pixels' rows of ``out``;
+    otherwise (pixels of a bin scattered, as in a shuffled test) writing rows at
+    random costs twice the reading, so the results are written in sorted order and
+    gathered back into pixel order at the end. On a 5760x3840 block: 58 -> 51 ms
+    (the products 26 -> 22 ms into the cached buffer, no unsorting). The buffers
+    are kept per thread (:func:`scratch`).
     """
     n, m = c.shape
     n_wl = bank.mean.size
+    if out is None:
+        out = np.empty((n, n_wl), dtype=np.float32)
     # bins are small integers: a stable sort of int16 is numpy's radix sort, O(n)
     order = np.argsort(bins.astype(np.int16), kind="stable")
     counts = np.bincount(bins, minlength=bank.Wt.shape[0])
     rows = scratch("bin_rows", (min(APPLY_ROWS, n), m))
-    es = scratch("sorted_r", (n, n_wl))
+    coherent = 2 * np.count_nonzero(np.diff(order) == 1) > n
+    if coherent:
+        results = scratch("bin_results", (min(APPLY_ROWS, n), n_wl))
+    else:
+        ordered = scratch("sorted_r", (n, n_wl))
     start = 0
     for b in np.flatnonzero(counts):
         end = start + int(counts[b])
         for lo in range(start, end, APPLY_ROWS):
             hi = min(lo + APPLY_ROWS, end)
+            idx = order[lo:hi]
             part = rows[: hi - lo]
+            res = results[: hi - lo] if coherent else ordered[lo:hi]
             # indices from argsort are in range: "clip" skips the bounds checks (2x)
-            np.take(c, order[lo:hi], axis=0, out=part, mode="clip")
-            np.matmul(part, bank.Wt[b], out=es[lo:hi])
-            es[lo:hi] += bank.offset[b]
+            np.take(c, idx, axis=0, out=part, mode="clip")
+            np.matmul(part, bank.Wt[b], out=res)
+            res += bank.offset[b]
+            if clip:
+                np.clip(res, 0.0, 1.0, out=res)
+            if coherent:
+                out[idx] = res
         start = end
-    inverse = np.empty_like(order)
-    inverse[order] = np.arange(order.size)
-    return np.take(es, inverse, axis=0, mode="clip", out=out)
+    if not coherent:
+        inverse = np.empty_like(order)
+        inverse[order] = np.arange(order.size)
+        np.take(ordered, inverse, axis=0, mode="clip", out=out)
+    return out
 
 
 _SCRATCH: dict[tuple[int, str], NDArray[Any]] = {}
 _SCRATCH_LOCK = threading.Lock()
 
 
-def scratch(name: str, shape: tuple[int, ...], dtype: Any = np.float32) -> NDArray[Any]:
+#: The alignment :func:`scratch`'s ``phase`` refers to (direct I/O's, a page).
+SCRATCH_ALIGN = 4096
+
+
+def scratch(
+    name: str,
+    shape: tuple[int, ...],
+    dtype: Any = np.float32,
+    *,
+    phase: int | None = None,
+) -> NDArray[Any]:
     """A scratch array of ``shape`` for this thread, reused across calls.
 
     Large fresh arrays cost a page fault per page on first touch (and the kernel
@@ -841,17 +876,29 @@ def scratch(name: str, shape: tuple[int, ...], dtype: Any = np.float32) -> NDArr
     buffer kept per thread is faulted once. The contents are undefined and the next
     call with the same ``name`` on this thread overwrites them;
     :func:`release_scratch` drops the buffers when the work is done.
+
+    ``phase``: the array starts ``phase`` bytes past a multiple of
+    :data:`SCRATCH_ALIGN` (a multiple of the item size): written to a file offset
+    with that remainder, its aligned middle can go to the disk directly, without a
+    copy into an aligned buffer
+    (:func:`tunespec.core.io.image_formats.pwrite_direct`).
     """
     dt = np.dtype(dtype)
     size = math.prod(shape)
+    pad = 0 if phase is None else SCRATCH_ALIGN // dt.itemsize
     key = (threading.get_ident(), f"{name}:{dt.str}")
     with _SCRATCH_LOCK:
         buf = _SCRATCH.get(key)
-    if buf is None or buf.size < size:
-        buf = np.empty(size, dtype=dt)
+    if buf is None or buf.size < size + pad:
+        buf = np.empty(size + pad, dtype=dt)
         with _SCRATCH_LOCK:
             _SCRATCH[key] = buf
-    return buf[:size].reshape(shape)
+    start = 0
+    if phase is not None:
+        if phase % dt.itemsize:
+            raise ValueError(f"scratch: phase {phase} is not a multiple of the item")
+        start = (phase - buf.ctypes.data) % SCRATCH_ALIGN // dt.itemsize
+    return buf[start : start + size].reshape(shape)
 
 
 def release_scratch() -> int:

@@ -196,35 +196,49 @@ def session_graph(
     job = st.plan_image_job(session, work, dark=settings.dark)
     rect = _rectification(session) if settings.rectify else None
     shape = rect.shape if rect is not None else job.plane_shape
+    # the job and the calibration as one literal each in the graph, which the tasks
+    # refer to: as arguments, Dask would take the job's dataclasses apart in every
+    # task (about 700 objects each) and build them again when the task runs
+    job_ref = delayed(job, name=f"job-{job.work}", traverse=False)
+    sens, meta, prior = (
+        delayed(v, name=f"{k}-{job.work}", traverse=False)
+        for k, v in (
+            ("sensitivity", calibration.sensitivity),
+            ("meta", calibration.meta),
+            ("prior", calibration.prior),
+        )
+    )
     darks = [
         delayed(st.prepare_darks, pure=True)(
-            job, i, dask_key_name=f"dark-{i}-{job.work}"
+            job_ref, i, dask_key_name=f"dark-{i}-{job.work}"
         )
         for i in range(len(job.dark_keys))
     ]
     channels = [
         delayed(_after(st.prepare_channel), pure=True)(
-            darks, job, j, dask_key_name=f"led-{j}-{job.work}"
+            darks, job_ref, j, dask_key_name=f"led-{j}-{job.work}"
         )
         for j in range(len(job.channels))
     ]
     warm = delayed(st.warm_up, pure=True)(
-        calibration.grid.wavelength_nm, dask_key_name=f"warm-{job.work}"
+        calibration.grid.wavelength_nm, job_ref, dask_key_name=f"warm-{job.work}"
     )
     bank = delayed(_after(st.setup_estimation), pure=True)(
-        warm, job, channels, calibration.sensitivity, calibration.meta, calibration.prior,
-        calibration.grid, noise=settings.noise, n_levels=settings.n_levels,
-        n_phi=settings.n_phi, dask_key_name=f"setup-{job.work}",
+        warm, job_ref, channels, sens, meta, prior, calibration.grid, noise=settings.noise,
+        n_levels=settings.n_levels, n_phi=settings.n_phi,
+        dask_key_name=f"setup-{job.work}",
     )  # fmt: skip
     systematic = None
     if "tiff" in settings.formats:  # only the uncertainty TIFF holds it
         systematic = delayed(one_blas_thread, pure=True)(
-            st.systematic_table, job, bank, calibration.path, calibration.meta,
-            calibration.prior, calibration.grid,
-            dask_key_name=f"systematic-{job.work}",
+            st.systematic_table, job_ref, bank, calibration.path, meta, prior,
+            calibration.grid, dask_key_name=f"systematic-{job.work}",
         )  # fmt: skip
     rows = st.block_rows_for(shape[1])
-    provenance = _provenance(session, job, calibration, settings, rect, shape)
+    provenance = delayed(
+        _provenance(session, job, calibration, settings, rect, shape),
+        name=f"provenance-{job.work}", traverse=False,
+    )  # fmt: skip
     outputs = delayed(_create_outputs, pure=True)(
         out, shape, bank, rows, provenance, settings.formats,
         dask_key_name=f"outputs-{job.work}",
@@ -232,7 +246,7 @@ def session_graph(
     blocks = [
         delayed(one_blas_thread, pure=True)(
             st.estimate_block,
-            job,
+            job_ref,
             bank,
             outputs,
             r0,
@@ -244,15 +258,18 @@ def session_graph(
         )
         for r0 in range(0, shape[0], rows)
     ]
-    final = delayed(_finish, pure=True)(
-        job,
-        outputs,
-        bank,
-        blocks,
-        provenance,
-        systematic,
-        dask_key_name=f"finish-{job.work}",
+    # the last, serial part: the uncertainty TIFF (waiting for the systematic
+    # table) and the preview PNG side by side, then the provenance
+    uncertainty = delayed(_uncertainty_tiff, pure=True)(
+        outputs, blocks, systematic, dask_key_name=f"uncertainty-{job.work}"
     )
+    preview = delayed(_preview, pure=True)(
+        outputs, blocks, dask_key_name=f"preview-{job.work}"
+    )
+    final = delayed(_provenance_written, pure=True)(
+        job_ref, outputs, bank, provenance, uncertainty, preview,
+        dask_key_name=f"finish-{job.work}",
+    )  # fmt: skip
     return final, blocks
 
 
@@ -307,12 +324,30 @@ def _finish(
     provenance: dict[str, Any],
     systematic: Any,
 ) -> dict[str, Any]:
-    import numpy as np
+    """The uncertainty TIFF, the preview and the provenance, one after the other
+    (the graph runs the first two as tasks of their own, side by side)."""
+    _uncertainty_tiff(outputs, blocks, systematic)
+    _preview(outputs, blocks)
+    return _provenance_written(job, outputs, bank, provenance)
 
+
+def _uncertainty_tiff(outputs: Any, blocks: Sequence[Any], systematic: Any) -> None:
     from tunespec.app.pipeline.image_session import finish_uncertainty
 
     finish_uncertainty(outputs, blocks, systematic)
+
+
+def _preview(outputs: Any, blocks: Sequence[Any]) -> None:
+    import numpy as np
+
     outputs.write_preview(np.concatenate([b.srgb for b in blocks], axis=0))
+
+
+def _provenance_written(
+    job: Any, outputs: Any, bank: Any, provenance: dict[str, Any], *_done: Any
+) -> dict[str, Any]:
+    """``provenance.json``, last (its presence marks finished images), once
+    ``_done``'s tasks have written the other files; the work folder removed."""
     doc = {
         **provenance,
         "noise_model": _noise_doc(bank),

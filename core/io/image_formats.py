@@ -212,11 +212,16 @@ class ImageOutputs:
         # shard's chunks in row order hold the same bytes at the same offsets
         bip = np.ascontiguousarray(cube, dtype="<f4")
         for name in self.cube_files:
-            pwrite_direct(self.folder / name, row0 * n_bands * cols * 4, bip)
+            pwrite_direct(self.folder / name, self.cube_offset(row0), bip)
         if "tiff" in self.formats:
             for name, data in ((XYZ_TIF, xyz), (LAB_TIF, lab), (UNC_TIF, uncertainty)):
                 if data is not None:
                     self._write_tiff_rows(name, row0, data)
+
+    def cube_offset(self, row0: int) -> int:
+        """The byte offset of row ``row0`` in the cube files (each pixel's bands in
+        turn, rows one after the other)."""
+        return row0 * self.shape[1] * self.n_bands * 4
 
     def write_uncertainty(self, row0: int, uncertainty: NDArray[np.float32]) -> None:
         """Rows of the uncertainty TIFF (r, cols, 2) from ``row0`` (any row: the
@@ -525,15 +530,24 @@ def _pwrite_aligned(fd: int, view: memoryview, offset: int) -> int:
     import errno
     import mmap
 
-    bounce = getattr(_BOUNCE, "buffer", None)
-    if bounce is None:
-        bounce = _BOUNCE.buffer = mmap.mmap(-1, DIRECT_CHUNK)  # page-aligned
+    # memory already aligned (a buffer placed for it, see core.image.scratch's
+    # phase) is written as it is; else through the bounce buffer
+    aligned = np.frombuffer(view, dtype=np.uint8).ctypes.data % DIRECT_ALIGN == 0
+    bounce = None
+    if not aligned:
+        bounce = getattr(_BOUNCE, "buffer", None)
+        if bounce is None:
+            bounce = _BOUNCE.buffer = mmap.mmap(-1, DIRECT_CHUNK)  # page-aligned
     done = 0
     while done < view.nbytes:
         n = min(DIRECT_CHUNK, view.nbytes - done)
-        bounce[:n] = view[done : done + n]
+        if bounce is None:
+            source = view[done : done + n]
+        else:
+            bounce[:n] = view[done : done + n]
+            source = memoryview(bounce)[:n]
         try:
-            got = os.pwrite(fd, memoryview(bounce)[:n], offset + done)
+            got = os.pwrite(fd, source, offset + done)
         except OSError as exc:
             if exc.errno != errno.EINVAL:  # a full disk, ...: the caller's error
                 raise

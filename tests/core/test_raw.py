@@ -110,6 +110,23 @@ def test_per_site_black_levels_and_green_mean() -> None:
     assert f.black_level == pytest.approx(4.5)
 
 
+@pytest.mark.parametrize("pattern", ["RGGB", "BGGR", "GRBG", "GBRG"])
+def test_planes_minus_is_planes_less_the_dark(pattern: str, monkeypatch) -> None:
+    import tunespec.core.io.raw as raw_mod
+
+    monkeypatch.setattr(raw_mod, "_STRIP_BYTES", 8 * 30 * 3)  # strips of 3 rows
+    rng = np.random.default_rng(1)
+    f = _frame(rng.integers(0, 1000, (23, 61)), pattern, black=(4, 6, 5, 7),
+               white=1000)  # fmt: skip
+    dark = rng.uniform(-0.01, 0.02, f.planes.shape).astype(np.float32)
+    out = np.full(f.planes.shape, np.nan, dtype=np.float32)
+    got = f.planes_minus(dark, out=out)
+    assert got is out and got.shape == (3, 11, 30)
+    np.testing.assert_allclose(got, f.planes - dark, rtol=0, atol=ATOL_FLOAT32)
+    with pytest.raises(ValueError, match="dark"):
+        f.planes_minus(dark[:, 1:])
+
+
 def test_saturated_when_any_photosite_reaches_white() -> None:
     mosaic = np.full((4, 6), 50, dtype=np.uint16)
     mosaic[1, 2] = 100  # G2 of cell (0, 1) at the white level
