@@ -106,6 +106,10 @@ GENERIC_SIGMAS = np.concatenate([[0.0], np.logspace(-3.0, np.log10(0.3), 11)])
 #: Scales of the prior's own covariance tried per target.
 GENERIC_ALPHAS = (1.0, 1.5, 2.0, 3.0, 5.0)
 _CHUNK = 256
+#: Corner of the bordered matrix [[C, y], [y', corner]] whose Cholesky factor gives
+#: ``L_C^-1 y`` in :func:`fit_generic_prior`: any value above ``y' C^-1 y`` keeps it
+#: positive definite and leaves the factor's other entries as they are.
+_BORDER_CORNER = 1e300
 
 
 def matern32(
@@ -173,8 +177,12 @@ def fit_generic_prior(
     (Matern 3/2 kernel).
     """
     y = rgb - F @ mean
+    # a target with a non-finite response keeps a NaN likelihood (as a solve with
+    # it gave), without making its chunk's bordered factorisation fail
+    finite = np.isfinite(y).all(axis=1)
+    y_border = np.where(finite[:, None], y, 0.0)
     base = F @ K @ F.T
-    n_p = rgb.shape[0]
+    n_p, m = rgb.shape
     grid = [(a, sg) for a in GENERIC_ALPHAS for sg in GENERIC_SIGMAS]
     best_total = np.inf
     best = (np.ones(n_p), np.zeros(n_p), GENERIC_LENGTHS_NM[0])
@@ -184,14 +192,31 @@ def fit_generic_prior(
         for j, (alpha, sigma) in enumerate(grid):
             for lo in range(0, n_p, _CHUNK):
                 hi = min(lo + _CHUNK, n_p)
-                C = alpha**2 * base[None] + sigma**2 * FMF[None] + noise[lo:hi]
+                # C bordered by y: the Cholesky factor's last row is then
+                # z = L_C^-1 y (the forward substitution inside the factorisation,
+                # half the cost of a separate solve); the corner only has to keep
+                # the bordered matrix positive definite and does not enter z
+                aug = np.empty((hi - lo, m + 1, m + 1))
+                C = aug[:, :m, :m]
+                np.multiply(alpha**2, base[None], out=C)
+                C += sigma**2 * FMF[None]
+                C += noise[lo:hi]
+                aug[:, m, :m] = y_border[lo:hi]
+                aug[:, :m, m] = y_border[lo:hi]
+                aug[:, m, m] = _BORDER_CORNER
                 try:
-                    Lc = np.linalg.cholesky(C)
+                    La = np.linalg.cholesky(aug)
                 except np.linalg.LinAlgError:
                     continue
-                z = np.linalg.solve(Lc, y[lo:hi, :, None])[..., 0]
-                nll[j, lo:hi] = np.sum(z**2, axis=1) + 2.0 * np.sum(
-                    np.log(np.diagonal(Lc, axis1=1, axis2=2)), axis=1
+                z = La[:, m, :m]
+                nll[j, lo:hi] = np.where(
+                    finite[lo:hi],
+                    np.sum(z**2, axis=1)
+                    + 2.0
+                    * np.sum(
+                        np.log(np.diagonal(La[:, :m, :m], axis1=1, axis2=2)), axis=1
+                    ),
+                    np.nan,
                 )
         # posterior over the (alpha, sigma) grid (flat prior on it): the error
         # covariance is linear in alpha^2 and sigma^2, so their posterior means
