@@ -53,7 +53,6 @@ JCGM 100:2008 (GUM) Sec. 5 (propagation of uncertainty).
 from __future__ import annotations
 
 import math
-import threading
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -61,12 +60,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tunespec.core.errors import InputError, SingularSystemError
+from tunespec.core.scratch import scratch
 from tunespec.core.wiener import solve_with_noise
 
 __all__ = [
     "DEFAULT_LEVEL_BINS",
     "DEFAULT_PHI_BINS",
-    "SCRATCH_ALIGN",
     "NoiseModel",
     "PixelEstimate",
     "SensorFigures",
@@ -76,8 +75,6 @@ __all__ = [
     "estimate_pixels",
     "lab_from_xyz",
     "photon_transfer_fit",
-    "release_scratch",
-    "scratch",
     "srgb8_from_xyz_d50",
     "wiener_pixels_exact",
 ]
@@ -726,7 +723,7 @@ def estimate_pixels(
         Solve every pixel with its own ``K_e`` (:func:`wiener_pixels_exact`) instead
         of its bin's matrix: for measuring the binning error.
     out : (n, n_wl) float32, optional
-        Where the reflectances go (e.g. a :func:`scratch` buffer); the result's
+        Where the reflectances go (e.g. a :func:`~tunespec.core.scratch.scratch` buffer); the result's
         ``reflectance`` is then this array.
 
     Returns
@@ -815,7 +812,7 @@ def _apply_bins(
     random costs twice the reading, so the results are written in sorted order and
     gathered back into pixel order at the end. On a 5760x3840 block: 58 -> 51 ms
     (the products 26 -> 22 ms into the cached buffer, no unsorting). The buffers
-    are kept per thread (:func:`scratch`).
+    are kept per thread (:func:`~tunespec.core.scratch.scratch`).
     """
     n, m = c.shape
     n_wl = bank.mean.size
@@ -852,62 +849,6 @@ def _apply_bins(
         inverse[order] = np.arange(order.size)
         np.take(ordered, inverse, axis=0, mode="clip", out=out)
     return out
-
-
-_SCRATCH: dict[tuple[int, str], NDArray[Any]] = {}
-_SCRATCH_LOCK = threading.Lock()
-
-
-#: The alignment :func:`scratch`'s ``phase`` refers to (direct I/O's, a page).
-SCRATCH_ALIGN = 4096
-
-
-def scratch(
-    name: str,
-    shape: tuple[int, ...],
-    dtype: Any = np.float32,
-    *,
-    phase: int | None = None,
-) -> NDArray[Any]:
-    """A scratch array of ``shape`` for this thread, reused across calls.
-
-    Large fresh arrays cost a page fault per page on first touch (and the kernel
-    zeroes them), as much as the arithmetic that fills them; a block or frame
-    buffer kept per thread is faulted once. The contents are undefined and the next
-    call with the same ``name`` on this thread overwrites them;
-    :func:`release_scratch` drops the buffers when the work is done.
-
-    ``phase``: the array starts ``phase`` bytes past a multiple of
-    :data:`SCRATCH_ALIGN` (a multiple of the item size): written to a file offset
-    with that remainder, its aligned middle can go to the disk directly, without a
-    copy into an aligned buffer
-    (:func:`tunespec.core.io.image_formats.pwrite_direct`).
-    """
-    dt = np.dtype(dtype)
-    size = math.prod(shape)
-    pad = 0 if phase is None else SCRATCH_ALIGN // dt.itemsize
-    key = (threading.get_ident(), f"{name}:{dt.str}")
-    with _SCRATCH_LOCK:
-        buf = _SCRATCH.get(key)
-    if buf is None or buf.size < size + pad:
-        buf = np.empty(size + pad, dtype=dt)
-        with _SCRATCH_LOCK:
-            _SCRATCH[key] = buf
-    start = 0
-    if phase is not None:
-        if phase % dt.itemsize:
-            raise ValueError(f"scratch: phase {phase} is not a multiple of the item")
-        start = (phase - buf.ctypes.data) % SCRATCH_ALIGN // dt.itemsize
-    return buf[start : start + size].reshape(shape)
-
-
-def release_scratch() -> int:
-    """Forget every thread's :func:`scratch` buffers (arrays still in use stay
-    valid); returns the bytes released to the allocator."""
-    with _SCRATCH_LOCK:
-        n = sum(b.nbytes for b in _SCRATCH.values())
-        _SCRATCH.clear()
-    return n
 
 
 def _bin_variances(

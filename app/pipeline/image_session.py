@@ -66,7 +66,6 @@ from tunespec.core.errors import InputError
 from tunespec.core.image import (
     DEFAULT_LEVEL_BINS,
     DEFAULT_PHI_BINS,
-    SCRATCH_ALIGN,
     NoiseModel,
     SensorFigures,
     WienerBank,
@@ -74,7 +73,6 @@ from tunespec.core.image import (
     build_wiener_bank,
     estimate_pixels,
     photon_transfer_fit,
-    scratch,
     srgb8_from_xyz_d50,
 )
 from tunespec.core.image_planes import (
@@ -90,6 +88,7 @@ from tunespec.core.io.image_formats import ImageOutputs, pwrite_all, write_array
 from tunespec.core.io.raw import load_raw
 from tunespec.core.io.session import Session, find_darks, frames_by_channel
 from tunespec.core.processing import BRACKET_CLIP_LEVEL, exposure_groups
+from tunespec.core.scratch import SCRATCH_ALIGN, scratch
 from tunespec.core.spectra import Grid, Spectra
 
 __all__ = [
@@ -280,7 +279,7 @@ def _planes(
 ) -> tuple[NDArray[np.float32], NDArray[np.bool_]]:
     """A frame's planes (less ``dark``, in the same passes:
     :meth:`~tunespec.core.io.raw.RawFrame.planes_minus`) and clipped cells; with a
-    ``slot``, the planes are this thread's :func:`~tunespec.core.image.scratch`
+    ``slot``, the planes are this thread's :func:`~tunespec.core.scratch.scratch`
     buffer of that name (a frame is 66 MB at full resolution: fresh pages for
     every frame cost as much as the conversion)."""
     raw = load_raw(frame.path)
@@ -326,7 +325,7 @@ _DARK_LOCK = threading.Lock()
 def release_buffers() -> int:
     """Drop the cached dark planes and every thread's scratch buffers (call when
     the images are done); returns the bytes released."""
-    from tunespec.core.image import release_scratch
+    from tunespec.core.scratch import release_scratch
 
     with _DARK_LOCK:
         n = sum(d.nbytes for d in _DARK_CACHE.values())

@@ -530,7 +530,7 @@ def _pwrite_aligned(fd: int, view: memoryview, offset: int) -> int:
     import errno
     import mmap
 
-    # memory already aligned (a buffer placed for it, see core.image.scratch's
+    # memory already aligned (a buffer placed for it, see core.scratch.scratch's
     # phase) is written as it is; else through the bounce buffer
     aligned = np.frombuffer(view, dtype=np.uint8).ctypes.data % DIRECT_ALIGN == 0
     bounce = None

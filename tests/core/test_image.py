@@ -240,7 +240,7 @@ def test_image_outputs_round_trip(tmp_path) -> None:
 def test_scratch_buffers_are_per_thread_and_released() -> None:
     import threading
 
-    from tunespec.core.image import release_scratch, scratch
+    from tunespec.core.scratch import release_scratch, scratch
 
     a = scratch("t", (4, 5))
     a[:] = 1.0
@@ -279,7 +279,7 @@ def test_bins_applied_in_either_write_order(system, layout: str) -> None:
 
 
 def test_scratch_phase_places_the_array_for_direct_writes(tmp_path) -> None:
-    from tunespec.core.image import SCRATCH_ALIGN, release_scratch, scratch
+    from tunespec.core.scratch import SCRATCH_ALIGN, release_scratch, scratch
     from tunespec.core.io.image_formats import pwrite_direct
 
     for phase in (0, 2304, 4092):
