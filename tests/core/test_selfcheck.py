@@ -113,19 +113,24 @@ def test_chi_square_flags_what_the_noise_model_lacks(bench, problem, at_least) -
     assert chi.flagged == ("R", "G", "B")
 
 
-def test_chi_square_limit_and_variance_model() -> None:
-    # many stimuli: the fixed limit; few: five standard deviations above 1
-    assert ChiSquare(np.ones(3), dof=3000, n_stimuli=3000).limit == CHI2_LIMIT
-    few = ChiSquare(np.array([2.5, 1.0, 3.0]), dof=20, n_stimuli=20)
-    assert few.limit == pytest.approx(1 + 5 * np.sqrt(0.1))  # 2.58
-    assert few.flagged == ("B",)
-    r = Responses(
+def _one_response() -> Responses:
+    """One patch under one LED: RGB 0.5, 0.1, 0 with ROI std 0.02 over 400 px."""
+    return Responses(
         ("A1",),
         ("L1",),
         np.array([[[0.5, 0.1, 0.0]]]),
         rgb_std=np.full((1, 1, 3), 0.02),
         n_pixels=np.full((1, 1), 400.0),
     )
+
+
+def test_chi_square_limit_and_variance_model() -> None:
+    # many stimuli: the fixed limit; few: five standard deviations above 1
+    assert ChiSquare(np.ones(3), dof=3000, n_stimuli=3000).limit == CHI2_LIMIT
+    few = ChiSquare(np.array([2.5, 1.0, 3.0]), dof=20, n_stimuli=20)
+    assert few.limit == pytest.approx(1 + 5 * np.sqrt(0.1))  # 2.58
+    assert few.flagged == ("B",)
+    r = _one_response()
     # 0.02^2 / 400 + (0.003 c)^2 + 1e-6^2
     assert response_variance(r)[0, 0] == pytest.approx(
         np.array([1e-6 + 2.25e-6, 1e-6 + 9e-8, 1e-6]) + 1e-12, rel=1e-12
@@ -133,13 +138,7 @@ def test_chi_square_limit_and_variance_model() -> None:
 
 
 def test_the_error_model_with_fitted_terms() -> None:
-    r = Responses(
-        ("A1",),
-        ("L1",),
-        np.array([[[0.5, 0.1, 0.0]]]),
-        rgb_std=np.full((1, 1, 3), 0.02),
-        n_pixels=np.full((1, 1), 400.0),
-    )
+    r = _one_response()
     fitted = ExcessVariance(
         response_relative=0.004, common_relative=0.0, flat_field_relative=0.001
     )
