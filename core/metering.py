@@ -213,6 +213,11 @@ def reading_noise_fractions(spectra: Spectra) -> dict[str, float]:
         doc = json.loads(kept)
         if isinstance(doc, dict) and set(spectra.names) <= set(doc):
             return {n: float(doc[n]) for n in spectra.names}
+    return _measured_noise_fractions(spectra)
+
+
+def _measured_noise_fractions(spectra: Spectra) -> dict[str, float]:
+    """:func:`reading_noise_rms` of each spectrum as it stands, over its peak."""
     out = {}
     for name, row in zip(spectra.names, spectra.values, strict=True):
         peak = float(np.max(row)) if row.size else 0.0
@@ -291,20 +296,17 @@ def suppress_meter_floor(spectra: Spectra) -> Spectra:
     >>> int((ten.values > 0).sum()), int((suppress_meter_floor(ten).values > 0).sum())
     (25, 8)
     """
-    out = np.array(spectra.values, dtype=np.float64)
-    changed = False
-    noise = {}
-    for name, row in zip(spectra.names, out, strict=True):
-        peak = float(row.max()) if row.size else 0.0
-        noise[name] = reading_noise_rms(row) / peak if peak > 0 else 0.0
+    values = np.asarray(spectra.values, dtype=np.float64)
+    cut = np.zeros(values.shape, dtype=bool)
+    for row, cut_row in zip(values, cut, strict=True):
         keep = emission_bands(row, spectra.wavelength_nm)
-        cut = row < 0 if keep is None else (row < 0) | (~keep & (row != 0.0))
-        if np.any(cut):
-            row[cut] = 0.0
-            changed = True
-    if not changed:
+        cut_row[:] = row < 0 if keep is None else (row < 0) | (~keep & (row != 0.0))
+    if not cut.any():
         return spectra
     # cleaned, the spectra no longer show their noise (at 5 nm what is left below
     # the bands are their tails): it is kept as the instrument reported it
+    noise = _measured_noise_fractions(spectra)
     meta = {**spectra.meta, READING_NOISE_META: json.dumps(noise)}
-    return Spectra(spectra.wavelength_nm, out, spectra.names, meta)
+    return Spectra(
+        spectra.wavelength_nm, np.where(cut, 0.0, values), spectra.names, meta
+    )
