@@ -56,6 +56,7 @@ __all__ = [
     "FLAT_FIELD_RESIDUAL",
     "ExcessVariance",
     "fit_excess_variance",
+    "flat_field_residual",
     "led_blocks",
     "log_profile",
     "other_channels",
@@ -68,6 +69,13 @@ FLAT_FIELD_RESIDUAL = 0.003
 TAU_GRID = np.concatenate([[0.0], np.logspace(-4.0, np.log10(0.05), 40)])
 #: Largest relative error accepted from a side file.
 _TAU_MAX = 1.0
+
+
+def flat_field_residual(excess: ExcessVariance | None) -> float:
+    """The flat field's relative residual: as a calibration's residuals showed it
+    (:attr:`ExcessVariance.flat_field_relative`), or the nominal
+    :data:`FLAT_FIELD_RESIDUAL` without a fit."""
+    return FLAT_FIELD_RESIDUAL if excess is None else excess.flat_field_relative
 
 
 def led_blocks(values: NDArray[np.float64], n_channels: int = 3) -> NDArray[np.float64]:

@@ -71,17 +71,14 @@ from numpy.typing import NDArray
 
 from tunespec.core.calibration import predict_responses
 from tunespec.core.errors import InputError
-from tunespec.core.excess import ExcessVariance
+from tunespec.core.excess import ExcessVariance, flat_field_residual
 from tunespec.core.metering import reading_noise_fractions
 from tunespec.core.progress import ProgressFn, StopFn, check_stop, report
 from tunespec.core.responses import CHANNELS, Responses
 from tunespec.core.sensitivity import SensitivityEstimate
 from tunespec.core.spectra import Spectra
 from tunespec.core.stats import PredictionStats, prediction_stats, split_patches
-from tunespec.core.uncertainty import (
-    FLAT_FIELD_RESIDUAL,
-    calibration_response_covariance,
-)
+from tunespec.core.uncertainty import calibration_response_covariance
 
 __all__ = [
     "CHI2_LIMIT",
@@ -371,7 +368,7 @@ def response_variance(
     that nothing divides by zero); with a calibration's fitted ``excess``, ``f`` is
     its fitted flat field and its systematic terms' variance is added (the error
     model :mod:`tunespec.core.uncertainty` propagates), without one ``f`` is the
-    nominal :data:`FLAT_FIELD_RESIDUAL`.
+    nominal :data:`~tunespec.core.excess.FLAT_FIELD_RESIDUAL`.
 
     Examples
     --------
@@ -382,8 +379,7 @@ def response_variance(
     0.0018
     """
     rgb = np.asarray(responses.rgb, dtype=np.float64)
-    flat = FLAT_FIELD_RESIDUAL if excess is None else excess.flat_field_relative
-    var = (flat * rgb) ** 2 + _ABS_NOISE_FLOOR**2
+    var = (flat_field_residual(excess) * rgb) ** 2 + _ABS_NOISE_FLOOR**2
     if excess is not None:
         cov = excess.covariance(rgb.reshape(rgb.shape[0], -1))
         var = var + np.diagonal(cov, axis1=1, axis2=2).reshape(rgb.shape)

@@ -42,7 +42,7 @@ from numpy.typing import NDArray
 
 from tunespec.core.colorimetry import astm_e308_weights_d50, xyz_to_lab_d50
 from tunespec.core.errors import InputError
-from tunespec.core.excess import FLAT_FIELD_RESIDUAL, led_blocks
+from tunespec.core.excess import FLAT_FIELD_RESIDUAL, flat_field_residual, led_blocks
 from tunespec.core.metering import suppress_meter_floor
 from tunespec.core.responses import Responses
 from tunespec.core.sensitivity import SensitivityEstimate
@@ -439,11 +439,7 @@ def _response_error_terms(
 
     # one irradiance error per patch and LED: shared by that LED's three channels;
     # its size as the calibration's residuals showed it (else the nominal one)
-    flat = (
-        FLAT_FIELD_RESIDUAL
-        if calibration.excess is None
-        else calibration.excess.flat_field_relative
-    )
+    flat = flat_field_residual(calibration.excess)
     terms = {"flat field": led_blocks(flat * np.where(keep, rgb, 0.0))}
     if responses.rgb_std is not None:
         n_pix = (

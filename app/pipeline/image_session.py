@@ -623,6 +623,7 @@ def setup_estimation(
     import cv2
 
     from tunespec.core.calibration import Calibration
+    from tunespec.core.excess import flat_field_residual
 
     # the LEDs are done: their frame buffers (about 0.3 GB a thread at full
     # resolution) and the dark planes go back to the heap, where the blocks' buffers
@@ -654,7 +655,7 @@ def setup_estimation(
         F, prior.values, white, noise, grid.wavelength_nm,
         phi_range=(float(phi.min()), float(phi.max())),
         n_levels=n_levels, n_phi=n_phi,
-        flat_residual=None if excess is None else excess.flat_field_relative,
+        flat_residual=flat_field_residual(excess),
     )  # fmt: skip
     bank.params["noise_source"] = noise.source
     return bank
