@@ -279,8 +279,8 @@ def test_bins_applied_in_either_write_order(system, layout: str) -> None:
 
 
 def test_scratch_phase_places_the_array_for_direct_writes(tmp_path) -> None:
-    from tunespec.core.scratch import SCRATCH_ALIGN, release_scratch, scratch
     from tunespec.core.io.image_formats import pwrite_direct
+    from tunespec.core.scratch import SCRATCH_ALIGN, release_scratch, scratch
 
     for phase in (0, 2304, 4092):
         a = scratch("phase_test", (1000, 61), phase=phase)
