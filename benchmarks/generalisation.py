@@ -59,12 +59,13 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import generalisation_data as gd
 
-from tunespec.core.colorimetry import lab_d50, reflectance_stats
+from tunespec.core.colorimetry import delta_e_2000, lab_d50, reflectance_stats
 from tunespec.core.datasets import load_camera_database, load_colorchecker_sg
 from tunespec.core.metering import suppress_meter_floor
 from tunespec.core.selfcheck import self_check
@@ -175,7 +176,8 @@ def collection(name: str) -> str:
 
 def coverage_counts(w, unc, truth_r, lab_true, names) -> dict[str, list[list[float]]]:
     """Inside-the-95 %-interval counts per collection at every ``KAPPAS`` value: the
-    reflectance samples inside at each wavelength, then L*, a*, b* inside and the
+    reflectance samples inside at each wavelength, then L*, a*, b* inside (against
+    ``lab_true``, the surfaces' own colour as :func:`surface_lab` gives it) and the
     number of targets.
 
     The prior-mismatch share of each variance scales with ``kappa^2`` (the rest does
@@ -249,12 +251,40 @@ def tune_prior_scale(scores: list[Score]) -> None:
     print(f"  all collections: kappa {KAPPAS[i]:.2f}: " + _describe_coverage(allc[i]))
 
 
-def coverage(est_r, std_r, lab_est, lab_std, truth_r, lab_true) -> dict[str, float]:
+def surface_lab(test_fine: Spectra) -> NDArray[np.float64]:
+    """CIELAB of the test surfaces themselves: their 1 nm spectra over the estimation
+    grid's range. The colour of their samples on a coarse grid (``lab_d50`` of the
+    10 nm samples, ASTM E308's 10 nm weights) differs from it where a spectrum has
+    detail between the samples (:func:`print_tabulation_error`)."""
+    return lab_d50(test_fine.resample(Grid(EST.start_nm, EST.end_nm, 1.0)))
+
+
+def print_tabulation_error(test_fine: Spectra, test_est: Spectra) -> None:
+    """CIEDE2000 between the colour of each test surface and the colour of its
+    samples on the estimation grid, per collection: how far the two measurands of
+    the L*a*b* coverage lie apart."""
+    de = delta_e_2000(lab_d50(test_est), surface_lab(test_fine))
+    groups = np.array([collection(n) for n in test_est.names])
+    print(
+        f"\ncolour of the {EST.step_nm:g} nm samples vs the surface's, dE00 mean/max:"
+    )
+    for g in sorted(set(groups)):
+        d = de[groups == g]
+        print(f"  {g:<15} {d.mean():.3f} / {d.max():.3f}")
+
+
+def coverage(
+    est_r, std_r, lab_est, lab_std, truth_r, lab_true, lab_surface
+) -> dict[str, float]:
+    """Coverage of the 95 % intervals: the reflectance samples, L*a*b* against the
+    colour of the truth's samples on the estimation grid (``L``, ``a``, ``b``) and
+    against the surface's own colour (``L_surface``, ...)."""
     cov = {"reflectance": float(np.mean(np.abs(est_r - truth_r) <= Z95 * std_r))}
-    for j, name in enumerate(("L", "a", "b")):
-        cov[name] = float(
-            np.mean(np.abs(lab_est[:, j] - lab_true[:, j]) <= Z95 * lab_std[:, j])
-        )
+    for ref, suffix in ((lab_true, ""), (lab_surface, "_surface")):
+        for j, name in enumerate(("L", "a", "b")):
+            cov[name + suffix] = float(
+                np.mean(np.abs(lab_est[:, j] - ref[:, j]) <= Z95 * lab_std[:, j])
+            )
     return cov
 
 
@@ -324,7 +354,7 @@ def run_camera(
         reported_native = suppress_meter_floor(reported_native)
     reported = reported_native.resample(WORK, average=True)
     truth_work = cam.truth.resample(WORK)
-    lab_true = lab_d50(test_est)
+    lab_true, lab_surface = lab_d50(test_est), surface_lab(test_fine)
     out = []
     for variant in variants:
         t0 = time.perf_counter()
@@ -368,7 +398,7 @@ def run_camera(
         if est.covariance is not None:
             sc.sens_z = sensitivity_z(est, truth_work)
             sc.coverage_counts = coverage_counts(
-                w, unc, test_est.values, lab_true, test_est.names
+                w, unc, test_est.values, lab_surface, test_est.names
             )
             sc.coverage = coverage(
                 w.reflectance.values,
@@ -377,6 +407,7 @@ def run_camera(
                 unc.lab_std,
                 test_est.values,
                 lab_true,
+                lab_surface,
             )
         if est.led_correction is not None and est.led_correction.gain_std:
             sc.fitted_shift_nm = list(est.led_correction.shift_nm)
@@ -433,7 +464,7 @@ def print_summary(summary: dict[str, Any], variants) -> None:
     print(
         f"{'family':<26}{'variant':<17}{'n':>4}"
         + "".join(f"{c:>19}" for c in cols)
-        + "   coverage R/L/a/b"
+        + "   coverage R/L/a/b (L/a/b against the surface's colour)"
     )
     for fam, per in summary.items():
         for var in variants:
@@ -442,8 +473,12 @@ def print_summary(summary: dict[str, Any], variants) -> None:
             d = per[var]
             cov = ""
             if "coverage_reflectance" in d:
-                cov = "   " + "/".join(
-                    f"{d[f'coverage_{k}']:.3f}" for k in ("reflectance", "L", "a", "b")
+                keys = ("reflectance", "L", "a", "b")
+                cov = "   " + "/".join(f"{d[f'coverage_{k}']:.3f}" for k in keys)
+                cov += (
+                    " (surface "
+                    + "/".join(f"{d[f'coverage_{k}_surface']:.3f}" for k in keys[1:])
+                    + ")"
                 )
             print(
                 f"{fam:<26}{var:<17}{d['n']:>4}"
@@ -536,6 +571,7 @@ def main(argv: list[str] | None = None) -> int:
                 seen[c.family] = seen.get(c.family, 0) + 1
         cams = picked
     setup = load_setup()
+    print_tabulation_error(setup[1], setup[5])
     light_spectra = gd.light_sources()
     rng = np.random.default_rng(args.seed)
     scores: list[Score] = []
