@@ -60,7 +60,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tunespec.core.errors import InputError, SingularSystemError
-from tunespec.core.scratch import scratch
+from tunespec.core.image_bins import _apply_bins
 from tunespec.core.wiener import solve_with_noise
 
 __all__ = [
@@ -784,71 +784,6 @@ def estimate_pixels(
     u_l = _u_lightness(xyz[:, 1], var_y)
     u_rms = np.minimum(np.sqrt(var_rms), 0.5).astype(np.float32)
     return PixelEstimate(est, xyz, np.ascontiguousarray(lab), u_l, u_rms, sat, bins)
-
-
-#: Pixels per product in :func:`_apply_bins`: their responses (gathered) fit in
-#: the core's L2 cache beside the bin's matrix, so the product reads them there.
-APPLY_ROWS = 4096
-
-
-def _apply_bins(
-    bank: WienerBank,
-    c: NDArray[np.float32],
-    bins: NDArray[np.int64],
-    out: NDArray[np.float32] | None = None,
-    *,
-    clip: bool = False,
-) -> NDArray[np.float32]:
-    """``r = offset_b + c W_b^T`` for every pixel (row), bin by bin.
-
-    The pixels are ordered by bin (a stable radix sort of the small bin numbers);
-    for each run of up to :data:`APPLY_ROWS` pixels of one bin, their rows of ``c``
-    are gathered into a small buffer that stays in the L2 cache, multiplied by the
-    bin's matrix, and the offset added (and the result limited to [0, 1] with
-    ``clip``) while those rows are still cached. Where the bins follow the image
-    (most pixels of a run are neighbours, as in a photograph) the run's results go
-    from a second cached buffer straight into their pixels' rows of ``out``;
-    otherwise (pixels of a bin scattered, as in a shuffled test) writing rows at
-    random costs twice the reading, so the results are written in sorted order and
-    gathered back into pixel order at the end. On a 5760x3840 block: 58 -> 51 ms
-    (the products 26 -> 22 ms into the cached buffer, no unsorting). The buffers
-    are kept per thread (:func:`~tunespec.core.scratch.scratch`).
-    """
-    n, m = c.shape
-    n_wl = bank.mean.size
-    if out is None:
-        out = np.empty((n, n_wl), dtype=np.float32)
-    # bins are small integers: a stable sort of int16 is numpy's radix sort, O(n)
-    order = np.argsort(bins.astype(np.int16), kind="stable")
-    counts = np.bincount(bins, minlength=bank.Wt.shape[0])
-    rows = scratch("bin_rows", (min(APPLY_ROWS, n), m))
-    coherent = 2 * np.count_nonzero(np.diff(order) == 1) > n
-    if coherent:
-        results = scratch("bin_results", (min(APPLY_ROWS, n), n_wl))
-    else:
-        ordered = scratch("sorted_r", (n, n_wl))
-    start = 0
-    for b in np.flatnonzero(counts):
-        end = start + int(counts[b])
-        for lo in range(start, end, APPLY_ROWS):
-            hi = min(lo + APPLY_ROWS, end)
-            idx = order[lo:hi]
-            part = rows[: hi - lo]
-            res = results[: hi - lo] if coherent else ordered[lo:hi]
-            # indices from argsort are in range: "clip" skips the bounds checks (2x)
-            np.take(c, idx, axis=0, out=part, mode="clip")
-            np.matmul(part, bank.Wt[b], out=res)
-            res += bank.offset[b]
-            if clip:
-                np.clip(res, 0.0, 1.0, out=res)
-            if coherent:
-                out[idx] = res
-        start = end
-    if not coherent:
-        inverse = np.empty_like(order)
-        inverse[order] = np.arange(order.size)
-        np.take(ordered, inverse, axis=0, mode="clip", out=out)
-    return out
 
 
 def _bin_variances(
