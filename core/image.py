@@ -61,6 +61,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from tunespec.core.errors import InputError, SingularSystemError
 from tunespec.core.image_bins import _apply_bins
+from tunespec.core.scratch import scratch
 from tunespec.core.wiener import solve_with_noise
 
 __all__ = [
@@ -286,15 +287,24 @@ def block_noise_stats(
     # float32 (numpy's pairwise sums and two-pass variance keep ~1e-7 relative over
     # a block's 256 values): float64 copies of the rows cost more in fresh pages
     # than the statistics themselves. Each block's pixels contiguous: the sums run
-    # along the last axis (a third faster than over two strided axes)
-    blocks = np.empty((3, rows.size, wb, block_px, block_px), dtype=np.float32)
-    np.copyto(blocks, x[:, rows].transpose(0, 1, 3, 2, 4))
+    # along the last axis (a third faster than over two strided axes). The blocks
+    # and their differences in this thread's scratch buffers (12 MB each: fresh
+    # pages every frame cost as much as the sums)
+    shape = (3, rows.size, wb, block_px, block_px)
+    blocks = scratch("ptc_blocks", shape)
+    for k in range(3):  # strided views of the rows: no copy of them first
+        np.copyto(blocks[k], x[k, ::row_step].transpose(0, 2, 1, 3))
     n = rows.size * wb
     level = blocks.reshape(3, n, -1).mean(axis=2, dtype=np.float64)
-    d = np.diff(blocks, axis=4).reshape(3, n, -1)
+    d = scratch("ptc_diff", (*shape[:4], block_px - 1))
+    np.subtract(blocks[..., 1:], blocks[..., :-1], out=d)
+    d = d.reshape(3, n, -1)
     # the variance (not the mean square) of the differences: a gradient of the
-    # light field across the block shifts their mean, not their spread
-    var = 0.5 * d.var(axis=2, dtype=np.float64)
+    # light field across the block shifts their mean, not their spread. Two
+    # passes, the deviations in float32 and their squares summed in float64
+    # (numpy's var makes a float64 copy of the deviations: 25 MB fresh a frame)
+    d -= d.mean(axis=2, dtype=np.float64).astype(np.float32)[..., None]
+    var = 0.5 / d.shape[2] * np.einsum("ijk,ijk->ij", d, d, dtype=np.float64)
     keep = np.ones(rows.size * wb, dtype=bool)
     if saturated is not None:
         s = saturated[: hb * block_px, : wb * block_px].reshape(
