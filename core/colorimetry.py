@@ -90,9 +90,10 @@ def _colour() -> Any:
     plots with colour: while colour is imported here, an empty module stands in for
     ``colour.plotting`` (colour 0.4's ``__init__`` imports it, and a lazy module
     would be loaded by the import system's own look-ups), taken out again
-    afterwards so that ``import colour.plotting`` still gives the real one (the
-    images' warm-up: 1.4-2.0 -> 1.0-1.3 s of imports holding the GIL beside the
-    LEDs' stage). colour-science 0.4 also sets numpy's legacy="1.13" print options
+    afterwards so that ``import colour.plotting`` still gives the real one
+    (``import colour`` 1.95-2.02 -> 1.39-1.57 s on a loaded machine; the images'
+    warm-up, imports holding the GIL beside the LEDs' stage, 2.30 -> 1.63 s).
+    colour-science 0.4 also sets numpy's legacy="1.13" print options
     when it is imported, which would change how every array in the process prints
     (reports, doctests); ``np.printoptions()`` restores the caller's options on
     leaving the block.
