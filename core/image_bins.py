@@ -93,13 +93,16 @@ def _bin_runs(
     small = np.uint8 if n_bins <= 256 else np.int16
     order = np.argsort(bins.astype(small), kind="stable")
     counts = np.bincount(bins, minlength=n_bins)
+    present = np.flatnonzero(counts)
+    ends = np.cumsum(counts[present])
+    starts = ends - counts[present]
+    bounds = zip(present.tolist(), starts.tolist(), ends.tolist(), strict=True)
+    if counts.max(initial=0) <= APPLY_ROWS:  # each bin one run (a tile's usually)
+        return order, list(bounds)
     runs = []
-    start = 0
-    for b in np.flatnonzero(counts):
-        end = start + int(counts[b])
-        runs.extend((int(b), lo, min(lo + APPLY_ROWS, end))
+    for b, start, end in bounds:
+        runs.extend((b, lo, min(lo + APPLY_ROWS, end))
                     for lo in range(start, end, APPLY_ROWS))  # fmt: skip
-        start = end
     return order, runs
 
 
