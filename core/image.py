@@ -60,6 +60,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tunespec.core.errors import InputError, SingularSystemError
+from tunespec.core.image_bins import _apply_bins
 from tunespec.core.scratch import scratch
 from tunespec.core.wiener import solve_with_noise
 
@@ -286,15 +287,24 @@ def block_noise_stats(
     # float32 (numpy's pairwise sums and two-pass variance keep ~1e-7 relative over
     # a block's 256 values): float64 copies of the rows cost more in fresh pages
     # than the statistics themselves. Each block's pixels contiguous: the sums run
-    # along the last axis (a third faster than over two strided axes)
-    blocks = np.empty((3, rows.size, wb, block_px, block_px), dtype=np.float32)
-    np.copyto(blocks, x[:, rows].transpose(0, 1, 3, 2, 4))
+    # along the last axis (a third faster than over two strided axes). The blocks
+    # and their differences in this thread's scratch buffers (12 MB each: fresh
+    # pages every frame cost as much as the sums)
+    shape = (3, rows.size, wb, block_px, block_px)
+    blocks = scratch("ptc_blocks", shape)
+    for k in range(3):  # strided views of the rows: no copy of them first
+        np.copyto(blocks[k], x[k, ::row_step].transpose(0, 2, 1, 3))
     n = rows.size * wb
     level = blocks.reshape(3, n, -1).mean(axis=2, dtype=np.float64)
-    d = np.diff(blocks, axis=4).reshape(3, n, -1)
+    d = scratch("ptc_diff", (*shape[:4], block_px - 1))
+    np.subtract(blocks[..., 1:], blocks[..., :-1], out=d)
+    d = d.reshape(3, n, -1)
     # the variance (not the mean square) of the differences: a gradient of the
-    # light field across the block shifts their mean, not their spread
-    var = 0.5 * d.var(axis=2, dtype=np.float64)
+    # light field across the block shifts their mean, not their spread. Two
+    # passes, the deviations in float32 and their squares summed in float64
+    # (numpy's var makes a float64 copy of the deviations: 25 MB fresh a frame)
+    d -= d.mean(axis=2, dtype=np.float64).astype(np.float32)[..., None]
+    var = 0.5 / d.shape[2] * np.einsum("ijk,ijk->ij", d, d, dtype=np.float64)
     keep = np.ones(rows.size * wb, dtype=bool)
     if saturated is not None:
         s = saturated[: hb * block_px, : wb * block_px].reshape(
@@ -784,71 +794,6 @@ def estimate_pixels(
     u_l = _u_lightness(xyz[:, 1], var_y)
     u_rms = np.minimum(np.sqrt(var_rms), 0.5).astype(np.float32)
     return PixelEstimate(est, xyz, np.ascontiguousarray(lab), u_l, u_rms, sat, bins)
-
-
-#: Pixels per product in :func:`_apply_bins`: their responses (gathered) fit in
-#: the core's L2 cache beside the bin's matrix, so the product reads them there.
-APPLY_ROWS = 4096
-
-
-def _apply_bins(
-    bank: WienerBank,
-    c: NDArray[np.float32],
-    bins: NDArray[np.int64],
-    out: NDArray[np.float32] | None = None,
-    *,
-    clip: bool = False,
-) -> NDArray[np.float32]:
-    """``r = offset_b + c W_b^T`` for every pixel (row), bin by bin.
-
-    The pixels are ordered by bin (a stable radix sort of the small bin numbers);
-    for each run of up to :data:`APPLY_ROWS` pixels of one bin, their rows of ``c``
-    are gathered into a small buffer that stays in the L2 cache, multiplied by the
-    bin's matrix, and the offset added (and the result limited to [0, 1] with
-    ``clip``) while those rows are still cached. Where the bins follow the image
-    (most pixels of a run are neighbours, as in a photograph) the run's results go
-    from a second cached buffer straight into their pixels' rows of ``out``;
-    otherwise (pixels of a bin scattered, as in a shuffled test) writing rows at
-    random costs twice the reading, so the results are written in sorted order and
-    gathered back into pixel order at the end. On a 5760x3840 block: 58 -> 51 ms
-    (the products 26 -> 22 ms into the cached buffer, no unsorting). The buffers
-    are kept per thread (:func:`~tunespec.core.scratch.scratch`).
-    """
-    n, m = c.shape
-    n_wl = bank.mean.size
-    if out is None:
-        out = np.empty((n, n_wl), dtype=np.float32)
-    # bins are small integers: a stable sort of int16 is numpy's radix sort, O(n)
-    order = np.argsort(bins.astype(np.int16), kind="stable")
-    counts = np.bincount(bins, minlength=bank.Wt.shape[0])
-    rows = scratch("bin_rows", (min(APPLY_ROWS, n), m))
-    coherent = 2 * np.count_nonzero(np.diff(order) == 1) > n
-    if coherent:
-        results = scratch("bin_results", (min(APPLY_ROWS, n), n_wl))
-    else:
-        ordered = scratch("sorted_r", (n, n_wl))
-    start = 0
-    for b in np.flatnonzero(counts):
-        end = start + int(counts[b])
-        for lo in range(start, end, APPLY_ROWS):
-            hi = min(lo + APPLY_ROWS, end)
-            idx = order[lo:hi]
-            part = rows[: hi - lo]
-            res = results[: hi - lo] if coherent else ordered[lo:hi]
-            # indices from argsort are in range: "clip" skips the bounds checks (2x)
-            np.take(c, idx, axis=0, out=part, mode="clip")
-            np.matmul(part, bank.Wt[b], out=res)
-            res += bank.offset[b]
-            if clip:
-                np.clip(res, 0.0, 1.0, out=res)
-            if coherent:
-                out[idx] = res
-        start = end
-    if not coherent:
-        inverse = np.empty_like(order)
-        inverse[order] = np.arange(order.size)
-        np.take(ordered, inverse, axis=0, mode="clip", out=out)
-    return out
 
 
 def _bin_variances(

@@ -747,7 +747,6 @@ def estimate_block(
     (rows, cols, 3) uint8, or BlockResult with ``keep_uncertainty``
         The sRGB preview of the block.
     """
-    import cv2
 
     if rectification is None:
         planes = _read_stack_rows(job, row0, row1)
@@ -757,18 +756,8 @@ def estimate_block(
     else:
         planes, phi = _rectified(job, rectification, row0, row1)
     m, r, cols = planes.shape
-    # pixels as rows (band-interleaved by pixel, as the outputs): OpenCV's blocked
-    # transpose (of the half floats' bits as stored) into this thread's buffers,
-    # no fresh pages per block
-    t = scratch("block_pixels_t", (r * cols, m), planes.dtype)
-    cv2.transpose(planes.reshape(m, r * cols), dst=t)
-    c = t
-    if t.dtype != np.float32:
-        c = scratch("block_pixels", (r * cols, m))
-        # OpenCV's half-precision conversion (F16C): the same values as numpy's
-        # (NaN and -0 kept) at 1.5x its speed
-        cv2.multiply(t.view(STACK_DTYPE), 1.0, dst=c, dtype=cv2.CV_32F)
-    del planes, t
+    c = _pixels_as_rows(planes.reshape(m, r * cols))
+    del planes
     # placed as the cube's rows fall in its files: written there without a copy
     est = estimate_pixels(
         bank, c, phi.reshape(-1), clip=clip,
@@ -792,6 +781,36 @@ def estimate_block(
         cells = SystematicTable.cells(est.lab.T).reshape(r, cols)
         return BlockResult(srgb, unc, cells)
     return srgb
+
+
+#: Pixels transposed at a time by :func:`_pixels_as_rows` (their half floats stay
+#: in the L2 cache until converted).
+TRANSPOSE_PX = 4096
+
+
+def _pixels_as_rows(planes: NDArray[Any]) -> NDArray[np.float32]:
+    """``planes`` (m, n) as pixels in rows (n, m) float32 (band-interleaved by
+    pixel, as the outputs), in this thread's buffers (no fresh pages per block).
+
+    OpenCV's blocked transpose (of the half floats' bits as stored), then its
+    half-precision conversion (F16C) as ``x - 0`` (the same bits as numpy's cast,
+    NaN and -0 kept; 1.5x its ``x * 1``), :data:`TRANSPOSE_PX` pixels at a time
+    while they are cached (a 5760x3840 block: 24 -> 15 ms against transposing the
+    whole block, then converting it)."""
+    import cv2
+
+    m, n = planes.shape
+    c = scratch("block_pixels", (n, m), np.float32)
+    if planes.dtype == np.float32:
+        cv2.transpose(planes, dst=c)
+        return c
+    t = scratch("block_pixels_t", (min(TRANSPOSE_PX, n), m), planes.dtype)
+    for lo in range(0, n, TRANSPOSE_PX):
+        hi = min(lo + TRANSPOSE_PX, n)
+        cv2.transpose(planes[:, lo:hi], dst=t[: hi - lo])
+        cv2.subtract(t[: hi - lo].view(STACK_DTYPE), 0.0, dst=c[lo:hi],
+                     dtype=cv2.CV_32F)  # fmt: skip
+    return c
 
 
 def finish_uncertainty(

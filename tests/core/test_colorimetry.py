@@ -327,3 +327,22 @@ def test_importing_colorimetry_keeps_numpy_print_options() -> None:
         [sys.executable, "-c", code], capture_output=True, text=True, check=True
     ).stdout
     assert out.split() == ["False", "array([1.])"]
+
+
+def test_colour_imported_without_its_plotting() -> None:
+    # the D50 weights need colour but not colour.plotting (matplotlib's pyplot, half
+    # of colour's import); colour.plotting is still importable afterwards
+    code = (
+        "import sys\n"
+        "import numpy as np\n"
+        "from tunespec.core.colorimetry import astm_e308_weights_d50\n"
+        "w = astm_e308_weights_d50(np.arange(400.0, 701.0, 5.0))\n"
+        "print(round(float(w[:, 1].sum()), 6), 'matplotlib' in sys.modules)\n"
+        "import colour.plotting\n"
+        "import colour\n"
+        "print(callable(colour.plotting.plot_single_sd), 'matplotlib' in sys.modules)\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    ).stdout
+    assert out.split() == ["100.0", "False", "True", "True"]

@@ -255,11 +255,18 @@ def test_scratch_buffers_are_per_thread_and_released() -> None:
     assert float(a.sum()) == 20.0  # still valid for whoever holds it
 
 
+@pytest.mark.parametrize("tile", [32768, 700])
 @pytest.mark.parametrize("layout", ["neighbours", "shuffled"])
-def test_bins_applied_in_either_write_order(system, layout: str) -> None:
+def test_bins_applied_in_either_write_order(
+    system, layout: str, tile: int, monkeypatch
+) -> None:
     # pixels of a bin side by side (as in a photograph: each run's rows are put
-    # straight into pixel order) or scattered (written sorted, gathered back)
+    # straight into pixel order) or scattered (sorted tile by tile, written sorted,
+    # gathered back; tiles of 700 pixels: several, the last one short)
+    from tunespec.core import image_bins
     from tunespec.core.image import _apply_bins
+
+    monkeypatch.setattr(image_bins, "SCATTERED_TILE", tile)
 
     F, sg = system["F"], system["sg"].values
     bank = build_wiener_bank(F, sg, system["white"], CAMERA_NOISE, GRID.wavelength_nm,
