@@ -8,17 +8,24 @@ so that each bin's matrix multiplies many rows at once (:func:`_apply_bins`, for
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
 from tunespec.core.scratch import scratch
 
-if TYPE_CHECKING:
-    from tunespec.core.image import WienerBank
-
 __all__ = ["APPLY_ROWS", "SCATTERED_TILE"]
+
+
+class BankArrays(Protocol):
+    """What the stage reads of a :class:`tunespec.core.image.WienerBank` (this module
+    does not import it: the images' module imports this one)."""
+
+    mean: NDArray[np.float64]
+    Wt: NDArray[np.float32]
+    offset: NDArray[np.float32]
+
 
 #: Pixels per product in :func:`_apply_bins`: their responses (gathered) fit in
 #: the core's L2 cache beside the bin's matrix, so the product reads them there.
@@ -31,7 +38,7 @@ SCATTERED_TILE = 32768
 
 
 def _apply_bins(
-    bank: WienerBank,
+    bank: BankArrays,
     c: NDArray[np.float32],
     bins: NDArray[np.int64],
     out: NDArray[np.float32] | None = None,
@@ -83,7 +90,7 @@ def _apply_bins(
 
 
 def _bin_runs(
-    bank: WienerBank, bins: NDArray[np.int64]
+    bank: BankArrays, bins: NDArray[np.int64]
 ) -> tuple[NDArray[np.intp], list[tuple[int, int, int]]]:
     """The pixels in order of their bin, and the runs ``(bin, lo, hi)`` of that
     order (each of one bin, at most :data:`APPLY_ROWS` long)."""
@@ -107,7 +114,7 @@ def _bin_runs(
 
 
 def _apply_run(
-    bank: WienerBank,
+    bank: BankArrays,
     b: int,
     c: NDArray[np.float32],
     idx: NDArray[np.intp],
