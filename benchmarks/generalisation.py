@@ -328,6 +328,7 @@ def run_camera(
     metering: bool,
     setup,
     meter_noise: float = 0.0,
+    meter_reads: int = 2,
     clean_meter: bool = False,
     report_step_nm: float = 1.0,
     report_slit: bool = False,
@@ -349,7 +350,9 @@ def run_camera(
     # the instrument's own sampling, then its reading noise on what it reports
     reported_native = gd.report_at(reported_fine, report_step_nm, slit=report_slit)
     if meter_noise:
-        reported_native = gd.metering_noise(reported_native, rng, meter_noise)
+        reported_native = gd.metering_noise(
+            reported_native, rng, meter_noise, reads=meter_reads
+        )
     if clean_meter:
         reported_native = suppress_meter_floor(reported_native)
     reported = reported_native.resample(WORK, average=True)
@@ -504,7 +507,14 @@ def main(argv: list[str] | None = None) -> int:
         type=float,
         default=0.0,
         help="noise of the reported spectra, a fraction of each one's peak, clipped at "
-        "0 and averaged over 2 readings (the simulated CAL1: 0.001)",
+        "0 and averaged over --meter-reads readings (the simulated CAL1: 0.001)",
+    )
+    ap.add_argument(
+        "--meter-reads",
+        type=int,
+        default=2,
+        help="readings averaged per reported spectrum, each clipped at 0 (default 2, "
+        "as capture averages the readings before and after a frame)",
     )
     ap.add_argument(
         "--raw-meter",
@@ -587,6 +597,7 @@ def main(argv: list[str] | None = None) -> int:
                 metering=not args.no_metering_error,
                 setup=setup,
                 meter_noise=args.meter_noise,
+                meter_reads=args.meter_reads,
                 clean_meter=not args.raw_meter,
                 report_step_nm=args.report_step_nm,
                 report_slit=args.report_slit,
