@@ -196,16 +196,20 @@ def _scattered_zeros(
     nonzero = v != 0.0
     if wavelength_nm is not None and v.size:
         # the run about the peak above BAND_NOISE_FRACTION of it, widened
-        strong = np.concatenate([[False], v >= BAND_NOISE_FRACTION * v.max(), [False]])
-        starts = np.flatnonzero(np.diff(strong.astype(np.int8)) == 1)
-        ends = np.flatnonzero(np.diff(strong.astype(np.int8)) == -1) - 1
-        ipk = int(np.argmax(v))
-        k = int(np.searchsorted(starts, ipk, side="right")) - 1
+        starts, stops = _runs(v >= BAND_NOISE_FRACTION * v.max())
+        k = int(np.searchsorted(starts, int(np.argmax(v)), side="right")) - 1
         lo_nm = wavelength_nm[starts[k]] - BAND_REACH_NM
-        hi_nm = wavelength_nm[ends[k]] + BAND_REACH_NM
+        hi_nm = wavelength_nm[stops[k] - 1] + BAND_REACH_NM
         nonzero &= (wavelength_nm < lo_nm) | (wavelength_nm > hi_nm)
-    edges = np.diff(np.concatenate([[0], nonzero.astype(np.int8), [0]]))
-    return int(np.count_nonzero(edges == 1)) >= _MIN_NONZERO_RUNS
+    return _runs(nonzero)[0].size >= _MIN_NONZERO_RUNS
+
+
+def _runs(mask: NDArray[np.bool_]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Starts and (exclusive) stops of ``mask``'s runs of True."""
+    edges = np.flatnonzero(
+        np.diff(np.concatenate([[False], mask, [False]]).astype(np.int8))
+    )
+    return edges[::2], edges[1::2]
 
 
 def _rms_without_tails(low: NDArray[np.float64]) -> float:
@@ -301,11 +305,9 @@ def emission_bands(
     limit = limit_sd * _rms_without_tails(noise)
     step_nm = float(np.median(np.diff(wavelength_nm))) if v.size > 1 else 1.0
     margin = max(1, round(margin_nm / step_nm))
-    above = np.concatenate([[False], v > limit, [False]])
-    edges = np.flatnonzero(np.diff(above.astype(np.int8)))
     ipk = int(np.argmax(v))
     keep = np.zeros(v.size, dtype=bool)
-    for lo, hi in zip(edges[::2], edges[1::2], strict=True):
+    for lo, hi in zip(*_runs(v > limit), strict=True):
         if hi - lo >= 2 or lo <= ipk < hi:
             keep[max(lo - margin, 0) : hi + margin] = True
     return keep
