@@ -103,8 +103,10 @@ sizes() {  # the bundle's size and its 10 largest parts (folders under _internal
     printf 'bundle %s: %s MB in %s files\n' "$APP" \
         "$(du -sm "$APP" | cut -f1)" "$(find "$APP" -type f | wc -l)"
     echo "10 largest parts (MB):"
+    # sed reads to the end: head would exit after 10 lines and, under pipefail,
+    # sort's next write would end the script with SIGPIPE (141)
     (cd "$APP" && du -sm _internal/* tunespec tunespec-gui share 2>/dev/null) \
-        | sort -rn | head -n 10 | sed 's/^/  /'
+        | sort -rn | sed -n '1,10s/^/  /p'
 }
 
 timed_start() {  # timed_start NAME CMD... : seconds to run CMD (e.g. --help), logged
