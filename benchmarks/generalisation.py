@@ -68,6 +68,7 @@ import generalisation_data as gd
 from tunespec.core.colorimetry import delta_e_2000, lab_d50, reflectance_stats
 from tunespec.core.datasets import load_camera_database, load_colorchecker_sg
 from tunespec.core.metering import suppress_meter_floor
+from tunespec.core.responses import Responses
 from tunespec.core.selfcheck import self_check
 from tunespec.core.sensitivity import (
     SensitivityEstimate,
@@ -318,15 +319,29 @@ def tune_band_scale(scores: list[Score]) -> None:
         )
 
 
-def run_camera(
+@dataclass
+class Session:
+    """One camera's simulated session under a light: the chart's and the test
+    reflectances' responses, the exposure-scaled true spectra, the spectra as the
+    light reported them at its own sampling and on the calibration's grid, and the
+    per-LED metering errors it drew."""
+
+    scaled: Spectra
+    resp: Responses
+    resp_t: Responses
+    reported_native: Spectra
+    reported: Spectra
+    shifts: NDArray[np.float64]
+    gains: NDArray[np.float64]
+
+
+def simulate_session(
     cam: gd.Camera,
-    light: str,
     leds: Spectra,
-    variants,
+    setup,
     rng,
     *,
-    metering: bool,
-    setup,
+    metering: bool = True,
     meter_noise: float = 0.0,
     meter_reads: int = 2,
     clean_meter: bool = False,
@@ -334,8 +349,10 @@ def run_camera(
     report_slit: bool = False,
     systematic: bool = False,
     flat_field: float = NoiseModel.flat_field_residual,
-) -> list[Score]:
-    chart_fine, test_fine, chart_work, prior_est, db, test_est = setup
+) -> Session:
+    """Eq. 1 for the chart and the test reflectances, with the light's readings as
+    an instrument reports them (the options as :func:`main`'s flags)."""
+    chart_fine, test_fine = setup[0], setup[1]
     scaled = scale_to_exposure(chart_fine, leds, cam.truth, target=0.8)
     noise = NoiseModel(flat_field_residual=flat_field)
     resp = simulate_responses(chart_fine, scaled, cam.truth, noise=noise, rng=rng)
@@ -356,6 +373,38 @@ def run_camera(
     if clean_meter:
         reported_native = suppress_meter_floor(reported_native)
     reported = reported_native.resample(WORK, average=True)
+    return Session(scaled, resp, resp_t, reported_native, reported, shifts, gains)
+
+
+def estimate_tests(
+    est: SensitivityEstimate, resp_t: Responses, used: Spectra, reported: Spectra, setup
+):
+    """The product's estimate chain for the test reflectances: Eq. 1 integrated on
+    the calibration's grid, the reflectance on EST (as `tunespec estimate` does),
+    Eq. 5 with the error model as K_e where the calibration carries one, and its
+    uncertainty. ``used``: the spectra Eq. 1 takes (corrected as the calibration
+    found); ``reported``: as the light reported them."""
+    illum, sens, _ = on_integration_grid(
+        est.correct_illuminants(used), est.sensitivity, EST
+    )
+    return wiener_with_uncertainty(resp_t, illum, sens, setup[3], reported, est)
+
+
+def run_camera(
+    cam: gd.Camera,
+    light: str,
+    leds: Spectra,
+    variants,
+    rng,
+    *,
+    setup,
+    **conditions: Any,
+) -> list[Score]:
+    """Every variant's calibration and test estimate for one camera and light
+    (``conditions``: :func:`simulate_session`'s options)."""
+    _, test_fine, chart_work, _, db, test_est = setup
+    session = simulate_session(cam, leds, setup, rng, **conditions)
+    resp, resp_t, reported = session.resp, session.resp_t, session.reported
     truth_work = cam.truth.resample(WORK)
     lab_true, lab_surface = lab_d50(test_est), surface_lab(test_fine)
     out = []
@@ -367,16 +416,13 @@ def run_camera(
         secs = time.perf_counter() - t0
         # ``truth``: the true spectra; ``truth-read``: the true sensitivities with
         # the light's readings as reported (what no calibration can beat with them)
-        used = scaled.resample(WORK, average=True) if variant == "truth" else reported
-        t1 = calibration_report(est, resp, used, chart_work).training
-        # Eq. 1 integrated on the calibration's grid, reflectance on EST (as
-        # `tunespec estimate` does)
-        illum, sens, _ = on_integration_grid(
-            est.correct_illuminants(used), est.sensitivity, EST
+        used = (
+            session.scaled.resample(WORK, average=True)
+            if variant == "truth"
+            else reported
         )
-        # the product's estimate chain: Eq. 5 with the error model as K_e where the
-        # calibration carries one, and its uncertainty
-        w, unc = wiener_with_uncertainty(resp_t, illum, sens, prior_est, reported, est)
+        t1 = calibration_report(est, resp, used, chart_work).training
+        w, unc = estimate_tests(est, resp_t, used, reported, setup)
         st = reflectance_stats(w.reflectance, test_est)
         sc = Score(
             cam.name,
@@ -395,7 +441,11 @@ def run_camera(
             sc.fitted_excess = est.excess.as_dict()
             sc.self_check_warnings = list(
                 self_check(
-                    est, resp, used, chart_work, reported_illuminants=reported_native
+                    est,
+                    resp,
+                    used,
+                    chart_work,
+                    reported_illuminants=session.reported_native,
                 ).warnings
             )
         if est.covariance is not None:
@@ -415,8 +465,8 @@ def run_camera(
         if est.led_correction is not None and est.led_correction.gain_std:
             sc.fitted_shift_nm = list(est.led_correction.shift_nm)
             sc.fitted_gain = list(est.led_correction.gain)
-            sc.true_shift_nm = [float(x) for x in shifts]
-            sc.true_gain = [float(x) for x in gains]
+            sc.true_shift_nm = [float(x) for x in session.shifts]
+            sc.true_gain = [float(x) for x in session.gains]
         out.append(sc)
     return out
 

@@ -283,10 +283,13 @@ def metering_error(
 
 
 def metering_noise(
-    reported: Spectra, rng: np.random.Generator, floor_rel: float, reads: int = 2
+    reported: Spectra,
+    rng: np.random.Generator,
+    floor_rel: float | np.ndarray,
+    reads: int = 2,
 ) -> Spectra:
     """Each reported spectrum read ``reads`` times with Gaussian noise of ``floor_rel``
-    of its peak, every reading clipped at zero (as the simulated CAL1's
+    of its peak (one for all, or (n, 1): one a spectrum), every reading clipped at zero (as the simulated CAL1's
     spectroradiometer), and the readings averaged (as capture does around a frame)."""
     v = reported.values
     sd = floor_rel * v.max(axis=1, keepdims=True)

@@ -27,24 +27,20 @@ import generalisation_data as gd
 import numpy as np
 
 from tunespec.core.metering import reading_noise_fractions, suppress_meter_floor
-from tunespec.core.simulate import NoiseModel, scale_to_exposure, simulate_responses
 from tunespec.core.spectra import Grid, Spectra
-from tunespec.core.uncertainty import wiener_with_uncertainty
-from tunespec.core.wiener import on_integration_grid
 
 #: Median of a chi-square with one degree of freedom.
 CHI2_1_MEDIAN = 0.455
 
 
-def _estimate(cam, resp, resp_t, native: Spectra, setup):
-    """Calibrate on the chart and estimate the test reflectances, as the benchmark."""
-    _, _, chart_work, prior_est, db, _ = setup
+def _estimate(cam, session, native: Spectra, setup):
+    """Calibrate on the chart with ``native`` readings and estimate the test
+    reflectances, as the benchmark does."""
     reported = native.resample(gen.WORK, average=True)
-    est = gen.calibrate("bayes", resp, reported, chart_work, db, cam.exclude)
-    illum, sens, _ = on_integration_grid(
-        est.correct_illuminants(reported), est.sensitivity, gen.EST
+    est = gen.calibrate(
+        "bayes", session.resp, reported, setup[2], setup[4], cam.exclude
     )
-    return wiener_with_uncertainty(resp_t, illum, sens, prior_est, reported, est)
+    return gen.estimate_tests(est, session.resp_t, reported, reported, setup)
 
 
 def _coverage(err, std) -> list[float]:
@@ -52,34 +48,23 @@ def _coverage(err, std) -> list[float]:
 
 
 def run_camera(cam, leds, setup, rng, args) -> dict:
-    chart_fine, test_fine, *_ = setup
-    scaled = scale_to_exposure(chart_fine, leds, cam.truth, target=0.8)
-    resp = simulate_responses(
-        chart_fine, scaled, cam.truth, noise=NoiseModel(), rng=rng
-    )
-    resp_t = simulate_responses(
-        test_fine, scaled, cam.truth, noise=NoiseModel(), rng=rng
-    )
-    reported_fine, _, _ = gd.metering_error(scaled, rng)
-    if args.systematic:
-        resp = gd.systematic_effects(resp, rng)
-        resp_t = gd.systematic_effects(resp_t, rng)
-    native = gd.report_at(reported_fine, args.report_step_nm)
-    native = suppress_meter_floor(gd.metering_noise(native, rng, args.meter_noise))
+    session = gen.simulate_session(
+        cam, leds, setup, rng, meter_noise=args.meter_noise, clean_meter=True,
+        report_step_nm=args.report_step_nm, systematic=args.systematic,
+    )  # fmt: skip
+    native = session.reported_native
     frac = reading_noise_fractions(native)
-    sd = np.array([frac[n] for n in native.names])[:, None]
-    sd = sd * native.values.max(axis=1, keepdims=True)
-    _, unc = _estimate(cam, resp, resp_t, native, setup)
+    _, unc = _estimate(cam, session, native, setup)
     labs = []
     for _ in range(args.replicates):
-        v = native.values
-        noisy = np.maximum(v + sd * rng.standard_normal(v.shape), 0.0)
-        cleaned = suppress_meter_floor(native.with_values(noisy))
-        _, u_k = _estimate(cam, resp, resp_t, cleaned, setup)
+        # one more reading's noise at the level measured, clipped and cleaned
+        level = np.array([[frac[n]] for n in native.names])
+        noisy = gd.metering_noise(native, rng, level, reads=1)
+        _, u_k = _estimate(cam, session, suppress_meter_floor(noisy), setup)
         labs.append(u_k.lab)
     dev2 = (np.array(labs) - unc.lab) ** 2
     robust = np.median(dev2, axis=0) / CHI2_1_MEDIAN
-    err = np.abs(unc.lab - gen.surface_lab(test_fine))
+    err = np.abs(unc.lab - gen.surface_lab(setup[1]))
     std = unc.lab_std
     return {
         "family": cam.family,
