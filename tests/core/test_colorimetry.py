@@ -323,10 +323,7 @@ def test_importing_colorimetry_keeps_numpy_print_options() -> None:
         "datasets.load_training_reflectances_190()\n"
         "print(np.get_printoptions()['legacy'], repr(np.array([1.0])))\n"
     )
-    out = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, check=True
-    ).stdout
-    assert out.split() == ["False", "array([1.])"]
+    assert _fresh_interpreter(code) == ["False", "array([1.])"]
 
 
 def test_colour_imported_without_its_plotting() -> None:
@@ -342,7 +339,11 @@ def test_colour_imported_without_its_plotting() -> None:
         "import colour\n"
         "print(callable(colour.plotting.plot_single_sd), 'matplotlib' in sys.modules)\n"
     )
-    out = subprocess.run(
+    assert _fresh_interpreter(code) == ["100.0", "False", "True", "True"]
+
+
+def _fresh_interpreter(code: str) -> list[str]:
+    """What ``code`` prints in a fresh interpreter (colour is imported here), split."""
+    return subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, check=True
-    ).stdout
-    assert out.split() == ["100.0", "False", "True", "True"]
+    ).stdout.split()
