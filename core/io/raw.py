@@ -67,6 +67,17 @@ _KEEP_LIBRAW_BUFFER = os.name == "posix"
 _STRIP_BYTES = 1 << 19
 
 
+def _planes_out(
+    caller: str, shape: tuple[int, int, int], out: NDArray[np.float32] | None
+) -> NDArray[np.float32]:
+    """``out`` checked to hold planes of ``shape`` (float32), or a new array."""
+    if out is None:
+        return np.empty(shape, dtype=np.float32)
+    if out.shape != shape or out.dtype != np.float32:
+        raise ValueError(f"{caller}: out {out.shape} is not {shape} float32")
+    return out
+
+
 @dataclass(frozen=True)
 class PlaneStats:
     """Per-ROI statistics of the R, G, B planes.
@@ -185,11 +196,7 @@ class RawFrame:
             Full-scale units.
         """
         row0, row1, col0, col1 = self._clip_window(row0, row1, col0, col1)
-        shape = (3, row1 - row0, col1 - col0)
-        if out is None:
-            out = np.empty(shape, dtype=np.float32)
-        elif out.shape != shape or out.dtype != np.float32:
-            raise ValueError(f"planes_in: out {out.shape} is not {shape} float32")
+        out = _planes_out("planes_in", (3, row1 - row0, col1 - col0), out)
         self._convert(row0, row1, col0, col1, out)
         return out
 
@@ -213,10 +220,7 @@ class RawFrame:
         shape = (3, h2, w2)
         if dark.shape != shape or dark.dtype != np.float32:
             raise ValueError(f"planes_minus: dark {dark.shape} is not {shape} float32")
-        if out is None:
-            out = np.empty(shape, dtype=np.float32)
-        elif out.shape != shape or out.dtype != np.float32:
-            raise ValueError(f"planes_minus: out {out.shape} is not {shape} float32")
+        out = _planes_out("planes_minus", shape, out)
         self._convert(0, h2, 0, w2, out, dark)
         return out
 
