@@ -23,13 +23,13 @@ Three checks look further, each against a model the numbers rest on:
    is flagged by name. The error bars carry it, but the numbers are less precise
    than the instrument can give (a 1 % flat field: 0.08 -> 0.14 dE00).
 2. **The light source's corrections** (:func:`led_correction_warnings`) and its
-   **readings** (:func:`meter_noise_fractions`). The self-calibration's per-LED gain
-   and wavelength offset correct the light's metering; a gain far from 1 or an offset
-   of several nm is no metering error a working spectroradiometer makes (the prior
-   widths are 2 % and 1 nm, :mod:`tunespec.core.sensitivity_bayes`), but a wrong or
-   swapped spectrum. A noise floor in the readings
-   (:func:`tunespec.core.metering.reading_noise_rms`) enters Eq. 1 of the calibration and
-   of every estimate.
+   **readings** (:func:`~tunespec.core.metering.reading_noise_fractions`). The
+   self-calibration's per-LED gain and wavelength offset correct the light's
+   metering; a gain far from 1 or an offset of several nm is no metering error a
+   working spectroradiometer makes (the prior widths are 2 % and 1 nm,
+   :mod:`tunespec.core.sensitivity_bayes`), but a wrong or swapped spectrum. A noise
+   floor in the readings (:func:`tunespec.core.metering.reading_noise_rms`) enters
+   Eq. 1 of the calibration and of every estimate.
 3. **Patches left out** (:func:`hold_out_check`). The chart is calibrated again without
    every ``k``-th patch and the left-out patches' responses are predicted: Table 1's
    statistics out of sample, with their own chi-square (the calibration's own
@@ -95,7 +95,6 @@ __all__ = [
     "held_out_of",
     "hold_out_check",
     "led_correction_warnings",
-    "meter_noise_fractions",
     "residual_chi_square",
     "response_variance",
     "self_check",
@@ -286,7 +285,8 @@ class SelfCheck:
         The leave-patches-out prediction (``None``: not run).
     meter_noise
         Per illuminant the reading noise found, fraction of its peak
-        (:func:`meter_noise_fractions`; empty: no readings given).
+        (:func:`~tunespec.core.metering.reading_noise_fractions`; empty: no readings
+        given).
     implausible_leds
         The LEDs whose fitted correction :func:`led_correction_warnings` flags.
     large_systematic
@@ -537,14 +537,6 @@ def systematic_warnings(estimate: SensitivityEstimate) -> dict[str, str]:
     return out
 
 
-def meter_noise_fractions(illuminants: Spectra) -> dict[str, float]:
-    """Per spectrum the reading noise, as a fraction of its peak
-    (:func:`tunespec.core.metering.reading_noise_fractions`: as the light reported
-    it, before its floor was cleaned; at its own step, where a resampled spectrum's
-    noise is averaged away)."""
-    return reading_noise_fractions(illuminants)
-
-
 def hold_out_check(
     responses: Responses,
     illuminants: Spectra,
@@ -676,7 +668,9 @@ def self_check(
     warnings += large.values()
     led_lines = led_correction_warnings(estimate)
     warnings += led_lines
-    noise = meter_noise_fractions(
+    # as the light reported them, before their floor was cleaned, at their own
+    # step (resampled, a spectrum's noise is averaged away)
+    noise = reading_noise_fractions(
         illuminants if reported_illuminants is None else reported_illuminants
     )
     loud = {k: v for k, v in noise.items() if v > METER_NOISE_LIMIT}

@@ -23,6 +23,7 @@ from tunespec.core.datasets import (
     load_led_set,
 )
 from tunespec.core.excess import ExcessVariance
+from tunespec.core.metering import reading_noise_fractions
 from tunespec.core.responses import Responses
 from tunespec.core.selfcheck import (
     CHI2_LIMIT,
@@ -31,7 +32,6 @@ from tunespec.core.selfcheck import (
     SYSTEMATIC_LIMIT,
     ChiSquare,
     led_correction_warnings,
-    meter_noise_fractions,
     residual_chi_square,
     response_variance,
     self_check,
@@ -180,7 +180,7 @@ def test_led_corrections_far_from_none_are_flagged(bench) -> None:
 
 def test_noisy_readings_of_the_light_are_flagged(bench) -> None:
     leds = bench["leds"]
-    assert max(meter_noise_fractions(leds).values()) == 0.0
+    assert max(reading_noise_fractions(leds).values()) == 0.0
     rng = np.random.default_rng(2)
     peak = leds.values.max(axis=1, keepdims=True)
     noisy = leds.with_values(
@@ -188,7 +188,7 @@ def test_noisy_readings_of_the_light_are_flagged(bench) -> None:
             leds.values + 0.005 * peak * rng.standard_normal(leds.values.shape), 0
         )
     )
-    found = meter_noise_fractions(noisy)
+    found = reading_noise_fractions(noisy)
     # a single clipped reading of 0.5 % of the peak: DER_SNR over the samples above
     # zero finds about 0.6 of it in the 20 narrow LEDs; a white is broad, with no
     # noise-only region to measure (0)
