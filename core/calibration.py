@@ -45,6 +45,7 @@ from tunespec.core.metering import suppress_meter_floor
 from tunespec.core.spectra import Grid, Spectra
 
 if TYPE_CHECKING:
+    from tunespec.core.readings import ReadingReplicates
     from tunespec.core.responses import Responses
     from tunespec.core.sensitivity_bayes import LedCorrection
 
@@ -63,7 +64,13 @@ __all__ = [
 CALIBRATION_FORMAT = "tunespec-calibration"
 _FORMAT_VERSION = 1
 #: Keys of ``Spectra.meta`` that carry a calibration's corrections.
-_CORRECTION_KEYS = ("spd_shift_nm", "led_correction", "excess_variance", "forced")
+_CORRECTION_KEYS = (
+    "spd_shift_nm",
+    "led_correction",
+    "excess_variance",
+    "reading_replicates",
+    "forced",
+)
 
 
 class MissingCorrectionsWarning(UserWarning):
@@ -110,6 +117,10 @@ class Calibration:
     provenance
         Where the calibration came from (files read, the estimator's label, plausibility
         checks overridden), JSON-friendly strings.
+    readings
+        The calibration fitted again with the light's readings' noise drawn anew
+        (``"bayes"`` with noisy readings, :mod:`~tunespec.core.readings`): the
+        errors-in-variables term of the estimate's uncertainty.
     """
 
     sensitivity: Spectra
@@ -121,6 +132,7 @@ class Calibration:
     covariance: NDArray[np.float64] | None = None
     excess: ExcessVariance | None = None
     provenance: dict[str, Any] = field(default_factory=dict)
+    readings: ReadingReplicates | None = None
 
     @property
     def std(self) -> NDArray[np.float64] | None:
@@ -149,6 +161,17 @@ class Calibration:
             suppress_meter_floor(illuminants), self.led_correction, self.spd_shift_nm
         )
 
+    def corrections_for(
+        self, names: Sequence[str]
+    ) -> tuple[NDArray[np.intp], NDArray[np.float64], NDArray[np.float64]]:
+        """Per spectrum of ``names``: its row in the LED correction (-1: not
+        fitted), its gain and its wavelength shift, as :func:`undo_metering`
+        applies them (without per-LED corrections: gain 1, the common shift)."""
+        if self.led_correction is not None:
+            return self.led_correction.lookup(names)
+        n = len(names)
+        return np.full(n, -1), np.ones(n), np.full(n, float(self.spd_shift_nm))
+
     def side_meta(self) -> dict[str, Any]:
         """The calibration as :func:`correct_illuminants_from_meta` and the side-file
         writer read it from ``Spectra.meta`` (JSON strings)."""
@@ -160,6 +183,8 @@ class Calibration:
             meta["led_correction"] = json.dumps(self.led_correction.as_dict())
         if self.excess is not None:
             meta["excess_variance"] = json.dumps(self.excess.as_dict())
+        if self.readings is not None:
+            meta["reading_replicates"] = json.dumps(self.readings.as_dict())
         if "forced" in self.provenance:
             meta["forced"] = json.dumps(list(self.provenance["forced"]))
         return meta
@@ -352,6 +377,14 @@ class Calibration:
             excess = ExcessVariance.from_dict(
                 json.loads(doc) if isinstance(doc, str) else doc, path=source
             )
+        readings = None
+        if "reading_replicates" in meta:
+            from tunespec.core.readings import ReadingReplicates
+
+            doc = meta["reading_replicates"]
+            readings = ReadingReplicates.from_dict(
+                json.loads(doc) if isinstance(doc, str) else doc, path=source
+            )
         prov = dict(provenance or {})
         label = meta.get("estimated_by")
         if isinstance(label, str) and label:
@@ -373,6 +406,7 @@ class Calibration:
             covariance=cov,
             excess=excess,
             provenance=prov,
+            readings=readings,
         )
         # the sensitivities' meta says the same as the fields (the pipeline's
         # estimate reads the corrections from there)

@@ -23,7 +23,7 @@ replies against; :func:`reading_noise_rms` the noise of a spectrum as it stands,
 cleaned or not, for the self-check.
 
 What cleaning leaves, the noise inside the bands, is propagated as an uncertainty of
-Eq. 1's illumination (:func:`reading_variance`).
+Eq. 1's illumination (:mod:`tunespec.core.readings`).
 
 References
 ----------
@@ -51,6 +51,7 @@ __all__ = [
     "EMISSION_MARGIN_NM",
     "NOISE_REGION_FRACTION",
     "READING_NOISE_META",
+    "READING_STEP_META",
     "emission_bands",
     "meter_noise_sd",
     "reading_noise_fractions",
@@ -75,6 +76,9 @@ BAND_NOISE_FRACTION = 0.02
 #: Key of a cleaned spectra's ``meta`` under which :func:`suppress_meter_floor` keeps
 #: each spectrum's reading noise as reported (JSON: name -> fraction of its peak).
 READING_NOISE_META = "reading_noise_fraction"
+#: Key of a cleaned spectra's ``meta`` under which :func:`suppress_meter_floor` keeps
+#: the step the instrument reported at (nm): where the noise was, once resampled.
+READING_STEP_META = "reading_step_nm"
 #: A spectrum whose low samples are mostly exact zeros has been cleaned already (an
 #: instrument that clips its noise at zero leaves a quarter to a half of them at zero).
 _CLEANED_ZERO_FRACTION = 2.0 / 3.0
@@ -252,12 +256,19 @@ def reading_noise_fractions(spectra: Spectra) -> dict[str, float]:
     below them, which measured as 0.3-0.9 % of the peak where the instrument's noise
     was 0.07 % (``benchmarks/generalisation.py``, 0.1 % noise, two readings averaged).
     """
+    kept = _kept_noise_fractions(spectra)
+    return kept if kept is not None else _measured_noise_fractions(spectra)
+
+
+def _kept_noise_fractions(spectra: Spectra) -> dict[str, float] | None:
+    """The reading noise that a cleaning kept in ``meta`` for every spectrum, or
+    ``None``."""
     kept = spectra.meta.get(READING_NOISE_META)
     if kept is not None:
         doc = json.loads(kept)
         if isinstance(doc, dict) and set(spectra.names) <= set(doc):
             return {n: float(doc[n]) for n in spectra.names}
-    return _measured_noise_fractions(spectra)
+    return None
 
 
 def _measured_noise_fractions(spectra: Spectra) -> dict[str, float]:
@@ -303,7 +314,7 @@ def emission_bands(
     if noise is None:
         return None
     limit = limit_sd * _rms_without_tails(noise)
-    step_nm = float(np.median(np.diff(wavelength_nm))) if v.size > 1 else 1.0
+    step_nm = _median_step(wavelength_nm)
     margin = max(1, round(margin_nm / step_nm))
     ipk = int(np.argmax(v))
     keep = np.zeros(v.size, dtype=bool)
@@ -311,6 +322,11 @@ def emission_bands(
         if hi - lo >= 2 or lo <= ipk < hi:
             keep[max(lo - margin, 0) : hi + margin] = True
     return keep
+
+
+def _median_step(wavelength_nm: NDArray[np.float64]) -> float:
+    """The samples' typical step in nm (1 for a single sample)."""
+    return float(np.median(np.diff(wavelength_nm))) if wavelength_nm.size > 1 else 1.0
 
 
 def suppress_meter_floor(spectra: Spectra) -> Spectra:
@@ -349,9 +365,14 @@ def suppress_meter_floor(spectra: Spectra) -> Spectra:
     if not cut.any():
         return spectra
     # cleaned, the spectra no longer show their noise (at 5 nm what is left below
-    # the bands are their tails): it is kept as the instrument reported it
-    noise = _measured_noise_fractions(spectra)
-    meta = {**spectra.meta, READING_NOISE_META: json.dumps(noise)}
+    # the bands are their tails): it is kept as the instrument reported it, and
+    # what an earlier cleaning kept stays (spectra cleaned, then resampled: their
+    # spline's ripples beside a band are not the instrument's noise)
+    meta = dict(spectra.meta)
+    if _kept_noise_fractions(spectra) is None:
+        noise = _measured_noise_fractions(spectra)
+        meta[READING_NOISE_META] = json.dumps(noise)
+        meta[READING_STEP_META] = repr(_median_step(spectra.wavelength_nm))
     return Spectra(
         spectra.wavelength_nm, np.where(cut, 0.0, values), spectra.names, meta
     )

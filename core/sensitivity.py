@@ -46,8 +46,7 @@ as a method for choosing a good ridge parameter", Technometrics 21 (1979) 215-22
 
 from __future__ import annotations
 
-import json
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -70,6 +69,11 @@ from tunespec.core.excess import (
 )
 from tunespec.core.metering import suppress_meter_floor
 from tunespec.core.progress import ProgressFn, StopFn, check_stop, report
+from tunespec.core.readings import (
+    ReadingReplicates,
+    replicate_spectra,
+    replicates_of,
+)
 from tunespec.core.responses import CHANNELS, Responses
 from tunespec.core.sensitivity_bayes import (
     ROUGHNESS_CAP_FACTOR,
@@ -136,7 +140,9 @@ class _Problem:
 
     ``A`` (m, n_wl): stimulus rows, ``C`` (m, 3): responses, ``var`` (m, 3): variance
     of each response, ``wavelength_nm`` (n_wl,); ``L`` (n_i, n_wl) and ``R``
-    (n_p, n_wl) the illuminants and the (unsaturated) patches that make ``A``.
+    (n_p, n_wl) the illuminants and the (unsaturated) patches that make ``A``;
+    ``readings`` the illuminants as a :class:`Spectra` (names and the cleaning's
+    ``meta``: their reading noise).
     """
 
     A: NDArray[np.float64]
@@ -149,6 +155,7 @@ class _Problem:
     L: NDArray[np.float64]
     R: NDArray[np.float64]
     step_nm: float
+    readings: Spectra
 
     def shifted(self, shift_nm: float) -> _Problem:
         """The same system with the illuminants' wavelength shift undone."""
@@ -343,6 +350,7 @@ def _prepare(
         illum.values,
         refl.values[keep],
         illuminants.step_nm,
+        illum,
     )
 
 
@@ -661,8 +669,15 @@ def _estimate_sensitivity_bayes(
     self_calibrate: bool,
     illuminant_names: tuple[str, ...],
     should_stop: StopFn | None,
-) -> tuple[NDArray[np.float64], dict[str, Any], LedCorrection, NDArray[np.float64]]:
-    """Empirical Bayes with per-LED self-calibration (:mod:`.sensitivity_bayes`).
+) -> tuple[
+    NDArray[np.float64],
+    dict[str, Any],
+    LedCorrection,
+    NDArray[np.float64],
+    ReadingReplicates | None,
+]:
+    """Empirical Bayes with per-LED self-calibration (:mod:`.sensitivity_bayes`),
+    fitted again with the readings' noise drawn anew (:mod:`.readings`).
 
     The database prior is the subspace of the first :data:`SMOOTH_PRIOR_COMPONENTS`
     components per channel; its weight, like the smoothness weight, is chosen per
@@ -693,6 +708,7 @@ def _estimate_sensitivity_bayes(
             else None
             for k in range(3)
         ],
+        replicate_spectra=replicate_spectra(problem.readings),
         should_stop=should_stop,
     )
     n = problem.wavelength_nm.size
@@ -718,7 +734,8 @@ def _estimate_sensitivity_bayes(
         "roi_noise_weights": problem.has_roi_noise,
         "database_size": len(database),
     }
-    return fit.S, params, correction, fit.covariance
+    readings = replicates_of(problem.readings, fit.S, fit.replicates)
+    return fit.S, params, correction, fit.covariance, readings
 
 
 _MethodFn = Callable[..., Any]
@@ -825,14 +842,14 @@ def estimate_camera_sensitivity(
     db = _database(database, exclude, problem.wavelength_nm, illuminants.step_nm)
     _check_solvable(problem, method, db)
     if method == "bayes":
-        S, params, correction, covariance = _estimate_sensitivity_bayes(
+        S, params, correction, covariance, readings = _estimate_sensitivity_bayes(
             problem, db, fit_shift=fit_spd_shift, self_calibrate=self_calibrate,
             illuminant_names=tuple(responses.illuminants), should_stop=should_stop,
         )  # fmt: skip
         shift_nm = float(correction.common_shift_nm)
         shift_at_bound = abs(shift_nm) >= SPD_SHIFT_RANGE_NM
     else:
-        correction, covariance = None, None
+        correction, covariance, readings = None, None, None
         S, params, shift_nm, shift_at_bound = _estimate_classic(
             problem, db, method, fit_spd_shift=fit_spd_shift,
             n_components=n_components, explained_variance=explained_variance,
@@ -842,53 +859,39 @@ def estimate_camera_sensitivity(
     params |= {"n_stimuli": int(problem.C.shape[0]), "n_patches": len(problem.patches),
                "excluded_cameras": excluded, "spd_shift_fitted": fit_spd_shift,
                "spd_shift_nm": shift_nm, "spd_shift_at_bound": shift_at_bound}  # fmt: skip
-    excess = _excess_variance(problem, S, correction, shift_nm, responses.illuminants)
     report(progress, 1.0)
-    sens = _result_spectra(problem, S, method, shift_nm, correction, excess)
-    return SensitivityEstimate(
-        sens, method, params, problem.excluded_patches, spd_shift_nm=shift_nm,
-        led_correction=correction, covariance=covariance, excess=excess,
+    cal = SensitivityEstimate(
+        Spectra(problem.wavelength_nm, S, CHANNELS), method, params,
+        problem.excluded_patches, spd_shift_nm=shift_nm, led_correction=correction,
+        covariance=covariance, readings=readings,
     )  # fmt: skip
+    cal = replace(cal, excess=_excess_variance(problem, cal))
+    # the side file's keys in the sensitivities' meta (the pipeline reads them there)
+    return replace(cal, sensitivity=Spectra(problem.wavelength_nm, S, CHANNELS,
+                                            cal.side_meta()))  # fmt: skip
 
 
-def _result_spectra(
-    problem: _Problem,
-    S: NDArray[np.float64],
-    method: str,
-    shift_nm: float,
-    correction: LedCorrection | None,
-    excess: ExcessVariance,
-) -> Spectra:
-    """The fitted sensitivities with what the side file keeps in their ``meta``."""
-    meta = {"source": f"estimated ({method})", "spd_shift_nm": repr(shift_nm),
-            "excess_variance": json.dumps(excess.as_dict())}  # fmt: skip
-    if correction is not None:
-        meta["led_correction"] = json.dumps(correction.as_dict())
-    return Spectra(problem.wavelength_nm, S, CHANNELS, meta)
-
-
-def _excess_variance(
-    problem: _Problem,
-    S: NDArray[np.float64],
-    correction: LedCorrection | None,
-    shift_nm: float,
-    illuminant_names: Sequence[str],
-) -> ExcessVariance:
+def _excess_variance(problem: _Problem, cal: SensitivityEstimate) -> ExcessVariance:
     """The chart's residuals beyond its known noise (:func:`fit_excess_variance`):
     Eq. 1 with the fitted corrections against the responses, the known variance
-    the ROI noise (the flat-field residual is fitted there)."""
-    L = undo_metering(
-        Spectra(problem.wavelength_nm, problem.L, tuple(illuminant_names)),
-        correction,
-        shift_nm,
-    )
+    the ROI noise and what the light's reading noise explains (the spread of the
+    calibration's replicates over the chart, :mod:`.readings`: else the excess
+    would count it a second time beside the estimate's readings term); the
+    flat-field residual is fitted there."""
+    S = cal.sensitivity.values
+    L = undo_metering(problem.readings, cal.led_correction, cal.spd_shift_nm)
     pred = stimulus_matrix(L.values, problem.R, problem.step_nm) @ S.T
-    noise = problem.var - (SMOOTH_RELATIVE_ERROR * problem.C) ** 2
     n_p = len(problem.patches)
+    noise = (problem.var - (SMOOTH_RELATIVE_ERROR * problem.C) ** 2).reshape(n_p, -1)
+    if cal.readings is not None:
+        dev = cal.readings.deviations(
+            problem.readings, S, cal.corrections_for(problem.readings.names), problem.R
+        )
+        noise = noise + np.mean(dev**2, axis=0)
     return fit_excess_variance(
         problem.C.reshape(n_p, -1),
         pred.reshape(n_p, -1),
-        noise.reshape(n_p, -1),
+        noise,
         weight_variance=problem.var.reshape(n_p, -1),
     )
 

@@ -223,7 +223,8 @@ class BayesFit:
     corrections (``i_j(l) = gain_j * reported_j(l + shift_j)``); ``shift0_nm`` their
     common offset; ``covariance`` (3 n + 2 n_i, 3 n + 2 n_i) the joint posterior
     covariance of ``(s_R, s_G, s_B, log gain, shift_nm)``; ``params`` the
-    hyper-parameters and diagnostics (JSON-friendly).
+    hyper-parameters and diagnostics (JSON-friendly); ``replicates`` per spectra of
+    ``replicate_spectra`` its ``(S, gain, shift_nm)`` (:func:`_replicate_fits`).
     """
 
     S: NDArray[np.float64]
@@ -232,6 +233,7 @@ class BayesFit:
     shift0_nm: float
     covariance: NDArray[np.float64]
     params: dict[str, Any]
+    replicates: tuple[tuple[NDArray[np.float64], ...], ...] = ()
 
 
 def apply_led_corrections(
@@ -321,6 +323,17 @@ def _normal(data: _Data, L: NDArray[np.float64]) -> tuple[NDArray, NDArray]:
     G = np.einsum("il,im,iklm->klm", Ls, Ls, data.M, optimize=True)
     b = np.einsum("il,ikl->kl", Ls, data.V)
     return G, b
+
+
+def _normal_at(data: _Data, wl: NDArray, L_rep: NDArray) -> Any:
+    """``state -> (G, b)``: :func:`_normal` at the spectra ``L_rep`` corrected as
+    ``state`` says."""
+
+    def normal(st: _State) -> tuple[NDArray, NDArray]:
+        Lc, _ = _corrected(wl, L_rep, np.exp(st.gamma), st.shift)
+        return _normal(data, Lc)
+
+    return normal
 
 
 def _smoothness_penalty(n: int) -> NDArray[np.float64]:
@@ -742,6 +755,7 @@ def fit_bayes(
     sigma_gain: float = SIGMA_GAIN,
     sigma_shift_nm: float = SIGMA_SHIFT_NM,
     max_roughness: Sequence[float | None] = (None, None, None),
+    replicate_spectra: Sequence[NDArray[np.float64]] = (),
     should_stop: StopFn | None = None,
 ) -> BayesFit:
     """Joint MAP of sensitivities and light-source corrections, priors by evidence.
@@ -766,6 +780,10 @@ def fit_bayes(
         Per channel the largest :func:`roughness` accepted (``None``: no cap), e.g.
         :data:`ROUGHNESS_CAP_FACTOR` x :func:`database_roughness`; with
         ``mode="per-led"`` only.
+    replicate_spectra
+        Other reported spectra (each like ``L_rep``): the readings with their noise
+        drawn again (:mod:`tunespec.core.readings`); each is fitted at this fit's
+        hyper-parameters, from its solution (:attr:`BayesFit.replicates`).
 
     Returns
     -------
@@ -785,9 +803,7 @@ def fit_bayes(
     B = _reduction(mode, n_i)
     sg, sd = float(sigma_gain), float(sigma_shift_nm)
 
-    def normal(st: _State) -> tuple[NDArray, NDArray]:
-        Lc, _ = _corrected(wavelength_nm, L_rep, np.exp(st.gamma), st.shift)
-        return _normal(data, Lc)
+    normal = _normal_at(data, wavelength_nm, L_rep)
 
     def choose(G: NDArray, b: NDArray) -> tuple[list, list[float]]:
         got = [
@@ -834,6 +850,11 @@ def fit_bayes(
     phi = _phi(data, G, b, S, Lams)
     H, _, Z = _hessian(data, wavelength_nm, L_rep, state, S, G, Lams, phi, sg, sd, B)
     cov = _covariance(H, S, B, Z, n, n_i)
+    replicates = tuple(
+        _replicate_fit(data, wavelength_nm, L, state, B, (Om, Qs, hyper), (sg, sd),
+                       should_stop)
+        for L in replicate_spectra
+    )  # fmt: skip
     params = {
         "lambda": [h[0] for h in hyper],
         "database_weight": [h[1] for h in hyper],
@@ -847,8 +868,35 @@ def fit_bayes(
         "roughness": [roughness(S[k], Om) for k in range(3)],
     }
     return BayesFit(
-        S, np.exp(state.gamma), state.shift.copy(), state.shift0, cov, params
-    )
+        S, np.exp(state.gamma), state.shift.copy(), state.shift0, cov, params,
+        replicates,
+    )  # fmt: skip
+
+
+def _replicate_fit(
+    data: _Data,
+    wl: NDArray,
+    L_rep: NDArray,
+    state: _State,
+    B: NDArray,
+    priors: tuple[NDArray, list, list],
+    widths: tuple[float, float],
+    should_stop: StopFn | None,
+) -> tuple[NDArray[np.float64], ...]:
+    """``(S, gain, shift_nm)`` of the fit with the reported spectra ``L_rep``: the
+    corrections refined by Gauss-Newton from ``state`` at the fit's hyper-parameters
+    and prior widths (a conditional bootstrap replicate: the priors stay as chosen,
+    one to three iterations instead of the whole search)."""
+    Om, Qs, hyper = priors
+    normal = _normal_at(data, wl, L_rep)
+    st = _State(state.gamma.copy(), state.shift.copy(), state.shift0)
+    G, b = normal(st)
+    Lams = _channel_precisions(G, Om, Qs, hyper)
+    if B.shape[1]:
+        st, G, b, Lams, _ = _gauss_newton(
+            data, normal, wl, L_rep, st, (G, b, Lams), widths, B, priors, should_stop
+        )
+    return _solve_s(G, b, Lams, nonneg=True), np.exp(st.gamma), st.shift.copy()
 
 
 #: Bounds of the hierarchical widths: from "no metering error" to far beyond a

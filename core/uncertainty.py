@@ -47,7 +47,7 @@ from tunespec.core.metering import suppress_meter_floor
 from tunespec.core.responses import Responses
 from tunespec.core.sensitivity import SensitivityEstimate
 from tunespec.core.sensitivity_bayes import _corrected
-from tunespec.core.spectra import Spectra, resampling_matrix
+from tunespec.core.spectra import Grid, Spectra, resampling_matrix
 from tunespec.core.wiener import (
     WienerEstimate,
     reflectance_basis,
@@ -329,13 +329,8 @@ def calibration_response_covariance(
         illuminants.wavelength_nm, illuminants.values, wl, average=True
     )
     corr = calibration.led_correction
-    names = list(illuminants.names)
-    n_i = len(names)
-    if corr is not None:
-        rows, gains, shifts = corr.lookup(names)
-    else:
-        rows, gains = np.full(n_i, -1), np.ones(n_i)
-        shifts = np.full(n_i, calibration.spd_shift_nm)
+    n_i = len(illuminants.names)
+    rows, gains, shifts = calibration.corrections_for(illuminants.names)
     Lc, dL = _corrected(wl, rep, gains, shifts)
     # the reflectance between its samples as Eq. 5's F has it
     R = reflectance.values @ reflectance_basis(reflectance.wavelength_nm, wl).T
@@ -367,6 +362,56 @@ def calibration_response_covariance(
         JU = JU.reshape(hi - lo, 3 * n_i, N)
         out[lo:hi] = JU @ JU.transpose(0, 2, 1)
     return out
+
+
+def readings_response_covariance(
+    calibration: SensitivityEstimate,
+    illuminants: Spectra,
+    reflectance: Spectra,
+) -> NDArray[np.float64]:
+    """Covariance of the responses that the light's reading noise causes.
+
+    The errors-in-variables term (:mod:`tunespec.core.readings`): Eq. 1 at the given
+    reflectances under each of the calibration's replicates (its sensitivities and
+    LED corrections, the readings with the replicate's noise: the calibration's
+    draw where they are the readings it saw, else one of their own), about Eq. 1
+    with the calibration itself; the mean of the deviations' outer products (a
+    bootstrap's estimate of the error's covariance about the truth).
+
+    Parameters
+    ----------
+    calibration
+        With :attr:`~SensitivityEstimate.readings`.
+    illuminants : Spectra, (n_i, n_wl')
+        The target capture's spectra as reported (uncorrected), a grid the
+        readings can be resampled onto.
+    reflectance : Spectra, (n_p, n_wl'')
+        The (estimated) reflectances, any grid.
+
+    Returns
+    -------
+    (n_p, 3 n_i, 3 n_i)
+        Rows illuminant-major, as Eq. 5's ``c``.
+    """
+    reps = calibration.readings
+    if reps is None:
+        raise InputError("the calibration carries no reading replicates")
+    wl = reps.wavelength_nm
+    cleaned = suppress_meter_floor(illuminants)
+    if cleaned.wavelength_nm.shape != wl.shape or not np.allclose(
+        cleaned.wavelength_nm, wl
+    ):
+        grid = Grid(float(wl[0]), float(wl[-1]), float(wl[1] - wl[0]))
+        cleaned = cleaned.resample(grid, average=True)
+    sens = calibration.sensitivity
+    R = reflectance.values @ reflectance_basis(reflectance.wavelength_nm, wl).T
+    dev = reps.deviations(
+        cleaned,
+        _hold_resample(sens.wavelength_nm, sens.values, wl),
+        calibration.corrections_for(cleaned.names),
+        R,
+    )
+    return np.einsum("kpi,kpj->pij", dev, dev) / reps.n_replicates
 
 
 def lab_covariance(
@@ -408,6 +453,7 @@ BUDGET_TERMS = (
     "flat field",
     "systematic",
     "calibration",
+    "readings",
 )
 
 
@@ -426,7 +472,8 @@ def _response_error_terms(
     the systematic errors the calibration's residuals showed
     (:attr:`SensitivityEstimate.excess`) and, with a ``"bayes"`` calibration, its
     response covariance at the estimate (:func:`calibration_response_covariance`).
-    A term the inputs do not carry is left out."""
+    A term the inputs do not carry is left out; the light's reading noise
+    (:func:`readings_response_covariance`) comes with the calibration's covariance."""
     n_p, m_rows = len(responses.patches), 3 * len(responses.illuminants)
     rgb = responses.rgb.reshape(n_p, m_rows)
     keep = ~np.repeat(responses.clipped, 3, axis=1)  # (n_p, m_rows)
@@ -461,6 +508,10 @@ def _response_error_terms(
         terms["calibration"] = calibration_response_covariance(
             calibration, illuminants.select(responses.illuminants), unclipped
         )
+        if calibration.readings is not None:
+            terms["readings"] = readings_response_covariance(
+                calibration, illuminants.select(responses.illuminants), unclipped
+            )
     return terms
 
 

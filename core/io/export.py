@@ -170,7 +170,7 @@ def sensitivity_meta_document(
         "grid": f"{wl[0]:g}:{wl[-1]:g}:{sensitivity.step_nm:g}",
         "spd_shift_nm": float(sensitivity.meta.get("spd_shift_nm", 0.0)),
     }
-    for key in ("led_correction", "excess_variance"):
+    for key in ("led_correction", "excess_variance", "reading_replicates"):
         if key in sensitivity.meta:
             doc[key] = json.loads(sensitivity.meta[key])
     if "forced" in sensitivity.meta:  # plausibility checks overridden (--force)
@@ -250,7 +250,7 @@ def parse_sensitivity_meta(doc: Any, path: str | PathLike[str]) -> dict[str, Any
             "expected a JSON object with a number spd_shift_nm", path=path
         ) from None
     out: dict[str, Any] = {"meta_path": str(path), "spd_shift_nm": spd_shift_nm}
-    for key in ("led_correction", "excess_variance"):
+    for key in ("led_correction", "excess_variance", "reading_replicates"):
         if key in doc:
             out[key] = doc[key]
     cov = doc.get("covariance")

@@ -1,0 +1,165 @@
+"""Errors in variables: the light's reading noise in calibration and estimate (issue 23).
+
+The simulated bench's LEDs, reported every 10 nm with noise of 0.3 % of each peak
+(two readings averaged, clipped at zero, cleaned as the readers clean them); the
+camera renders the SG and the 190 test reflectances on a 1 nm grid.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from tunespec.core.calibration import Calibration
+from tunespec.core.datasets import (
+    DEFAULT_CAMERA,
+    load_camera_database,
+    load_colorchecker_sg,
+    load_led_set,
+    load_training_reflectances_190,
+)
+from tunespec.core.errors import InputError
+from tunespec.core.metering import (
+    READING_STEP_META,
+    reading_noise_fractions,
+    suppress_meter_floor,
+)
+from tunespec.core.readings import (
+    REPLICATES,
+    ReadingReplicates,
+    draw_noise,
+    replicate_spectra,
+)
+from tunespec.core.sensitivity import estimate_camera_sensitivity
+from tunespec.core.simulate import NoiseModel, scale_to_exposure, simulate_responses
+from tunespec.core.spectra import DEFAULT_GRID, Grid, Spectra
+from tunespec.core.uncertainty import readings_response_covariance
+
+FINE = Grid(380.0, 730.0, 1.0)
+NOISE = 0.003
+
+
+def _reported(leds: Spectra, rng: np.random.Generator) -> Spectra:
+    """Every 10 nm, two noisy readings clipped at zero and averaged, cleaned, on
+    the calibration's grid."""
+    at10 = leds.resample(Grid(380.0, 730.0, 10.0))
+    peak = at10.values.max(axis=1, keepdims=True)
+    reads = [
+        np.maximum(
+            at10.values + NOISE * peak * rng.standard_normal(at10.values.shape), 0
+        )
+        for _ in range(2)
+    ]
+    cleaned = suppress_meter_floor(at10.with_values(np.mean(reads, axis=0)))
+    return cleaned.resample(DEFAULT_GRID, average=True)
+
+
+@pytest.fixture(scope="module")
+def bench():
+    truth = load_camera_database(FINE)[DEFAULT_CAMERA]
+    sg_fine = load_colorchecker_sg(FINE)
+    leds = scale_to_exposure(sg_fine, load_led_set(FINE), truth, target=0.8)
+    rng = np.random.default_rng(5)
+    chart = simulate_responses(sg_fine, leds, truth, noise=NoiseModel(), rng=rng)
+    reported = _reported(leds, rng)
+    est = estimate_camera_sensitivity(
+        chart,
+        reported,
+        load_colorchecker_sg(DEFAULT_GRID),
+        database=load_camera_database(DEFAULT_GRID),
+        exclude=DEFAULT_CAMERA,
+    )
+    return {
+        "est": est,
+        "reported": reported,
+        "other": _reported(leds, rng),  # another session's readings
+        "test": load_training_reflectances_190(DEFAULT_GRID),
+    }
+
+
+def test_the_cleaning_keeps_the_instruments_step_and_noise_through_resampling(
+    bench,
+) -> None:
+    reported = bench["reported"]
+    assert float(reported.meta[READING_STEP_META]) == 10.0
+    fractions = np.array(list(reading_noise_fractions(reported).values()))
+    # two readings of 0.3 % averaged: 0.21 %, measured on the clipped floor
+    assert 0.0005 < np.median(fractions) < 0.003, fractions
+    # cleaning again after resampling keeps what the first cleaning measured
+    again = suppress_meter_floor(reported)
+    assert again.meta.get(READING_STEP_META) == reported.meta[READING_STEP_META]
+    assert reading_noise_fractions(again) == reading_noise_fractions(reported)
+
+
+def test_a_noisy_calibration_is_fitted_again_per_replicate(bench) -> None:
+    reps = bench["est"].readings
+    assert reps is not None and reps.n_replicates == REPLICATES
+    assert reps.names == tuple(bench["reported"].names)
+    # the replicates move the sensitivities by a little, not by nothing
+    rel = np.abs(reps.sensitivity_delta).max() / bench["est"].sensitivity.values.max()
+    assert 1e-4 < rel < 0.2, rel
+    assert np.all(np.abs(np.log(reps.gain)) < 0.2)
+    # noise-free readings: nothing to replicate
+    assert replicate_spectra(load_led_set(DEFAULT_GRID)) == []
+
+
+def test_the_same_draw_for_the_same_key() -> None:
+    wl = DEFAULT_GRID.wavelength_nm
+    led = np.exp(-0.5 * ((wl - 520.0) / 12.0) ** 2)
+    led[led < 1e-3] = 0.0  # cleaned: zero outside the band
+    a = draw_noise(wl, led, 0.002, 10.0, (3, 4))
+    assert np.array_equal(a, draw_noise(wl, led, 0.002, 10.0, (3, 4)))
+    assert not np.array_equal(a, draw_noise(wl, led, 0.002, 10.0, (3, 5)))
+    # nothing far from the band (the cleaning zeroes the readings there) but the
+    # cubic spline's ripples from 10 nm onto 5 nm
+    far = np.abs(a[np.abs(wl - 520.0) > 60.0]).max()
+    assert far < 0.05 * np.abs(a).max(), (far, np.abs(a).max())
+    assert np.all(draw_noise(wl, led, 0.0, 10.0, (0, 0)) == 0.0)
+
+
+def test_the_readings_term_shares_the_calibrations_draw(bench) -> None:
+    est, test = bench["est"], bench["test"]
+    same = readings_response_covariance(est, bench["reported"], test)
+    other = readings_response_covariance(est, bench["other"], test)
+    n = same.shape[1]
+    assert same.shape == (len(test), n, n) and n == 3 * 22
+    var_same = np.diagonal(same, axis1=1, axis2=2)
+    var_other = np.diagonal(other, axis1=1, axis2=2)
+    assert np.all(var_same >= 0) and np.median(var_same) > 0
+    # under its own readings the calibration absorbed part of their noise, which
+    # cancels; another session's readings bring noise of their own
+    assert np.median(var_same) < np.median(var_other), (
+        np.median(var_same),
+        np.median(var_other),
+    )
+
+
+def test_replicates_survive_save_and_load(tmp_path, bench) -> None:
+    est = bench["est"]
+    back = Calibration.load(est.save(tmp_path / "cal.json"))
+    assert back.readings is not None
+    assert np.array_equal(back.readings.gain, est.readings.gain)
+    a = readings_response_covariance(est, bench["reported"], bench["test"])
+    b = readings_response_covariance(back, bench["reported"], bench["test"])
+    assert np.allclose(a, b, rtol=1e-9, atol=0.0)
+
+
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [
+        (lambda d: d.pop("gain"), "gain"),
+        (lambda d: d.update(noise_fraction=[2.0] * len(d["names"])), "outside"),
+        (lambda d: d.update(shift_nm=[[0.0]]), "shape"),
+        (lambda d: d.update(readings=True), "expected"),
+    ],
+)
+def test_a_malformed_replicate_block_is_refused_in_one_line(
+    bench, edit, message
+) -> None:
+    doc = json.loads(json.dumps(bench["est"].readings.as_dict()))
+    edit(doc)
+    with pytest.raises(InputError, match=message) as err:
+        ReadingReplicates.from_dict(doc, path="cal.meta.json")
+    assert "\n" not in str(err.value) and "reading_replicates" in str(err.value)
