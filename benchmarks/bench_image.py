@@ -21,9 +21,9 @@ CFA DNGs) into ``--work`` (kept for later runs). Then, side by side in one run:
 - **Wiener stage vs. matrix product**: the per-pixel Eq. 5 of one block
   (:data:`~tunespec.app.pipeline.image_session.BLOCK_PIXELS` pixels as rows, 66
   responses, 61 wavelengths; binning, sorting by bin, the products per bin,
-  unsorting) against ``numpy.matmul`` of the same float32 shapes in one product,
-  both with one BLAS thread, as the pipeline runs its tasks (one per core), on
-  this machine (goal: the stage at >= 50 % of the product's throughput); the
+  limiting to [0, 1], unsorting) against ``numpy.matmul`` of the same float32
+  shapes in one product, both with one BLAS thread, as the pipeline runs its
+  tasks (one per core), on this machine (goal: the stage at >= 50 % of the product's throughput); the
   product with BLAS's default threads is printed beside it;
 - **write floor**: writing as many bytes as the outputs hold into a fresh file, with
   no computing, right after each estimate-image run: what the page cache of this
@@ -157,12 +157,17 @@ def _synthetic_system() -> tuple:
 
 
 def _wiener_vs_matmul() -> dict[str, float]:
-    """The binned Wiener stage of one block against one float32 product."""
+    """The binned Wiener stage of one block against one float32 product: the stage
+    as :func:`~tunespec.core.image.estimate_pixels` runs it in the pipeline
+    (:func:`~tunespec.core.image_bins.apply_bank`: levels, bins, sorting, the
+    products, limiting to [0, 1] as ``estimate-image`` does unless ``--no-clip``,
+    unsorting)."""
     import numpy as np
 
     from tunespec.app.pipeline.image_session import BLOCK_PIXELS
     from tunespec.core.datasets import load_colorchecker_sg
-    from tunespec.core.image import _apply_bins, build_wiener_bank, estimate_pixels
+    from tunespec.core.image import build_wiener_bank, estimate_pixels
+    from tunespec.core.image_bins import apply_bank
 
     grid, F, white, noise = _synthetic_system()
     sg = load_colorchecker_sg(grid).values
@@ -194,7 +199,7 @@ def _wiener_vs_matmul() -> dict[str, float]:
         t_mm = best(lambda: c @ W0)
         # into a preallocated result, as the pipeline's blocks (a scratch buffer)
         est = np.empty((n, n_wl), dtype=np.float32)
-        t_stage = best(lambda: _apply_bins(bank, c, bank.bins_of(c, phi), est))
+        t_stage = best(lambda: apply_bank(bank, c, phi, est, clip=True))
         t_pix = best(lambda: estimate_pixels(bank, c, phi), k=3)
     return {
         "pixels": n,

@@ -60,7 +60,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tunespec.core.errors import InputError, SingularSystemError
-from tunespec.core.image_bins import _apply_bins
+from tunespec.core.image_bins import apply_bank
 from tunespec.core.scratch import scratch
 from tunespec.core.wiener import solve_with_noise
 
@@ -760,26 +760,22 @@ def estimate_pixels(
             f"pixels: responses {c.shape} and phi {phi.shape} do not fit the "
             f"bank's {bank.F.shape[0]} responses"
         )
-    rho = c @ bank.level_weights
-    sat = np.isnan(rho)  # a NaN (clipped) response makes its pixel's level NaN
-    bins = np.full(n, -1, dtype=np.int64)
-    ok = ~sat if not exact else np.zeros(n, dtype=bool)
     if out is not None and (
         out.shape != (n, bank.mean.size) or out.dtype != np.float32
     ):
         raise InputError(f"pixels: output {out.shape} is not ({n}, {bank.mean.size})")
     est = np.empty((n, bank.mean.size), dtype=np.float32) if out is None else out
-    # the binned pixels are limited to [0, 1] while their rows are cached
-    if ok.all():
-        bins = bank.bins_of_level(rho, phi)
-        _apply_bins(bank, c, bins, est, clip=clip)
-    elif ok.any():
-        # every pixel through its bin (no copies of the unclipped ones); a clipped
-        # pixel's row (NaN) is replaced by its exact solution below
-        b = bank.bins_of_level(np.where(ok, rho, np.float32(0.0)), phi)
-        _apply_bins(bank, c, b, est, clip=clip)
-        bins[ok] = b[ok]
-    rest = np.flatnonzero(~ok)
+    if exact:
+        sat = np.isnan(c @ bank.level_weights)
+        bins = np.full(n, -1, dtype=np.int64)
+        rest = np.arange(n)
+    else:
+        # every pixel through its bin (no copies of the unclipped ones); a NaN
+        # (clipped) response makes its pixel's level NaN, and its row (NaN) is
+        # replaced by its exact solution below
+        bins, sat = apply_bank(bank, c, phi, est, clip=clip)
+        rest = np.flatnonzero(sat)
+        bins[rest] = -1
     if rest.size:
         exact_rows = wiener_pixels_exact(bank, c[rest], phi[rest]).astype(np.float32)
         est[rest] = np.clip(exact_rows, 0.0, 1.0) if clip else exact_rows

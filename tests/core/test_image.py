@@ -256,33 +256,62 @@ def test_scratch_buffers_are_per_thread_and_released() -> None:
 
 
 @pytest.mark.parametrize("tile", [32768, 700])
-@pytest.mark.parametrize("layout", ["neighbours", "shuffled"])
+@pytest.mark.parametrize("layout", ["neighbours", "shuffled", "mixed"])
 def test_bins_applied_in_either_write_order(
     system, layout: str, tile: int, monkeypatch
 ) -> None:
-    # pixels of a bin side by side (as in a photograph: each run's rows are put
-    # straight into pixel order) or scattered (sorted tile by tile, written sorted,
-    # gathered back; tiles of 700 pixels: several, the last one short)
+    # pixels of a bin side by side (as in a photograph: the tiles wait and each
+    # run's rows are put straight into pixel order), scattered (sorted tile by tile,
+    # written sorted, gathered back) or both in one block (the last third
+    # shuffled); tiles of 700 pixels: several, the last one short
     from tunespec.core import image_bins
-    from tunespec.core.image import _apply_bins
 
     monkeypatch.setattr(image_bins, "SCATTERED_TILE", tile)
+    ran = set()
+
+    def spied(name):  # records that the write order ``name`` ran
+        f = getattr(image_bins, name)
+
+        def spy(*args):
+            ran.add(name)
+            return f(*args)
+
+        return spy
+
+    for name in ("_apply_tile", "_apply_in_order"):
+        monkeypatch.setattr(image_bins, name, spied(name))
 
     F, sg = system["F"], system["sg"].values
     bank = build_wiener_bank(F, sg, system["white"], CAMERA_NOISE, GRID.wavelength_nm,
                              phi_range=(1.0, 1.5))  # fmt: skip
     rng = np.random.default_rng(3)
     n = 3000
-    c = _noisy(F, sg[np.repeat(np.arange(30), n // 30)], np.ones(n), rng)
-    bins = np.repeat(rng.integers(0, bank.Wt.shape[0], 30), n // 30)
-    if layout == "shuffled":
-        perm = rng.permutation(n)
-        c, bins = c[perm], bins[perm]
-    got = _apply_bins(bank, c, bins, clip=True)
+    phi = np.repeat(rng.uniform(1.0, 1.5, 30), n // 30)
+    c = _noisy(F, sg[np.repeat(np.arange(30), n // 30)], phi, rng)
+    c[7, 3] = np.nan  # a clipped response: level NaN, binned at level 0
+    first = {"neighbours": n, "shuffled": 0, "mixed": n * 2 // 3}[layout]
+    perm = np.r_[np.arange(first), first + rng.permutation(n - first)]
+    c, phi = c[perm], phi[perm]
+    got = np.full((n, bank.mean.size), -9.0, dtype=np.float32)
+    bins, nan_level = image_bins.apply_bank(bank, c, phi, got, clip=True)
+    in_order, tiled = {"_apply_in_order"}, {"_apply_tile"}
+    expected_paths = {
+        "neighbours": in_order,
+        "shuffled": tiled,
+        "mixed": in_order | tiled if tile == 700 else in_order,  # one tile: in order
+    }
+    assert ran == expected_paths[layout]
+    bad = np.isnan(c).any(axis=1)
+    assert np.array_equal(nan_level, bad) and bad.sum() == 1
+    assert np.array_equal(bins[~bad], bank.bins_of(c[~bad], phi[~bad]))
+    assert bins[bad] == bank.bins_of_level(np.zeros(1), phi[bad])
     exact = (
         np.einsum("pm,pml->pl", c.astype(np.float64), bank.Wt[bins]) + bank.offset[bins]
     )
-    np.testing.assert_allclose(got, np.clip(exact, 0.0, 1.0), rtol=0, atol=1e-5)
+    assert np.isnan(got[bad]).all()
+    np.testing.assert_allclose(
+        got[~bad], np.clip(exact[~bad], 0.0, 1.0), rtol=0, atol=1e-5
+    )
 
 
 def test_scratch_phase_places_the_array_for_direct_writes(tmp_path) -> None:
