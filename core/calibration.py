@@ -42,12 +42,12 @@ from numpy.typing import NDArray
 from tunespec.core.errors import InputError
 from tunespec.core.excess import ExcessVariance
 from tunespec.core.metering import suppress_meter_floor
-from tunespec.core.spectra import Grid, Spectra
+from tunespec.core.spectra import Grid, Spectra, resampling_matrix
 
 if TYPE_CHECKING:
+    from tunespec.core.led_correction import LedCorrection
     from tunespec.core.readings import ReadingReplicates
     from tunespec.core.responses import Responses
-    from tunespec.core.sensitivity_bayes import LedCorrection
 
 __all__ = [
     "CALIBRATION_FORMAT",
@@ -136,11 +136,17 @@ class Calibration:
 
     @property
     def std(self) -> NDArray[np.float64] | None:
-        """Standard uncertainty of each sensitivity sample, (3, n_wl), if known."""
+        """Standard uncertainty of each sensitivity sample, (3, n_wl), if known: the
+        covariance's (from the chart's responses) and the spread of the replicates
+        fitted with the light's readings drawn anew (:attr:`readings`), added."""
         if self.covariance is None:
             return None
-        n = self.sensitivity.wavelength_nm.size
-        return np.sqrt(np.maximum(np.diag(self.covariance)[: 3 * n], 0.0)).reshape(3, n)
+        wl = self.sensitivity.wavelength_nm
+        var = np.maximum(np.diag(self.covariance)[: 3 * wl.size], 0.0).reshape(3, -1)
+        if self.readings is not None:
+            T = resampling_matrix(self.readings.wavelength_nm, wl)
+            var = var + np.mean((self.readings.sensitivity_delta @ T.T) ** 2, axis=0)
+        return np.sqrt(var)
 
     @property
     def grid(self) -> Grid:
@@ -333,8 +339,7 @@ class Calibration:
         InputError
             The covariance does not fit the sensitivities and LED corrections.
         """
-        from tunespec.core.sensitivity_bayes import LedCorrection
-        from tunespec.core.spectra import resampling_matrix
+        from tunespec.core.led_correction import LedCorrection
 
         source = meta.get("meta_path")
         corr = None
@@ -524,11 +529,11 @@ def shift_values(
     A cubic spline, not linear interpolation: on a 5 nm grid a narrowband LED spans a
     few samples, and linear interpolation would blur it by more than the shift.
     Outside the grid the end values are held. The common-shift case of
-    :func:`~tunespec.core.sensitivity_bayes.apply_led_corrections`.
+    :func:`~tunespec.core.led_correction.apply_led_corrections`.
     """
     if shift_nm == 0.0:
         return np.asarray(values, dtype=np.float64)
-    from tunespec.core.sensitivity_bayes import apply_led_corrections
+    from tunespec.core.led_correction import apply_led_corrections
 
     n = np.atleast_2d(values).shape[0]
     return apply_led_corrections(
@@ -615,7 +620,7 @@ def correct_illuminants_from_meta(
     illuminants = suppress_meter_floor(illuminants)
     doc = meta.get("led_correction")
     if doc is not None and spd_shift_nm is None:
-        from tunespec.core.sensitivity_bayes import LedCorrection
+        from tunespec.core.led_correction import LedCorrection
 
         if isinstance(doc, str):
             try:

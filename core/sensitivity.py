@@ -67,6 +67,7 @@ from tunespec.core.excess import (
     ExcessVariance,
     fit_excess_variance,
 )
+from tunespec.core.led_correction import LedCorrection
 from tunespec.core.metering import suppress_meter_floor
 from tunespec.core.progress import ProgressFn, StopFn, check_stop, report
 from tunespec.core.readings import (
@@ -77,7 +78,6 @@ from tunespec.core.readings import (
 from tunespec.core.responses import CHANNELS, Responses
 from tunespec.core.sensitivity_bayes import (
     ROUGHNESS_CAP_FACTOR,
-    LedCorrection,
     _nnls_quadratic,
     _smoothness_penalty,
     database_roughness,
@@ -860,34 +860,31 @@ def estimate_camera_sensitivity(
                "excluded_cameras": excluded, "spd_shift_fitted": fit_spd_shift,
                "spd_shift_nm": shift_nm, "spd_shift_at_bound": shift_at_bound}  # fmt: skip
     report(progress, 1.0)
-    cal = SensitivityEstimate(
+    return _with_excess(SensitivityEstimate(
         Spectra(problem.wavelength_nm, S, CHANNELS), method, params,
         problem.excluded_patches, spd_shift_nm=shift_nm, led_correction=correction,
         covariance=covariance, readings=readings,
-    )  # fmt: skip
+    ), problem)  # fmt: skip
+
+
+def _with_excess(cal: SensitivityEstimate, problem: _Problem) -> SensitivityEstimate:
+    """``cal`` with its excess variance (:func:`_excess_variance`) and the side
+    file's keys in its sensitivities' meta (the pipeline reads them there)."""
     cal = replace(cal, excess=_excess_variance(problem, cal))
-    # the side file's keys in the sensitivities' meta (the pipeline reads them there)
-    return replace(cal, sensitivity=Spectra(problem.wavelength_nm, S, CHANNELS,
-                                            cal.side_meta()))  # fmt: skip
+    s = cal.sensitivity
+    sens = Spectra(s.wavelength_nm, s.values, s.names, cal.side_meta())
+    return replace(cal, sensitivity=sens)
 
 
 def _excess_variance(problem: _Problem, cal: SensitivityEstimate) -> ExcessVariance:
     """The chart's residuals beyond its known noise (:func:`fit_excess_variance`):
     Eq. 1 with the fitted corrections against the responses, the known variance
-    the ROI noise and what the light's reading noise explains (the spread of the
-    calibration's replicates over the chart, :mod:`.readings`: else the excess
-    would count it a second time beside the estimate's readings term); the
-    flat-field residual is fitted there."""
+    the ROI noise (the flat-field residual is fitted there)."""
     S = cal.sensitivity.values
     L = undo_metering(problem.readings, cal.led_correction, cal.spd_shift_nm)
     pred = stimulus_matrix(L.values, problem.R, problem.step_nm) @ S.T
     n_p = len(problem.patches)
     noise = (problem.var - (SMOOTH_RELATIVE_ERROR * problem.C) ** 2).reshape(n_p, -1)
-    if cal.readings is not None:
-        dev = cal.readings.deviations(
-            problem.readings, S, cal.corrections_for(problem.readings.names), problem.R
-        )
-        noise = noise + np.mean(dev**2, axis=0)
     return fit_excess_variance(
         problem.C.reshape(n_p, -1),
         pred.reshape(n_p, -1),

@@ -278,7 +278,7 @@ def test_a_bayes_report_states_the_validated_accuracy_and_the_led_corrections() 
     import numpy as np
 
     from tunespec.app.report.report import ReportData, render_html
-    from tunespec.core.sensitivity_bayes import LedCorrection
+    from tunespec.core.led_correction import LedCorrection
     from tunespec.core.spectra import Spectra
 
     wl = np.arange(400.0, 701.0, 10.0)

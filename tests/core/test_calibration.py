@@ -19,7 +19,7 @@ from tunespec.core.errors import InputError
 from tunespec.core.excess import ExcessVariance
 from tunespec.core.io.export import read_sensitivity_meta, sensitivity_meta_path
 from tunespec.core.io.spectral_csv import write_spectra_csv
-from tunespec.core.sensitivity_bayes import LedCorrection
+from tunespec.core.led_correction import LedCorrection
 from tunespec.core.spectra import Grid, Spectra
 
 GRID = Grid(400.0, 700.0, 10.0)

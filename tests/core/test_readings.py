@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from tunespec.core.calibration import Calibration
+from tunespec.core.colorimetry import lab_d50
 from tunespec.core.datasets import (
     DEFAULT_CAMERA,
     load_camera_database,
@@ -35,7 +36,12 @@ from tunespec.core.readings import (
 from tunespec.core.sensitivity import estimate_camera_sensitivity
 from tunespec.core.simulate import NoiseModel, scale_to_exposure, simulate_responses
 from tunespec.core.spectra import DEFAULT_GRID, Grid, Spectra
-from tunespec.core.uncertainty import readings_response_covariance
+from tunespec.core.uncertainty import (
+    budget_summary,
+    readings_response_covariance,
+    wiener_with_uncertainty,
+)
+from tunespec.core.wiener import on_integration_grid
 
 FINE = Grid(380.0, 730.0, 1.0)
 NOISE = 0.003
@@ -63,6 +69,8 @@ def bench():
     leds = scale_to_exposure(sg_fine, load_led_set(FINE), truth, target=0.8)
     rng = np.random.default_rng(5)
     chart = simulate_responses(sg_fine, leds, truth, noise=NoiseModel(), rng=rng)
+    test_fine = load_training_reflectances_190(FINE)
+    test = simulate_responses(test_fine, leds, truth, noise=NoiseModel(), rng=rng)
     reported = _reported(leds, rng)
     est = estimate_camera_sensitivity(
         chart,
@@ -76,6 +84,8 @@ def bench():
         "reported": reported,
         "other": _reported(leds, rng),  # another session's readings
         "test": load_training_reflectances_190(DEFAULT_GRID),
+        "test_responses": test,
+        "test_lab": lab_d50(test_fine),
     }
 
 
@@ -101,6 +111,11 @@ def test_a_noisy_calibration_is_fitted_again_per_replicate(bench) -> None:
     rel = np.abs(reps.sensitivity_delta).max() / bench["est"].sensitivity.values.max()
     assert 1e-4 < rel < 0.2, rel
     assert np.all(np.abs(np.log(reps.gain)) < 0.2)
+    # the sensitivities' bands carry the replicates' spread beside the covariance's
+    est = bench["est"]
+    n = est.sensitivity.wavelength_nm.size
+    cov_only = np.sqrt(np.maximum(np.diag(est.covariance)[: 3 * n], 0)).reshape(3, n)
+    assert np.all(est.std >= cov_only) and np.any(est.std > 1.01 * cov_only)
     # noise-free readings: nothing to replicate
     assert replicate_spectra(load_led_set(DEFAULT_GRID)) == []
 
@@ -163,3 +178,22 @@ def test_a_malformed_replicate_block_is_refused_in_one_line(
     with pytest.raises(InputError, match=message) as err:
         ReadingReplicates.from_dict(doc, path="cal.meta.json")
     assert "\n" not in str(err.value) and "reading_replicates" in str(err.value)
+
+
+def test_the_budget_has_the_readings_row_and_the_intervals_hold(bench) -> None:
+    est, reported = bench["est"], bench["reported"]
+    grid = Grid(400.0, 700.0, 10.0)
+    illum, sens, _ = on_integration_grid(
+        est.correct_illuminants(reported), est.sensitivity, grid
+    )
+    prior = load_colorchecker_sg(grid)
+    _, unc = wiener_with_uncertainty(
+        bench["test_responses"], illum, sens, prior, reported, est
+    )
+    budget = budget_summary(unc)
+    assert "readings" in budget and budget["readings"]["share_L"] > 0.002, budget
+    assert abs(sum(b["share_L"] for b in budget.values()) - 1.0) < 1e-9
+    # the surfaces' own colour (1 nm) inside the 95 % intervals (0.3 % readings
+    # at 10 nm, an ideal sensor, 190 reflectances: 0.984 / 0.926 / 0.995 measured)
+    inside = np.abs(unc.lab - bench["test_lab"]) <= 1.96 * unc.lab_std
+    assert np.all(inside.mean(axis=0) >= 0.88), inside.mean(axis=0)

@@ -23,6 +23,7 @@ from tunespec.core.datasets import (
     load_led_set,
 )
 from tunespec.core.excess import ExcessVariance
+from tunespec.core.led_correction import LedCorrection
 from tunespec.core.metering import reading_noise_fractions
 from tunespec.core.responses import Responses
 from tunespec.core.selfcheck import (
@@ -38,7 +39,6 @@ from tunespec.core.selfcheck import (
     systematic_warnings,
 )
 from tunespec.core.sensitivity import SensitivityEstimate, estimate_camera_sensitivity
-from tunespec.core.sensitivity_bayes import LedCorrection
 from tunespec.core.simulate import NoiseModel, scale_to_exposure, simulate_responses
 from tunespec.core.spectra import CALIBRATION_GRID, Grid, Spectra
 from tunespec.core.verdict import self_check_findings

@@ -21,8 +21,8 @@ from tunespec.core.datasets import (
     load_training_reflectances_190,
 )
 from tunespec.core.errors import InputError
+from tunespec.core.led_correction import LedCorrection
 from tunespec.core.sensitivity import estimate_camera_sensitivity
-from tunespec.core.sensitivity_bayes import LedCorrection
 from tunespec.core.simulate import NoiseModel, scale_to_exposure, simulate_responses
 from tunespec.core.spectra import DEFAULT_GRID, Grid, Spectra
 from tunespec.core.uncertainty import reflectance_uncertainty
