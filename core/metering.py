@@ -39,6 +39,7 @@ spline).
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -54,6 +55,7 @@ __all__ = [
     "READING_STEP_META",
     "emission_bands",
     "meter_noise_sd",
+    "reading_meta",
     "reading_noise_fractions",
     "reading_noise_rms",
     "suppress_meter_floor",
@@ -269,6 +271,55 @@ def _kept_noise_fractions(spectra: Spectra) -> dict[str, float] | None:
         if isinstance(doc, dict) and set(spectra.names) <= set(doc):
             return {n: float(doc[n]) for n in spectra.names}
     return None
+
+
+def reading_meta(spectra: Sequence[Spectra], names: Sequence[str]) -> dict[str, str]:
+    """The metering keys (:data:`READING_NOISE_META`, :data:`READING_STEP_META`) of
+    spectra combined from single readings ``spectra`` (each cleaned), named
+    ``names``: each one's reading noise (:func:`reading_noise_fractions`) and the
+    first one's step as reported."""
+    noise = {
+        name: next(iter(reading_noise_fractions(s).values()), 0.0)
+        for s, name in zip(spectra, names, strict=True)
+    }
+    first = spectra[0] if spectra else None
+    step = first.meta.get(READING_STEP_META) if first is not None else None
+    if step is None and first is not None:
+        step = repr(_median_step(first.wavelength_nm))
+    return {READING_NOISE_META: json.dumps(noise), READING_STEP_META: str(step)}
+
+
+def parse_reading_meta(
+    values: Mapping[str, str], names: Sequence[str]
+) -> dict[str, str]:
+    """The metering keys as a file states them (:data:`READING_NOISE_META`: a JSON
+    object name -> fraction of the peak in [0, 1) naming every spectrum;
+    :data:`READING_STEP_META`: a step in nm in (0, 100]), checked and written back
+    canonically; ValueError saying what is wrong."""
+    out: dict[str, str] = {}
+    if READING_NOISE_META in values:
+        try:
+            doc = json.loads(values[READING_NOISE_META])
+        except ValueError:
+            raise ValueError("expected a JSON object name -> number") from None
+        if not isinstance(doc, dict) or not set(names) <= set(doc):
+            raise ValueError("expected a JSON object naming every spectrum")
+        noise = {}
+        for n in names:
+            v = doc[n]
+            if isinstance(v, bool) or not isinstance(v, int | float) or not 0 <= v < 1:
+                raise ValueError(f"{n}: {v!r} is not a fraction in [0, 1)")
+            noise[n] = float(v)
+        out[READING_NOISE_META] = json.dumps(noise)
+    if READING_STEP_META in values:
+        try:
+            step = float(values[READING_STEP_META])
+        except ValueError:
+            raise ValueError("expected a step in nm") from None
+        if not 0 < step <= 100:
+            raise ValueError(f"step {step:g} nm outside (0, 100]")
+        out[READING_STEP_META] = repr(step)
+    return out
 
 
 def _measured_noise_fractions(spectra: Spectra) -> dict[str, float]:

@@ -66,7 +66,7 @@ from tunespec.core.io.session import (
     frames_by_channel,
 )
 from tunespec.core.layout import TargetLayout
-from tunespec.core.metering import suppress_meter_floor
+from tunespec.core.metering import reading_meta, suppress_meter_floor
 from tunespec.core.responses import Responses
 from tunespec.core.spectra import Grid, Spectra
 
@@ -113,8 +113,8 @@ def illuminants_from_spds(
     """
     rows: list[NDArray[np.float64]] = []
     wl: NDArray[np.float64] | None = None
-    for spd, t in zip(spds, exposures_s, strict=True):
-        spd = suppress_meter_floor(spd)
+    cleaned = [suppress_meter_floor(spd) for spd in spds]
+    for spd, t in zip(cleaned, exposures_s, strict=True):
         if grid is not None:
             spd = spd.resample(grid, average=True)
         if wl is None:
@@ -123,6 +123,8 @@ def illuminants_from_spds(
     if wl is None:
         raise InputError("no light readings (SPDs) to build the illuminants from")
     meta = {"unit": ILLUMINANT_UNIT, **({"source": source} if source else {})}
+    # each reading's noise and step as reported: the calibration draws it again
+    meta |= reading_meta(cleaned, names)
     return Spectra(wl, np.stack(rows), tuple(names), meta)
 
 

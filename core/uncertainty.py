@@ -14,7 +14,10 @@ Three sources of error reach a Wiener estimate ``r = m + W (c - F m)``,
 3. the calibration: the joint covariance ``Sigma`` of the sensitivities and the
    light-source corrections (:attr:`SensitivityEstimate.covariance`) moves the
    responses by ``J Sigma J'`` with ``J = d c / d theta`` at the estimate (Eq. 1
-   differentiated).
+   differentiated), and the light's reading noise moves them by what the
+   calibration's replicates with the readings drawn anew show
+   (:func:`readings_response_covariance`, :mod:`tunespec.core.readings`; in ``N``
+   only, not in the estimate's ``K_e``).
 
 For the linear estimator actually used (whatever ``K_e`` Eq. 6 gave it), the error
 covariance is the sandwich::

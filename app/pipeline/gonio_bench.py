@@ -113,7 +113,7 @@ def _load_setup(root: Path, mix_kind: str) -> tuple[Spectra, Any, np.ndarray]:
     """Sensitivities, the illuminant correction and the mix levels kept in ``root``."""
     from tunespec.app.pipeline.gonio_process import calibration_correction
     from tunespec.core.errors import InputError
-    from tunespec.core.sensitivity_bayes import LedCorrection
+    from tunespec.core.led_correction import LedCorrection
 
     doc = read_json(root / "mix.json")
     if doc.get("mix", "d50") != mix_kind:

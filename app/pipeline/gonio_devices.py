@@ -134,7 +134,7 @@ def run_gonio_session(
 
     ``out/plan.json`` must exist (the CLI writes it). The sensitivities and the
     calibration's per-LED corrections (``led_correction``, a
-    :class:`~tunespec.core.sensitivity_bayes.LedCorrection`: metering errors of the
+    :class:`~tunespec.core.led_correction.LedCorrection`: metering errors of the
     light's spectroradiometer that the calibration separated from the sensitivities)
     are saved with the session (``calibration.csv``, ``led_correction.json``) and a
     resumed session uses those (``sensitivity_meta``, the sensitivities' side file
@@ -153,7 +153,7 @@ def run_gonio_session(
         process_gonio,
     )
     from tunespec.core.datasets import load_colorchecker_sg
-    from tunespec.core.sensitivity_bayes import LedCorrection
+    from tunespec.core.led_correction import LedCorrection
     from tunespec.devices.goniometer_registry import open_goniometer
     from tunespec.devices.registry import open_bench
 

@@ -393,7 +393,7 @@ def calibration_correction(
     """The calibration's per-LED corrections, extended to the D50 mix.
 
     Each LED spectrum is corrected by its own gain and offset
-    (:class:`~tunespec.core.sensitivity_bayes.LedCorrection`). The mix is a sum of
+    (:class:`~tunespec.core.led_correction.LedCorrection`). The mix is a sum of
     LEDs: its measured spectrum is multiplied by the ratio, per wavelength, of the
     corrected to the uncorrected sum of the calibration's LED spectra at the mix
     levels (the mix's own shape is kept, its metering errors are those of its LEDs).

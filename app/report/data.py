@@ -140,7 +140,7 @@ class ReportData:
     lab, lab_std : (n, 3)
         CIELAB (D50) of ``reflectance`` and its standard uncertainty (a table).
     led_correction
-        :class:`tunespec.core.sensitivity_bayes.LedCorrection`: the light source's
+        :class:`tunespec.core.led_correction.LedCorrection`: the light source's
         per-LED corrections found by the calibration (a table).
     uncertainty_budget
         :func:`tunespec.core.uncertainty.budget_summary`: each term's share of the

@@ -405,9 +405,11 @@ def read_spectral(
         spectra = _as_sensitivity(spectra, source)
     elif kind == "illuminant":
         # the reading noise goes at the instrument's own sampling, before anything
-        # resamples it (core.metering)
+        # resamples it (core.metering); a file written resampled says what it was
         from tunespec.core.metering import suppress_meter_floor
 
+        if fmt == "csv":
+            spectra = _with_reading_meta(spectra, text, source)
         spectra = suppress_meter_floor(spectra)
     spectra = Spectra(
         spectra.wavelength_nm,
@@ -420,6 +422,22 @@ def read_spectral(
     if average is None:
         average = kind == "illuminant"
     return spectra.resample(grid, source=source, average=average)
+
+
+def _with_reading_meta(spectra: Spectra, text: str, source: str) -> Spectra:
+    """``spectra`` with the reading noise and step its CSV's comment lines state
+    (:data:`~tunespec.core.io.spectral_csv.COMMENT_META`), checked."""
+    from tunespec.core.io.spectral_csv import COMMENT_META, comment_values
+    from tunespec.core.metering import parse_reading_meta
+
+    found = comment_values(text, COMMENT_META)
+    meta = dict(spectra.meta)
+    for key, (value, lineno) in found.items():
+        try:
+            meta |= parse_reading_meta({key: value}, spectra.names)
+        except ValueError as exc:
+            raise InputError(f"{key}: {exc}", path=source, line=lineno) from None
+    return Spectra(spectra.wavelength_nm, spectra.values, spectra.names, meta)
 
 
 def read_spectra_csv(

@@ -32,6 +32,7 @@ import csv
 import math
 import re
 from collections import Counter
+from collections.abc import Sequence
 from os import PathLike
 
 import numpy as np
@@ -45,9 +46,12 @@ from tunespec.core.limits import (
     shown,
     valid_name,
 )
+from tunespec.core.metering import READING_NOISE_META, READING_STEP_META
 from tunespec.core.spectra import Spectra
 
 __all__ = [
+    "COMMENT_META",
+    "comment_values",
     "is_wavelength_header",
     "numbered_rows",
     "parse_spectra_csv",
@@ -295,9 +299,36 @@ def _by_rows(
 def write_spectra_csv(
     spectra: Spectra, path: str | PathLike[str], *, header: str = "wavelength_nm"
 ) -> None:
-    """Write ``spectra`` as a spectral CSV (full float precision, round-trips exactly)."""
+    """Write ``spectra`` as a spectral CSV (full float precision, round-trips exactly).
+
+    The light's readings keep their reading noise and step as the instrument reported
+    them (``meta`` keys :data:`COMMENT_META`) in ``# key: value`` comment lines above
+    the header (:func:`comment_values` reads them back)."""
     with atomic_open(path, newline="") as fh:
+        for key in COMMENT_META:
+            if key in spectra.meta:
+                fh.write(f"# {key}: {spectra.meta[key]}\n")
         w = csv.writer(fh, lineterminator="\n")
         w.writerow([header, *spectra.names])
         for i, wl in enumerate(spectra.wavelength_nm):
             w.writerow([f"{wl:g}", *(repr(float(v)) for v in spectra.values[:, i])])
+
+
+#: ``Spectra.meta`` keys a spectral CSV keeps in ``# key: value`` comment lines: the
+#: light's reading noise and step as reported (:mod:`tunespec.core.metering`).
+COMMENT_META = (READING_NOISE_META, READING_STEP_META)
+
+
+def comment_values(text: str, keys: Sequence[str]) -> dict[str, tuple[str, int]]:
+    """``key -> (value, line number)`` of the ``# key: value`` comment lines of
+    ``text`` whose key is one of ``keys`` (the first of each)."""
+    out: dict[str, tuple[str, int]] = {}
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        body = line.lstrip("\ufeff \t")
+        if not body.startswith("#"):
+            continue
+        key, sep, value = body[1:].partition(":")
+        key = key.strip()
+        if sep and key in keys and key not in out:
+            out[key] = (value.strip(), lineno)
+    return out

@@ -197,3 +197,23 @@ def test_the_budget_has_the_readings_row_and_the_intervals_hold(bench) -> None:
     # at 10 nm, an ideal sensor, 190 reflectances: 0.984 / 0.926 / 0.995 measured)
     inside = np.abs(unc.lab - bench["test_lab"]) <= 1.96 * unc.lab_std
     assert np.all(inside.mean(axis=0) >= 0.88), inside.mean(axis=0)
+
+
+def test_the_readings_noise_survives_a_spectral_csv(tmp_path, bench) -> None:
+    from tunespec.core.io.spectral import read_spectral
+    from tunespec.core.io.spectral_csv import write_spectra_csv
+
+    reported = bench["reported"]
+    path = tmp_path / "illuminants.csv"
+    write_spectra_csv(reported, path)
+    back = read_spectral(path, kind="illuminant")
+    assert back.meta[READING_STEP_META] == "10.0"
+    assert reading_noise_fractions(back) == pytest.approx(
+        reading_noise_fractions(reported), rel=1e-12
+    )
+    # a comment that says something impossible is refused, naming its line
+    text = path.read_text().replace("# reading_step_nm: 10.0", "# reading_step_nm: -3")
+    path.write_text(text)
+    with pytest.raises(InputError, match=r"reading_step_nm: step -3 nm") as err:
+        read_spectral(path, kind="illuminant")
+    assert err.value.line == 2 and "\n" not in str(err.value)
