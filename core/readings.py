@@ -14,15 +14,18 @@ Introduction to the Bootstrap*, 1993, ch. 6): the calibration is fitted again
 hyper-parameters) with the readings' noise drawn again :data:`REPLICATES` times at
 the level measured in them (:func:`~tunespec.core.metering.reading_noise_fractions`),
 on the samples the instrument reported (its own step, kept by
-:func:`~tunespec.core.metering.suppress_meter_floor`) inside the emission bands
-(outside, the cleaning sets the readings to zero). :class:`ReadingReplicates` keeps
+:func:`~tunespec.core.metering.suppress_meter_floor`) inside the emission bands and
+their margins (outside, the cleaning sets the readings to zero), clipped at zero as
+the instrument clips (:func:`draw_noise`). :class:`ReadingReplicates` keeps
 each replicate's sensitivities (as differences from the fit's), LED corrections and
 the readings it was drawn on. An estimate under the *same* readings evaluates Eq. 1
 with each replicate's sensitivities, corrections and the same draw of noise (the
 calibration absorbed part of it, which then cancels); under other readings, a draw
 of its own (:meth:`ReadingReplicates.perturbations`). The spread of the responses
-it predicts is a term of the estimate's error model
-(:func:`tunespec.core.uncertainty.readings_response_covariance`).
+it predicts is a term of the estimate's uncertainty
+(:func:`tunespec.core.uncertainty.readings_response_covariance`; not of Eq. 5's
+``K_e``, see ``docs/validation.md``), and the replicates' spread widens the
+sensitivities' bands (:attr:`~tunespec.core.calibration.Calibration.std`).
 """
 
 from __future__ import annotations
@@ -241,10 +244,14 @@ def draw_noise(
     """One draw of a reading's noise, on ``wavelength_nm``.
 
     Gaussian noise of ``noise_fraction`` of the spectrum's peak on the samples the
-    instrument reports (every ``step_nm``, where ``row`` is not zero: outside the
-    emission bands the cleaning zeroes the readings), resampled onto the grid as
-    the readers resample the readings (band-averaged, or a cubic spline from coarser
-    data). ``key`` (replicate, spectrum) seeds it: the same key gives the same draw.
+    instrument reports (every ``step_nm``) where ``row`` is not zero and within
+    :data:`~tunespec.core.metering.EMISSION_MARGIN_NM` of it (the bands and margins
+    the cleaning keeps; it zeroes the rest), clipped at zero as the instrument clips
+    and taken about the clipped reading's mean (``v Phi(v/sd) + sd phi(v/sd)``, so a
+    sample near zero, whose reading already carries its clipped floor, gets no second
+    floor), resampled onto the grid as the readers resample readings (band-averaged,
+    or a cubic spline from coarser data). ``key`` (replicate, spectrum) seeds it: the
+    same key gives the same draw.
     """
     peak = float(np.max(row)) if row.size else 0.0
     if not (noise_fraction > 0 and peak > 0):
