@@ -71,6 +71,7 @@ from tunespec.core.led_correction import LedCorrection
 from tunespec.core.metering import suppress_meter_floor
 from tunespec.core.progress import ProgressFn, StopFn, check_stop, report
 from tunespec.core.readings import (
+    REPLICATES,
     ReadingReplicates,
     replicate_spectra,
     replicates_of,
@@ -668,6 +669,7 @@ def _estimate_sensitivity_bayes(
     fit_shift: bool,
     self_calibrate: bool,
     illuminant_names: tuple[str, ...],
+    replicates: int,
     should_stop: StopFn | None,
 ) -> tuple[
     NDArray[np.float64],
@@ -708,7 +710,7 @@ def _estimate_sensitivity_bayes(
             else None
             for k in range(3)
         ],
-        replicate_spectra=replicate_spectra(problem.readings),
+        replicate_spectra=replicate_spectra(problem.readings, replicates),
         should_stop=should_stop,
     )
     n = problem.wavelength_nm.size
@@ -760,6 +762,7 @@ def estimate_camera_sensitivity(
     explained_variance: float | None = None,
     fit_spd_shift: bool | None = None,
     self_calibrate: bool | None = None,
+    replicates: int = REPLICATES,
     progress: ProgressFn | None = None,
     should_stop: StopFn | None = None,
 ) -> SensitivityEstimate:
@@ -788,11 +791,9 @@ def estimate_camera_sensitivity(
         the shipped database (:func:`load_camera_database`).
     exclude
         Camera name(s) to leave out of the database (a leave-one-out check).
-    n_components
-        ``"pca"``: principal components per channel (the paper uses 4).
-    explained_variance
-        ``"pca"``: if given, the fewest components explaining this fraction of the
-        database's variance instead of ``n_components`` (the paper: 0.97).
+    n_components, explained_variance
+        ``"pca"``: principal components per channel (the paper uses 4), or if given
+        the fewest explaining this fraction of the database's variance (paper: 0.97).
     fit_spd_shift
         Also fit one wavelength-scale error of the spectroradiometer that reported
         ``illuminants`` (within +-:data:`SPD_SHIFT_RANGE_NM`; a 1 nm shift costs
@@ -803,6 +804,9 @@ def estimate_camera_sensitivity(
         ``"bayes"``: fit every LED's gain and wavelength offset too (default: with
         ``fit_spd_shift``); the corrections are in ``.led_correction`` and applied
         by :meth:`SensitivityEstimate.correct_illuminants`.
+    replicates
+        ``"bayes"``: fits again with the readings' noise drawn anew (:mod:`.readings`;
+        0: none, as the self-check's hold-out fit needs none).
     progress, should_stop
         Progress callback (fraction 0..1) and cancellation check.
 
@@ -844,7 +848,8 @@ def estimate_camera_sensitivity(
     if method == "bayes":
         S, params, correction, covariance, readings = _estimate_sensitivity_bayes(
             problem, db, fit_shift=fit_spd_shift, self_calibrate=self_calibrate,
-            illuminant_names=tuple(responses.illuminants), should_stop=should_stop,
+            illuminant_names=tuple(responses.illuminants), replicates=replicates,
+            should_stop=should_stop,
         )  # fmt: skip
         shift_nm = float(correction.common_shift_nm)
         shift_at_bound = abs(shift_nm) >= SPD_SHIFT_RANGE_NM

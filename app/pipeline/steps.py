@@ -316,7 +316,12 @@ def fit_calibration(
             reflectances,
             reported_illuminants=reported_illuminants,
             fit=lambda r: estimate_camera_sensitivity(
-                r, illuminants, reflectances, should_stop=should_stop, **refit
+                r,
+                illuminants,
+                reflectances,
+                should_stop=should_stop,
+                replicates=0,
+                **refit,
             ),
             held_out=held_out,
             progress=sub_progress(progress, 0.5, 1.0),
