@@ -302,16 +302,18 @@ def write_spectra_csv(
     """Write ``spectra`` as a spectral CSV (full float precision, round-trips exactly).
 
     The light's readings keep their reading noise and step as the instrument reported
-    them (``meta`` keys :data:`COMMENT_META`) in ``# key: value`` comment lines above
-    the header (:func:`comment_values` reads them back)."""
+    them (``meta`` keys :data:`COMMENT_META`) in ``# key: value`` comment lines after
+    the data (:func:`comment_values` reads them back): readers that take the first
+    line as the header and skip comments (numpy's ``genfromtxt``, colour-science's
+    ``read_sds_from_csv_file``, pandas with ``comment="#"``) read the file as before."""
     with atomic_open(path, newline="") as fh:
-        for key in COMMENT_META:
-            if key in spectra.meta:
-                fh.write(f"# {key}: {spectra.meta[key]}\n")
         w = csv.writer(fh, lineterminator="\n")
         w.writerow([header, *spectra.names])
         for i, wl in enumerate(spectra.wavelength_nm):
             w.writerow([f"{wl:g}", *(repr(float(v)) for v in spectra.values[:, i])])
+        for key in COMMENT_META:
+            if key in spectra.meta:
+                fh.write(f"# {key}: {spectra.meta[key]}\n")
 
 
 #: ``Spectra.meta`` keys a spectral CSV keeps in ``# key: value`` comment lines: the

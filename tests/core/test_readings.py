@@ -211,9 +211,17 @@ def test_the_readings_noise_survives_a_spectral_csv(tmp_path, bench) -> None:
     assert reading_noise_fractions(back) == pytest.approx(
         reading_noise_fractions(reported), rel=1e-12
     )
+    # the comments follow the data: colour-science's reader (numpy's genfromtxt,
+    # names from the first line) reads the file as it reads any spectral CSV
+    import colour
+
+    sds = colour.io.read_sds_from_csv_file(str(path))
+    assert list(sds) == list(reported.names)
     # a comment that says something impossible is refused, naming its line
-    text = path.read_text().replace("# reading_step_nm: 10.0", "# reading_step_nm: -3")
-    path.write_text(text)
+    lines = path.read_text().splitlines()
+    at = lines.index("# reading_step_nm: 10.0")
+    lines[at] = "# reading_step_nm: -3"
+    path.write_text("\n".join(lines) + "\n")
     with pytest.raises(InputError, match=r"reading_step_nm: step -3 nm") as err:
         read_spectral(path, kind="illuminant")
-    assert err.value.line == 2 and "\n" not in str(err.value)
+    assert err.value.line == at + 1 and "\n" not in str(err.value)
