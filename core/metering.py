@@ -58,6 +58,7 @@ __all__ = [
     "reading_meta",
     "reading_noise_fractions",
     "reading_noise_rms",
+    "reading_step_nm",
     "suppress_meter_floor",
 ]
 
@@ -282,11 +283,22 @@ def reading_meta(spectra: Sequence[Spectra], names: Sequence[str]) -> dict[str, 
         name: next(iter(reading_noise_fractions(s).values()), 0.0)
         for s, name in zip(spectra, names, strict=True)
     }
-    first = spectra[0] if spectra else None
-    step = first.meta.get(READING_STEP_META) if first is not None else None
-    if step is None and first is not None:
-        step = repr(_median_step(first.wavelength_nm))
-    return {READING_NOISE_META: json.dumps(noise), READING_STEP_META: str(step)}
+    out = {READING_NOISE_META: json.dumps(noise)}
+    if spectra:
+        out[READING_STEP_META] = repr(reading_step_nm(spectra[0]))
+    return out
+
+
+def reading_step_nm(spectra: Spectra) -> float:
+    """The step (nm) the instrument reported ``spectra`` at: as a cleaning kept it
+    (``meta``, :data:`READING_STEP_META`), else their own typical step."""
+    try:
+        step = float(spectra.meta.get(READING_STEP_META, "nan"))
+    except (TypeError, ValueError):
+        step = float("nan")
+    return (
+        step if np.isfinite(step) and step > 0 else _median_step(spectra.wavelength_nm)
+    )
 
 
 def parse_reading_meta(

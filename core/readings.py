@@ -44,8 +44,8 @@ from tunespec.core.forward_model import render_rgb
 from tunespec.core.led_correction import _corrected
 from tunespec.core.metering import (
     EMISSION_MARGIN_NM,
-    READING_STEP_META,
     reading_noise_fractions,
+    reading_step_nm,
 )
 from tunespec.core.spectra import Spectra, resampling_matrix
 
@@ -222,17 +222,6 @@ def _same_reading(a: NDArray[np.float64], b: NDArray[np.float64]) -> bool:
     return a.shape == b.shape and float(np.max(np.abs(a - b))) <= (
         SAME_READING_TOLERANCE * peak
     )
-
-
-def reading_step_nm(illuminants: Spectra) -> float:
-    """The step the instrument reported the spectra at: as the cleaning kept it
-    (``meta``), else their own."""
-    kept = illuminants.meta.get(READING_STEP_META)
-    try:
-        step = float(kept) if kept is not None else illuminants.step_nm
-    except (TypeError, ValueError):
-        step = illuminants.step_nm
-    return step if np.isfinite(step) and step > 0 else illuminants.step_nm
 
 
 def draw_noise(
