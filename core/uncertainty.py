@@ -465,6 +465,8 @@ def _response_error_terms(
     illuminants: Spectra,
     calibration: SensitivityEstimate,
     reflectance: Spectra,
+    *,
+    readings: bool = True,
 ) -> dict[str, NDArray[np.float64]]:
     """The true error covariance of every patch's stacked responses, (n_p, m, m),
     term by term: the noise of the ROI means (``rgb_std**2 / n_pixels``), the
@@ -476,7 +478,8 @@ def _response_error_terms(
     (:attr:`SensitivityEstimate.excess`) and, with a ``"bayes"`` calibration, its
     response covariance at the estimate (:func:`calibration_response_covariance`).
     A term the inputs do not carry is left out; the light's reading noise
-    (:func:`readings_response_covariance`) comes with the calibration's covariance."""
+    (:func:`readings_response_covariance`) comes with the calibration's covariance
+    unless ``readings`` is false (Eq. 5's ``K_e`` goes without it)."""
     n_p, m_rows = len(responses.patches), 3 * len(responses.illuminants)
     rgb = responses.rgb.reshape(n_p, m_rows)
     keep = ~np.repeat(responses.clipped, 3, axis=1)  # (n_p, m_rows)
@@ -511,7 +514,7 @@ def _response_error_terms(
         terms["calibration"] = calibration_response_covariance(
             calibration, illuminants.select(responses.illuminants), unclipped
         )
-        if calibration.readings is not None:
+        if readings and calibration.readings is not None:
             terms["readings"] = readings_response_covariance(
                 calibration, illuminants.select(responses.illuminants), unclipped
             )
@@ -712,16 +715,16 @@ def wiener_with_uncertainty(
         return first, None
     est = first
     if noise_std is None and responses.rgb_std is not None:
+        # the readings' term enters the uncertainty only: a sample covariance of a
+        # few replicates, as K_e (whole, or its diagonal) it moved the IR-cut
+        # camera's estimate 0.100 -> 0.110-0.116 mean dE00
+        # (benchmarks/generalisation.py, 0.3 % readings, --systematic)
         terms = _response_error_terms(
-            responses, illuminants, calibration, first.reflectance
+            responses, illuminants, calibration, first.reflectance, readings=False
         )
         est = wiener_reflectance(
             responses, illuminants_fine, sensitivity_fine, prior, **kw,
-            # the readings' term enters the uncertainty only: a sample covariance
-            # of a few replicates, as K_e (whole, or its diagonal) it moved the
-            # IR-cut camera's estimate 0.100 -> 0.110-0.116 mean dE00
-            # (benchmarks/generalisation.py, 0.3 % readings, --systematic)
-            noise_covariance=sum(v for t, v in terms.items() if t != "readings"),
+            noise_covariance=sum(terms.values()),
         )  # fmt: skip
     return est, reflectance_uncertainty(est, responses, illuminants, calibration)
 
