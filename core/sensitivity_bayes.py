@@ -241,8 +241,10 @@ def _choose(
 
     A grid search (the evidence can have two local optima), refined in ``lambda``
     by a factor-of-two grid around the best point, then stiffened where the curve
-    rings below zero or is rougher than ``max_roughness`` (:func:`roughness`; see
+    is rougher than ``max_roughness`` (:func:`roughness`; see
     :data:`ROUGHNESS_CAP_FACTOR`). Returns ``(lambda, mu, -2 log evidence)``.
+    Where the Gaussian posterior mean rings below zero the evidence's prior stays:
+    the final curve is the non-negative fit at it (:func:`_solve_s`).
     """
     n = G.shape[0]
     t = float(np.trace(G)) / n
@@ -264,24 +266,6 @@ def _choose(
         if e < best[0]:
             best = (e, float(lam), mu)
     e, lam, mu = best
-    # Physics check: a sensitivity is non-negative, so a prior under which the
-    # (Gaussian) posterior mean is substantially negative is too weak for these
-    # data -- it happens when the data carry structure the model lacks (e.g. noise
-    # in the reported spectra), which the evidence then buys with a rough curve.
-    # Stiffen until the negative part is small, as long as the non-negative fit
-    # still explains the data (a narrow band legitimately rings below zero).
-    misfit0 = _nnls_misfit(G, b, cc, t, lam * Om_a + mu * Q)
-    while _negative_fraction(G, b, t, lam * Om_a + mu * Q) > MAX_NEGATIVE_FRACTION:
-        if lam >= BAYES_LAMBDAS[-1]:
-            break
-        stiffer = 2.0 * lam
-        if (
-            _nnls_misfit(G, b, cc, t, stiffer * Om_a + mu * Q)
-            > MAX_MISFIT_GROWTH * misfit0
-        ):
-            break
-        lam = stiffer
-        e = _evidence(G, b, cc, m, t, lam * Om_a + mu * Q)
     # Plausibility check: no camera ever measured is as rough as a curve that
     # oscillates from one sample to the next; such a curve absorbs what the data
     # cannot attribute (per-LED metering error a small chart cannot separate from
@@ -323,28 +307,6 @@ def database_roughness(database_curves: NDArray[np.float64]) -> float:
     """The largest :func:`roughness` of a channel's database curves (n_cameras, n)."""
     Om = _smoothness_penalty(database_curves.shape[1])
     return max(roughness(s, Om) for s in np.asarray(database_curves, dtype=float))
-
-
-#: Largest negative part of the unconstrained posterior mean (relative to its
-#: positive part) accepted with the evidence's choice of prior.
-MAX_NEGATIVE_FRACTION = 0.1
-
-
-#: How much the stiffening may raise the non-negative fit's weighted residual.
-MAX_MISFIT_GROWTH = 3.0
-
-
-def _nnls_misfit(G: NDArray, b: NDArray, cc: float, t: float, Lam: NDArray) -> float:
-    """Weighted residual sum of squares of the non-negative MAP at prior ``Lam``."""
-    s = _nnls_quadratic(G + t * Lam, b)
-    return max(float(cc - 2.0 * b @ s + s @ G @ s), 0.0)
-
-
-def _negative_fraction(G: NDArray, b: NDArray, t: float, Lam: NDArray) -> float:
-    """``-sum(s < 0) / sum(s > 0)`` of the unconstrained MAP ``(G + t Lam)^-1 b``."""
-    s = np.linalg.solve(G + t * Lam, b)
-    pos = float(np.sum(s[s > 0]))
-    return float(-np.sum(s[s < 0])) / pos if pos > 0 else np.inf
 
 
 def _nnls_quadratic(H: NDArray, b: NDArray) -> NDArray:
