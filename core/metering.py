@@ -44,7 +44,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from tunespec.core.spectra import Spectra
+from tunespec.core.spectra import Grid, Spectra, resampling_matrix
 
 __all__ = [
     "BAND_NOISE_FRACTION",
@@ -53,6 +53,7 @@ __all__ = [
     "NOISE_REGION_FRACTION",
     "READING_NOISE_META",
     "READING_STEP_META",
+    "as_calibrated",
     "emission_bands",
     "meter_noise_sd",
     "reading_meta",
@@ -439,3 +440,30 @@ def suppress_meter_floor(spectra: Spectra) -> Spectra:
     return Spectra(
         spectra.wavelength_nm, np.where(cut, 0.0, values), spectra.names, meta
     )
+
+
+def as_calibrated(spectra: Spectra, grid: Grid) -> Spectra:
+    """Spectra as a calibration on ``grid`` takes its own: cleaned as reported
+    (:func:`suppress_meter_floor`), band-averaged onto ``grid`` (as ``calibrate``
+    reads them) and cleaned again there (as the fit does), in that order.
+
+    Every path that uses a calibration's corrections or its readings' replicates
+    brings a capture's spectra to this form first, so that the calibration's own
+    readings come out identical however they arrive. Read again from the
+    instrument's 10 nm file by ``tunespec estimate``, they used to be resampled after
+    one cleaning only: they kept the spline's ripples beside their bands (up to 0.3 %
+    of a peak), were taken for other readings (the readings' uncertainty drew noise
+    of its own: L* intervals covering 0.98-1.00 on ``benchmarks/cli_protocol.py``),
+    and the per-LED corrections fitted on 2 nm samples were applied to 10 nm ones.
+    """
+    spectra = suppress_meter_floor(spectra)
+    wl, target = spectra.wavelength_nm, grid.wavelength_nm
+    if wl.shape != target.shape or not np.allclose(wl, target):
+        # as Spectra.resample(average=True) draws light (cleaned, so non-negative),
+        # with the end values held where the spectra stop short of the grid (an LED
+        # is zero there)
+        values = np.maximum(
+            spectra.values @ resampling_matrix(wl, target, average=True).T, 0
+        )
+        spectra = Spectra(target, values, spectra.names, spectra.meta)
+    return suppress_meter_floor(spectra)

@@ -47,7 +47,7 @@ from tunespec.core.colorimetry import astm_e308_weights_d50, xyz_to_lab_d50
 from tunespec.core.errors import InputError
 from tunespec.core.excess import FLAT_FIELD_RESIDUAL, flat_field_residual, led_blocks
 from tunespec.core.led_correction import _corrected
-from tunespec.core.metering import suppress_meter_floor
+from tunespec.core.metering import as_calibrated
 from tunespec.core.responses import Responses
 from tunespec.core.sensitivity import SensitivityEstimate
 from tunespec.core.spectra import Grid, Spectra, resampling_matrix
@@ -327,10 +327,7 @@ def calibration_response_covariance(
     step = sens.step_nm
     n = wl.size
     # the corrections apply to the spectra as the calibration saw them
-    illuminants = suppress_meter_floor(illuminants)
-    rep = _hold_resample(
-        illuminants.wavelength_nm, illuminants.values, wl, average=True
-    )
+    rep = as_calibrated(illuminants, sens.grid).values
     corr = calibration.led_correction
     n_i = len(illuminants.names)
     rows, gains, shifts = calibration.corrections_for(illuminants.names)
@@ -400,12 +397,9 @@ def readings_response_covariance(
     if reps is None:
         raise InputError("the calibration carries no reading replicates")
     wl = reps.wavelength_nm
-    cleaned = suppress_meter_floor(illuminants)
-    if cleaned.wavelength_nm.shape != wl.shape or not np.allclose(
-        cleaned.wavelength_nm, wl
-    ):
-        grid = Grid(float(wl[0]), float(wl[-1]), float(wl[1] - wl[0]))
-        cleaned = cleaned.resample(grid, average=True)
+    cleaned = as_calibrated(
+        illuminants, Grid(float(wl[0]), float(wl[-1]), float(wl[1] - wl[0]))
+    )
     sens = calibration.sensitivity
     R = reflectance.values @ reflectance_basis(reflectance.wavelength_nm, wl).T
     dev = reps.deviations(
