@@ -121,13 +121,11 @@ def run_functions(
 def compare(
     cam: gd.Camera, leds, setup, rng, **conditions
 ) -> tuple[dict[str, float], dict[str, float]]:
-    """One camera's session (:func:`generalisation.simulate_session` with the
-    readings every 10 nm and ``conditions``) through the command line and through
-    the functions: their scores."""
+    """One camera's session (:func:`generalisation.simulate_session` with
+    ``conditions``) through the command line and through the functions: their
+    scores."""
     truth = (setup[5], gen.surface_lab(setup[1]))
-    session = gen.simulate_session(
-        cam, leds, setup, rng, report_step_nm=10, **conditions
-    )
+    session = gen.simulate_session(cam, leds, setup, rng, **conditions)
     with tempfile.TemporaryDirectory() as tmp:
         via_cli = run_cli(session, cam, Path(tmp), truth)
     # the function path takes the readings cleaned, as the readers clean them
@@ -143,6 +141,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--lights", default="cal1-model")
     ap.add_argument("--meter-noise", type=float, default=0.003)
     ap.add_argument("--meter-reads", type=int, default=1)
+    ap.add_argument("--report-step-nm", type=float, default=10.0)
     ap.add_argument("--systematic", action="store_true")
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args(argv)
@@ -163,6 +162,7 @@ def main(argv: list[str] | None = None) -> int:
             via_cli, via_fn = compare(
                 cam, lights[light], setup, rng, meter_noise=args.meter_noise,
                 meter_reads=args.meter_reads, systematic=args.systematic,
+                report_step_nm=args.report_step_nm,
             )  # fmt: skip
             for label, s in (("cli", via_cli), ("functions", via_fn)):
                 print(

@@ -200,7 +200,7 @@ def test_the_command_line_gives_what_the_benchmark_scores(camera) -> None:
         cam = next(c for c in gd.all_cameras() if c.name == camera)
         via_cli, via_fn = protocol.compare(
             cam, gd.light_sources()["cal1-model"], setup, np.random.default_rng(0),
-            meter_noise=0.003, meter_reads=1, systematic=True,
+            meter_noise=0.003, meter_reads=1, systematic=True, report_step_nm=10,
         )  # fmt: skip
     assert via_cli["de00"] == pytest.approx(via_fn["de00"], abs=1e-5), (via_cli, via_fn)
     for k in "RLab":
