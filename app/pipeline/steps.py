@@ -559,24 +559,20 @@ def estimation_lighting(
     the sensitivities' finer grid, the reflectances on ``grid``:
     ``core.wiener.on_integration_grid``).
 
-    The corrections apply on the finer of the spectra's own grid and the
-    calibration's (its side file's ``grid``, else the sensitivities'). Spectra
-    coarser than the calibration's grid (an instrument's 10 nm file) are first
-    taken as the calibration took them (``core.metering.as_calibrated``): the
-    corrections were fitted on that form, and the estimate then equals the one of
-    the same readings resampled beforehand (``benchmarks/cli_protocol.py``: IR-cut
-    0.110 -> 0.099 mean dE00; over 10 cameras 0.0900 -> 0.0897). Finer spectra
-    keep their resolution (the demo's 1 nm readings: its white patch 0.05 dE00,
-    0.08 when taken to the 2 nm grid first)."""
+    With a calibration's corrections the spectra are first taken as the
+    calibration took its own (``core.metering.as_calibrated``, on its side file's
+    ``grid``, else the sensitivities'): the corrections were fitted on that form.
+    Applied to the spectra as read, they placed an IR-cut camera's blue edge
+    wrongly (``benchmarks/cli_protocol.py``: IR-cut-01's 10 nm readings 0.104-0.300
+    mean dE00 against 0.090-0.118 over 4 draws; at 1 nm, 10 cameras 0.103 against
+    0.090, see docs/validation.md)."""
     from tunespec.core.calibration import correct_illuminants_from_meta
     from tunespec.core.metering import as_calibrated
     from tunespec.core.wiener import on_integration_grid
 
     if "led_correction" in meta or "spd_shift_nm" in meta:
         fitted_on = Grid.parse(meta["grid"]) if "grid" in meta else sensitivity.grid
-        own_step_nm = float(np.median(np.diff(illuminants.wavelength_nm)))
-        if own_step_nm > fitted_on.step_nm + 1e-6:
-            illuminants = as_calibrated(illuminants, fitted_on)
+        illuminants = as_calibrated(illuminants, fitted_on)
     corrected = correct_illuminants_from_meta(illuminants, meta, spd_shift_nm)
     return on_integration_grid(corrected, sensitivity, grid)
 
