@@ -560,8 +560,9 @@ def estimation_lighting(
     ``core.wiener.on_integration_grid``).
 
     With a calibration's corrections the spectra are first taken as the
-    calibration took its own (``core.metering.as_calibrated``, on its side file's
-    ``grid``, else the sensitivities'): the corrections were fitted on that form.
+    calibration took its own (``core.metering.as_calibrated``, on the
+    sensitivities' grid: ``calibrate``'s CSV is on the calibration's): the
+    corrections were fitted on that form.
     Applied to the spectra as read, they placed an IR-cut camera's blue edge
     wrongly (``benchmarks/cli_protocol.py``: IR-cut-01's 10 nm readings 0.104-0.300
     mean dE00 against 0.090-0.118 over 4 draws; at 1 nm, 10 cameras 0.103 against
@@ -571,8 +572,7 @@ def estimation_lighting(
     from tunespec.core.wiener import on_integration_grid
 
     if "led_correction" in meta or "spd_shift_nm" in meta:
-        fitted_on = Grid.parse(meta["grid"]) if "grid" in meta else sensitivity.grid
-        illuminants = as_calibrated(illuminants, fitted_on)
+        illuminants = as_calibrated(illuminants, sensitivity.grid)
     corrected = correct_illuminants_from_meta(illuminants, meta, spd_shift_nm)
     return on_integration_grid(corrected, sensitivity, grid)
 
