@@ -90,16 +90,18 @@ def run_cli(
 
 def score(truth, names, refl, std, lab, u) -> dict[str, float]:
     """Mean CIEDE2000 against the surfaces' colour and the coverage of the 95 %
-    intervals of the reflectance samples and of L*, a*, b* (against the surface);
-    ``truth`` the test reflectances on :data:`EST` and the surfaces' L*a*b*."""
+    intervals (:func:`generalisation.coverage`) of the reflectance samples (``R``)
+    and of L*, a*, b* against the surface; ``truth`` the test reflectances on
+    :data:`EST` and the surfaces' L*a*b*."""
     samples, lab_surface = truth
     order = [samples.names.index(n) for n in names]
-    lab_true = lab_surface[order]
-    out = {"de00": float(np.mean(delta_e_2000(lab, lab_true)))}
-    out["R"] = float(np.mean(np.abs(refl - samples.values[order]) <= gen.Z95 * std))
-    for j, k in enumerate("Lab"):
-        out[k] = float(np.mean(np.abs(lab[:, j] - lab_true[:, j]) <= gen.Z95 * u[:, j]))
-    return out
+    values = samples.values[order]
+    cov = gen.coverage(
+        refl, std, lab, u, values, gen.lab_d50(samples)[order], lab_surface[order]
+    )
+    out = {"de00": float(np.mean(delta_e_2000(lab, lab_surface[order])))}
+    out["R"] = cov["reflectance"]
+    return out | {k: cov[f"{k}_surface"] for k in "Lab"}
 
 
 def run_functions(
@@ -147,12 +149,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     gen.EST = EST
     setup = gen.load_setup()
-    seen: dict[str, int] = {}
-    cams = []
-    for c in gd.all_cameras():
-        if seen.get(c.family, 0) < args.per_family:
-            cams.append(c)
-            seen[c.family] = seen.get(c.family, 0) + 1
+    cams = gd.cameras_per_family(args.per_family)
     lights = gd.light_sources()
     rng = np.random.default_rng(args.seed)
     t0 = time.perf_counter()

@@ -621,15 +621,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.quick:
         per_family = per_family or 2
         lights = lights[:1]
-    cams = gd.all_cameras()
-    if per_family:
-        seen: dict[str, int] = {}
-        picked = []
-        for c in cams:
-            if seen.get(c.family, 0) < per_family:
-                picked.append(c)
-                seen[c.family] = seen.get(c.family, 0) + 1
-        cams = picked
+    cams = gd.cameras_per_family(per_family) if per_family else gd.all_cameras()
     setup = load_setup()
     print_tabulation_error(setup[1], setup[5])
     light_spectra = gd.light_sources()

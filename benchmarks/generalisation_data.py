@@ -214,6 +214,17 @@ def all_cameras(n_synthetic: int = 6, seed: int = 2026) -> list[Camera]:
     ]
 
 
+def cameras_per_family(per_family: int) -> list[Camera]:
+    """:func:`all_cameras`, at most ``per_family`` of each family (in their order)."""
+    seen: dict[str, int] = {}
+    picked = []
+    for c in all_cameras():
+        if seen.get(c.family, 0) < per_family:
+            picked.append(c)
+            seen[c.family] = seen.get(c.family, 0) + 1
+    return picked
+
+
 def light_sources() -> dict[str, Spectra]:
     """``cal1-model`` (shipped) and ``heldout-leds`` (built here only), on FINE."""
     rng = np.random.default_rng(7)
