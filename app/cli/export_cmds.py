@@ -255,14 +255,15 @@ def cmd_export_cgats(args: argparse.Namespace) -> int:
 
 
 def cmd_export_rawtoaces(args: argparse.Namespace) -> int:
-    import shutil
-
+    from tunespec.core.atomic import atomic_write_text
     from tunespec.core.io.export import (
         RAWTOACES_GRID,
+        curves_document,
         sensitivity_meta_path,
         tunespec_version,
         write_sensitivity_json,
     )
+    from tunespec.core.limits import dumps_json
 
     out = Console(args)
     sens = read_sensitivities(args.sensitivities, None)
@@ -277,10 +278,14 @@ def cmd_export_rawtoaces(args: argparse.Namespace) -> int:
         grid=grid,
         license=args.license,
     )
-    meta = sensitivity_meta_path(args.sensitivities)
-    if meta.is_file():
-        # LED corrections and covariance: 'estimate' finds them beside the JSON
-        shutil.copyfile(meta, sensitivity_meta_path(args.output))
+    side = sensitivity_meta_path(args.sensitivities)
+    if side.is_file():
+        # LED corrections and covariance, and the curves the JSON holds resampled:
+        # 'estimate' finds them beside the JSON
+        doc = read_json(side)
+        if isinstance(doc, dict) and grid is not None:
+            doc |= curves_document(sens)
+        atomic_write_text(sensitivity_meta_path(args.output), dumps_json(doc))
     wl = sens.wavelength_nm if grid is None else grid.wavelength_nm
     out.say(
         f"sensitivities ({wl.size} wavelengths, {wl[0]:g}-{wl[-1]:g} nm) written to "

@@ -80,6 +80,7 @@ class TableStats(Protocol):
 __all__ = [
     "EXPORT_NAMES",
     "RAWTOACES_GRID",
+    "curves_document",
     "export_measurement",
     "parse_sensitivity_meta",
     "read_sensitivity_meta",
@@ -147,29 +148,57 @@ def write_sensitivity_meta(
     sensitivity_csv: str | PathLike[str],
     sensitivity: Spectra,
     covariance: NDArray[np.float64] | None = None,
+    *,
+    curves: bool = False,
 ) -> Path:
     """Write the estimator and the fitted SPD shift beside a sensitivities CSV.
 
     ``sensitivity.meta`` as :func:`~tunespec.core.sensitivity.estimate_camera_sensitivity`
-    fills it (``source``, ``spd_shift_nm``).
+    fills it (``source``, ``spd_shift_nm``). ``curves``: the sensitivities too, for
+    a file that holds them resampled (:func:`sensitivity_meta_document`).
     """
     path = sensitivity_meta_path(sensitivity_csv)
-    doc = sensitivity_meta_document(sensitivity, covariance)
+    doc = sensitivity_meta_document(sensitivity, covariance, curves=curves)
     atomic_write_text(path, dumps_json(doc))
     return path
 
 
+def curves_document(sensitivity: Spectra) -> dict[str, Any]:
+    """Sensitivities as a calibration JSON and a side file hold them, every digit:
+    ``{"wavelength_nm": [...], "sensitivity": {"R": [...], ...}}``
+    (``core.calibration.document_curves`` reads them)."""
+    return {
+        "wavelength_nm": [float(x) for x in sensitivity.wavelength_nm],
+        "sensitivity": {
+            n: [float(v) for v in row]
+            for n, row in zip(sensitivity.names, sensitivity.values, strict=True)
+        },
+    }
+
+
 def sensitivity_meta_document(
-    sensitivity: Spectra, covariance: NDArray[np.float64] | None = None
+    sensitivity: Spectra,
+    covariance: NDArray[np.float64] | None = None,
+    *,
+    curves: bool = False,
 ) -> dict[str, Any]:
-    """What :func:`write_sensitivity_meta` writes, as a dict (a calibration JSON
-    holds the same keys beside its curves)."""
+    """What :func:`write_sensitivity_meta` writes, as a dict.
+
+    ``curves`` adds the sensitivities themselves at full precision
+    (``wavelength_nm``, ``sensitivity``: ``{"R": [...], ...}``), as a calibration
+    JSON holds them beside the same keys. The side file of a rawtoaces JSON carries
+    them: that schema's 5 nm samples lose what Eq. 1 and the covariance need from
+    the calibration's 2 nm curves, and ``core.calibration.absolute_sensitivities``
+    takes them back from here.
+    """
     wl = sensitivity.wavelength_nm
     doc: dict[str, Any] = {
         "estimated_by": sensitivity.meta.get("source", ""),
         "grid": f"{wl[0]:g}:{wl[-1]:g}:{sensitivity.step_nm:g}",
         "spd_shift_nm": float(sensitivity.meta.get("spd_shift_nm", 0.0)),
     }
+    if curves:
+        doc |= curves_document(sensitivity)
     for key in ("led_correction", "excess_variance", "reading_replicates"):
         if key in sensitivity.meta:
             doc[key] = json.loads(sensitivity.meta[key])
@@ -813,7 +842,10 @@ def export_measurement(
         # covariance go beside it too, so 'estimate --sensitivities X.json' applies
         # them as it does for the CSV
         write_sensitivity_meta(
-            paths["sensitivities_json"], sensitivity, sensitivity_covariance
+            paths["sensitivities_json"],
+            sensitivity,
+            sensitivity_covariance,
+            curves=True,
         )
         target("sensitivities_json_meta")
     ti3_rgb = responses
