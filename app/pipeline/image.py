@@ -136,18 +136,13 @@ class _Calibration:
 def _load_calibration(sensitivities: str | PathLike[str], grid: Grid) -> _Calibration:
     """Sensitivities (on their own grid: Eq. 1 is integrated there, as ``tunespec
     estimate`` does), their side file and the prior on ``grid``, read once."""
-    from tunespec.core.datasets import load_colorchecker_sg, read_sensitivities
+    from tunespec.core.calibration import absolute_sensitivities
+    from tunespec.core.datasets import load_colorchecker_sg
     from tunespec.core.io.export import read_sensitivity_meta
     from tunespec.core.io.session import sha256_file
 
     path = Path(sensitivities)
-    sens = read_sensitivities(path)
-    if sens.meta.get("relative"):
-        raise InputError(
-            "sensitivities in relative units (no absolute scale): Eq. 1 needs the "
-            "calibration's scale; give the CSV that 'tunespec calibrate' wrote",
-            path=path,
-        )
+    sens = absolute_sensitivities(path)
     meta = read_sensitivity_meta(path)
     return _Calibration(
         str(path.resolve()), sha256_file(path), sens, meta, load_colorchecker_sg(grid),
