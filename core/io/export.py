@@ -838,9 +838,8 @@ def export_measurement(
             comments="estimated with TuneSpec from a chart under a tunable LED source",
             created=created,
         )
-        # the JSON carries the curves; the calibration's LED corrections and
-        # covariance go beside it too, so 'estimate --sensitivities X.json' applies
-        # them as it does for the CSV
+        # beside the JSON its LED corrections, covariance and own (2 nm) curves:
+        # 'estimate --sensitivities X.json' gives what it gives from the CSV
         write_sensitivity_meta(
             paths["sensitivities_json"],
             sensitivity,
