@@ -122,6 +122,20 @@ def test_an_edited_rawtoaces_json_is_refused(demo, tmp_path, capsys) -> None:
     err = capsys.readouterr().err.strip()
     assert "not those of the side file s.json.meta.json (channel G at 550 nm" in err
     assert len(err.splitlines()) == 1 and not (tmp_path / "r.csv").exists()
+    # the JSON as exported, its side file without the curves (as before they were
+    # written there): the 5 nm samples with a 2 nm covariance are refused
+    shutil.copy(demo / "export/sensitivities.json", tmp_path / "s.json")
+    side = json.loads((tmp_path / "s.json.meta.json").read_text())
+    del side["sensitivity"], side["wavelength_nm"]
+    (tmp_path / "s.json.meta.json").write_text(json.dumps(side))
+    assert main([str(a) for a in args]) == 2
+    err = capsys.readouterr().err.strip()
+    assert (
+        "sensitivities at 380:730:5 nm, their calibration's covariance and LED " in err
+    )
+    assert err.endswith("--force to accept") and len(err.splitlines()) == 1
+    assert main([str(a) for a in [*args, "--force", "-q"]]) == 0
+    assert "accepted with --force" in capsys.readouterr().err
 
 
 #: Files the commands write, by kind (relative to the demo or the chain folder).

@@ -514,23 +514,32 @@ def estimate_reflectance(
     noise_std, center_prior, clip
         :func:`~tunespec.core.wiener.wiener_reflectance`'s.
     """
-    from tunespec.core.plausibility import Checks, check_estimate_inputs
+    from tunespec.core.plausibility import (
+        Checks,
+        check_calibration_grid,
+        check_estimate_inputs,
+    )
     from tunespec.core.uncertainty import wiener_with_uncertainty
 
-    illum_fine, sens_fine, _ = estimation_lighting(
-        illuminants, sensitivity, sensitivity.meta if meta is None else meta, grid,
-        spd_shift_nm=spd_shift_nm,
-    )  # fmt: skip
+    meta = sensitivity.meta if meta is None else meta
     checks = checks if checks is not None else Checks()
+    if "covariance_wavelength_nm" in meta:
+        checks(
+            check_calibration_grid,
+            sensitivity.wavelength_nm,
+            meta["covariance_wavelength_nm"],
+            meta.get("meta_path"),
+        )
+    illum_fine, sens_fine, _ = estimation_lighting(
+        illuminants, sensitivity, meta, grid, spd_shift_nm=spd_shift_nm
+    )
     check_estimate_inputs(
         checks, responses, illum_fine, sens_fine, responses_path=responses_path
     )
     if calibration is None and uncertainty_from_meta:
         from tunespec.core.calibration import Calibration as FileCalibration
 
-        calibration = FileCalibration.from_meta(
-            sensitivity, sensitivity.meta if meta is None else meta
-        )
+        calibration = FileCalibration.from_meta(sensitivity, meta)
     est, unc = wiener_with_uncertainty(
         responses,
         illum_fine,
