@@ -104,16 +104,22 @@ def score(truth, names, refl, std, lab, u) -> dict[str, float]:
     return out | {k: cov[f"{k}_surface"] for k in "Lab"}
 
 
+def function_estimate(session: gen.Session, cam: gd.Camera, setup):
+    """A session's calibration and test estimate through ``generalisation.py``'s
+    function path: ``(WienerEstimate, ReflectanceUncertainty)``."""
+    est = gen.calibrate(
+        "bayes", session.resp, session.reported, setup[2], setup[4], cam.exclude
+    )
+    return gen.estimate_tests(
+        est, session.resp_t, session.reported, session.reported, setup
+    )
+
+
 def run_functions(
     session: gen.Session, cam: gd.Camera, setup, truth
 ) -> dict[str, float]:
     """The same session through ``generalisation.py``'s function path."""
-    est = gen.calibrate(
-        "bayes", session.resp, session.reported, setup[2], setup[4], cam.exclude
-    )
-    w, unc = gen.estimate_tests(
-        est, session.resp_t, session.reported, session.reported, setup
-    )
+    w, unc = function_estimate(session, cam, setup)
     refl = w.reflectance
     return score(
         truth, refl.names, refl.values, unc.reflectance_std, unc.lab, unc.lab_std

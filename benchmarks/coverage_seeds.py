@@ -5,9 +5,11 @@ the 318 targets a calibration serves move together with its error: one run's
 per-family coverage has a standard deviation of about 0.01-0.02. This script runs
 ``--seeds`` independent sessions per camera and light (``generalisation.simulate_session``
 with ``numpy.random.default_rng(100 + k)``, the function path of
-``cli_protocol.run_functions``, which the command line matches to the digit), prints
+``cli_protocol.function_estimate``, which the command line matches to the digit), prints
 every calibration's mean CIEDE2000 and coverage of the reflectance samples and of
-L*, a*, b* against the surface's colour, then per family their mean and range.
+L*, a*, b*, against the colour of the truth's samples on the estimation grid (as
+``refl_colorimetry.csv`` computes the estimate's: like with like) and against the
+surface's own colour (its 1 nm spectrum), then per family their mean and range.
 
     python benchmarks/coverage_seeds.py --seeds 3 --meter-noise 0.003
 """
@@ -27,7 +29,19 @@ import cli_protocol as cp
 import generalisation as gen
 import generalisation_data as gd
 
-KEYS = ("de00", "R", "L", "a", "b")
+KEYS = ("de00", "R", "L", "a", "b", "L_surface", "a_surface", "b_surface")
+
+
+def scores(session, cam, setup, samples, lab_surface) -> dict[str, float]:
+    """``cli_protocol.function_estimate``, scored against both colours."""
+    w, unc = cp.function_estimate(session, cam, setup)
+    order = [samples.names.index(n) for n in w.reflectance.names]
+    cov = gen.coverage(
+        w.reflectance.values, unc.reflectance_std, unc.lab, unc.lab_std,
+        samples.values[order], gen.lab_d50(samples)[order], lab_surface[order],
+    )  # fmt: skip
+    de = gen.delta_e_2000(unc.lab, lab_surface[order])
+    return {"de00": float(np.mean(de)), "R": cov["reflectance"]} | cov
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -42,7 +56,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     gen.EST = cp.EST
     setup = gen.load_setup()
-    truth = (setup[5], gen.surface_lab(setup[1]))
+    samples, lab_surface = setup[5], gen.surface_lab(setup[1])
     cams = gd.cameras_per_family(args.per_family)
     if args.families:
         cams = [c for c in cams if c.family in args.families.split(",")]
@@ -63,7 +77,7 @@ def main(argv: list[str] | None = None) -> int:
                 cleaned = gen.suppress_meter_floor(session.reported_native)
                 session.reported = cleaned.resample(gen.WORK, average=True)
                 session.reported_native = cleaned
-                s = cp.run_functions(session, cam, setup, truth)
+                s = scores(session, cam, setup, samples, lab_surface)
                 rows[cam.family].append([s[x] for x in KEYS])
                 print(
                     f"{cam.family:<26} {cam.name[:20]:<20} {light:<13} {k:>4}  "
@@ -85,7 +99,7 @@ def main(argv: list[str] | None = None) -> int:
         f"  all: n={len(v)} dE00 {v[:, 0].mean():.4f}  "
         + " ".join(f"{x} {v[:, j].mean():.3f}" for j, x in enumerate(KEYS) if j)
         + "; standard deviation over calibrations "
-        + "/".join(f"{v[:, j].std():.3f}" for j in range(1, 5))
+        + "/".join(f"{v[:, j].std():.3f}" for j in range(1, len(KEYS)))
     )
     print(f"\n{len(v)} calibrations in {time.perf_counter() - t0:.0f} s")
     return 0

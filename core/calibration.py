@@ -546,7 +546,7 @@ def _calibration_curves(sensitivity: Spectra, path: str | os.PathLike[str]) -> S
     within :data:`CURVES_TOLERANCE` of their linear interpolation, zero where
     they end), so that an edited file is refused rather than overridden.
     """
-    from tunespec.core.io.export import sensitivity_meta_path
+    from tunespec.core.io.export import onto_grid, sensitivity_meta_path
     from tunespec.core.limits import read_json
 
     side = sensitivity_meta_path(path)
@@ -558,9 +558,7 @@ def _calibration_curves(sensitivity: Spectra, path: str | os.PathLike[str]) -> S
     own = document_curves(doc, side)
     wl = sensitivity.wavelength_nm
     values = sensitivity.select(["R", "G", "B"]).values
-    expected = np.stack(
-        [np.interp(wl, own.wavelength_nm, v, left=0.0, right=0.0) for v in own.values]
-    )
+    expected, _ = onto_grid(own.wavelength_nm, own.values, wl)
     peak = np.maximum(np.abs(own.values).max(axis=1, keepdims=True), 1e-300)
     off = np.abs(values - expected) / peak
     if off.max() > CURVES_TOLERANCE:

@@ -82,6 +82,7 @@ __all__ = [
     "RAWTOACES_GRID",
     "curves_document",
     "export_measurement",
+    "onto_grid",
     "parse_sensitivity_meta",
     "read_sensitivity_meta",
     "read_spd_shift",
@@ -446,7 +447,7 @@ def sensitivity_rawtoaces_document(
     note = comments
     wavelength_nm = rgb.wavelength_nm
     if grid is not None:
-        values, padded = _onto_grid(wavelength_nm, values, grid)
+        values, padded = onto_grid(wavelength_nm, values, grid.wavelength_nm)
         wavelength_nm = grid.wavelength_nm
         if padded:
             zero = f"set to 0 at {padded} nm (not estimated)"
@@ -488,14 +489,15 @@ def sensitivity_rawtoaces_document(
     }
 
 
-def _onto_grid(
-    wavelength_nm: np.ndarray, values: np.ndarray, grid: Grid
+def onto_grid(
+    wavelength_nm: np.ndarray, values: np.ndarray, target: np.ndarray
 ) -> tuple[np.ndarray, str]:
-    """``values`` (3, n_wl) linearly onto ``grid``, 0 outside the data's range.
+    """``values`` (3, n_wl) linearly onto the wavelengths ``target``, 0 outside the
+    data's range: the rawtoaces JSON's samples of a calibration's curves.
 
-    Returns the values (3, grid.n) and the zero-filled ranges as text ("" if none).
+    Returns the values (3, target.size) and the zero-filled ranges as text ("" if
+    none).
     """
-    target = grid.wavelength_nm
     out = np.stack(
         [np.interp(target, wavelength_nm, v, left=0.0, right=0.0) for v in values]
     )
