@@ -412,8 +412,8 @@ def check_calibration_grid(
         f"sensitivities at {_span(a)}, their calibration's covariance and LED "
         f"corrections at {_span(b)}: resampled curves give worse reflectances and "
         "intervals that miss (demo: 0.048 -> 0.090 dE00, coverage 0.97 -> 0.83); give "
-        "the calibration's own sensitivities or calibration.json, or export again "
-        "(its side file then carries the curves)",
+        "the sensitivities CSV that 'tunespec calibrate' wrote, or export again (the "
+        "side file then carries the curves)",
         path=path,
     )
 
