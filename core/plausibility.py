@@ -42,9 +42,10 @@ this module refuses inputs that do not match each other.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from os import PathLike
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -390,12 +391,12 @@ def check_spd_shift(shift_nm: float | None) -> None:
 
 
 def check_calibration_grid(
-    sensitivity_nm: NDArray[np.float64],
-    calibration_nm: NDArray[np.float64],
-    path: object = None,
+    sensitivity_nm: NDArray[np.float64], meta: Mapping[str, Any]
 ) -> None:
     """Sensitivities on the wavelengths their calibration's covariance and LED
-    corrections were fitted on (the side file's ``covariance.wavelength_nm``).
+    corrections were fitted on (``meta``: the side file's dict as
+    ``core.io.export.read_sensitivity_meta`` gives it; nothing to check without a
+    covariance).
 
     Resampled curves lose what the estimate needs, and the covariance resampled
     after them misstates its error: the demo's rawtoaces JSON (5 nm, of a 2 nm
@@ -403,8 +404,10 @@ def check_calibration_grid(
     covering 0.83 of the reflectance samples instead of 0.97. A side file with the
     curves (``core.io.export.curves_document``) gives them back before this check.
     """
+    if "covariance_wavelength_nm" not in meta:
+        return
     a = np.asarray(sensitivity_nm, dtype=np.float64)
-    b = np.asarray(calibration_nm, dtype=np.float64)
+    b = np.asarray(meta["covariance_wavelength_nm"], dtype=np.float64)
     if a.shape == b.shape and np.allclose(a, b):
         return
     raise Implausible(
@@ -414,7 +417,7 @@ def check_calibration_grid(
         "intervals that miss (demo: 0.048 -> 0.090 dE00, coverage 0.97 -> 0.83); give "
         "the sensitivities CSV that 'tunespec calibrate' wrote, or export again (the "
         "side file then carries the curves)",
-        path=path,
+        path=meta.get("meta_path"),
     )
 
 

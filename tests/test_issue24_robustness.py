@@ -292,3 +292,25 @@ def test_a_negative_session_version_is_refused(tmp_path) -> None:
     s.manifest_path.write_text(json.dumps(doc))
     with pytest.raises(InputError, match="bad session version -1"):
         Session.open(tmp_path / "s")
+
+
+def test_sensitivities_off_their_side_files_grid_are_refused(tmp_path) -> None:
+    """A CSV resampled by hand, its side file (covariance on 5 nm) copied along:
+    ``estimate-image``'s loader refuses it in one line; on their own grid they load."""
+    from tunespec.app.pipeline.image import _load_calibration
+    from tunespec.core.plausibility import Implausible
+
+    grid = Grid.parse("400:700:5")
+    wl = grid.wavelength_nm
+    values = np.stack([np.exp(-0.5 * ((wl - p) / 30.0) ** 2) for p in (600, 540, 450)])
+    sens = Spectra(wl, 3.0 * values, ("R", "G", "B"), {"source": "sim"})
+    write_sensitivities_csv(tmp_path / "s.csv", sens, 1e-6 * np.eye(3 * wl.size))
+    _load_calibration(tmp_path / "s.csv", grid)
+    coarse = sens.resample(Grid.parse("400:700:10"))
+    write_spectra_csv(coarse, tmp_path / "t.csv")
+    (tmp_path / "t.csv.meta.json").write_text(
+        (tmp_path / "s.csv.meta.json").read_text()
+    )
+    with pytest.raises(Implausible, match=r"sensitivities at 400:700:10 nm, their "
+                       r"calibration's covariance and LED corrections at 400:700:5 nm"):  # fmt: skip
+        _load_calibration(tmp_path / "t.csv", grid)

@@ -298,6 +298,7 @@ def cmd_gonio_run(args: argparse.Namespace) -> int:
     from tunespec.core.io.export import read_sensitivity_meta
     from tunespec.core.io.spectral import read_spectra_csv
     from tunespec.core.limits import valid_number
+    from tunespec.core.plausibility import check_calibration_grid
     from tunespec.devices.protocols import DeviceError
 
     valid_number(args.iso, "--iso", lo=50, hi=102400, integer=True)
@@ -309,6 +310,7 @@ def cmd_gonio_run(args: argparse.Namespace) -> int:
     elif args.sensitivities is not None:
         S = absolute_sensitivities(args.sensitivities)
         side = read_sensitivity_meta(args.sensitivities)  # its LED corrections
+        check_calibration_grid(S.wavelength_nm, side)
     _start_plan(args, needs=("plan", "sensitivities", "layout"))
     if layout is None:  # a resumed session from before layout.json was kept
         raise InputError(f"{args.out} has no layout.json: give --layout")

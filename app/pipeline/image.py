@@ -140,10 +140,12 @@ def _load_calibration(sensitivities: str | PathLike[str], grid: Grid) -> _Calibr
     from tunespec.core.datasets import load_colorchecker_sg
     from tunespec.core.io.export import read_sensitivity_meta
     from tunespec.core.io.session import sha256_file
+    from tunespec.core.plausibility import check_calibration_grid
 
     path = Path(sensitivities)
     sens = absolute_sensitivities(path)
     meta = read_sensitivity_meta(path)
+    check_calibration_grid(sens.wavelength_nm, meta)
     return _Calibration(
         str(path.resolve()), sha256_file(path), sens, meta, load_colorchecker_sg(grid),
         grid,

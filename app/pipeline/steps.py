@@ -523,13 +523,7 @@ def estimate_reflectance(
 
     meta = sensitivity.meta if meta is None else meta
     checks = checks if checks is not None else Checks()
-    if "covariance_wavelength_nm" in meta:
-        checks(
-            check_calibration_grid,
-            sensitivity.wavelength_nm,
-            meta["covariance_wavelength_nm"],
-            meta.get("meta_path"),
-        )
+    checks(check_calibration_grid, sensitivity.wavelength_nm, meta)
     illum_fine, sens_fine, _ = estimation_lighting(
         illuminants, sensitivity, meta, grid, spd_shift_nm=spd_shift_nm
     )
