@@ -280,10 +280,10 @@ def cmd_export_rawtoaces(args: argparse.Namespace) -> int:
     )
     side = sensitivity_meta_path(args.sensitivities)
     if side.is_file():
-        # LED corrections and covariance, and the curves the JSON holds resampled:
-        # 'estimate' finds them beside the JSON
+        # LED corrections and covariance, and the curves the JSON holds resampled
+        # (those of a JSON's side file already): 'estimate' finds them beside it
         doc = read_json(side)
-        if isinstance(doc, dict) and grid is not None:
+        if isinstance(doc, dict) and grid is not None and "sensitivity" not in doc:
             doc |= curves_document(sens)
         atomic_write_text(sensitivity_meta_path(args.output), dumps_json(doc))
     wl = sens.wavelength_nm if grid is None else grid.wavelength_nm
