@@ -54,6 +54,8 @@ __all__ = [
     "Calibration",
     "MissingCorrectionsWarning",
     "absolute_sensitivities",
+    "calibrated_sensitivities",
+    "calibration_curves",
     "correct_illuminants_from_meta",
     "correct_spd_shift",
     "predict_responses",
@@ -281,14 +283,19 @@ class Calibration:
         raw = read_json(side)
         meta = parse_sensitivity_meta(raw, side)
         provenance["side_file"] = str(side)
+        sens = calibration_curves(sens, meta)
         return cls.from_meta(sens, {**meta, **_labels(raw)}, provenance=provenance)
 
     @classmethod
     def _from_document(cls, doc: dict[str, Any], path: Path) -> Calibration:
-        from tunespec.core.io.export import parse_sensitivity_meta
+        from tunespec.core.io.export import document_curves, parse_sensitivity_meta
 
-        sens = document_curves(doc, path)
         meta = parse_sensitivity_meta(doc, path)
+        # its curves, which a calibration JSON must hold (document_curves says what
+        # is missing)
+        sens = meta.pop("curves", None)
+        if sens is None:
+            sens = document_curves(doc, path)
         provenance = {"calibration": str(path)}
         cal = cls.from_meta(sens, {**meta, **_labels(doc)}, provenance=provenance)
         excluded = doc.get("excluded_patches", [])
@@ -399,36 +406,6 @@ class Calibration:
         return replace(cal, sensitivity=sens)
 
 
-def document_curves(doc: Mapping[str, Any], path: str | os.PathLike[str]) -> Spectra:
-    """The sensitivities a calibration JSON or a side file holds (``wavelength_nm``,
-    ``sensitivity``: :func:`~tunespec.core.io.export.sensitivity_meta_document`).
-
-    Raises
-    ------
-    InputError
-        Naming ``path``: the keys missing or malformed, non-finite values.
-    """
-    try:
-        wl = np.asarray(doc["wavelength_nm"], dtype=np.float64)
-        curves = doc["sensitivity"]
-        values = np.asarray([curves[c] for c in ("R", "G", "B")], dtype=np.float64)
-    except (KeyError, TypeError, ValueError):
-        raise InputError(
-            "expected 'wavelength_nm': [...] and 'sensitivity': {'R': [...], "
-            "'G': [...], 'B': [...]} of equal lengths",
-            path=path,
-        ) from None
-    if values.ndim != 2 or values.shape[1] != wl.size or wl.size < 2:
-        raise InputError(
-            f"sensitivity curves of {values.shape[-1]} samples for "
-            f"{wl.size} wavelengths",
-            path=path,
-        )
-    if not np.all(np.isfinite(values)) or not np.all(np.isfinite(wl)):
-        raise InputError("sensitivity holds non-finite values", path=path)
-    return Spectra(wl, values, ("R", "G", "B"), {"source": str(path)})
-
-
 def _labels(doc: Any) -> dict[str, Any]:
     """The side file's provenance keys (``estimated_by``, ``forced``)."""
     if not isinstance(doc, dict):
@@ -525,7 +502,20 @@ def absolute_sensitivities(path: str | os.PathLike[str]) -> Spectra:
             "'tunespec calibrate' wrote, or a rawtoaces JSON written by TuneSpec",
             path=path,
         )
-    return _calibration_curves(sensitivity, path)
+    return sensitivity
+
+
+def calibrated_sensitivities(
+    path: str | os.PathLike[str],
+) -> tuple[Spectra, dict[str, Any]]:
+    """:func:`absolute_sensitivities` and their side file
+    (:func:`~tunespec.core.io.export.read_sensitivity_meta`, ``{}`` without one),
+    read once, the curves as :func:`calibration_curves` gives them."""
+    from tunespec.core.io.export import read_sensitivity_meta
+
+    sensitivity = absolute_sensitivities(path)
+    meta = read_sensitivity_meta(path)
+    return calibration_curves(sensitivity, meta), meta
 
 
 #: How far (of each channel's peak) a file's sensitivities may lie from their side
@@ -534,28 +524,25 @@ def absolute_sensitivities(path: str | os.PathLike[str]) -> Spectra:
 CURVES_TOLERANCE = 1e-6
 
 
-def _calibration_curves(sensitivity: Spectra, path: str | os.PathLike[str]) -> Spectra:
+def calibration_curves(sensitivity: Spectra, meta: Mapping[str, Any]) -> Spectra:
     """The calibration's own curves where the file holds them resampled.
 
     ``export-rawtoaces`` and the export folder write rawtoaces' 5 nm samples of a
     calibration on 2 nm, with the curves themselves in the side file
-    (:func:`~tunespec.core.io.export.sensitivity_meta_document`). The 5 nm samples
-    lose what the estimate needs: from them, the demo's Table 2 was 0.090 instead
-    of 0.048 mean CIEDE2000 and its 95 % intervals covered 0.83 of the reflectance
-    samples instead of 0.97. The file must still hold those curves (its samples
-    within :data:`CURVES_TOLERANCE` of their linear interpolation, zero where
-    they end), so that an edited file is refused rather than overridden.
+    (:func:`~tunespec.core.io.export.sensitivity_meta_document`; ``meta["curves"]``
+    as :func:`~tunespec.core.io.export.parse_sensitivity_meta` reads it). The 5 nm
+    samples lose what the estimate needs: from them, the demo's Table 2 was 0.090
+    instead of 0.048 mean CIEDE2000 and its 95 % intervals covered 0.83 of the
+    reflectance samples instead of 0.97. The file must still hold those curves
+    (its samples within :data:`CURVES_TOLERANCE` of their linear interpolation,
+    zero where they end), so that an edited file is refused rather than
+    overridden.
     """
-    from tunespec.core.io.export import onto_grid, sensitivity_meta_path
-    from tunespec.core.limits import read_json
+    from tunespec.core.io.export import onto_grid
 
-    side = sensitivity_meta_path(path)
-    if not side.is_file():
+    own = meta.get("curves")
+    if own is None:
         return sensitivity
-    doc = read_json(side)
-    if not isinstance(doc, dict) or "sensitivity" not in doc:
-        return sensitivity
-    own = document_curves(doc, side)
     wl = sensitivity.wavelength_nm
     values = sensitivity.select(["R", "G", "B"]).values
     expected, _ = onto_grid(own.wavelength_nm, own.values, wl)
@@ -564,11 +551,11 @@ def _calibration_curves(sensitivity: Spectra, path: str | os.PathLike[str]) -> S
     if off.max() > CURVES_TOLERANCE:
         k, i = np.unravel_index(int(np.argmax(off)), off.shape)
         raise InputError(
-            f"the sensitivities are not those of the side file {side.name} "
-            f"(channel {'RGB'[k]} at {wl[i]:g} nm: {values[k, i]:.6g} against "
-            f"{expected[k, i]:.6g}); was one of them edited? Use the calibration's "
-            "own files, or export them again",
-            path=path,
+            f"the sensitivities are not those of the side file "
+            f"{Path(meta['meta_path']).name} (channel {'RGB'[k]} at {wl[i]:g} nm: "
+            f"{values[k, i]:.6g} against {expected[k, i]:.6g}); was one of them "
+            "edited? Use the calibration's own files, or export them again",
+            path=sensitivity.meta.get("source"),
         )
     return Spectra(own.wavelength_nm, own.values, own.names, sensitivity.meta)
 

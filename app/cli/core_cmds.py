@@ -18,7 +18,11 @@ from tunespec.app.cli.common import (
     resolve_grid,
     seed_arg,
 )
-from tunespec.core.calibration import absolute_sensitivities
+from tunespec.core.calibration import (
+    absolute_sensitivities,
+    calibrated_sensitivities,
+    calibration_curves,
+)
 from tunespec.core.errors import InputError, check_names
 from tunespec.core.io.export import read_sensitivity_meta, write_sensitivities_csv
 from tunespec.core.io.responses_csv import read_responses_csv, write_responses_csv
@@ -449,12 +453,13 @@ def cmd_estimate(args: argparse.Namespace) -> int:
     checks(pl.check_noise_std, args.noise_std, responses.rgb_std)
     reported = read_spectral(args.illuminants, kind="illuminant")
     sensitivity = absolute_sensitivities(args.sensitivities)
+    meta = _corrections(args, out)
+    sensitivity = calibration_curves(sensitivity, meta)
     prior = _prior(args.prior)
     out.inputs(reported, sensitivity, prior)
     checks(pl.check_absolute_sensitivities, sensitivity.values, args.sensitivities)
     if args.prior is not None:
         checks(pl.check_prior_size, len(prior.names), args.prior)
-    meta = _corrections(args, out)
     grid = resolve_grid(
         args, [(reported, False), (sensitivity, True), (prior, True)], out
     )
@@ -604,7 +609,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     valid_number(args.n_pixels, "--n-pixels", lo=2, hi=1e9, integer=True)
     valid_number(args.flat_field_residual, "--flat-field-residual", lo=0.0, hi=1.0)
     out = Console(args)
-    sens_in = absolute_sensitivities(args.sensitivities)
+    sens_in, _ = calibrated_sensitivities(args.sensitivities)
     illum_in = read_spectral(args.illuminants, kind="illuminant")
     refl_in = read_spectral(args.reflectances, kind="reflectance")
     out.inputs(sens_in, illum_in, refl_in)

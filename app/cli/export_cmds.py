@@ -20,7 +20,7 @@ from tunespec.app.cli.common import (
     add_sensitivities_option,
 )
 from tunespec.app.cli.record_opts import add_record_options, record_from_args
-from tunespec.core.calibration import absolute_sensitivities
+from tunespec.core.calibration import calibrated_sensitivities
 from tunespec.core.datasets import read_sensitivities
 from tunespec.core.errors import InputError
 from tunespec.core.io.spectral import read_spectral
@@ -190,7 +190,7 @@ def cmd_export_camera(args: argparse.Namespace) -> int:
     responses = read_responses_csv(args.responses)
     illuminants = read_spectral(args.illuminants, kind="illuminant")
     chart = read_spectral(args.reflectances, kind="reflectance")
-    sens = absolute_sensitivities(args.sensitivities)
+    sens, _ = calibrated_sensitivities(args.sensitivities)
     out.inputs(illuminants, chart, sens)
     done = export_camera_characterisation(
         args.out,

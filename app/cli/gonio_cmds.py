@@ -294,8 +294,7 @@ def _start_plan(args: argparse.Namespace, *, needs: tuple[str, ...] = ()) -> Non
 def cmd_gonio_run(args: argparse.Namespace) -> int:
     """Run ``gonio-run``."""
     from tunespec.app.pipeline.gonio_devices import SESSION_LAYOUT, run_gonio_session
-    from tunespec.core.calibration import absolute_sensitivities
-    from tunespec.core.io.export import read_sensitivity_meta
+    from tunespec.core.calibration import calibrated_sensitivities
     from tunespec.core.io.spectral import read_spectra_csv
     from tunespec.core.limits import valid_number
     from tunespec.core.plausibility import check_calibration_grid
@@ -308,8 +307,7 @@ def cmd_gonio_run(args: argparse.Namespace) -> int:
     if saved.exists():
         S = read_spectra_csv(saved, allow_negative=True)
     elif args.sensitivities is not None:
-        S = absolute_sensitivities(args.sensitivities)
-        side = read_sensitivity_meta(args.sensitivities)  # its LED corrections
+        S, side = calibrated_sensitivities(args.sensitivities)  # its LED corrections
         check_calibration_grid(S.wavelength_nm, side)
     _start_plan(args, needs=("plan", "sensitivities", "layout"))
     if layout is None:  # a resumed session from before layout.json was kept

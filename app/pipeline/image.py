@@ -136,15 +136,13 @@ class _Calibration:
 def _load_calibration(sensitivities: str | PathLike[str], grid: Grid) -> _Calibration:
     """Sensitivities (on their own grid: Eq. 1 is integrated there, as ``tunespec
     estimate`` does), their side file and the prior on ``grid``, read once."""
-    from tunespec.core.calibration import absolute_sensitivities
+    from tunespec.core.calibration import calibrated_sensitivities
     from tunespec.core.datasets import load_colorchecker_sg
-    from tunespec.core.io.export import read_sensitivity_meta
     from tunespec.core.io.session import sha256_file
     from tunespec.core.plausibility import check_calibration_grid
 
     path = Path(sensitivities)
-    sens = absolute_sensitivities(path)
-    meta = read_sensitivity_meta(path)
+    sens, meta = calibrated_sensitivities(path)
     check_calibration_grid(sens.wavelength_nm, meta)
     return _Calibration(
         str(path.resolve()), sha256_file(path), sens, meta, load_colorchecker_sg(grid),

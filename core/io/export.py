@@ -81,6 +81,7 @@ __all__ = [
     "EXPORT_NAMES",
     "RAWTOACES_GRID",
     "curves_document",
+    "document_curves",
     "export_measurement",
     "onto_grid",
     "parse_sensitivity_meta",
@@ -167,7 +168,7 @@ def write_sensitivity_meta(
 def curves_document(sensitivity: Spectra) -> dict[str, Any]:
     """Sensitivities as a calibration JSON and a side file hold them, every digit:
     ``{"wavelength_nm": [...], "sensitivity": {"R": [...], ...}}``
-    (``core.calibration.document_curves`` reads them)."""
+    (:func:`document_curves` reads them)."""
     return {
         "wavelength_nm": [float(x) for x in sensitivity.wavelength_nm],
         "sensitivity": {
@@ -175,6 +176,36 @@ def curves_document(sensitivity: Spectra) -> dict[str, Any]:
             for n, row in zip(sensitivity.names, sensitivity.values, strict=True)
         },
     }
+
+
+def document_curves(doc: Mapping[str, Any], path: str | PathLike[str]) -> Spectra:
+    """The sensitivities a calibration JSON or a side file holds
+    (:func:`curves_document`).
+
+    Raises
+    ------
+    InputError
+        Naming ``path``: the keys missing or malformed, non-finite values.
+    """
+    try:
+        wl = np.asarray(doc["wavelength_nm"], dtype=np.float64)
+        curves = doc["sensitivity"]
+        values = np.asarray([curves[c] for c in ("R", "G", "B")], dtype=np.float64)
+    except (KeyError, TypeError, ValueError):
+        raise InputError(
+            "expected 'wavelength_nm': [...] and 'sensitivity': {'R': [...], "
+            "'G': [...], 'B': [...]} of equal lengths",
+            path=path,
+        ) from None
+    if values.ndim != 2 or values.shape[1] != wl.size or wl.size < 2:
+        raise InputError(
+            f"sensitivity curves of {values.shape[-1]} samples for "
+            f"{wl.size} wavelengths",
+            path=path,
+        )
+    if not np.all(np.isfinite(values)) or not np.all(np.isfinite(wl)):
+        raise InputError("sensitivity holds non-finite values", path=path)
+    return Spectra(wl, values, ("R", "G", "B"), {"source": str(path)})
 
 
 def sensitivity_meta_document(
@@ -189,7 +220,7 @@ def sensitivity_meta_document(
     (``wavelength_nm``, ``sensitivity``: ``{"R": [...], ...}``), as a calibration
     JSON holds them beside the same keys. The side file of a rawtoaces JSON carries
     them: that schema's 5 nm samples lose what Eq. 1 and the covariance need from
-    the calibration's 2 nm curves, and ``core.calibration.absolute_sensitivities``
+    the calibration's 2 nm curves, and ``core.calibration.calibration_curves``
     takes them back from here.
     """
     wl = sensitivity.wavelength_nm
@@ -259,8 +290,9 @@ def read_sensitivity_meta(sensitivity_csv: str | PathLike[str]) -> dict[str, Any
 
     Keys: ``spd_shift_nm``, ``excess_variance`` (the responses' systematic errors,
     :class:`~tunespec.core.excess.ExcessVariance` as a dict), and from a ``"bayes"``
-    calibration ``led_correction`` and ``covariance`` (an array); ``meta_path``
-    names the file for messages.
+    calibration ``led_correction`` and ``covariance`` (an array); ``curves`` (a
+    :class:`Spectra`) where the side file holds the calibration's own curves
+    (:func:`sensitivity_meta_document`); ``meta_path`` names the file for messages.
     """
     path = sensitivity_meta_path(sensitivity_csv)
     if not path.exists():
@@ -283,6 +315,8 @@ def parse_sensitivity_meta(doc: Any, path: str | PathLike[str]) -> dict[str, Any
     for key in ("led_correction", "excess_variance", "reading_replicates"):
         if key in doc:
             out[key] = doc[key]
+    if "sensitivity" in doc:
+        out["curves"] = document_curves(doc, path)
     cov = doc.get("covariance")
     if cov is not None:
         try:
