@@ -101,25 +101,30 @@ def score(truth, names, refl, std, lab, u) -> dict[str, float]:
     )
     out = {"de00": float(np.mean(delta_e_2000(lab, lab_surface[order])))}
     out["R"] = cov["reflectance"]
+    # L, a, b against the surface; against the samples' colour as *_samples
+    out |= {f"{k}_samples": cov[k] for k in "Lab"}
     return out | {k: cov[f"{k}_surface"] for k in "Lab"}
 
 
-def function_estimate(session: gen.Session, cam: gd.Camera, setup):
-    """A session's calibration and test estimate through ``generalisation.py``'s
-    function path: ``(WienerEstimate, ReflectanceUncertainty)``."""
-    est = gen.calibrate(
-        "bayes", session.resp, session.reported, setup[2], setup[4], cam.exclude
-    )
-    return gen.estimate_tests(
-        est, session.resp_t, session.reported, session.reported, setup
-    )
+def as_read(session: gen.Session) -> gen.Session:
+    """The session's readings cleaned, as the product's readers clean them (the
+    function path's input)."""
+    cleaned = gen.suppress_meter_floor(session.reported_native)
+    session.reported = cleaned.resample(gen.WORK, average=True)
+    session.reported_native = cleaned
+    return session
 
 
 def run_functions(
     session: gen.Session, cam: gd.Camera, setup, truth
 ) -> dict[str, float]:
     """The same session through ``generalisation.py``'s function path."""
-    w, unc = function_estimate(session, cam, setup)
+    est = gen.calibrate(
+        "bayes", session.resp, session.reported, setup[2], setup[4], cam.exclude
+    )
+    w, unc = gen.estimate_tests(
+        est, session.resp_t, session.reported, session.reported, setup
+    )
     refl = w.reflectance
     return score(
         truth, refl.names, refl.values, unc.reflectance_std, unc.lab, unc.lab_std
@@ -136,11 +141,7 @@ def compare(
     session = gen.simulate_session(cam, leds, setup, rng, **conditions)
     with tempfile.TemporaryDirectory() as tmp:
         via_cli = run_cli(session, cam, Path(tmp), truth)
-    # the function path takes the readings cleaned, as the readers clean them
-    cleaned = gen.suppress_meter_floor(session.reported_native)
-    session.reported = cleaned.resample(gen.WORK, average=True)
-    session.reported_native = cleaned
-    return via_cli, run_functions(session, cam, setup, truth)
+    return via_cli, run_functions(as_read(session), cam, setup, truth)
 
 
 def main(argv: list[str] | None = None) -> int:

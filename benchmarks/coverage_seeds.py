@@ -5,7 +5,7 @@ the 318 targets a calibration serves move together with its error: one run's
 per-family coverage has a standard deviation of about 0.01-0.02. This script runs
 ``--seeds`` independent sessions per camera and light (``generalisation.simulate_session``
 with ``numpy.random.default_rng(100 + k)``, the function path of
-``cli_protocol.function_estimate``, which the command line matches to the digit), prints
+``cli_protocol.run_functions``, which the command line matches to the digit), prints
 every calibration's mean CIEDE2000 and coverage of the reflectance samples and of
 L*, a*, b*, against the colour of the truth's samples on the estimation grid (as
 ``refl_colorimetry.csv`` computes the estimate's: like with like) and against the
@@ -29,19 +29,8 @@ import cli_protocol as cp
 import generalisation as gen
 import generalisation_data as gd
 
-KEYS = ("de00", "R", "L", "a", "b", "L_surface", "a_surface", "b_surface")
-
-
-def scores(session, cam, setup, samples, lab_surface) -> dict[str, float]:
-    """``cli_protocol.function_estimate``, scored against both colours."""
-    w, unc = cp.function_estimate(session, cam, setup)
-    order = [samples.names.index(n) for n in w.reflectance.names]
-    cov = gen.coverage(
-        w.reflectance.values, unc.reflectance_std, unc.lab, unc.lab_std,
-        samples.values[order], gen.lab_d50(samples)[order], lab_surface[order],
-    )  # fmt: skip
-    de = gen.delta_e_2000(unc.lab, lab_surface[order])
-    return {"de00": float(np.mean(de)), "R": cov["reflectance"]} | cov
+#: ``cli_protocol.score``'s keys as printed: the samples' colour, then the surface's.
+KEYS = ("de00", "R", "L_samples", "a_samples", "b_samples", "L", "a", "b")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -56,7 +45,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     gen.EST = cp.EST
     setup = gen.load_setup()
-    samples, lab_surface = setup[5], gen.surface_lab(setup[1])
+    truth = (setup[5], gen.surface_lab(setup[1]))
     cams = gd.cameras_per_family(args.per_family)
     if args.families:
         cams = [c for c in cams if c.family in args.families.split(",")]
@@ -64,7 +53,8 @@ def main(argv: list[str] | None = None) -> int:
     rows: dict[str, list[list[float]]] = defaultdict(list)
     t0 = time.perf_counter()
     print(
-        f"{'family':<26} {'camera':<20} {'light':<13} seed  dE00    R     L*    a*    b*"
+        f"{'family':<26} {'camera':<20} {'light':<13} seed  dE00    R     L*    a*    "
+        "b*    (surface L* a* b*)"
     )
     for cam in cams:
         for light in args.lights.split(","):
@@ -74,10 +64,7 @@ def main(argv: list[str] | None = None) -> int:
                     meter_noise=args.meter_noise, meter_reads=args.meter_reads,
                     systematic=True, report_step_nm=args.report_step_nm,
                 )  # fmt: skip
-                cleaned = gen.suppress_meter_floor(session.reported_native)
-                session.reported = cleaned.resample(gen.WORK, average=True)
-                session.reported_native = cleaned
-                s = scores(session, cam, setup, samples, lab_surface)
+                s = cp.run_functions(cp.as_read(session), cam, setup, truth)
                 rows[cam.family].append([s[x] for x in KEYS])
                 print(
                     f"{cam.family:<26} {cam.name[:20]:<20} {light:<13} {k:>4}  "
