@@ -40,6 +40,7 @@ See ``docs/api-example.ipynb``::
 from __future__ import annotations
 
 import tempfile
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from os import PathLike
@@ -267,11 +268,23 @@ def _grid(value: Grid | str | None, default: Grid) -> Grid:
 
 # -- inputs ----------------------------------------------------------------------------
 def load_calibration(
-    path: str | PathLike[str], *, without_side_file: bool = False
+    path: str | PathLike[str],
+    *,
+    without_side_file: bool = False,
+    force: bool = False,
 ) -> Calibration:
     """:meth:`Calibration.load <tunespec.core.calibration.Calibration.load>`: the
-    sensitivities CSV with its ``.meta.json`` side file, or a calibration JSON."""
-    return Calibration.load(path, without_side_file=without_side_file)
+    sensitivities CSV with its ``.meta.json`` side file, or a calibration JSON.
+    ``force`` accepts sensitivities off their covariance's grid (with a warning),
+    as ``estimate --force`` does."""
+    from tunespec.core import plausibility as pl
+
+    checks = pl.Checks(
+        force=force,
+        force_hint=_FORCE_HINT,
+        warn=lambda line: warnings.warn(line, stacklevel=3),
+    )
+    return Calibration.load(path, without_side_file=without_side_file, checks=checks)
 
 
 def read_stimuli(
@@ -393,14 +406,14 @@ def estimate(
     from tunespec.app.pipeline.plan import ESTIMATION_GRID
     from tunespec.core import plausibility as pl
 
+    checks = pl.Checks(force=force, force_hint=_FORCE_HINT)
     cal = (
         calibration
         if isinstance(calibration, Calibration)
-        else load_calibration(calibration)
+        else Calibration.load(calibration, checks=checks)
     )
     sample = read_stimuli(responses, illuminants)
     work = _grid(grid, ESTIMATION_GRID)
-    checks = pl.Checks(force=force, force_hint=_FORCE_HINT)
     where = cal.provenance.get("sensitivities") or cal.provenance.get("calibration")
     checks(pl.check_absolute_sensitivities, cal.sensitivity.values, where)
     prior_spectra = None

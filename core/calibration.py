@@ -18,7 +18,11 @@ together, with the grid and where they came from, and reads and writes them toge
 Reading sensitivities without their side file is an explicit choice
 (``without_side_file=True``) that warns (:class:`MissingCorrectionsWarning`); else
 :meth:`Calibration.load` refuses with an :class:`~tunespec.core.errors.InputError`
-naming the missing file.
+naming the missing file. Sensitivities on another grid than their side file's
+covariance (an older export's 5 nm rawtoaces JSON, a CSV resampled by hand) are
+refused as the command line refuses them
+(:func:`~tunespec.core.plausibility.check_calibration_grid`), unless the ``checks``
+accept them.
 
 The metering corrections themselves are here too, one rule each:
 :func:`correct_spd_shift` (the common shift), :func:`undo_metering` (per-LED ones
@@ -42,6 +46,7 @@ from numpy.typing import NDArray
 from tunespec.core.errors import InputError
 from tunespec.core.excess import ExcessVariance
 from tunespec.core.metering import suppress_meter_floor
+from tunespec.core.plausibility import Checks, check_calibration_grid
 from tunespec.core.spectra import Grid, Spectra, resampling_matrix
 
 if TYPE_CHECKING:
@@ -230,7 +235,11 @@ class Calibration:
 
     @classmethod
     def load(
-        cls, path: str | os.PathLike[str], *, without_side_file: bool = False
+        cls,
+        path: str | os.PathLike[str],
+        *,
+        without_side_file: bool = False,
+        checks: Checks | None = None,
     ) -> Calibration:
         """Read a calibration written by :meth:`save` or ``tunespec calibrate``.
 
@@ -243,12 +252,20 @@ class Calibration:
             Accept sensitivities whose side file is missing: no metering corrections
             and no covariance (a :class:`MissingCorrectionsWarning` says so; the
             CLI's ``--no-corrections``).
+        checks
+            The plausibility checks (default: refuse, no override): sensitivities
+            off their side file's covariance grid
+            (:func:`~tunespec.core.plausibility.check_calibration_grid`), which an
+            override accepts with the covariance resampled after them.
 
         Raises
         ------
         InputError
             The side file is missing (and ``without_side_file`` not set), either
             file is malformed, or the sensitivities are in relative units.
+        Implausible
+            The sensitivities are off their covariance's grid (and ``checks`` does
+            not accept it).
         """
         from tunespec.core.io.export import (
             parse_sensitivity_meta,
@@ -284,6 +301,7 @@ class Calibration:
         meta = parse_sensitivity_meta(raw, side)
         provenance["side_file"] = str(side)
         sens = calibration_curves(sens, meta)
+        (checks or Checks())(check_calibration_grid, sens.wavelength_nm, meta)
         return cls.from_meta(sens, {**meta, **_labels(raw)}, provenance=provenance)
 
     @classmethod
@@ -349,8 +367,9 @@ class Calibration:
             if wl.shape != sensitivity.wavelength_nm.shape or not np.allclose(
                 wl, sensitivity.wavelength_nm
             ):
-                # sensitivities written on another grid (rawtoaces' 5 nm): the
-                # covariance follows the same linear resampling, T Sigma T'
+                # sensitivities on another grid, accepted with an override of
+                # check_calibration_grid: the covariance follows the same linear
+                # resampling, T Sigma T'
                 T1 = resampling_matrix(wl, sensitivity.wavelength_nm)
                 T = np.zeros((3 * T1.shape[0] + 2 * n_led, expected))
                 for k in range(3):

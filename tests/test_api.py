@@ -239,3 +239,25 @@ def test_responses_under_illuminants_not_given_are_refused(files) -> None:
 def test_an_unknown_method_is_refused_before_anything_runs(files) -> None:
     with pytest.raises(InputError, match="unknown method 'magic'"):
         api.calibrate(files["resp"], files["leds"], method="magic")
+
+
+def test_load_calibration_refuses_curves_off_their_covariance_grid(tmp_path) -> None:
+    """As ``estimate`` refuses them: a 5 nm CSV with the side file of a 10 nm
+    calibration; ``force=True`` accepts it with a warning."""
+    from tunespec.core.calibration import Calibration
+    from tunespec.core.io.export import sensitivity_meta_path, write_sensitivities_csv
+    from tunespec.core.plausibility import Implausible
+
+    cam = load_camera(grid=GRID)
+    sens = Spectra(cam.wavelength_nm, cam.values * 0.01, cam.names, {})
+    n = 3 * cam.wavelength_nm.size
+    write_sensitivities_csv(tmp_path / "s.csv", sens, 1e-8 * np.eye(n))
+    write_spectra_csv(sens.resample(Grid(400.0, 700.0, 5.0)), tmp_path / "f.csv")
+    sensitivity_meta_path(tmp_path / "f.csv").write_text(
+        sensitivity_meta_path(tmp_path / "s.csv").read_text()
+    )
+    with pytest.raises(Implausible, match=r"force=True to accept$"):
+        api.load_calibration(tmp_path / "f.csv")
+    with pytest.warns(UserWarning, match="accepted with force=True"):
+        cal = api.load_calibration(tmp_path / "f.csv", force=True)
+    assert isinstance(cal, Calibration) and cal.covariance is not None

@@ -136,3 +136,26 @@ def test_a_calibration_json_with_curves_missing_is_refused(tmp_path) -> None:
     path.write_text(json.dumps({"format": CALIBRATION_FORMAT, "wavelength_nm": [400]}))
     with pytest.raises(InputError, match="'sensitivity'"):
         Calibration.load(path)
+
+
+def test_sensitivities_off_their_covariance_grid_are_refused_unless_forced(
+    tmp_path, calibration
+) -> None:
+    """The curves resampled by hand (10 -> 5 nm), their side file copied along: the
+    Python API refuses them as the command line does (check_calibration_grid); an
+    override loads them with the covariance resampled after them (T Sigma T')."""
+    from tunespec.core.plausibility import Checks, Implausible
+
+    calibration.save(tmp_path / "sens.csv")
+    fine = calibration.sensitivity.resample(Grid(400.0, 700.0, 5.0))
+    write_spectra_csv(fine, tmp_path / "fine.csv")
+    side = sensitivity_meta_path(tmp_path / "fine.csv")
+    side.write_text(sensitivity_meta_path(tmp_path / "sens.csv").read_text())
+    with pytest.raises(Implausible, match=r"sensitivities at 400:700:5 nm, their "
+                       r"calibration's covariance and LED corrections at 400:700:10"):  # fmt: skip
+        Calibration.load(tmp_path / "fine.csv")
+    checks = Checks(force=True)
+    cal = Calibration.load(tmp_path / "fine.csv", checks=checks)
+    assert len(checks.overridden) == 1 and "400:700:10" in checks.overridden[0]
+    n = 3 * 61 + 2 * 2
+    assert cal.covariance is not None and cal.covariance.shape == (n, n)
