@@ -53,6 +53,7 @@ from tunespec.core.sensitivity import SensitivityEstimate
 from tunespec.core.spectra import Grid, Spectra, resampling_matrix
 from tunespec.core.wiener import (
     WienerEstimate,
+    checked_noise_covariance,
     reflectance_basis,
     solve_with_noise,
     wiener_reflectance,
@@ -145,7 +146,7 @@ def fit_generic_prior(
     rgb: NDArray[np.float64],
     noise: NDArray[np.float64],
     wavelength_nm: NDArray[np.float64],
-) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+) -> tuple[NDArray[np.float64], NDArray[np.float64], float, NDArray[np.float64]]:
     """How far each measured target reaches beyond the prior.
 
     The prior reflectances (e.g. the SG's 140) span fewer spectra than the world;
@@ -172,6 +173,10 @@ def fit_generic_prior(
     -------
     alpha, sigma : (n_p,)
     length_nm : float
+    chi2 : (n_p,)
+        ``y' C^-1 y`` of each target at its most probable ``(alpha, sigma)``: how
+        far its responses are from any reflectance Eq. 1 can give
+        (:func:`~tunespec.core.plausibility.check_response_consistency`).
 
     References
     ----------
@@ -188,10 +193,11 @@ def fit_generic_prior(
     n_p, m = rgb.shape
     grid = [(a, sg) for a in GENERIC_ALPHAS for sg in GENERIC_SIGMAS]
     best_total = np.inf
-    best = (np.ones(n_p), np.zeros(n_p), GENERIC_LENGTHS_NM[0])
+    best = (np.ones(n_p), np.zeros(n_p), GENERIC_LENGTHS_NM[0], np.full(n_p, np.nan))
     for length in GENERIC_LENGTHS_NM:
         FMF = F @ matern32(wavelength_nm, length) @ F.T
         nll = np.full((len(grid), n_p), np.inf)
+        chi2 = np.full((len(grid), n_p), np.nan)
         for j, (alpha, sigma) in enumerate(grid):
             for lo in range(0, n_p, _CHUNK):
                 hi = min(lo + _CHUNK, n_p)
@@ -212,9 +218,10 @@ def fit_generic_prior(
                 except np.linalg.LinAlgError:
                     continue
                 z = La[:, m, :m]
+                chi2[j, lo:hi] = np.where(finite[lo:hi], np.sum(z**2, axis=1), np.nan)
                 nll[j, lo:hi] = np.where(
                     finite[lo:hi],
-                    np.sum(z**2, axis=1)
+                    chi2[j, lo:hi]
                     + 2.0
                     * np.sum(
                         np.log(np.diagonal(La[:, :m, :m], axis1=1, axis2=2)), axis=1
@@ -236,6 +243,10 @@ def fit_generic_prior(
                 np.sqrt(post.T @ g[:, 0] ** 2),
                 np.sqrt(post.T @ g[:, 1] ** 2),
                 float(length),
+                chi2[
+                    np.argmin(np.where(np.isnan(nll), np.inf, nll), axis=0),
+                    np.arange(n_p),
+                ],
             )
     return best
 
@@ -252,7 +263,10 @@ class ReflectanceUncertainty:
     the reflectance and CIELAB variances (scaled by ``prior_scale`` squared);
     ``budget`` each term of :data:`BUDGET_TERMS` that applies as ``(reflectance
     variance (n_p, n_wl), CIELAB variance (n_p, 3))``: the uncertainty budget (the
-    terms add up to the total, both are first order).
+    terms add up to the total, both are first order); ``chi2_per_response`` (n_p,) each
+    target's chi-square per response against Eq. 1 and ``misfit_by_light``
+    (n_i,) the estimate's mean squared standardised residual under each light
+    (:func:`~tunespec.core.plausibility.check_response_consistency`).
     """
 
     covariance: NDArray[np.float64]
@@ -269,6 +283,8 @@ class ReflectanceUncertainty:
     budget: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]] = field(
         default_factory=dict
     )
+    chi2_per_response: NDArray[np.float64] | None = None
+    misfit_by_light: NDArray[np.float64] | None = None
 
 
 def _hold_resample(
@@ -580,8 +596,8 @@ def reflectance_uncertainty(
     wl = refl.wavelength_nm
     # F and the prior exactly as the estimate used them (integrated on the
     # calibration's grid, see integrated_lighting_matrix)
-    F, K, mean = wiener.lighting, wiener.prior_covariance, wiener.prior_mean
-    assert F is not None and K is not None and mean is not None
+    F, K = wiener.lighting, wiener.prior_covariance
+    assert F is not None and K is not None
     m_rows = F.shape[0]
     n_p = len(responses.patches)
     diag = wiener.noise_variance.reshape(n_p, m_rows)
@@ -589,7 +605,7 @@ def reflectance_uncertainty(
     rgb = responses.rgb.reshape(n_p, m_rows)
     terms = _response_error_terms(responses, illuminants, calibration, refl)
     noise_all = sum(terms.values())
-    alpha, sigma, length = fit_generic_prior(F, K, mean, rgb, noise_all, wl)
+    alpha, sigma, length, chi2, misfit = _prior_reach(wiener, responses, rgb, noise_all)
     IM = matern32(wl, length)
     FK = F @ K
     G = FK @ F.T
@@ -651,7 +667,35 @@ def reflectance_uncertainty(
         prior_part_variance=prior_var,
         lab_prior_part_variance=lab_prior_var,
         budget=budget,
+        chi2_per_response=chi2,
+        misfit_by_light=misfit,
     )
+
+
+def _prior_reach(
+    wiener: WienerEstimate,
+    responses: Responses,
+    rgb: NDArray[np.float64],
+    noise: NDArray[np.float64],
+) -> tuple[
+    NDArray[np.float64], NDArray[np.float64], float, NDArray[np.float64],
+    NDArray[np.float64],
+]:  # fmt: skip
+    """:func:`fit_generic_prior` on the estimate's responses ``rgb`` (n_p, m) with
+    their error model ``noise``, saturated responses left out as the estimate leaves
+    them: ``alpha``, ``sigma``, the length, each target's chi-square per response
+    and, to say where a misfit is, the estimate's mean squared standardised
+    residual under each light."""
+    F, K, mean = wiener.lighting, wiener.prior_covariance, wiener.prior_mean
+    assert F is not None and K is not None and mean is not None
+    wl = wiener.reflectance.wavelength_nm
+    noise_fit = checked_noise_covariance(noise, responses, F.shape[0])
+    alpha, sigma, length, chi2 = fit_generic_prior(F, K, mean, rgb, noise_fit, wl)
+    dof = np.sum(np.isfinite(rgb) & ~np.repeat(responses.clipped, 3, axis=1), axis=1)
+    residual = rgb - wiener.reflectance.values @ F.T
+    z2 = residual**2 / np.diagonal(noise_fit, axis1=1, axis2=2)
+    by_light = np.nanmean(z2.reshape(rgb.shape[0], -1, 3), axis=(0, 2))
+    return alpha, sigma, length, chi2 / np.maximum(dof, 1), by_light
 
 
 def wiener_with_uncertainty(

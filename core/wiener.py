@@ -42,6 +42,7 @@ __all__ = [
     "NOISE_SOURCES",
     "RIDGE_RELATIVE",
     "WienerEstimate",
+    "checked_noise_covariance",
     "integrated_lighting_matrix",
     "integration_grid",
     "on_integration_grid",
@@ -264,7 +265,7 @@ def _k_e(
     if noise_covariance is None:
         var = _noise_variance(responses, noise_std, noise_from)
     else:
-        full = _checked_covariance(noise_covariance, responses, m_rows)
+        full = checked_noise_covariance(noise_covariance, responses, m_rows)
         var = np.diagonal(full, axis1=1, axis2=2).reshape(responses.rgb.shape)
     var, ridge_floor, n_ridged = _ridged(var, scale)
     noise = var.reshape(n_p, m_rows)
@@ -275,7 +276,7 @@ def _k_e(
     return var, noise, ridge_floor, n_ridged
 
 
-def _checked_covariance(
+def checked_noise_covariance(
     cov: NDArray[np.float64], responses: Responses, m_rows: int
 ) -> NDArray[np.float64]:
     """A copy of a whole ``K_e`` per patch, its shape and values checked, with

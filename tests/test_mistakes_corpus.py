@@ -259,6 +259,18 @@ CASES: list[tuple[str, Callable, str, str]] = [
         x.illuminants, d / "i.csv", lambda w, v: (w, v[np.random.default_rng(0)
                                                       .permutation(len(v))]))),
      "refused", "do not match each other"),
+    # found by the estimate itself: with a calibration's covariance, the responses
+    # must fit a reflectance through Eq. 1
+    ("two neighbouring LEDs' spectra swapped", lambda x, d: _est(
+        x, sensitivities=_with_covariance(x, d), illuminants=_rewritten(
+            x.illuminants, d / "i.csv", lambda w, v: (
+                w, v[[*range(9), 10, 9, *range(11, len(v))]]))), "refused",
+     "fit no reflectance through Eq. 1"),
+    ("responses not dark-subtracted (+1 % of full scale)", lambda x, d: _est(
+        x, sensitivities=_with_covariance(x, d), responses=fs.edited_responses(
+            x.responses, d / "r.csv", lambda r: type(r)(
+                r.patches, r.illuminants, r.rgb + 0.01, r.rgb_std, r.n_pixels,
+                r.saturated))), "refused", "fit no reflectance through Eq. 1"),
     ("illuminants 10 nm off", lambda x, d: _est(x, illuminants=_rewritten(
         x.illuminants, d / "i.csv", lambda w, v: (w + 10, v))), "refused",
      "off by more than 2x"),
@@ -286,6 +298,19 @@ CASES: list[tuple[str, Callable, str, str]] = [
         "capture", "--out", str(d / "s"), "--max-exposure", "0"], "refused",
      "--max-exposure"),
 ]  # fmt: skip
+
+
+def _with_covariance(x, d):
+    """The good sensitivities with a covariance in their side file, as a ``"bayes"``
+    calibration writes one (0.2 % of the peak per sample, independent): the
+    estimate then has its error model and its uncertainties."""
+    from tunespec.core.io.export import write_sensitivities_csv
+
+    s = read_spectral(x.sensitivities, kind="sensitivity")
+    n = s.values.size
+    return write_sensitivities_csv(
+        d / "S.csv", s, (0.002 * s.values.max()) ** 2 * np.eye(n)
+    )
 
 
 def _typo_on_white(path, d, value):
@@ -345,6 +370,18 @@ def test_the_good_files_give_no_warning(good, tmp_path, capsys) -> None:
     code, lines = _run(["evaluate", "--estimated", str(tmp_path / "e.csv"),
                         "--reference", str(x.reference)], capsys)  # fmt: skip
     assert code == 0 and lines == [], lines
+
+
+def test_the_good_files_fit_eq1(good, tmp_path, capsys) -> None:
+    """With a covariance the estimate checks its responses against Eq. 1: the good
+    files' chi-square per response is about 1, and nothing is said."""
+    argv = [*_est(good, sensitivities=_with_covariance(good, tmp_path)), "--json",
+            "-o", str(tmp_path / "e.csv")]  # fmt: skip
+    code = main(argv)
+    out, err = capsys.readouterr()
+    assert code == 0 and err == "", err
+    chi2 = np.array(json.loads(out)["chi2_per_response"])
+    assert chi2.size == 8 and 0.3 < np.median(chi2) < 2.0 and chi2.max() < 4.0, chi2
 
 
 def test_force_overrides_and_is_recorded(good, tmp_path, capsys) -> None:

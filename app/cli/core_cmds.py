@@ -530,6 +530,16 @@ def cmd_estimate(args: argparse.Namespace) -> int:
             f"{len(est.clipped)} patch(es): {', '.join(est.clipped[:10])}"
             f"{' ...' if len(est.clipped) > 10 else ''}"
         )
+    # chi-square per response of each patch against Eq. 1 (with the uncertainties)
+    chi2 = (
+        None
+        if estimation.uncertainty is None
+        else estimation.uncertainty.chi2_per_response
+    )
+    if chi2 is not None and (
+        misfit := pl.inconsistent_patches(chi2, est.reflectance.names)
+    ):
+        out.warn(misfit)
     out.say(f"{len(est.reflectance)} reflectances written to {args.output}")
     out.summary(
         {
@@ -539,6 +549,7 @@ def cmd_estimate(args: argparse.Namespace) -> int:
             "n_clipped_samples": int(est.n_clipped_samples),
             "files": files,
         }
+        | ({} if chi2 is None else {"chi2_per_response": np.round(chi2, 3).tolist()})
     )
     return 0
 

@@ -485,7 +485,8 @@ def estimate_reflectance(
     (:func:`~tunespec.core.calibration.correct_illuminants_from_meta`), put them and
     the sensitivities on the integration grid (``on_integration_grid``), check the
     responses against Eq. 1 (``check_estimate_inputs``), Wiener (Eq. 5-6) and, with
-    a ``calibration`` carrying a covariance, the standard uncertainties.
+    a ``calibration`` carrying a covariance, the standard uncertainties and whether
+    the responses fit any reflectance through Eq. 1 (``check_response_consistency``).
 
     :func:`estimate` (``run``, ``demo``, the wizard) and ``tunespec estimate`` call
     it.
@@ -518,6 +519,7 @@ def estimate_reflectance(
         Checks,
         check_calibration_grid,
         check_estimate_inputs,
+        check_response_consistency,
     )
     from tunespec.core.uncertainty import wiener_with_uncertainty
 
@@ -545,6 +547,13 @@ def estimate_reflectance(
         center_prior=center_prior,
         clip=clip,
     )
+    if unc is not None and unc.chi2_per_response is not None:
+        checks(
+            check_response_consistency,
+            unc.chi2_per_response,
+            unc.misfit_by_light,
+            responses.illuminants,
+        )
     return Estimation(est, None, unc, tuple(checks.overridden))
 
 
