@@ -215,7 +215,8 @@ def check_response_consistency(
         f"{median:.3g} per response over {c.size} patch(es) (about 1 expected, "
         f"{MAX_CHI2_PER_RESPONSE:g} at most), worst under {worst}: responses not "
         "dark-subtracted, illuminants named after other lights than those that lit "
-        "the responses (two swapped?), or another session's spectra",
+        "the responses (two swapped?), another session's spectra, or a fluorescent "
+        "target (brighteners under the violet LEDs)",
     )
 
 

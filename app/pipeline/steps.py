@@ -780,6 +780,7 @@ def _write_report(
         reflectance_std=None if unc is None else unc.reflectance_std,
         lab=None if unc is None else unc.lab,
         lab_std=None if unc is None else unc.lab_std,
+        chi2_per_response=None if unc is None else unc.chi2_per_response,
         led_correction=calibration.estimate.led_correction,
         uncertainty_budget=None if unc is None else budget_summary(unc),
         flags=tuple(warnings),

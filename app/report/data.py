@@ -139,6 +139,10 @@ class ReportData:
         Standard uncertainty of ``reflectance``; drawn as a 95 % band.
     lab, lab_std : (n, 3)
         CIELAB (D50) of ``reflectance`` and its standard uncertainty (a table).
+    chi2_per_response : (n,)
+        Each patch's responses against Eq. 1 (about 1; above
+        :data:`tunespec.core.plausibility.MAX_CHI2_PER_RESPONSE` they fit no
+        reflectance), a column of the CIELAB table.
     led_correction
         :class:`tunespec.core.led_correction.LedCorrection`: the light source's
         per-LED corrections found by the calibration (a table).
@@ -188,6 +192,7 @@ class ReportData:
     reflectance_std: NDArray[np.float64] | None = None
     lab: NDArray[np.float64] | None = None
     lab_std: NDArray[np.float64] | None = None
+    chi2_per_response: NDArray[np.float64] | None = None
     led_correction: Any = None
     uncertainty_budget: Mapping[str, Mapping[str, float]] | None = None
     sensitivity_reference_label: str = "reference"

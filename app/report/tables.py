@@ -28,6 +28,7 @@ from tunespec.app.report.data import (
 )
 from tunespec.core.intervals import COVERAGE_FACTOR_95
 from tunespec.core.io.export import tunespec_version
+from tunespec.core.plausibility import MAX_CHI2_PER_RESPONSE
 
 if TYPE_CHECKING:
     from tunespec.core.colorimetry import ReflectanceStats
@@ -233,6 +234,42 @@ def _table1(
     return _Table(title, header, tuple(rows), note)
 
 
+def _lab_table(report: ReportData) -> _Table:
+    """Each patch's CIELAB with its 95 % intervals and, where the estimate has
+    them, how well its responses fit Eq. 1."""
+    assert report.lab is not None and report.lab_std is not None
+    assert report.reflectance is not None
+    chi2 = report.chi2_per_response
+    rows = tuple(
+        (
+            name,
+            *(
+                f"{report.lab[i, j]:.2f} ± {COVERAGE_FACTOR_95 * report.lab_std[i, j]:.2f}"
+                for j in range(3)
+            ),
+            *(() if chi2 is None else (f"{chi2[i]:.2f}",)),
+        )
+        for i, name in enumerate(report.reflectance.names)
+    )
+    note = (
+        "± is the expanded uncertainty (k = 1.96): sensor noise, the flat-field "
+        "residual, the calibration (sensitivities and light-source corrections) and "
+        "what the LEDs cannot resolve, propagated to first order."
+    )
+    if chi2 is not None:
+        note += (
+            " chi²: the patch's responses against Eq. 1 under that error model, per "
+            f"response (about 1; above {MAX_CHI2_PER_RESPONSE:g} they fit no "
+            "reflectance and the row does not hold)."
+        )
+    return _Table(
+        "CIELAB (D50) with 95 % intervals",
+        ("Patch", "L*", "a*", "b*", *(() if chi2 is None else ("chi² per response",))),
+        rows,
+        note=note,
+    )
+
+
 def _budget_table(budget: Mapping[str, Mapping[str, float]]) -> _Table:
     """The uncertainty budget: each term's share of u(L*)^2 and of u(reflectance)^2."""
     rows = tuple(
@@ -393,26 +430,7 @@ def _result_tables(report: ReportData) -> list[_Table]:
         and report.lab_std is not None
         and report.reflectance is not None
     ):
-        rows = tuple(
-            (
-                name,
-                *(
-                    f"{report.lab[i, j]:.2f} ± {COVERAGE_FACTOR_95 * report.lab_std[i, j]:.2f}"
-                    for j in range(3)
-                ),
-            )
-            for i, name in enumerate(report.reflectance.names)
-        )
-        tables.append(
-            _Table(
-                "CIELAB (D50) with 95 % intervals",
-                ("Patch", "L*", "a*", "b*"),
-                rows,
-                note="± is the expanded uncertainty (k = 1.96): sensor noise, the "
-                "flat-field residual, the calibration (sensitivities and light-source "
-                "corrections) and what the LEDs cannot resolve, propagated to first order.",
-            )
-        )
+        tables.append(_lab_table(report))
     if report.uncertainty_budget:
         tables.append(_budget_table(report.uncertainty_budget))
     corr = report.led_correction

@@ -508,3 +508,20 @@ def test_a_long_table_fills_the_page_before_it() -> None:
     pages = list(_flow_pages("Results", [first, small]))
     text = ["\n".join(x.get_text() for x in fig.texts) for fig in pages]
     assert len(pages) == 2 and "c0" not in text[0] and "c14" in text[1]
+
+
+def test_cielab_table_carries_each_patchs_fit_to_eq1(report: ReportData) -> None:
+    """With the estimate's chi-square per response the CIELAB table gets a column
+    and its note says what the value means; without it, no column."""
+    from dataclasses import replace
+
+    n = len(report.reflectance.names)
+    lab, u = np.tile([50.0, 10.0, -5.0], (n, 1)), np.full((n, 3), 0.05)
+    chi2 = np.linspace(0.8, 12.5, n)
+    text = render_html(replace(report, lab=lab, lab_std=u, chi2_per_response=chi2))
+    assert "<th>chi² per response</th>" in text
+    assert '<td class="num">12.50</td>' in text
+    assert "above 10 they fit no reflectance" in text
+    bare = render_html(replace(report, lab=lab, lab_std=u))
+    assert "CIELAB (D50) with 95 % intervals" in bare
+    assert "chi² per response" not in bare
