@@ -126,11 +126,12 @@ SIGNAL_SPREAD = 2.0
 #: (``core.uncertainty.ReflectanceUncertainty.chi2_per_response``: ``y' C^-1 y`` over
 #: the responses, ``y`` the responses less the prior mean's, ``C`` their whole
 #: error model with the prior's reach fitted). Under the model it is about 1: on
-#: ``benchmarks/generalisation.py``'s ten families (one camera each, 318 targets,
-#: 10 nm readings with 0.3 % noise, the sensor effects) the median was 0.87-1.01
-#: and the largest 3.5. The demo's responses with two neighbouring LEDs' names
-#: swapped in the illuminants gave 150-2400, with a dark level of 1 % of full
-#: scale left in them 4500-8500.
+#: ``benchmarks/generalisation.py``'s sessions (10-27 cameras of ten families, 318
+#: targets each; CAL1 model or held-out LEDs, readings at 1, 5 or 10 nm with 0.1 or
+#: 0.3 % noise, with and without the sensor effects) the median per camera was
+#: 0.87-1.22 and the largest 6.3. The demo's responses with two neighbouring LEDs'
+#: spectra swapped gave 150-2400, with a dark level of 0.05 % of full scale left in
+#: them 10-26 (1 %: 4500-8500). See docs/validation.md.
 MAX_CHI2_PER_RESPONSE = 10.0
 
 
