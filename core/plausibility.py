@@ -129,9 +129,10 @@ SIGNAL_SPREAD = 2.0
 #: ``benchmarks/generalisation.py``'s sessions (10-27 cameras of ten families, 318
 #: targets each; CAL1 model or held-out LEDs, readings at 1, 5 or 10 nm with 0.1 or
 #: 0.3 % noise, with and without the sensor effects) the median per camera was
-#: 0.87-1.22 and the largest 6.3. The demo's responses with two neighbouring LEDs'
-#: spectra swapped gave 150-2400, with a dark level of 0.05 % of full scale left in
-#: them 10-26 (1 %: 4500-8500). See docs/validation.md.
+#: 0.89-1.22 and the largest 6.3 (``benchmarks/eq1_consistency.py``). The demo's
+#: responses with two neighbouring LEDs' spectra swapped gave 150-2400, with a dark
+#: level of 0.05 % of full scale left in them 10-26 (1 %: 4500-8500). See
+#: docs/validation.md.
 MAX_CHI2_PER_RESPONSE = 10.0
 
 
