@@ -43,7 +43,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from tunespec.core.errors import InputError
+from tunespec.core.errors import InputError, shown_names
 from tunespec.core.excess import ExcessVariance
 from tunespec.core.metering import suppress_meter_floor
 from tunespec.core.plausibility import Checks, check_calibration_grid
@@ -494,7 +494,7 @@ def select_named(spectra: Spectra, names: Sequence[str] | None, what: str) -> Sp
         return spectra
     missing = [n for n in names if n not in spectra.names]
     if missing:
-        shown = ", ".join(missing[:8]) + (" ..." if len(missing) > 8 else "")
+        shown = shown_names(missing, 8)
         raise InputError(
             f"{len(missing)} {what} not found in the spectra: {shown}",
             path=spectra.meta.get("source"),

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from os import PathLike
 
 
@@ -94,6 +94,18 @@ class SingularSystemError(TuneSpecError, ArithmeticError):
     """A linear system that cannot be solved (too few or degenerate stimuli)."""
 
 
+def shown_names(names: Sequence[str], limit: int) -> str:
+    """The first ``limit`` of ``names`` joined by commas, `` ...`` when there are more:
+    how a message lists names.
+
+    Examples
+    --------
+    >>> shown_names(["A1", "A2", "A3"], 2)
+    'A1, A2 ...'
+    """
+    return ", ".join(names[:limit]) + (" ..." if len(names) > limit else "")
+
+
 def check_names(
     wanted: Iterable[str],
     available: Iterable[str],
@@ -119,6 +131,6 @@ def check_names(
     have = set(available)
     missing = [n for n in wanted if n not in have]
     if missing:
-        shown = ", ".join(missing[:limit]) + (" ..." if len(missing) > limit else "")
+        shown = shown_names(missing, limit)
         text = message.replace("{n}", str(len(missing))).replace("{names}", shown)
         raise InputError(text, path=path)

@@ -50,7 +50,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from tunespec.core.errors import InputError
+from tunespec.core.errors import InputError, shown_names
 from tunespec.core.responses import Responses
 from tunespec.core.spectra import Spectra
 
@@ -232,12 +232,11 @@ def inconsistent_patches(
     bad = np.flatnonzero(c > MAX_CHI2_PER_RESPONSE)
     if bad.size == 0:
         return ""
-    names = ", ".join(str(patches[i]) for i in bad[:10])
-    more = " ..." if bad.size > 10 else ""
+    names = shown_names([str(patches[i]) for i in bad], 10)
     return (
         f"{bad.size} patch(es) fit no reflectance through Eq. 1 (chi-square "
         f"{c[bad].min():.3g}-{c[bad].max():.3g} per response, about 1 expected): "
-        f"{names}{more} (fluorescent, glossy or off their place?): their estimates "
+        f"{names} (fluorescent, glossy or off their place?): their estimates "
         "and intervals do not hold"
     )
 
@@ -306,8 +305,8 @@ def reflectance_unit(
     elif percent_like.any() and not percent:
         bad = [names[k] for k in np.flatnonzero(percent_like)]
         raise InputError(
-            f"mixed units: {len(bad)} spectrum(s) ({', '.join(bad[:5])}"
-            f"{' ...' if len(bad) > 5 else ''}) look like percent (median above "
+            f"mixed units: {len(bad)} spectrum(s) ({shown_names(bad, 5)}) look like "
+            "percent (median above "
             f"{PERCENT_BULK:g}) among {int(factor_like.sum())} in factors 0..1 (at "
             f"most {MAX_PLAUSIBLE_FRACTION:g}); write every spectrum in one unit",
             path=source,

@@ -52,7 +52,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tunespec.core.errors import InputError
+from tunespec.core.errors import InputError, shown_names
 from tunespec.core.extraction import ExtractionCheck, check_responses
 from tunespec.core.io.raw import (
     RawFrame,
@@ -799,7 +799,7 @@ class _ChannelStats:
         chans = sorted({c for _, c in self.flagged}, key=self.use.index)
         return [
             f"{len(self.flagged)} patch/channel pair(s) have clipped pixels (channels "
-            f"{', '.join(chans[:6])}{' ...' if len(chans) > 6 else ''}); they are "
+            f"{shown_names(chans, 6)}); they are "
             "flagged saturated and left out of calibration"
         ]
 

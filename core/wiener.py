@@ -28,7 +28,12 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from tunespec.core.errors import InputError, SingularSystemError, check_names
+from tunespec.core.errors import (
+    InputError,
+    SingularSystemError,
+    check_names,
+    shown_names,
+)
 from tunespec.core.forward_model import lighting_matrix
 from tunespec.core.responses import CHANNELS, Responses
 from tunespec.core.spectra import (
@@ -617,7 +622,7 @@ def _source(spectra: Spectra) -> str | None:
 
 
 def _select(spectra: Spectra, names: tuple[str, ...], role: str) -> Spectra:
-    have = ", ".join(spectra.names[:8]) + (" ..." if len(spectra) > 8 else "")
+    have = shown_names(spectra.names, 8)
     check_names(
         names,
         spectra.names,

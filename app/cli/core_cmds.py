@@ -23,7 +23,7 @@ from tunespec.core.calibration import (
     calibrated_sensitivities,
     calibration_curves,
 )
-from tunespec.core.errors import InputError, check_names
+from tunespec.core.errors import InputError, check_names, shown_names
 from tunespec.core.io.export import read_sensitivity_meta, write_sensitivities_csv
 from tunespec.core.io.responses_csv import read_responses_csv, write_responses_csv
 from tunespec.core.io.spectral import read_spectral
@@ -527,8 +527,7 @@ def cmd_estimate(args: argparse.Namespace) -> int:
     if est.clipped:
         out.warn(
             f"clipped to [0, 1]: {est.n_clipped_samples} sample(s) in "
-            f"{len(est.clipped)} patch(es): {', '.join(est.clipped[:10])}"
-            f"{' ...' if len(est.clipped) > 10 else ''}"
+            f"{len(est.clipped)} patch(es): {shown_names(est.clipped, 10)}"
         )
     # chi-square per response of each patch against Eq. 1 (with the uncertainties)
     chi2 = (
