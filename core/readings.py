@@ -40,7 +40,7 @@ from numpy.typing import NDArray
 from scipy.special import ndtr
 
 from tunespec.core.errors import InputError
-from tunespec.core.forward_model import render_rgb
+from tunespec.core.forward_model import lighting_matrix
 from tunespec.core.led_correction import _corrected
 from tunespec.core.metering import (
     EMISSION_MARGIN_NM,
@@ -111,32 +111,27 @@ class ReadingReplicates:
             )
         return out
 
-    def deviations(
+    def lighting_deviations(
         self,
         readings: Spectra,
         sensitivity: NDArray[np.float64],
         correction: tuple[NDArray[np.intp], NDArray[np.float64], NDArray[np.float64]],
-        reflectance: NDArray[np.float64],
     ) -> NDArray[np.float64]:
-        """Eq. 1 under each replicate minus Eq. 1 under the calibration, (K, n_p,
-        3 n_i), illuminant-major.
+        """Eq. 1's ``F`` (:func:`~tunespec.core.forward_model.lighting_matrix`) under
+        each replicate minus under the calibration, (K, 3 n_i, n), illuminant-major;
+        at reflectances ``r`` the responses move by ``dF @ r``.
 
         ``readings`` the spectra as reported (cleaned, on this grid);
         ``sensitivity`` (3, n) the calibration's on this grid; ``correction``
         ``(rows, gain, shift_nm)`` of each spectrum as the calibration's LED
-        correction looks them up (row -1: not fitted, kept in the replicates);
-        ``reflectance`` (n_p, n) on this grid.
+        correction looks them up (row -1: not fitted, kept in the replicates).
         """
         wl = self.wavelength_nm
         step = float(wl[1] - wl[0]) if wl.size > 1 else 1.0
         rows, gain, shift = correction
         fitted = rows >= 0
-        n_p = reflectance.shape[0]
-
-        def eq1(L: NDArray[np.float64], S: NDArray[np.float64]) -> NDArray:
-            return render_rgb(reflectance, L, S, step).reshape(n_p, -1)
-
-        base = eq1(_corrected(wl, readings.values, gain, shift)[0], sensitivity)
+        base = lighting_matrix(_corrected(wl, readings.values, gain, shift)[0],
+                               sensitivity, step)  # fmt: skip
         out = np.empty((self.n_replicates, *base.shape))
         for k in range(self.n_replicates):
             g, d = gain.copy(), shift.copy()
@@ -144,7 +139,7 @@ class ReadingReplicates:
             d[fitted] = self.shift_nm[k, rows[fitted]]
             noisy = readings.values + self.perturbations(readings, k)
             Sk = sensitivity + self.sensitivity_delta[k]
-            out[k] = eq1(_corrected(wl, noisy, g, d)[0], Sk) - base
+            out[k] = lighting_matrix(_corrected(wl, noisy, g, d)[0], Sk, step) - base
         return out
 
     def as_dict(self) -> dict[str, Any]:

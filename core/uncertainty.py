@@ -22,9 +22,16 @@ Three sources of error reach a Wiener estimate ``r = m + W (c - F m)``,
 For the linear estimator actually used (whatever ``K_e`` Eq. 6 gave it), the error
 covariance is the sandwich::
 
-    E = (I - W F) K (I - W F)' + W (N + J Sigma J') W'
+    E = (I - W F) K (I - W F)' + W N W' + D Sigma D'
 
-with ``N`` the true response noise covariance. ``E`` is propagated to CIE XYZ (D50,
+with ``N`` the true response noise covariance and ``D`` the derivative of the
+estimate with respect to the calibration: an error ``dF`` of Eq. 1's matrix moves
+the responses' prediction (``W dF r``) and Eq. 5's gain ``W`` as well, which adds
+``-(I - W F) K dF' A^-1 (c - F m)`` (:class:`_MovesOfF`; the readings' replicates
+likewise). Without the gain's part the calibration's reflectance variance was off
+by up to a factor 3.2 where the camera sees little (by central differences,
+``tests/core/test_sensitivity_bayes.py``); in L*a*b* the two terms' variances moved
+by 0.8 % and 4 % at most (one session of ``benchmarks/generalisation.py``). ``E`` is propagated to CIE XYZ (D50,
 ASTM E308 weights, exactly linear) and to CIELAB by the Jacobian of the CIELAB
 formulas (first order, as GUM Supplement 2 / JCGM 102 allows for small
 uncertainties).
@@ -298,6 +305,82 @@ def _hold_resample(
     return values @ resampling_matrix(wl_from, wl_to, average=average).T
 
 
+class _CalibrationJacobian:
+    """Eq. 1 differentiated with respect to the calibration's parameters ``theta``
+    (the sensitivities, the LEDs' log gains and their wavelength offsets), with its
+    covariance factored as ``Sigma = U U'``: the factors ``J U`` of the responses and
+    ``(dF U)' u`` of Eq. 1's matrix seen through response weights ``u``."""
+
+    def __init__(self, calibration: SensitivityEstimate, illuminants: Spectra) -> None:
+        cov = calibration.covariance
+        if cov is None:
+            raise InputError(
+                f"the {calibration.method!r} calibration carries no uncertainty; "
+                "calibrate with method 'bayes'"
+            )
+        sens = calibration.sensitivity
+        self.wavelength_nm = wl = sens.wavelength_nm
+        self.step = sens.step_nm
+        n = wl.size
+        # the corrections apply to the spectra as the calibration saw them
+        rep = as_calibrated(illuminants, sens.grid).values
+        rows, gains, shifts = calibration.corrections_for(illuminants.names)
+        self.Lc, self.dL = _corrected(wl, rep, gains, shifts)
+        self.S = sens.values
+        self.n_responses = 3 * len(illuminants.names)
+        # Sigma = U U' (U from the eigen-decomposition, rank <= its size).
+        e, V = np.linalg.eigh(cov)
+        keep = e > e.max() * 1e-14
+        U = V[:, keep] * np.sqrt(e[keep])
+        self.U_sens = U[: 3 * n].reshape(3, n, -1)
+        # each spectrum's rows of U for its log gain and its offset (0: not fitted)
+        corr = calibration.led_correction
+        n_led = len(corr.names) if corr is not None else 0
+        fitted = (rows >= 0) & (cov.shape[0] > 3 * n)
+        self.U_gain = np.where(fitted[:, None], U[3 * n + rows], 0.0)
+        self.U_shift = np.where(fitted[:, None], U[3 * n + n_led + rows], 0.0)
+
+    def responses(self, R: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``J U`` (P, 3 n_i, N) at reflectances ``R`` (P, n) on the calibration's
+        grid; rows illuminant-major as Eq. 5's ``c``."""
+        A = R[:, None, :] * self.Lc[None] * self.step  # (P, n_i, n)
+        dA = R[:, None, :] * self.dL[None] * self.step
+        S = self.S
+        pred = np.einsum("pil,kl->pik", A, S)
+        dpred = np.einsum("pil,kl->pik", dA, S)
+        JU = np.stack([A @ U for U in self.U_sens], axis=2)  # (P, n_i, 3, N)
+        JU += pred[..., None] * self.U_gain[None, :, None, :]
+        JU += dpred[..., None] * self.U_shift[None, :, None, :]
+        return JU.reshape(R.shape[0], -1, JU.shape[-1])
+
+    def matrix(
+        self, u: NDArray[np.float64], basis: NDArray[np.float64]
+    ) -> NDArray[np.float64]:
+        """``(dF U)' u`` (P, n_est, N): for every column of ``U``, the transposed
+        change of Eq. 5's ``F = F_cal Phi`` (``basis`` ``Phi`` (n, n_est),
+        :func:`~tunespec.core.wiener.reflectance_basis`) applied to response weights
+        ``u`` (P, 3 n_i)."""
+        w = u.reshape(u.shape[0], -1, 3) * self.step  # (P, n_i, 3)
+        Q = np.einsum("pic,il->pcl", w, self.Lc)
+        out = sum(
+            (Q[:, c, None, :] * basis.T[None]) @ U for c, U in enumerate(self.U_sens)
+        )
+        V = np.einsum("pic,cl->pil", w, self.S)
+        out += (basis.T[None] @ (V * self.Lc[None]).transpose(0, 2, 1)) @ self.U_gain
+        out += (basis.T[None] @ (V * self.dL[None]).transpose(0, 2, 1)) @ self.U_shift
+        return out
+
+
+def _on_calibration_grid(
+    reflectance: Spectra, wavelength_nm: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """The reflectances between their samples as Eq. 5's ``F`` has them."""
+    return (
+        reflectance.values
+        @ reflectance_basis(reflectance.wavelength_nm, wavelength_nm).T
+    )
+
+
 def calibration_response_covariance(
     calibration: SensitivityEstimate,
     illuminants: Spectra,
@@ -332,51 +415,20 @@ def calibration_response_covariance(
     InputError
         If the calibration carries no covariance.
     """
-    cov = calibration.covariance
-    if cov is None:
-        raise InputError(
-            f"the {calibration.method!r} calibration carries no uncertainty; "
-            "calibrate with method 'bayes'"
-        )
-    sens = calibration.sensitivity
-    wl = sens.wavelength_nm
-    step = sens.step_nm
-    n = wl.size
-    # the corrections apply to the spectra as the calibration saw them
-    rep = as_calibrated(illuminants, sens.grid).values
-    corr = calibration.led_correction
-    n_i = len(illuminants.names)
-    rows, gains, shifts = calibration.corrections_for(illuminants.names)
-    Lc, dL = _corrected(wl, rep, gains, shifts)
-    # the reflectance between its samples as Eq. 5's F has it
-    R = reflectance.values @ reflectance_basis(reflectance.wavelength_nm, wl).T
-    n_p = R.shape[0]
-    # Sigma = U U' (U from the eigen-decomposition, rank <= its size).
-    e, V = np.linalg.eigh(cov)
-    keep = e > e.max() * 1e-14
-    U = V[:, keep] * np.sqrt(e[keep])
-    N = U.shape[1]
-    S = sens.values
-    n_led = len(corr.names) if corr is not None else 0
-    out = np.empty((n_p, 3 * n_i, 3 * n_i))
-    for lo in range(0, n_p, _CHUNK):
-        hi = min(lo + _CHUNK, n_p)
-        A = R[lo:hi, None, :] * Lc[None] * step  # (P, n_i, n)
-        dA = R[lo:hi, None, :] * dL[None] * step
-        JU = np.empty((hi - lo, n_i, 3, N))
-        pred = np.einsum("pil,kl->pik", A, S)
-        dpred = np.einsum("pil,kl->pik", dA, S)
-        for k in range(3):
-            JU[:, :, k, :] = (A.reshape(-1, n) @ U[k * n : (k + 1) * n]).reshape(
-                hi - lo, n_i, N
-            )
-        for j in range(n_i):
-            if rows[j] >= 0 and cov.shape[0] > 3 * n:
-                ug = U[3 * n + rows[j]]
-                ud = U[3 * n + n_led + rows[j]]
-                JU[:, j, :, :] += pred[:, j, :, None] * ug + dpred[:, j, :, None] * ud
-        JU = JU.reshape(hi - lo, 3 * n_i, N)
-        out[lo:hi] = JU @ JU.transpose(0, 2, 1)
+    return _response_covariance(
+        _CalibrationJacobian(calibration, illuminants), reflectance
+    )
+
+
+def _response_covariance(
+    jac: _CalibrationJacobian | _ReadingsJacobian, reflectance: Spectra
+) -> NDArray[np.float64]:
+    """``sum_k (J u_k)(J u_k)'`` over the factors of ``jac`` at ``reflectance``."""
+    R = _on_calibration_grid(reflectance, jac.wavelength_nm)
+    out = np.empty((R.shape[0], jac.n_responses, jac.n_responses))
+    for lo in range(0, R.shape[0], _CHUNK):
+        JU = jac.responses(R[lo : lo + _CHUNK])
+        out[lo : lo + _CHUNK] = JU @ JU.transpose(0, 2, 1)
     return out
 
 
@@ -409,22 +461,42 @@ def readings_response_covariance(
     (n_p, 3 n_i, 3 n_i)
         Rows illuminant-major, as Eq. 5's ``c``.
     """
-    reps = calibration.readings
-    if reps is None:
-        raise InputError("the calibration carries no reading replicates")
-    wl = reps.wavelength_nm
-    cleaned = as_calibrated(
-        illuminants, Grid(float(wl[0]), float(wl[-1]), float(wl[1] - wl[0]))
+    return _response_covariance(
+        _ReadingsJacobian(calibration, illuminants), reflectance
     )
-    sens = calibration.sensitivity
-    R = reflectance.values @ reflectance_basis(reflectance.wavelength_nm, wl).T
-    dev = reps.deviations(
-        cleaned,
-        _hold_resample(sens.wavelength_nm, sens.values, wl),
-        calibration.corrections_for(cleaned.names),
-        R,
-    )
-    return np.einsum("kpi,kpj->pij", dev, dev) / reps.n_replicates
+
+
+class _ReadingsJacobian:
+    """The calibration's replicates (:mod:`tunespec.core.readings`) as
+    :class:`_CalibrationJacobian`'s factors: column ``k`` is replicate ``k``'s change
+    of Eq. 1's ``F`` (its sensitivities, corrections and readings) over
+    ``sqrt(K)``, so that the factors' outer products are the replicates' mean."""
+
+    def __init__(self, calibration: SensitivityEstimate, illuminants: Spectra) -> None:
+        reps = calibration.readings
+        if reps is None:
+            raise InputError("the calibration carries no reading replicates")
+        self.wavelength_nm = wl = reps.wavelength_nm
+        cleaned = as_calibrated(
+            illuminants, Grid(float(wl[0]), float(wl[-1]), float(wl[1] - wl[0]))
+        )
+        sens = calibration.sensitivity
+        self.dF = reps.lighting_deviations(
+            cleaned,
+            _hold_resample(sens.wavelength_nm, sens.values, wl),
+            calibration.corrections_for(cleaned.names),
+        ) / np.sqrt(reps.n_replicates)  # (K, 3 n_i, n)
+        self.n_responses = self.dF.shape[1]
+
+    def responses(self, R: NDArray[np.float64]) -> NDArray[np.float64]:
+        """(P, 3 n_i, K) at reflectances ``R`` (P, n) on the readings' grid."""
+        return np.einsum("kml,pl->pmk", self.dF, R)
+
+    def matrix(
+        self, u: NDArray[np.float64], basis: NDArray[np.float64]
+    ) -> NDArray[np.float64]:
+        """(P, n_est, K), as :meth:`_CalibrationJacobian.matrix`."""
+        return basis.T[None] @ np.einsum("kml,pm->plk", self.dF, u)
 
 
 def lab_covariance(
@@ -519,8 +591,7 @@ def _response_error_terms(
             log_reference=_log_reference(calibration, tuple(responses.illuminants)),
         )
     if calibration.covariance is not None:
-        wl, values = reflectance.wavelength_nm, reflectance.values
-        unclipped = Spectra(wl, np.clip(values, 0.0, 1.5), reflectance.names)
+        unclipped = _physical(reflectance)
         terms["calibration"] = calibration_response_covariance(
             calibration, illuminants.select(responses.illuminants), unclipped
         )
@@ -529,6 +600,13 @@ def _response_error_terms(
                 calibration, illuminants.select(responses.illuminants), unclipped
             )
     return terms
+
+
+def _physical(reflectance: Spectra) -> Spectra:
+    """The estimate as Eq. 1's derivatives take it: within what a surface reflects
+    (an unclipped estimate can ring below 0 where the LEDs see little)."""
+    values = np.clip(reflectance.values, 0.0, 1.5)
+    return Spectra(reflectance.wavelength_nm, values, reflectance.names)
 
 
 def _log_reference(
@@ -549,6 +627,69 @@ def _log_reference(
         if j >= 0:
             out[i] = by[3 * j : 3 * j + 3]
     return out.reshape(-1)
+
+
+class _MovesOfF:
+    """The budget's terms that are errors ``dF`` of Eq. 1's matrix (the
+    calibration's, the readings'), as moves of Eq. 5's estimate.
+
+    To first order ``dF`` moves ``r_hat = m + W (c - F m)`` by
+    ``W dF r_hat - (I - W F) K dF' u`` with ``u = A^-1 (c - F m)``: the gain
+    ``W = K F' A^-1`` (``A = F K F' + K_e``) depends on ``F`` too,
+    ``dW = (I - W F) K dF' A^-1 - W dF W``. The second part lies where the responses
+    see little (``I - W F``): it is the reflectance's, hardly the colour's.
+    """
+
+    def __init__(
+        self,
+        wiener: WienerEstimate,
+        responses: Responses,
+        illuminants: Spectra,
+        calibration: SensitivityEstimate,
+        terms: tuple[str, ...],
+    ) -> None:
+        kinds = {"calibration": _CalibrationJacobian, "readings": _ReadingsJacobian}
+        chosen = illuminants.select(responses.illuminants)
+        self.jacobians = {t: kinds[t](calibration, chosen) for t in terms if t in kinds}
+        refl, wl = _physical(wiener.reflectance), wiener.reflectance.wavelength_nm
+        self.at = {
+            t: (
+                _on_calibration_grid(refl, jac.wavelength_nm),
+                reflectance_basis(wl, jac.wavelength_nm),
+            )
+            for t, jac in self.jacobians.items()
+        }
+        F, mean = wiener.lighting, wiener.prior_mean
+        assert F is not None and mean is not None
+        n_p = len(responses.patches)
+        self.innovation = np.nan_to_num(responses.rgb.reshape(n_p, -1) - F @ mean)
+
+    def weights(
+        self, G: NDArray[np.float64], used: NDArray[np.float64], rows: slice
+    ) -> NDArray[np.float64] | None:
+        """``u = A^-1 (c - F m)`` of the targets ``rows`` (None: no such term)."""
+        if not self.jacobians:
+            return None
+        return solve_with_noise(G, used, self.innovation[rows, :, None])[..., 0]
+
+    def covariance(
+        self,
+        term: str,
+        N: NDArray[np.float64],
+        rows: slice,
+        W: NDArray[np.float64],
+        posterior: NDArray[np.float64],
+        u: NDArray[np.float64] | None,
+    ) -> NDArray[np.float64]:
+        """The estimate's covariance from ``term`` for the targets ``rows``: its
+        response covariance ``N`` through ``W`` where it is no error of ``F``, else
+        its moves' (``posterior`` ``(I - W F) K``)."""
+        if term not in self.jacobians:
+            return W @ N @ W.transpose(0, 2, 1)
+        assert u is not None
+        jac, (R, basis) = self.jacobians[term], self.at[term]
+        D = W @ jac.responses(R[rows]) - posterior @ jac.matrix(u, basis)
+        return D @ D.transpose(0, 2, 1)
 
 
 def reflectance_uncertainty(
@@ -618,11 +759,11 @@ def reflectance_uncertainty(
     term_xyz = {t: np.empty((n_p, 3, 3)) for t in terms}
     T = astm_e308_weights_d50(wl)  # (n, 3), XYZ = r @ T
     eye = np.eye(n)
+    moves = _MovesOfF(wiener, responses, illuminants, calibration, tuple(terms))
     for lo in range(0, n_p, _CHUNK):
         hi = min(lo + _CHUNK, n_p)
         # W' = A^-1 F K with A = F K F' + K_e as the estimate used it (symmetric)
-        Wt = solve_with_noise(G, used[lo:hi], FK)
-        W = Wt.transpose(0, 2, 1)
+        W = solve_with_noise(G, used[lo:hi], FK).transpose(0, 2, 1)
         IWF = eye - W @ F
         P = (
             IWF
@@ -634,8 +775,9 @@ def reflectance_uncertainty(
         )
         P *= edge[lo:hi, :, None] * edge[lo:hi, None, :]
         E = P.copy()  # + W N W' term by term: the budget's parts add up to it
+        u, posterior = moves.weights(G, used[lo:hi], slice(lo, hi)), IWF @ K
         for t, N in terms.items():
-            Et = W @ N[lo:hi] @ Wt
+            Et = moves.covariance(t, N[lo:hi], slice(lo, hi), W, posterior, u)
             E += Et
             term_var[t][lo:hi] = np.diagonal(Et, axis1=1, axis2=2)
             term_xyz[t][lo:hi] = T.T[None] @ Et @ T[None]

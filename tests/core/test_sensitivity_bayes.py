@@ -8,6 +8,8 @@ reports each LED with its own wavelength offset and gain error.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -24,9 +26,9 @@ from tunespec.core.errors import InputError
 from tunespec.core.led_correction import LedCorrection
 from tunespec.core.sensitivity import estimate_camera_sensitivity
 from tunespec.core.simulate import NoiseModel, scale_to_exposure, simulate_responses
-from tunespec.core.spectra import DEFAULT_GRID, Grid, Spectra
+from tunespec.core.spectra import CALIBRATION_GRID, DEFAULT_GRID, Grid, Spectra
 from tunespec.core.uncertainty import reflectance_uncertainty
-from tunespec.core.wiener import wiener_reflectance
+from tunespec.core.wiener import on_integration_grid, wiener_reflectance
 
 FINE = Grid(380.0, 730.0, 1.0)
 EST = Grid(400.0, 700.0, 5.0)
@@ -152,3 +154,60 @@ def test_led_correction_round_trip_and_bad_input() -> None:
     s = Spectra(wl, np.ones((2, wl.size)), ("A", "C"))
     fixed = correct_illuminants_from_meta(s, {"led_correction": c.as_dict()})
     assert np.allclose(fixed.values[0], 1.01) and np.allclose(fixed.values[1], 1.0)
+
+
+@pytest.mark.slow
+def test_calibration_term_is_the_estimates_first_order_change(bench) -> None:
+    """The budget's calibration variance is what moving the calibration along each
+    direction of its covariance does to Eq. 5's estimate (F and its gain W both
+    recomputed), by central differences: W dF r and the gain's (I - W F) K dF' u.
+    On the product's calibration grid, where Eq. 1 is integrated."""
+    metered = bench["metered"].resample(CALIBRATION_GRID)
+    est = estimate_camera_sensitivity(
+        bench["chart"],
+        metered,
+        load_colorchecker_sg(CALIBRATION_GRID),
+        database=load_camera_database(CALIBRATION_GRID),
+        exclude=DEFAULT_CAMERA,
+    )
+    test = bench["test"].subset(list(bench["test"].patches[:8]))
+
+    def estimate(calibration):
+        illum, sens, _ = on_integration_grid(
+            calibration.correct_illuminants(metered), calibration.sensitivity, EST
+        )
+        return wiener_reflectance(test, illum, sens, bench["sg_est"], clip=False)
+
+    w = estimate(est)
+    unc = reflectance_uncertainty(w, test, metered, est)
+    e, V = np.linalg.eigh(est.covariance)
+    keep = e > e.max() * 1e-14
+    U = V[:, keep] * np.sqrt(e[keep])
+    n, corr = est.sensitivity.values.shape[1], est.led_correction
+    n_led = len(corr.names)
+
+    def moved(theta):
+        return dataclasses.replace(
+            est,
+            sensitivity=est.sensitivity.with_values(
+                est.sensitivity.values + theta[: 3 * n].reshape(3, n)
+            ),
+            led_correction=dataclasses.replace(
+                corr,
+                gain=tuple(
+                    np.asarray(corr.gain) * np.exp(theta[3 * n : 3 * n + n_led])
+                ),
+                shift_nm=tuple(np.asarray(corr.shift_nm) + theta[3 * n + n_led :]),
+            ),
+        )
+
+    h = 1e-2
+    var = np.zeros_like(w.reflectance.values)
+    for k in range(U.shape[1]):
+        plus = estimate(moved(h * U[:, k])).reflectance.values
+        minus = estimate(moved(-h * U[:, k])).reflectance.values
+        var += ((plus - minus) / (2 * h)) ** 2
+    budget = unc.budget["calibration"][0]
+    assert np.allclose(budget, var, rtol=0.01, atol=1e-4 * var.max()), np.max(
+        np.abs(budget / var - 1)
+    )
