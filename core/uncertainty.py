@@ -31,10 +31,11 @@ the responses' prediction (``W dF r``) and Eq. 5's gain ``W`` as well, which add
 likewise). Without the gain's part the calibration's reflectance variance was off
 by up to a factor 3.2 where the camera sees little (by central differences,
 ``tests/core/test_sensitivity_bayes.py``); in L*a*b* the two terms' variances moved
-by 0.8 % and 4 % at most (one session of ``benchmarks/generalisation.py``). ``E`` is propagated to CIE XYZ (D50,
-ASTM E308 weights, exactly linear) and to CIELAB by the Jacobian of the CIELAB
-formulas (first order, as GUM Supplement 2 / JCGM 102 allows for small
-uncertainties).
+by 0.8 % and 4 % at most (one session of ``benchmarks/generalisation.py``).
+
+``E`` is propagated to CIE XYZ (D50, ASTM E308 weights, exactly linear) and to
+CIELAB by the Jacobian of the CIELAB formulas (first order, as GUM Supplement 2 /
+JCGM 102 allows for small uncertainties).
 
 References
 ----------
@@ -117,6 +118,9 @@ GENERIC_SIGMAS = np.concatenate([[0.0], np.logspace(-3.0, np.log10(0.3), 11)])
 #: Scales of the prior's own covariance tried per target.
 GENERIC_ALPHAS = (1.0, 1.5, 2.0, 3.0, 5.0)
 _CHUNK = 256
+#: Targets whose moves (n_est x the calibration's parameters each: 1 nm estimates and
+#: a 2 nm calibration, 400 x 572) are formed at once.
+_MOVES_CHUNK = 32
 #: Corner of the bordered matrix [[C, y], [y', corner]] whose Cholesky factor gives
 #: ``L_C^-1 y`` in :func:`fit_generic_prior`: any value above ``y' C^-1 y`` keeps it
 #: positive definite and leaves the factor's other entries as they are.
@@ -688,8 +692,13 @@ class _MovesOfF:
             return W @ N @ W.transpose(0, 2, 1)
         assert u is not None
         jac, (R, basis) = self.jacobians[term], self.at[term]
-        D = W @ jac.responses(R[rows]) - posterior @ jac.matrix(u, basis)
-        return D @ D.transpose(0, 2, 1)
+        R = R[rows]
+        out = np.empty((W.shape[0], W.shape[1], W.shape[1]))
+        for a in range(0, len(out), _MOVES_CHUNK):
+            b = slice(a, a + _MOVES_CHUNK)
+            D = W[b] @ jac.responses(R[b]) - posterior[b] @ jac.matrix(u[b], basis)
+            out[b] = D @ D.transpose(0, 2, 1)
+        return out
 
 
 def reflectance_uncertainty(
