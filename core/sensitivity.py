@@ -884,12 +884,21 @@ def _with_excess(cal: SensitivityEstimate, problem: _Problem) -> SensitivityEsti
 def _excess_variance(problem: _Problem, cal: SensitivityEstimate) -> ExcessVariance:
     """The chart's residuals beyond its known noise (:func:`fit_excess_variance`):
     Eq. 1 with the fitted corrections against the responses, the known variance
-    the ROI noise (the flat-field residual is fitted there)."""
+    the ROI noise (the flat-field residual is fitted there) and what the light's
+    reading noise does to Eq. 1 at the chart (the replicates' spread,
+    :class:`~tunespec.core.readings.ReadingReplicates`): the estimate's budget
+    carries that apart, as its ``readings`` term, and an excess fitted to it would
+    count it twice."""
     S = cal.sensitivity.values
     L = undo_metering(problem.readings, cal.led_correction, cal.spd_shift_nm)
     pred = stimulus_matrix(L.values, problem.R, problem.step_nm) @ S.T
     n_p = len(problem.patches)
     noise = (problem.var - (SMOOTH_RELATIVE_ERROR * problem.C) ** 2).reshape(n_p, -1)
+    if cal.readings is not None:
+        dF = cal.readings.lighting_deviations(
+            problem.readings, S, cal.corrections_for(problem.readings.names)
+        )
+        noise = noise + np.mean(np.einsum("kml,pl->kpm", dF, problem.R) ** 2, axis=0)
     return fit_excess_variance(
         problem.C.reshape(n_p, -1),
         pred.reshape(n_p, -1),

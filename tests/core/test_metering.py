@@ -194,3 +194,23 @@ def test_the_reading_noise_is_kept_as_reported_when_the_floor_is_cleaned(
     assert kept == reading_noise_fractions(rep)  # as reported
     assert reading_noise_fractions(clean.resample(Grid(400.0, 700.0, 2.0))) == kept
     assert READING_NOISE_META not in suppress_meter_floor(true).meta  # noise-free
+
+
+def test_a_white_with_no_floor_to_measure_gets_the_others_noise() -> None:
+    """A phosphor white emits at every sample, so none of them shows the noise
+    alone: it is read by the same instrument as the LEDs that do, and gets their
+    median; noise-free readings stay noise-free."""
+    rng = np.random.default_rng(7)
+    peaks = np.arange(420.0, 700.0, 40.0)
+    white = 0.2 + _led(450.0, 25.0) + 0.8 * _led(570.0, 120.0)
+    true = Spectra(
+        WL,
+        np.stack([*(_led(p) for p in peaks), white]),
+        (*(f"L{p:.0f}" for p in peaks), "WHITE"),
+    )
+    rep = true.with_values(np.stack([_reported(v, rng) for v in true.values]))
+    noise = reading_noise_fractions(rep)
+    leds = [noise[n] for n in true.names[:-1]]
+    assert min(leds) > 0.0002, noise
+    assert noise["WHITE"] == pytest.approx(float(np.median(leds)), rel=1e-12)
+    assert set(reading_noise_fractions(true).values()) == {0.0}

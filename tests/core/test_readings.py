@@ -243,3 +243,28 @@ def test_the_readings_noise_survives_a_spectral_csv(tmp_path, bench) -> None:
     with pytest.raises(InputError, match=r"reading_step_nm: step -3 nm") as err:
         read_spectral(path, kind="illuminant")
     assert err.value.line == at + 1 and "\n" not in str(err.value)
+
+
+def test_the_excess_leaves_the_readings_noise_to_the_readings_term(bench) -> None:
+    """The readings' noise moves the chart's residuals too; the calibration's
+    replicates measure that, and the excess is fitted beside it: the fitted sensor
+    terms are those of the same chart read without noise (a relative response
+    error of 0.019 % was fitted to the noise instead before)."""
+    truth = load_camera_database(FINE)[DEFAULT_CAMERA]
+    sg_fine = load_colorchecker_sg(FINE)
+    leds = scale_to_exposure(sg_fine, load_led_set(FINE), truth, target=0.8)
+    # the fixture's chart (its generator's first draws), read without noise
+    chart = simulate_responses(
+        sg_fine, leds, truth, noise=NoiseModel(), rng=np.random.default_rng(5)
+    )
+    exact = suppress_meter_floor(leds.resample(Grid(380.0, 730.0, 10.0)))
+    clean = estimate_camera_sensitivity(
+        chart,
+        exact.resample(DEFAULT_GRID, average=True),
+        load_colorchecker_sg(DEFAULT_GRID),
+        database=load_camera_database(DEFAULT_GRID),
+        exclude=DEFAULT_CAMERA,
+    )
+    noisy, quiet = bench["est"].excess, clean.excess
+    assert noisy.response_relative <= quiet.response_relative + 5e-5, (noisy, quiet)
+    assert noisy.common_relative <= quiet.common_relative + 5e-5, (noisy, quiet)
