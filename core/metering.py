@@ -259,9 +259,20 @@ def reading_noise_fractions(spectra: Spectra) -> dict[str, float]:
     Cleaned, a spectrum reported every 5 nm keeps little more than its bands' tails
     below them, which measured as 0.3-0.9 % of the peak where the instrument's noise
     was 0.07 % (``benchmarks/generalisation.py``, 0.1 % noise, two readings averaged).
+
+    A spectrum that shows no noise where others do gets their median: one instrument
+    read them all, and a phosphor white emits at every sample, so no sample of it
+    shows the noise alone (``benchmarks/generalisation.py``, readings at 10 nm with
+    0.3 % noise: the two whites measured 0, and the readings' term of the budget was
+    1.5-1.8 times too small in L* and b* on the broad cameras, 1.3-1.4 with the whites
+    read without noise).
     """
     kept = _kept_noise_fractions(spectra)
-    return kept if kept is not None else _measured_noise_fractions(spectra)
+    out = kept if kept is not None else _measured_noise_fractions(spectra)
+    shown = [f for f in out.values() if f > 0]
+    if not shown:
+        return out
+    return {n: f if f > 0 else float(np.median(shown)) for n, f in out.items()}
 
 
 def _kept_noise_fractions(spectra: Spectra) -> dict[str, float] | None:
@@ -336,21 +347,11 @@ def parse_reading_meta(
 
 
 def _measured_noise_fractions(spectra: Spectra) -> dict[str, float]:
-    """:func:`reading_noise_rms` of each spectrum as it stands, over its peak.
-
-    A spectrum that shows no noise where the others do gets their median: one
-    instrument read them all, and a phosphor white emits at every sample, so no
-    sample of it shows the noise alone (``benchmarks/generalisation.py``, readings at
-    10 nm with 0.3 % noise: the two whites measured 0, and the readings' term of the
-    budget was 1.5-1.8 times too small in L* and b* on the broad cameras, 1.3-1.4 with
-    the whites read without noise)."""
+    """:func:`reading_noise_rms` of each spectrum as it stands, over its peak."""
     out = {}
     for name, row in zip(spectra.names, spectra.values, strict=True):
         peak = float(np.max(row)) if row.size else 0.0
         out[name] = reading_noise_rms(row) / peak if peak > 0 else 0.0
-    shown = [f for f in out.values() if f > 0]
-    if shown:
-        out = {n: f if f > 0 else float(np.median(shown)) for n, f in out.items()}
     return out
 
 

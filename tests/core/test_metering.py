@@ -10,6 +10,7 @@ from tunespec.core.forward_model import render_rgb
 from tunespec.core.metering import (
     READING_NOISE_META,
     meter_noise_sd,
+    reading_meta,
     reading_noise_fractions,
     suppress_meter_floor,
 )
@@ -213,4 +214,9 @@ def test_a_white_with_no_floor_to_measure_gets_the_others_noise() -> None:
     leds = [noise[n] for n in true.names[:-1]]
     assert min(leds) > 0.0002, noise
     assert noise["WHITE"] == pytest.approx(float(np.median(leds)), rel=1e-12)
+    # read one at a time and combined, as capture keeps them: the same
+    each = [suppress_meter_floor(rep.select([n])) for n in rep.names]
+    meta = {**rep.meta, **reading_meta(each, rep.names)}
+    kept = Spectra(rep.wavelength_nm, rep.values, rep.names, meta)
+    assert reading_noise_fractions(kept) == pytest.approx(noise, rel=1e-12)
     assert set(reading_noise_fractions(true).values()) == {0.0}

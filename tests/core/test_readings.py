@@ -86,6 +86,8 @@ def bench():
     )
     return {
         "est": est,
+        "chart": chart,
+        "leds": leds,  # as they shone
         "reported": reported,
         "native": native,  # the same readings at the instrument's 10 nm
         "other": _reported(leds, rng),  # another session's readings
@@ -249,17 +251,11 @@ def test_the_excess_leaves_the_readings_noise_to_the_readings_term(bench) -> Non
     """The readings' noise moves the chart's residuals too; the calibration's
     replicates measure that, and the excess is fitted beside it: the fitted sensor
     terms are those of the same chart read without noise (a relative response
-    error of 0.019 % was fitted to the noise instead before)."""
-    truth = load_camera_database(FINE)[DEFAULT_CAMERA]
-    sg_fine = load_colorchecker_sg(FINE)
-    leds = scale_to_exposure(sg_fine, load_led_set(FINE), truth, target=0.8)
-    # the fixture's chart (its generator's first draws), read without noise
-    chart = simulate_responses(
-        sg_fine, leds, truth, noise=NoiseModel(), rng=np.random.default_rng(5)
-    )
-    exact = suppress_meter_floor(leds.resample(Grid(380.0, 730.0, 10.0)))
+    error of 0.019 % was fitted to the noise instead before): the same chart read
+    without noise."""
+    exact = suppress_meter_floor(bench["leds"].resample(Grid(380.0, 730.0, 10.0)))
     clean = estimate_camera_sensitivity(
-        chart,
+        bench["chart"],
         exact.resample(DEFAULT_GRID, average=True),
         load_colorchecker_sg(DEFAULT_GRID),
         database=load_camera_database(DEFAULT_GRID),
