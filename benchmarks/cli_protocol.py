@@ -115,16 +115,23 @@ def as_read(session: gen.Session) -> gen.Session:
     return session
 
 
+def estimate_session(session: gen.Session, cam: gd.Camera, setup):
+    """``generalisation.py``'s function path on a session read as the product reads
+    it (:func:`as_read`): the ``"bayes"`` calibration, then the test targets'
+    estimate and its uncertainty."""
+    est = gen.calibrate(
+        "bayes", session.resp, session.reported, setup[2], setup[4], cam.exclude
+    )
+    return gen.estimate_tests(
+        est, session.resp_t, session.reported, session.reported, setup
+    )
+
+
 def run_functions(
     session: gen.Session, cam: gd.Camera, setup, truth
 ) -> dict[str, float]:
     """The same session through ``generalisation.py``'s function path."""
-    est = gen.calibrate(
-        "bayes", session.resp, session.reported, setup[2], setup[4], cam.exclude
-    )
-    w, unc = gen.estimate_tests(
-        est, session.resp_t, session.reported, session.reported, setup
-    )
+    w, unc = estimate_session(session, cam, setup)
     refl = w.reflectance
     return score(
         truth, refl.names, refl.values, unc.reflectance_std, unc.lab, unc.lab_std

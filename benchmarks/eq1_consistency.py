@@ -50,11 +50,7 @@ def main(argv: list[str] | None = None) -> int:
             systematic=args.systematic, report_step_nm=args.report_step_nm,
             flat_field=args.flat_field,
         )  # fmt: skip
-        s = cp.as_read(session)
-        est = gen.calibrate(
-            "bayes", s.resp, s.reported, setup[2], setup[4], cam.exclude
-        )
-        _, unc = gen.estimate_tests(est, s.resp_t, s.reported, s.reported, setup)
+        _, unc = cp.estimate_session(cp.as_read(session), cam, setup)
         c = unc.chi2_per_response
         every.append(c)
         print(

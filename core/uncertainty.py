@@ -340,9 +340,11 @@ class _CalibrationJacobian:
         # each spectrum's rows of U for its log gain and its offset (0: not fitted)
         corr = calibration.led_correction
         n_led = len(corr.names) if corr is not None else 0
-        fitted = (rows >= 0) & (cov.shape[0] > 3 * n)
-        self.U_gain = np.where(fitted[:, None], U[3 * n + rows], 0.0)
-        self.U_shift = np.where(fitted[:, None], U[3 * n + n_led + rows], 0.0)
+        self.U_gain = np.zeros((rows.size, U.shape[1]))
+        self.U_shift = np.zeros((rows.size, U.shape[1]))
+        fitted = np.flatnonzero(rows >= 0) if cov.shape[0] > 3 * n else []
+        self.U_gain[fitted] = U[3 * n + rows[fitted]]
+        self.U_shift[fitted] = U[3 * n + n_led + rows[fitted]]
 
     def responses(self, R: NDArray[np.float64]) -> NDArray[np.float64]:
         """``J U`` (P, 3 n_i, N) at reflectances ``R`` (P, n) on the calibration's
@@ -546,11 +548,34 @@ BUDGET_TERMS = (
 )
 
 
+_FJacobians = dict[str, _CalibrationJacobian | _ReadingsJacobian]
+
+
+def _f_jacobians(
+    calibration: SensitivityEstimate,
+    responses: Responses,
+    illuminants: Spectra,
+    *,
+    readings: bool = True,
+) -> _FJacobians:
+    """The budget's terms that are errors of Eq. 1's ``F``, by name, for the
+    responses' lights: the calibration's covariance and, unless ``readings`` is
+    false, its reading replicates (none without a ``"bayes"`` calibration)."""
+    if calibration.covariance is None:
+        return {}
+    chosen = illuminants.select(responses.illuminants)
+    out: _FJacobians = {"calibration": _CalibrationJacobian(calibration, chosen)}
+    if readings and calibration.readings is not None:
+        out["readings"] = _ReadingsJacobian(calibration, chosen)
+    return out
+
+
 def _response_error_terms(
     responses: Responses,
     illuminants: Spectra,
     calibration: SensitivityEstimate,
     reflectance: Spectra,
+    jacobians: _FJacobians | None = None,
     *,
     readings: bool = True,
 ) -> dict[str, NDArray[np.float64]]:
@@ -565,7 +590,8 @@ def _response_error_terms(
     response covariance at the estimate (:func:`calibration_response_covariance`).
     A term the inputs do not carry is left out; the light's reading noise
     (:func:`readings_response_covariance`) comes with the calibration's covariance
-    unless ``readings`` is false (Eq. 5's ``K_e`` goes without it)."""
+    unless ``readings`` is false (Eq. 5's ``K_e`` goes without it). ``jacobians``:
+    :func:`_f_jacobians`' already built."""
     n_p, m_rows = len(responses.patches), 3 * len(responses.illuminants)
     rgb = responses.rgb.reshape(n_p, m_rows)
     keep = ~np.repeat(responses.clipped, 3, axis=1)  # (n_p, m_rows)
@@ -594,15 +620,10 @@ def _response_error_terms(
             np.where(keep, rgb, 0.0),
             log_reference=_log_reference(calibration, tuple(responses.illuminants)),
         )
-    if calibration.covariance is not None:
-        unclipped = _physical(reflectance)
-        terms["calibration"] = calibration_response_covariance(
-            calibration, illuminants.select(responses.illuminants), unclipped
-        )
-        if readings and calibration.readings is not None:
-            terms["readings"] = readings_response_covariance(
-                calibration, illuminants.select(responses.illuminants), unclipped
-            )
+    if jacobians is None:
+        jacobians = _f_jacobians(calibration, responses, illuminants, readings=readings)
+    for t, jac in jacobians.items():
+        terms[t] = _response_covariance(jac, _physical(reflectance))
     return terms
 
 
@@ -645,16 +666,9 @@ class _MovesOfF:
     """
 
     def __init__(
-        self,
-        wiener: WienerEstimate,
-        responses: Responses,
-        illuminants: Spectra,
-        calibration: SensitivityEstimate,
-        terms: tuple[str, ...],
+        self, wiener: WienerEstimate, responses: Responses, jacobians: _FJacobians
     ) -> None:
-        kinds = {"calibration": _CalibrationJacobian, "readings": _ReadingsJacobian}
-        chosen = illuminants.select(responses.illuminants)
-        self.jacobians = {t: kinds[t](calibration, chosen) for t in terms if t in kinds}
+        self.jacobians = jacobians
         refl, wl = _physical(wiener.reflectance), wiener.reflectance.wavelength_nm
         self.at = {
             t: (
@@ -753,7 +767,8 @@ def reflectance_uncertainty(
     diag = wiener.noise_variance.reshape(n_p, m_rows)
     used = diag if wiener.noise_covariance is None else wiener.noise_covariance
     rgb = responses.rgb.reshape(n_p, m_rows)
-    terms = _response_error_terms(responses, illuminants, calibration, refl)
+    jacobians = _f_jacobians(calibration, responses, illuminants)
+    terms = _response_error_terms(responses, illuminants, calibration, refl, jacobians)
     noise_all = sum(terms.values())
     alpha, sigma, length, chi2, misfit = _prior_reach(wiener, responses, rgb, noise_all)
     IM = matern32(wl, length)
@@ -767,13 +782,12 @@ def reflectance_uncertainty(
     term_var = {t: np.empty((n_p, n)) for t in terms}
     term_xyz = {t: np.empty((n_p, 3, 3)) for t in terms}
     T = astm_e308_weights_d50(wl)  # (n, 3), XYZ = r @ T
-    eye = np.eye(n)
-    moves = _MovesOfF(wiener, responses, illuminants, calibration, tuple(terms))
+    moves = _MovesOfF(wiener, responses, jacobians)
     for lo in range(0, n_p, _CHUNK):
         hi = min(lo + _CHUNK, n_p)
         # W' = A^-1 F K with A = F K F' + K_e as the estimate used it (symmetric)
         W = solve_with_noise(G, used[lo:hi], FK).transpose(0, 2, 1)
-        IWF = eye - W @ F
+        IWF = np.eye(n) - W @ F
         P = (
             IWF
             @ (
