@@ -17,10 +17,10 @@ illuminant files before anything resamples them. On the generalisation benchmark
 22-LED lights and 52 cameras (``benchmarks/metering_denoise.py``) the response error
 that noise of 0.1 % of the peak leaves falls to within 1.0-1.4x of an oracle that knows
 where each LED emits, at 1, 5 and 10 nm (0.1 % and 0.3 %). A noise-free spectrum, and a cleaned one, are
-returned unchanged. :func:`meter_noise_sd` (DER_SNR, corrected for
-clipping) estimates an instrument's noise per reading, which the CAL1 driver checks
-replies against; :func:`reading_noise_rms` the noise of a spectrum as it stands,
-cleaned or not, for the self-check.
+returned unchanged. :func:`reading_noise_rms` estimates the noise on a spectrum's
+emission from its floor (clipped or not, one reading or several averaged): the
+readings' uncertainty draws it again, the self-check judges it and the CAL1 driver
+checks replies against it.
 
 What cleaning leaves, the noise inside the bands, is propagated as an uncertainty of
 Eq. 1's illumination (:mod:`tunespec.core.readings`).
@@ -55,7 +55,6 @@ __all__ = [
     "READING_STEP_META",
     "as_calibrated",
     "emission_bands",
-    "meter_noise_sd",
     "reading_meta",
     "reading_noise_fractions",
     "reading_noise_rms",
@@ -100,63 +99,10 @@ _MIN_DIFFERENCES = 16
 #: (a noise-free spectrum, however coarsely sampled) almost none. Below this fraction
 #: the region is taken to hold no noise to measure.
 _MIN_EXTREMUM_FRACTION = 1.0 / 3.0
-#: DER_SNR's constant: 1.482602 / sqrt(6) turns the median of |2 f_i - f_i-2 - f_i+2|
-#: into a Gaussian standard deviation (Stoehr et al. 2008).
-_DER_SNR = 1.482602 / np.sqrt(6.0)
-#: Standard deviation of a half-normal variable, in units of its Gaussian's.
-_HALF_NORMAL_SD = float(np.sqrt(1.0 - 2.0 / np.pi))
-
-
-def meter_noise_sd(values: NDArray[np.float64]) -> float:
-    """Noise standard deviation of one reported spectrum (DER_SNR, Stoehr et al. 2008).
-
-    The samples below :data:`NOISE_REGION_FRACTION` of the peak, in order, give the
-    median of ``|2 f_i - f_(i-2) - f_(i+2)|`` times 1.482602 / sqrt(6). Where the
-    instrument clips (exact zeros among them) only the samples above zero are used,
-    and those are half-normal: their estimate is divided by ``sqrt(1 - 2 / pi)``, the
-    ratio of a half-normal's standard deviation to the Gaussian's. 0.0 when fewer
-    than 16 differences exist (a broad spectrum has no noise-only region) or where
-    fewer than a third of those samples turn (a local maximum or minimum: a smooth,
-    noise-free tail, which DER_SNR would mistake for noise on a coarse grid).
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> rng = np.random.default_rng(0)
-    >>> v = np.exp(-0.5 * ((np.arange(400.0) - 200.0) / 10.0) ** 2)
-    >>> round(meter_noise_sd(v + 0.001 * rng.standard_normal(400)), 4)  # sd 0.001
-    0.0011
-    >>> round(meter_noise_sd(np.maximum(v + 0.001 * rng.standard_normal(400), 0)), 4)
-    0.0008
-    >>> meter_noise_sd(v)  # noise-free: the tails' second differences are tiny
-    0.0
-    """
-    v = np.asarray(values, dtype=np.float64)
-    peak = float(v.max()) if v.size else 0.0
-    if not peak > 0:
-        return 0.0
-    low = v[v < NOISE_REGION_FRACTION * peak]
-    clipped = bool(np.any(low == 0.0)) and not bool(np.any(low < 0.0))
-    if clipped:
-        low = low[low > 0.0]
-    if (
-        low.size < _MIN_DIFFERENCES + 4
-        or _extremum_fraction(low) < _MIN_EXTREMUM_FRACTION
-    ):
-        return 0.0
-    sd = _der_snr(low)
-    if clipped:
-        sd /= _HALF_NORMAL_SD
-    # rounding jitter of a computed, noise-free tail turns as noise does, at a level
-    # far below any instrument's
-    return sd if sd > 1e-6 * peak else 0.0
-
-
-def _der_snr(samples: NDArray[np.float64]) -> float:
-    """DER_SNR's noise standard deviation of ``samples`` in order (Stoehr et al.
-    2008): the median of ``|2 f_i - f_(i-2) - f_(i+2)|`` times 1.482602 / sqrt(6)."""
-    d = np.abs(2.0 * samples[2:-2] - samples[:-4] - samples[4:])
-    return float(_DER_SNR * np.median(d))
+#: Standard deviation of ``max(0, z)`` for a standard normal ``z``: a floor clipped at
+#: zero, as a fraction of the noise on the emission (the same for an average of
+#: ``n`` readings, both then divided by ``sqrt(n)``).
+_CLIPPED_FLOOR_SD = float(np.sqrt(0.5 - 0.5 / np.pi))
 
 
 def _extremum_fraction(values: NDArray[np.float64]) -> float:
@@ -226,14 +172,29 @@ def _rms_without_tails(low: NDArray[np.float64]) -> float:
     return float(np.sqrt(np.mean(body**2)))
 
 
-def reading_noise_rms(values: NDArray[np.float64]) -> float:
-    """The reading noise of one reported spectrum, as reported (clipped or not).
+def reading_noise_rms(
+    values: NDArray[np.float64], wavelength_nm: NDArray[np.float64] | None = None
+) -> float:
+    """The reading noise of one reported spectrum: the standard deviation of the noise
+    on its emission, which Eq. 1 integrates (:func:`tunespec.core.readings.draw_noise`
+    draws it again at this level).
 
-    On the samples far below the peak that are not exactly zero: DER_SNR (second
-    differences, which an emission's smooth tails do not disturb) where there are
-    at least 20 of them, else their root mean square without the highest tenth;
-    0.0 where they show no noise. On a spectrum cleaned by
-    :func:`suppress_meter_floor` it measures the noise left in the bands' margins.
+    Where the spectrum has a floor far from its emission (samples more than
+    :data:`BAND_REACH_NM` from any sample above :data:`BAND_NOISE_FRACTION` of the
+    peak; ``wavelength_nm`` their wavelengths, default 1 nm apart), the floor's
+    variance comes from its second differences within each run of samples
+    (``mean((2 f_i - f_(i-2) - f_(i+2))^2) / 6``, which a slow background does not
+    disturb: DER_SNR's differences, Stoehr et al. 2008, averaged squared rather than
+    through their median, whose constant holds for Gaussian noise only). There the true spectrum is zero, so an instrument that clips its noise
+    at zero reports ``max(0, sigma z)``, or the mean of ``n`` such readings, whose
+    variance is ``(1/2 - 1/(2 pi)) sigma^2 / n`` for any ``n``, while on the emission
+    the noise is ``sigma / sqrt(n)``: the floor's standard deviation is divided by
+    ``sqrt(1/2 - 1/(2 pi))`` where the floor holds no negative sample. The positive
+    samples alone, by DER_SNR, read 0.56-0.66 of the noise at 1 nm, one or two readings
+    averaged (``docs/validation.md``). 0.0 where there is no such floor of at least
+    16 second differences (a phosphor white emits everywhere; the samples near a
+    band carry its tails) or it shows no noise (all zero, as cleaned; or smooth, as
+    a noise-free tail).
 
     Examples
     --------
@@ -241,14 +202,39 @@ def reading_noise_rms(values: NDArray[np.float64]) -> float:
     >>> v = np.exp(-0.5 * ((np.arange(400.0) - 200.0) / 10.0) ** 2)
     >>> noisy = np.maximum(v + 0.001 * np.random.default_rng(0).standard_normal(400), 0)
     >>> round(reading_noise_rms(noisy), 4), reading_noise_rms(v)
-    (0.0006, 0.0)
+    (0.0009, 0.0)
     """
-    low = _noise_samples(np.asarray(values, dtype=np.float64))
-    if low is None:
+    v = np.asarray(values, dtype=np.float64)
+    wl = (
+        np.arange(v.size, dtype=np.float64)
+        if wavelength_nm is None
+        else np.asarray(wavelength_nm, dtype=np.float64)
+    )
+    peak = float(v.max()) if v.size else 0.0
+    if not peak > 0:
         return 0.0
-    if low.size >= _MIN_DIFFERENCES + 4:
-        return _der_snr(low)
-    return _rms_without_tails(low)
+    lit = wl[v >= BAND_NOISE_FRACTION * peak]
+    gap = np.min(np.abs(wl[:, None] - lit[None, :]), axis=1)
+    starts, stops = _runs(gap > BAND_REACH_NM)
+    runs = [v[a:b] for a, b in zip(starts, stops, strict=True)]
+    d = np.concatenate(
+        [2.0 * r[2:-2] - r[:-4] - r[4:] for r in runs if r.size > 4] or [np.zeros(0)]
+    )
+    floor = np.concatenate(runs) if runs else np.zeros(0)
+    if d.size < _MIN_DIFFERENCES or not np.any(floor != 0.0):
+        return 0.0
+    shows_noise = (
+        _extremum_fraction(floor) >= _MIN_EXTREMUM_FRACTION
+        or _runs(floor != 0.0)[0].size >= _MIN_NONZERO_RUNS
+    )
+    if not shows_noise:
+        return 0.0
+    sd = float(np.sqrt(np.mean(d * d) / 6.0))
+    if not np.any(floor < 0.0):  # clipped at zero
+        sd /= _CLIPPED_FLOOR_SD
+    # rounding jitter of a computed, noise-free tail turns as noise does, at a level
+    # far below any instrument's
+    return sd if sd > 1e-6 * peak else 0.0
 
 
 def reading_noise_fractions(spectra: Spectra) -> dict[str, float]:
@@ -256,9 +242,8 @@ def reading_noise_fractions(spectra: Spectra) -> dict[str, float]:
     :func:`suppress_meter_floor` measured before it cleaned them (``meta``), else
     :func:`reading_noise_rms` of the spectra as they stand, at their own step.
 
-    Cleaned, a spectrum reported every 5 nm keeps little more than its bands' tails
-    below them, which measured as 0.3-0.9 % of the peak where the instrument's noise
-    was 0.07 % (``benchmarks/generalisation.py``, 0.1 % noise, two readings averaged).
+    Cleaned, a spectrum's floor is zero and shows no noise, so the cleaning keeps
+    what it measured before.
 
     A spectrum that shows no noise where others do gets their median: one instrument
     read them all, and a phosphor white emits at every sample, so no sample of it
@@ -351,7 +336,9 @@ def _measured_noise_fractions(spectra: Spectra) -> dict[str, float]:
     out = {}
     for name, row in zip(spectra.names, spectra.values, strict=True):
         peak = float(np.max(row)) if row.size else 0.0
-        out[name] = reading_noise_rms(row) / peak if peak > 0 else 0.0
+        out[name] = (
+            reading_noise_rms(row, spectra.wavelength_nm) / peak if peak > 0 else 0.0
+        )
     return out
 
 

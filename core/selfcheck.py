@@ -119,8 +119,9 @@ SHIFT_LIMIT_NM = 2.0
 CORRECTION_SIGMAS = 5.0
 #: Reading noise as reported (:func:`tunespec.core.metering.reading_noise_fractions`,
 #: fraction of the LED's peak) above which the light's readings are flagged: the
-#: simulated bench's instrument (0.1 % a reading, two averaged) shows 0.04-0.15 % per
-#: LED at a 1, 5 or 10 nm step, 0.3 % a reading 0.13-0.30 %; the cleaning is
+#: generalisation benchmark's instrument (0.1 % a reading, two averaged: 0.07 % on
+#: the emission) shows 0.03-0.11 % per LED at a 1, 5 or 10 nm step, 0.3 % a reading
+#: 0.13-0.50 %, which averaging two readings brings to 0.09-0.34 %; the cleaning is
 #: validated up to 0.3 % (``docs/validation.md``).
 METER_NOISE_LIMIT = 0.002
 #: A fitted systematic error (:class:`~tunespec.core.excess.ExcessVariance`: the

@@ -481,7 +481,7 @@ def spectrum_problem(spectrum: MeasuredSpectrum) -> str:
     """What makes a decoded ``MEAS:SPD?`` reply impossible ("" if nothing): a grid
     no visible spectroradiometer has, too short a range, absurd values, or values
     negative beyond the meter's noise (nothing measured)."""
-    from tunespec.core.metering import meter_noise_sd
+    from tunespec.core.metering import reading_noise_rms
 
     v = spectrum.values
     wl = spectrum.wavelength_nm
@@ -506,7 +506,7 @@ def spectrum_problem(spectrum: MeasuredSpectrum) -> str:
     if not peak > 0:
         return "no value above zero: no light was measured"
     allowed = (
-        SPD_NEGATIVE_NOISE_SD * meter_noise_sd(v)
+        SPD_NEGATIVE_NOISE_SD * reading_noise_rms(v, wl)
         + SPD_NEGATIVE_PEAK_FRACTION * peak
         + SPD_NEGATIVE_FLOOR
     )

@@ -9,9 +9,9 @@ from tunespec.core.datasets import load_camera_database, load_led_set
 from tunespec.core.forward_model import render_rgb
 from tunespec.core.metering import (
     READING_NOISE_META,
-    meter_noise_sd,
     reading_meta,
     reading_noise_fractions,
+    reading_noise_rms,
     suppress_meter_floor,
 )
 from tunespec.core.selfcheck import METER_NOISE_LIMIT
@@ -43,10 +43,9 @@ def test_noise_free_spectra_come_back_unchanged() -> None:
     white = 0.3 + _led(450.0) + 0.8 * np.exp(-0.5 * ((WL - 580.0) / 60.0) ** 2)
     leds = load_led_set(Grid(380.0, 780.0, 1.0))
     synthetic = Spectra(WL, np.vstack([_led(700.0), white]), ("LED700", "W"))
-    assert all(meter_noise_sd(v) == 0.0 for v in synthetic.values)
-    # the shipped LED model: the whites' file digits read as noise of 1e-5 of the
-    # peak, far below any of their samples
-    assert max(meter_noise_sd(v) / v.max() for v in leds.values) < 2e-5
+    assert all(reading_noise_rms(v, WL) == 0.0 for v in synthetic.values)
+    # the shipped LED model: no floor shows noise
+    assert max(reading_noise_rms(v, WL) / v.max() for v in leds.values) == 0.0
     for s in (synthetic, leds):
         assert suppress_meter_floor(s) is s
 
@@ -57,7 +56,7 @@ def test_the_clipped_floor_goes_and_the_emission_stays(reads) -> None:
     true = _led(700.0)
     rep = _reported(true, rng, reads)
     sd = FLOOR_SD / np.sqrt(reads)
-    assert meter_noise_sd(rep) == pytest.approx(sd, rel=0.35)
+    assert reading_noise_rms(rep, WL) == pytest.approx(sd, rel=0.35)
     got = suppress_meter_floor(Spectra(WL, rep[None], ("LED700",))).values[0]
     far = np.abs(WL - 700.0) > 60.0
     # the floor: about 0.4 sd a sample before, under a tenth of that after
@@ -77,7 +76,7 @@ def test_unclipped_noise_is_zeroed_below_the_detection_limit() -> None:
     assert np.any(rep < 0)
     got = suppress_meter_floor(Spectra(WL, rep[None], ("LED520",))).values[0]
     assert np.all(got >= 0)
-    assert meter_noise_sd(rep) == pytest.approx(FLOOR_SD, rel=0.25)
+    assert reading_noise_rms(rep, WL) == pytest.approx(FLOOR_SD, rel=0.25)
     # outside the emission band and its 10 nm margins only noise was reported
     assert np.all(got[np.abs(WL - 520.0) > 40.0] == 0.0)
     np.testing.assert_array_equal(got[np.abs(WL - 520.0) < 15.0],
@@ -220,3 +219,25 @@ def test_a_white_with_no_floor_to_measure_gets_the_others_noise() -> None:
     kept = Spectra(rep.wavelength_nm, rep.values, rep.names, meta)
     assert reading_noise_fractions(kept) == pytest.approx(noise, rel=1e-12)
     assert set(reading_noise_fractions(true).values()) == {0.0}
+
+
+@pytest.mark.parametrize("reads", [1, 2])
+@pytest.mark.parametrize("step_nm", [1.0, 5.0, 10.0])
+def test_the_reading_noise_is_the_noise_on_the_emission(step_nm, reads) -> None:
+    """What the readings' replicates draw on the emission: the noise of one reading,
+    over the square root of the readings averaged. The floor clipped at zero
+    shows less: its positive samples alone read 0.56-0.66 of it at 1 nm, 0.63-0.86
+    at 5 nm."""
+    coarse = Grid(380.0, 780.0, step_nm)
+    rng = np.random.default_rng(11)
+    peaks = np.arange(420.0, 700.0, 10.0)
+    true = Spectra(
+        WL, np.stack([_led(p) for p in peaks]), tuple(f"L{p:.0f}" for p in peaks)
+    ).resample(coarse)
+    rep = true.with_values(
+        np.stack([_reported(v, rng, reads=reads) for v in true.values])
+    )
+    ratio = np.array(list(reading_noise_fractions(rep).values())) / (
+        FLOOR_SD / np.sqrt(reads)
+    )
+    assert 0.9 < np.median(ratio) < 1.1, ratio

@@ -189,9 +189,8 @@ def test_noisy_readings_of_the_light_are_flagged(bench) -> None:
         )
     )
     found = reading_noise_fractions(noisy)
-    # a single clipped reading of 0.5 % of the peak: DER_SNR over the samples above
-    # zero finds about 0.6 of it in the 20 narrow LEDs; a white is broad, with no
-    # noise-only region to measure (0)
+    # a single clipped reading of 0.5 % of the peak, measured on the 20 narrow LEDs'
+    # floors; a white is broad, with no floor to measure, and gets their median
     narrow = [n for n in leds.names if n.startswith("LED")]
     assert len(narrow) == 20
     assert all(found[n] > METER_NOISE_LIMIT for n in narrow), found
