@@ -10,7 +10,7 @@ calibration's per-LED gains absorbed it (0.61-0.83 for the red LEDs).
 
 :func:`suppress_meter_floor` keeps each spectrum's emission bands and sets everything
 outside them to zero (:func:`emission_bands`: runs of samples above four times the
-noise's RMS, widened by 10 nm for the tails). It works on the spectra as the instrument
+noise's standard deviation, widened by 10 nm for the tails). It works on the spectra as the instrument
 reports them, from 1 to 10 nm: at 10 nm an LED is two or three samples wide, and once
 resampled its interpolated noise no longer looks like noise, so the readers clean
 illuminant files before anything resamples them. On the generalisation benchmark's two
@@ -50,7 +50,6 @@ __all__ = [
     "BAND_NOISE_FRACTION",
     "EMISSION_LIMIT_SD",
     "EMISSION_MARGIN_NM",
-    "NOISE_REGION_FRACTION",
     "READING_NOISE_META",
     "READING_STEP_META",
     "as_calibrated",
@@ -62,19 +61,21 @@ __all__ = [
     "suppress_meter_floor",
 ]
 
-#: Samples below this fraction of a spectrum's peak estimate its noise.
-NOISE_REGION_FRACTION = 0.01
-#: A reported sample above this many times the noise's RMS is emission (at 4 a clipped
-#: noise sample passes with a probability of about 1e-4, so a 22-LED light at 1 nm
-#: shows a few such single samples, which :func:`emission_bands` does not take as a band).
+#: A reported sample above this many times the noise's standard deviation
+#: (:func:`reading_noise_rms`) is emission (at 4 a noise sample passes with a
+#: probability of about 3e-5, so a 22-LED light at 1 nm shows a few such single
+#: samples, which :func:`emission_bands` does not take as a band). The earlier level,
+#: the low samples' RMS without their highest tenth, put the LEDs' limits at a median
+#: 3.4-4.6 of this standard deviation.
 EMISSION_LIMIT_SD = 4.0
 #: Each emission band is widened by this much on either side: an LED's tails below the
 #: limit carry light a camera channel far from the peak still sees (a deep-red LED's
 #: short-wavelength tail is all an IR-cut camera's red channel gets of it). Half the
 #: width of a typical LED band (20-30 nm FWHM).
 EMISSION_MARGIN_NM = 10.0
-#: Samples below this fraction of a spectrum's peak measure its noise for
-#: :func:`emission_bands` (at 10 nm an LED's flanks fall past 1 % within one sample).
+#: Samples above this fraction of a spectrum's peak are its emission, whatever the
+#: noise: its floor lies beyond them (:data:`BAND_REACH_NM`), and a spectrum whose
+#: samples below it are mostly exact zeros has been cleaned.
 BAND_NOISE_FRACTION = 0.02
 #: Key of a cleaned spectra's ``meta`` under which :func:`suppress_meter_floor` keeps
 #: each spectrum's reading noise as reported (JSON: name -> fraction of its peak).
@@ -85,8 +86,6 @@ READING_STEP_META = "reading_step_nm"
 #: A spectrum whose low samples are mostly exact zeros has been cleaned already (an
 #: instrument that clips its noise at zero leaves a quarter to a half of them at zero).
 _CLEANED_ZERO_FRACTION = 2.0 / 3.0
-#: Fewest noise samples (not clipped to zero) needed to judge a spectrum's noise.
-_MIN_NOISE_SAMPLES = 8
 #: Separate nonzero runs that make a floor clipped noise (:func:`_scattered_zeros`).
 _MIN_NONZERO_RUNS = 4
 #: How far past the samples above :data:`BAND_NOISE_FRACTION` of its peak an LED's
@@ -110,25 +109,6 @@ def _extremum_fraction(values: NDArray[np.float64]) -> float:
     step = np.sign(np.diff(values))
     turns = step[1:] * step[:-1] < 0
     return float(np.mean(turns)) if turns.size else 0.0
-
-
-def _noise_samples(
-    v: NDArray[np.float64], wavelength_nm: NDArray[np.float64] | None = None
-) -> NDArray[np.float64] | None:
-    """A spectrum's samples below :data:`BAND_NOISE_FRACTION` of its peak that are
-    not exactly zero, or ``None`` where they show no noise: fewer than 8 of them, or
-    fewer than a third turning (a smooth, noise-free tail) where the floor is not
-    clipped noise either (:func:`_scattered_zeros`)."""
-    peak = float(v.max()) if v.size else 0.0
-    if not peak > 0:
-        return None
-    low = v[(v < BAND_NOISE_FRACTION * peak) & (v != 0.0)]
-    if low.size < _MIN_NOISE_SAMPLES or (
-        _extremum_fraction(low) < _MIN_EXTREMUM_FRACTION
-        and not _scattered_zeros(v, wavelength_nm)
-    ):
-        return None
-    return low
 
 
 def _scattered_zeros(
@@ -164,12 +144,6 @@ def _runs(mask: NDArray[np.bool_]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
         np.diff(np.concatenate([[False], mask, [False]]).astype(np.int8))
     )
     return edges[::2], edges[1::2]
-
-
-def _rms_without_tails(low: NDArray[np.float64]) -> float:
-    """Root mean square of ``low`` without its highest tenth (the emission's tails)."""
-    body = np.sort(np.abs(low))[: max(1, int(0.9 * low.size))]
-    return float(np.sqrt(np.mean(body**2)))
 
 
 def reading_noise_rms(
@@ -253,11 +227,17 @@ def reading_noise_fractions(spectra: Spectra) -> dict[str, float]:
     read without noise).
     """
     kept = _kept_noise_fractions(spectra)
-    out = kept if kept is not None else _measured_noise_fractions(spectra)
-    shown = [f for f in out.values() if f > 0]
+    return _others_where_unmeasured(
+        kept if kept is not None else _measured_noise_fractions(spectra)
+    )
+
+
+def _others_where_unmeasured(noise: dict[str, float]) -> dict[str, float]:
+    """``noise`` with each 0 replaced by the median of the others (all 0: as is)."""
+    shown = [f for f in noise.values() if f > 0]
     if not shown:
-        return out
-    return {n: f if f > 0 else float(np.median(shown)) for n, f in out.items()}
+        return noise
+    return {n: f if f > 0 else float(np.median(shown)) for n, f in noise.items()}
 
 
 def _kept_noise_fractions(spectra: Spectra) -> dict[str, float] | None:
@@ -347,20 +327,25 @@ def emission_bands(
     wavelength_nm: NDArray[np.float64],
     limit_sd: float = EMISSION_LIMIT_SD,
     margin_nm: float = EMISSION_MARGIN_NM,
+    noise_sd: float | None = None,
 ) -> NDArray[np.bool_] | None:
     """Which reported samples belong to the light's emission bands, or ``None``.
 
     An LED emits in one band (a phosphor-converted white in two joined ones); what a
-    spectroradiometer reports outside them is its noise. The noise is measured on the
-    samples that the instrument did not clip to zero, below
-    :data:`BAND_NOISE_FRACTION` of the peak: their root mean square without the
-    highest tenth (the emission's own tails). A band is a run of samples above ``limit_sd`` times that
-    level which holds the peak or is at least two samples long (one sample above it
-    is the noise's own tail), widened by ``margin_nm`` on each side (at least one
-    sample) for the band's tails below the limit. ``None`` where nothing shows noise
-    (fewer than 8 such samples, or fewer than a third of them turning, as a smooth,
-    noise-free tail does not) or where most low samples are exact zeros (a spectrum
-    cleaned already) -- the spectrum is then taken as it is.
+    spectroradiometer reports outside them is its noise, of standard deviation
+    ``noise_sd`` (default: :func:`reading_noise_rms` of this spectrum). A band is a
+    run of samples above ``limit_sd`` times it which holds the peak or is at least
+    two samples long (one sample above it is the noise's own tail), widened by
+    ``margin_nm`` on each side (at least one sample) for the band's tails below the
+    limit. ``None`` where there is no noise (``noise_sd`` 0: a noise-free spectrum,
+    or a white whose noise nothing measured) or where most samples below
+    :data:`BAND_NOISE_FRACTION` of the peak are exact zeros (a spectrum cleaned
+    already) -- the spectrum is then taken as it is.
+
+    The level used to be the root mean square of this spectrum's low samples
+    without their highest tenth; a white's low samples are mostly its own emission,
+    so at 1 nm its limit was 1.7-6.7 % of the peak and the cleaning cut 0.05-2.1 %
+    of its light, below 410 and above 690 nm (``docs/validation.md``).
     """
     v = np.asarray(values, dtype=np.float64)
     peak = float(v.max()) if v.size else 0.0
@@ -372,10 +357,10 @@ def emission_bands(
         and not _scattered_zeros(v, wavelength_nm)
     ):
         return None
-    noise = _noise_samples(v, wavelength_nm)
-    if noise is None:
+    sd = reading_noise_rms(v, wavelength_nm) if noise_sd is None else noise_sd
+    if not sd > 0:
         return None
-    limit = limit_sd * _rms_without_tails(noise)
+    limit = limit_sd * sd
     step_nm = _median_step(wavelength_nm)
     margin = max(1, round(margin_nm / step_nm))
     ipk = int(np.argmax(v))
@@ -420,20 +405,27 @@ def suppress_meter_floor(spectra: Spectra) -> Spectra:
     (25, 8)
     """
     values = np.asarray(spectra.values, dtype=np.float64)
+    kept = _kept_noise_fractions(spectra)
+    measured = kept if kept is not None else _measured_noise_fractions(spectra)
+    # one instrument read them all: each spectrum is cleaned at its own noise or
+    # the others' median, whichever is higher (a white has no floor of its own to
+    # measure; at 10 nm one LED's floor gives a few dozen differences, and a level
+    # measured low let 2 of 1000 floors through, 0 with the median)
+    noise = _others_where_unmeasured(measured)
+    typical = float(np.median(list(noise.values()))) if noise else 0.0
     cut = np.zeros(values.shape, dtype=bool)
-    for row, cut_row in zip(values, cut, strict=True):
-        keep = emission_bands(row, spectra.wavelength_nm)
+    for name, row, cut_row in zip(spectra.names, values, cut, strict=True):
+        sd = max(noise[name], typical) * float(np.max(row)) if row.size else 0.0
+        keep = emission_bands(row, spectra.wavelength_nm, noise_sd=sd)
         cut_row[:] = row < 0 if keep is None else (row < 0) | (~keep & (row != 0.0))
     if not cut.any():
         return spectra
-    # cleaned, the spectra no longer show their noise (at 5 nm what is left below
-    # the bands are their tails): it is kept as the instrument reported it, and
-    # what an earlier cleaning kept stays (spectra cleaned, then resampled: their
-    # spline's ripples beside a band are not the instrument's noise)
+    # cleaned, the spectra no longer show their noise: it is kept as the instrument
+    # reported it, and what an earlier cleaning kept stays (spectra cleaned, then
+    # resampled: their spline's ripples beside a band are not the instrument's noise)
     meta = dict(spectra.meta)
-    if _kept_noise_fractions(spectra) is None:
-        noise = _measured_noise_fractions(spectra)
-        meta[READING_NOISE_META] = json.dumps(noise)
+    if kept is None:
+        meta[READING_NOISE_META] = json.dumps(measured)
         meta[READING_STEP_META] = repr(_median_step(spectra.wavelength_nm))
     return Spectra(
         spectra.wavelength_nm, np.where(cut, 0.0, values), spectra.names, meta
