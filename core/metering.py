@@ -111,12 +111,23 @@ def _extremum_fraction(values: NDArray[np.float64]) -> float:
     return float(np.mean(turns)) if turns.size else 0.0
 
 
+def _far_floor(
+    v: NDArray[np.float64], wavelength_nm: NDArray[np.float64]
+) -> NDArray[np.bool_]:
+    """The samples more than :data:`BAND_REACH_NM` from any sample above
+    :data:`BAND_NOISE_FRACTION` of the peak: where a spectrum shows its floor alone."""
+    lit = wavelength_nm[v >= BAND_NOISE_FRACTION * v.max()] if v.size else v
+    if lit.size == 0:
+        return np.ones(v.shape, dtype=bool)
+    gap = np.min(np.abs(wavelength_nm[:, None] - lit[None, :]), axis=1)
+    return gap > BAND_REACH_NM
+
+
 def _scattered_zeros(
-    v: NDArray[np.float64], wavelength_nm: NDArray[np.float64] | None = None
+    v: NDArray[np.float64], wavelength_nm: NDArray[np.float64]
 ) -> bool:
     """Whether ``v`` is nonzero in at least :data:`_MIN_NONZERO_RUNS` separate runs
-    (with ``wavelength_nm``: counted more than :data:`BAND_REACH_NM` beyond the run of
-    samples about its peak above :data:`BAND_NOISE_FRACTION` of it).
+    of its floor (:func:`_far_floor`).
 
     A noise-free spectrum is zero, if anywhere, in one run at each end, a phosphor
     white's two bands are joined, and a cleaned spectrum is zero beyond its bands'
@@ -127,15 +138,8 @@ def _scattered_zeros(
     of them at zero): 8-21 of 1000 LED spectra at 10 nm, whose floor then stayed in
     Eq. 1 and once moved a calibration 0.24 RMS from the truth
     (``docs/validation.md``)."""
-    nonzero = v != 0.0
-    if wavelength_nm is not None and v.size:
-        # the run about the peak above BAND_NOISE_FRACTION of it, widened
-        starts, stops = _runs(v >= BAND_NOISE_FRACTION * v.max())
-        k = int(np.searchsorted(starts, int(np.argmax(v)), side="right")) - 1
-        lo_nm = wavelength_nm[starts[k]] - BAND_REACH_NM
-        hi_nm = wavelength_nm[stops[k] - 1] + BAND_REACH_NM
-        nonzero &= (wavelength_nm < lo_nm) | (wavelength_nm > hi_nm)
-    return _runs(nonzero)[0].size >= _MIN_NONZERO_RUNS
+    far = (v != 0.0) & _far_floor(v, wavelength_nm)
+    return _runs(far)[0].size >= _MIN_NONZERO_RUNS
 
 
 def _runs(mask: NDArray[np.bool_]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
@@ -159,13 +163,14 @@ def reading_noise_rms(
     variance comes from its second differences within each run of samples
     (``mean((2 f_i - f_(i-2) - f_(i+2))^2) / 6``, which a slow background does not
     disturb: DER_SNR's differences, Stoehr et al. 2008, averaged squared rather than
-    through their median, whose constant holds for Gaussian noise only). There the true spectrum is zero, so an instrument that clips its noise
-    at zero reports ``max(0, sigma z)``, or the mean of ``n`` such readings, whose
-    variance is ``(1/2 - 1/(2 pi)) sigma^2 / n`` for any ``n``, while on the emission
-    the noise is ``sigma / sqrt(n)``: the floor's standard deviation is divided by
+    through their median, whose constant holds for Gaussian noise only). There the
+    true spectrum is zero, so an instrument that clips its noise at zero reports
+    ``max(0, sigma z)``, or the mean of ``n`` such readings, whose variance is
+    ``(1/2 - 1/(2 pi)) sigma^2 / n`` for any ``n``, while on the emission the noise is
+    ``sigma / sqrt(n)``: the floor's standard deviation is divided by
     ``sqrt(1/2 - 1/(2 pi))`` where the floor holds no negative sample. The positive
-    samples alone, by DER_SNR, read 0.56-0.66 of the noise at 1 nm, one or two readings
-    averaged (``docs/validation.md``). 0.0 where there is no such floor of at least
+    samples alone, by DER_SNR, read 0.56-0.66 of the noise at 1 nm, one or two
+    readings averaged (``docs/validation.md``). 0.0 where there is no such floor of at least
     16 second differences (a phosphor white emits everywhere; the samples near a
     band carry its tails) or it shows no noise (all zero, as cleaned; or smooth, as
     a noise-free tail).
@@ -187,21 +192,16 @@ def reading_noise_rms(
     peak = float(v.max()) if v.size else 0.0
     if not peak > 0:
         return 0.0
-    lit = wl[v >= BAND_NOISE_FRACTION * peak]
-    gap = np.min(np.abs(wl[:, None] - lit[None, :]), axis=1)
-    starts, stops = _runs(gap > BAND_REACH_NM)
-    runs = [v[a:b] for a, b in zip(starts, stops, strict=True)]
+    runs = [v[a:b] for a, b in zip(*_runs(_far_floor(v, wl)), strict=True)]
     d = np.concatenate(
         [2.0 * r[2:-2] - r[:-4] - r[4:] for r in runs if r.size > 4] or [np.zeros(0)]
     )
     floor = np.concatenate(runs) if runs else np.zeros(0)
     if d.size < _MIN_DIFFERENCES or not np.any(floor != 0.0):
         return 0.0
-    shows_noise = (
-        _extremum_fraction(floor) >= _MIN_EXTREMUM_FRACTION
-        or _runs(floor != 0.0)[0].size >= _MIN_NONZERO_RUNS
-    )
-    if not shows_noise:
+    if _extremum_fraction(floor) < _MIN_EXTREMUM_FRACTION and not _scattered_zeros(
+        v, wl
+    ):
         return 0.0
     sd = float(np.sqrt(np.mean(d * d) / 6.0))
     if not np.any(floor < 0.0):  # clipped at zero
