@@ -83,7 +83,12 @@ from tunespec.core.sensitivity_bayes import (
 from tunespec.core.simulate import NoiseModel, scale_to_exposure, simulate_responses
 from tunespec.core.spectra import CALIBRATION_GRID, Grid, Spectra
 from tunespec.core.stats import calibration_report, sensitivity_rms
-from tunespec.core.uncertainty import PRIOR_MISMATCH_SCALE, wiener_with_uncertainty
+from tunespec.core.uncertainty import (
+    BLIND_EDGE_SCALE,
+    PRIOR_MISMATCH_SCALE,
+    reflectance_uncertainty,
+    wiener_with_uncertainty,
+)
 from tunespec.core.wiener import on_integration_grid
 
 WORK = CALIBRATION_GRID
@@ -109,6 +114,8 @@ class Score:
     # per reflectance collection, per KAPPAS: reflectance samples inside at each
     # wavelength, L*, a*, b* inside, targets (for tune_prior_scale)
     coverage_counts: dict[str, list[list[float]]] = field(default_factory=dict)
+    # the same at each blind-edge scale gamma of --tune-edge (keys: gamma)
+    edge_counts: dict[str, dict[str, list[list[float]]]] = field(default_factory=dict)
     fitted_shift_nm: list[float] = field(default_factory=list)
     fitted_gain: list[float] = field(default_factory=list)
     true_shift_nm: list[float] = field(default_factory=list)
@@ -165,6 +172,8 @@ def calibrate(
 
 #: Candidate prior-mismatch scales (``core.uncertainty.PRIOR_MISMATCH_SCALE``).
 KAPPAS = np.round(np.arange(0.6, 3.01, 0.05), 2)
+#: Blind-edge scales tried with them by ``--tune-edge``.
+EDGE_SCALES = (0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 2.0)
 
 
 def collection(name: str) -> str:
@@ -250,6 +259,42 @@ def tune_prior_scale(scores: list[Score]) -> None:
     allc = np.sum([tot[g] for g in groups], axis=0)
     i = int(np.argmin(_coverage_miss(allc)))
     print(f"  all collections: kappa {KAPPAS[i]:.2f}: " + _describe_coverage(allc[i]))
+
+
+def tune_prior_and_edge(scores: list[Score]) -> None:
+    """Leave-one-collection-out over ``kappa`` and the blind-edge scale ``gamma``
+    together (``--tune-edge``): the pair :func:`_coverage_miss` likes best on the
+    other collections, scored on the one left out, as ``PRIOR_MISMATCH_SCALE`` and
+    ``BLIND_EDGE_SCALE`` are chosen."""
+    ss = [s for s in scores if s.edge_counts]
+    if not ss:
+        return
+    gammas = sorted(ss[0].edge_counts, key=float)
+    groups = sorted(ss[0].coverage_counts)
+    # (gamma, kappa) x collection: the counts summed over the calibrations
+    tot = {
+        g: np.stack([np.sum([s.edge_counts[e][g] for s in ss], axis=0) for e in gammas])
+        for g in groups
+    }
+    print("\nprior-mismatch and blind-edge scales, chosen without the collection:")
+
+    def best(counts: np.ndarray) -> tuple[int, int]:
+        miss = np.stack([_coverage_miss(c) for c in counts])
+        e, k = np.unravel_index(int(np.argmin(miss)), miss.shape)
+        return int(e), int(k)
+
+    for g in groups:
+        e, k = best(np.sum([tot[h] for h in groups if h != g], axis=0))
+        print(
+            f"  {g:<15} kappa {KAPPAS[k]:.2f} gamma {float(gammas[e]):.2f}: "
+            + _describe_coverage(tot[g][e, k])
+        )
+    allc = np.sum([tot[g] for g in groups], axis=0)
+    e, k = best(allc)
+    print(
+        f"  all collections: kappa {KAPPAS[k]:.2f} gamma {float(gammas[e]):.2f}: "
+        + _describe_coverage(allc[e, k])
+    )
 
 
 def surface_lab(test_fine: Spectra) -> NDArray[np.float64]:
@@ -398,10 +443,12 @@ def run_camera(
     rng,
     *,
     setup,
+    edge_scales: tuple[float, ...] = (),
     **conditions: Any,
 ) -> list[Score]:
     """Every variant's calibration and test estimate for one camera and light
-    (``conditions``: :func:`simulate_session`'s options)."""
+    (``conditions``: :func:`simulate_session`'s options; ``edge_scales``: the
+    blind-edge scales whose coverage counts :func:`tune_prior_and_edge` takes)."""
     _, test_fine, chart_work, _, db, test_est = setup
     session = simulate_session(cam, leds, setup, rng, **conditions)
     resp, resp_t, reported = session.resp, session.resp_t, session.reported
@@ -453,6 +500,13 @@ def run_camera(
             sc.coverage_counts = coverage_counts(
                 w, unc, test_est.values, lab_surface, test_est.names
             )
+            for gamma in edge_scales:
+                unc_g = reflectance_uncertainty(
+                    w, resp_t, reported, est, edge_scale=gamma
+                )
+                sc.edge_counts[repr(gamma)] = coverage_counts(
+                    w, unc_g, test_est.values, lab_surface, test_est.names
+                )
             sc.coverage = coverage(
                 w.reflectance.values,
                 unc.reflectance_std,
@@ -612,6 +666,12 @@ def main(argv: list[str] | None = None) -> int:
         default=EST,
         help=f"estimation grid START:END:STEP (default {EST})",
     )
+    ap.add_argument(
+        "--tune-edge",
+        action="store_true",
+        help="also choose the blind-edge scale with the prior-mismatch scale "
+        f"(gamma in {EDGE_SCALES}; shipped {BLIND_EDGE_SCALE})",
+    )
     ap.add_argument("--json")
     args = ap.parse_args(argv)
     WORK, EST = args.grid, args.estimate_grid
@@ -645,10 +705,12 @@ def main(argv: list[str] | None = None) -> int:
                 report_slit=args.report_slit,
                 systematic=args.systematic,
                 flat_field=args.flat_field,
+                edge_scales=EDGE_SCALES if args.tune_edge else (),
             )
     summary = summarise(scores)
     print_summary(summary, variants)
     tune_prior_scale([s for s in scores if s.variant == "bayes"])
+    tune_prior_and_edge([s for s in scores if s.variant == "bayes"])
     tune_band_scale([s for s in scores if s.variant == "bayes"])
     flagged = [s for s in scores if s.self_check_warnings]
     print(f"\nself-check findings: {len(flagged)} of {len(scores)} calibrations")
