@@ -39,8 +39,9 @@ Usage::
     python benchmarks/generalisation.py --meter-noise 0.001 --report-step-nm 10  # noisy SPDs
     python benchmarks/generalisation.py --systematic  # stray light, cross-talk, non-linearity
 
-After the table it prints the leave-one-reflectance-collection-out check of
-``core.uncertainty.PRIOR_MISMATCH_SCALE`` (:func:`tune_prior_scale`).
+After the table it prints the leave-one-reflectance-collection-out choice of
+``core.uncertainty.PRIOR_MISMATCH_SCALE`` (:func:`tune_prior_scales`), with
+``BLIND_EDGE_SCALE`` as shipped or, with ``--tune-edge``, chosen with it.
 """
 
 from __future__ import annotations
@@ -112,7 +113,7 @@ class Score:
     spec_rms_mean: float
     coverage: dict[str, float] = field(default_factory=dict)
     # per reflectance collection, per KAPPAS: reflectance samples inside at each
-    # wavelength, L*, a*, b* inside, targets (for tune_prior_scale)
+    # wavelength, L*, a*, b* inside, targets (for tune_prior_scales)
     coverage_counts: dict[str, list[list[float]]] = field(default_factory=dict)
     # the same at each blind-edge scale gamma of --tune-edge (keys: gamma)
     edge_counts: dict[str, dict[str, list[list[float]]]] = field(default_factory=dict)
@@ -241,60 +242,40 @@ def _describe_coverage(c: np.ndarray) -> str:
     )
 
 
-def tune_prior_scale(scores: list[Score]) -> None:
-    """Leave-one-collection-out: ``kappa`` chosen on the other collections
-    (:func:`_coverage_miss` least), scored on the one left out."""
+def tune_prior_scales(scores: list[Score]) -> None:
+    """Leave-one-collection-out over ``kappa`` and the blind-edge scale ``gamma``
+    (the shipped one alone without ``--tune-edge``): the pair :func:`_coverage_miss`
+    likes best on the other collections, scored on the one left out, as
+    ``PRIOR_MISMATCH_SCALE`` and ``BLIND_EDGE_SCALE`` are chosen."""
     ss = [s for s in scores if s.coverage_counts]
     if not ss:
         return
-    groups = sorted(ss[0].coverage_counts)
-    tot = {g: np.sum([s.coverage_counts[g] for s in ss], axis=0) for g in groups}
-    print(
-        "\nprior-mismatch scale kappa, chosen without the collection it is scored on:"
-    )
-    for g in groups:
-        train = np.sum([tot[h] for h in groups if h != g], axis=0)
-        i = int(np.argmin(_coverage_miss(train)))
-        print(f"  {g:<15} kappa {KAPPAS[i]:.2f}: " + _describe_coverage(tot[g][i]))
-    allc = np.sum([tot[g] for g in groups], axis=0)
-    i = int(np.argmin(_coverage_miss(allc)))
-    print(f"  all collections: kappa {KAPPAS[i]:.2f}: " + _describe_coverage(allc[i]))
-
-
-def tune_prior_and_edge(scores: list[Score]) -> None:
-    """Leave-one-collection-out over ``kappa`` and the blind-edge scale ``gamma``
-    together (``--tune-edge``): the pair :func:`_coverage_miss` likes best on the
-    other collections, scored on the one left out, as ``PRIOR_MISMATCH_SCALE`` and
-    ``BLIND_EDGE_SCALE`` are chosen."""
-    ss = [s for s in scores if s.edge_counts]
-    if not ss:
-        return
-    gammas = sorted(ss[0].edge_counts, key=float)
+    counts = [{repr(BLIND_EDGE_SCALE): s.coverage_counts} | s.edge_counts for s in ss]
+    gammas = sorted(counts[0], key=float)
     groups = sorted(ss[0].coverage_counts)
     # (gamma, kappa) x collection: the counts summed over the calibrations
     tot = {
-        g: np.stack([np.sum([s.edge_counts[e][g] for s in ss], axis=0) for e in gammas])
+        g: np.stack([np.sum([c[e][g] for c in counts], axis=0) for e in gammas])
         for g in groups
     }
     print("\nprior-mismatch and blind-edge scales, chosen without the collection:")
 
-    def best(counts: np.ndarray) -> tuple[int, int]:
-        miss = np.stack([_coverage_miss(c) for c in counts])
+    def best(c: np.ndarray) -> tuple[int, int]:
+        miss = np.stack([_coverage_miss(x) for x in c])
         e, k = np.unravel_index(int(np.argmin(miss)), miss.shape)
         return int(e), int(k)
 
-    for g in groups:
-        e, k = best(np.sum([tot[h] for h in groups if h != g], axis=0))
+    def show(label: str, train: np.ndarray, scored: np.ndarray) -> None:
+        e, k = best(train)
         print(
-            f"  {g:<15} kappa {KAPPAS[k]:.2f} gamma {float(gammas[e]):.2f}: "
-            + _describe_coverage(tot[g][e, k])
+            f"  {label:<15} kappa {KAPPAS[k]:.2f} gamma {float(gammas[e]):.2f}: "
+            + _describe_coverage(scored[e, k])
         )
+
+    for g in groups:
+        show(g, np.sum([tot[h] for h in groups if h != g], axis=0), tot[g])
     allc = np.sum([tot[g] for g in groups], axis=0)
-    e, k = best(allc)
-    print(
-        f"  all collections: kappa {KAPPAS[k]:.2f} gamma {float(gammas[e]):.2f}: "
-        + _describe_coverage(allc[e, k])
-    )
+    show("all", allc, allc)
 
 
 def surface_lab(test_fine: Spectra) -> NDArray[np.float64]:
@@ -448,7 +429,7 @@ def run_camera(
 ) -> list[Score]:
     """Every variant's calibration and test estimate for one camera and light
     (``conditions``: :func:`simulate_session`'s options; ``edge_scales``: the
-    blind-edge scales whose coverage counts :func:`tune_prior_and_edge` takes)."""
+    blind-edge scales whose coverage counts :func:`tune_prior_scales` takes)."""
     _, test_fine, chart_work, _, db, test_est = setup
     session = simulate_session(cam, leds, setup, rng, **conditions)
     resp, resp_t, reported = session.resp, session.resp_t, session.reported
@@ -709,8 +690,7 @@ def main(argv: list[str] | None = None) -> int:
             )
     summary = summarise(scores)
     print_summary(summary, variants)
-    tune_prior_scale([s for s in scores if s.variant == "bayes"])
-    tune_prior_and_edge([s for s in scores if s.variant == "bayes"])
+    tune_prior_scales([s for s in scores if s.variant == "bayes"])
     tune_band_scale([s for s in scores if s.variant == "bayes"])
     flagged = [s for s in scores if s.self_check_warnings]
     print(f"\nself-check findings: {len(flagged)} of {len(scores)} calibrations")

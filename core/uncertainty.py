@@ -89,7 +89,7 @@ __all__ = [
 #: foliage past an IR cut), so the fitted term is too narrow by a factor no single
 #: target reveals. Chosen with :data:`BLIND_EDGE_SCALE` by
 #: ``benchmarks/generalisation.py --tune-edge`` (with the estimate of
-#: :func:`wiener_with_uncertainty`; ``tune_prior_and_edge``'s criterion: the coverage
+#: :func:`wiener_with_uncertainty`; ``tune_prior_scales``' criterion: the coverage
 #: of the 95 % intervals of the reflectance at every wavelength and of L*, a*, b*
 #: closest to 95 %) under issue 23's conditions (10 nm readings with 0.1 % noise,
 #: stray light, cross-talk, non-linearity; one camera per family, the CAL1 model,
