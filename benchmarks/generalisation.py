@@ -481,7 +481,8 @@ def run_camera(
             sc.coverage_counts = coverage_counts(
                 w, unc, test_est.values, lab_surface, test_est.names
             )
-            for gamma in edge_scales:
+            # the shipped scale's counts are coverage_counts' own
+            for gamma in set(edge_scales) - {BLIND_EDGE_SCALE}:
                 unc_g = reflectance_uncertainty(
                     w, resp_t, reported, est, edge_scale=gamma
                 )

@@ -123,11 +123,9 @@ def _far_floor(
     return gap > BAND_REACH_NM
 
 
-def _scattered_zeros(
-    v: NDArray[np.float64], wavelength_nm: NDArray[np.float64]
-) -> bool:
+def _scattered_zeros(v: NDArray[np.float64], far: NDArray[np.bool_]) -> bool:
     """Whether ``v`` is nonzero in at least :data:`_MIN_NONZERO_RUNS` separate runs
-    of its floor (:func:`_far_floor`).
+    of its floor ``far`` (:func:`_far_floor`'s mask).
 
     A noise-free spectrum is zero, if anywhere, in one run at each end, a phosphor
     white's two bands are joined, and a cleaned spectrum is zero beyond its bands'
@@ -138,8 +136,7 @@ def _scattered_zeros(
     of them at zero): 8-21 of 1000 LED spectra at 10 nm, whose floor then stayed in
     Eq. 1 and once moved a calibration 0.24 RMS from the truth
     (``docs/validation.md``)."""
-    far = (v != 0.0) & _far_floor(v, wavelength_nm)
-    return _runs(far)[0].size >= _MIN_NONZERO_RUNS
+    return _runs((v != 0.0) & far)[0].size >= _MIN_NONZERO_RUNS
 
 
 def _runs(mask: NDArray[np.bool_]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
@@ -192,7 +189,8 @@ def reading_noise_rms(
     peak = float(v.max()) if v.size else 0.0
     if not peak > 0:
         return 0.0
-    runs = [v[a:b] for a, b in zip(*_runs(_far_floor(v, wl)), strict=True)]
+    far = _far_floor(v, wl)
+    runs = [v[a:b] for a, b in zip(*_runs(far), strict=True)]
     d = np.concatenate(
         [2.0 * r[2:-2] - r[:-4] - r[4:] for r in runs if r.size > 4] or [np.zeros(0)]
     )
@@ -200,7 +198,7 @@ def reading_noise_rms(
     if d.size < _MIN_DIFFERENCES or not np.any(floor != 0.0):
         return 0.0
     if _extremum_fraction(floor) < _MIN_EXTREMUM_FRACTION and not _scattered_zeros(
-        v, wl
+        v, far
     ):
         return 0.0
     sd = float(np.sqrt(np.mean(d * d) / 6.0))
@@ -354,7 +352,7 @@ def emission_bands(
     low = v[v < BAND_NOISE_FRACTION * peak]
     if low.size == 0 or (
         np.mean(low == 0.0) > _CLEANED_ZERO_FRACTION
-        and not _scattered_zeros(v, wavelength_nm)
+        and not _scattered_zeros(v, _far_floor(v, wavelength_nm))
     ):
         return None
     sd = reading_noise_rms(v, wavelength_nm) if noise_sd is None else noise_sd

@@ -623,8 +623,9 @@ def _response_error_terms(
         )
     if jacobians is None:
         jacobians = _f_jacobians(calibration, responses, illuminants, readings=readings)
+    physical = _physical(reflectance)
     for t, jac in jacobians.items():
-        terms[t] = _response_covariance(jac, _physical(reflectance))
+        terms[t] = _response_covariance(jac, physical)
     return terms
 
 
@@ -939,9 +940,8 @@ def blind_edge_factor(
     scale: float = BLIND_EDGE_SCALE,
 ) -> NDArray[np.float64]:
     """Per target and wavelength, ``1 + gamma b`` (``scale``, default
-    :data:`BLIND_EDGE_SCALE`): ``b``
-    is 1 where Eq. 1 sees nothing of the wavelength and falls linearly to 0 at the
-    visibility :data:`BLIND_VISIBILITY`.
+    :data:`BLIND_EDGE_SCALE`): ``b`` is 1 where Eq. 1 sees nothing of the wavelength
+    and falls linearly to 0 at the visibility :data:`BLIND_VISIBILITY`.
 
     The visibility of wavelength ``l`` for a target is ``sqrt(sum_j F_jl^2 / v_j)``
     (``v_j`` its responses' noise variances as Eq. 5 used them) relative to its
