@@ -46,9 +46,7 @@ def main(argv: list[str] | None = None) -> int:
     gen.EST = cp.EST
     setup = gen.load_setup()
     truth = (setup[5], gen.surface_lab(setup[1]))
-    cams = gd.cameras_per_family(args.per_family)
-    if args.families:
-        cams = [c for c in cams if c.family in args.families.split(",")]
+    cams = gd.cameras_per_family(args.per_family, args.families)
     lights = gd.light_sources()
     rows: dict[str, list[list[float]]] = defaultdict(list)
     t0 = time.perf_counter()

