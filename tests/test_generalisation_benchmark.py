@@ -105,9 +105,10 @@ def test_noisy_coarse_readings_and_sensor_effects_keep_numbers_and_error_bars(
         # Against the surfaces' own colour (their 1 nm spectra): L* 0.943-0.981, a*
         # 0.950-0.981, b* 0.940-0.991. The Sigma SD Merrill: 0.945, 0.947, 0.912,
         # 0.937 (surface L* a* b* 0.943, 0.903, 0.950)
-        lo = {"reflectance": 0.93, "L": 0.92, "a": 0.90 if fam == FOVEON else 0.92}
-        lo["b"] = 0.92
-        lo |= {"L_surface": 0.91, "a_surface": 0.90, "b_surface": 0.92}
+        foveon = fam == FOVEON
+        lo = {"reflectance": 0.93, "L": 0.92, "a": 0.89 if foveon else 0.92, "b": 0.92}
+        lo |= {"L_surface": 0.91, "a_surface": 0.88 if foveon else 0.90}
+        lo["b_surface"] = 0.92
         hi = {"reflectance": 0.975, "L": 0.99, "a": 0.99, "b": 0.99}
         hi |= {k: 0.995 for k in lo if k.endswith("_surface")}
         for k in lo:
@@ -156,10 +157,11 @@ def test_a_flat_field_worse_than_nominal_is_measured_not_assumed(
         # measured per family: reflectance 0.952-0.963, L* 0.943-0.972, a*
         # 0.950-0.984, b* 0.950-0.994; mean dE00 0.130-0.150 (the Sigma SD Merrill
         # 0.230; coverage 0.931-0.947)
-        assert per["bayes"]["de00_mean"] <= (0.25 if fam == FOVEON else 0.17), fam
+        foveon = fam == FOVEON
+        assert per["bayes"]["de00_mean"] <= (0.25 if foveon else 0.17), fam
         for k in ("reflectance", "L", "a", "b"):
             c = per["bayes"][f"coverage_{k}"]
-            assert 0.93 <= c <= 0.999, (fam, k, c)
+            assert (0.91 if foveon else 0.93) <= c <= 0.999, (fam, k, c)
 
 
 @pytest.mark.slow
