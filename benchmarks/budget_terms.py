@@ -33,6 +33,8 @@ import argparse
 import functools
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
 
@@ -56,10 +58,28 @@ def _predicted(budget, terms) -> np.ndarray:
     return sum(budget[t][1] for t in terms if t in budget)
 
 
+@contextmanager
+def _sensor_effects(linear: bool) -> Iterator[None]:
+    """:func:`generalisation_data.systematic_effects` as the session and the draws
+    apply it, without the non-linearity where ``linear``."""
+    original = gd.systematic_effects
+    if linear:
+        gd.systematic_effects = functools.partial(original, nonlinearity=1.0)
+    try:
+        yield
+    finally:
+        gd.systematic_effects = original
+
+
 def run_camera(cam: gd.Camera, leds, setup, args) -> dict[str, np.ndarray]:
     """One session's calibration, its budget at the session's test responses, and
     the random and fixed parts of the error over ``args.draws`` new draws of them:
     summed empirical over summed predicted variance, (3,) each."""
+    with _sensor_effects(args.linear):
+        return _parts(cam, leds, setup, args)
+
+
+def _parts(cam: gd.Camera, leds, setup, args) -> dict[str, np.ndarray]:
     session = cp.as_read(
         gen.simulate_session(
             cam, leds, setup, np.random.default_rng(args.seed),
@@ -113,10 +133,6 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.draws < 2:
         ap.error("--draws: at least 2")
-    if args.linear:  # the session's and the draws' sensor effects alike
-        gd.systematic_effects = functools.partial(
-            gd.systematic_effects, nonlinearity=1.0
-        )
     gen.EST = cp.EST
     setup = gen.load_setup()
     cams = gd.cameras_per_family(1, args.families)
