@@ -355,6 +355,7 @@ def systematic_effects(
     rng: np.random.Generator,
     *,
     stray: float = 0.002,
+    crosstalk: float = 0.002,
     nonlinearity: float = 1.003,
 ) -> Responses:
     """Sensor effects that photon and read noise do not describe, on top of the
@@ -362,7 +363,7 @@ def systematic_effects(
 
     - stray light: each patch under each LED gains ``stray * z`` of the mean
       response under that LED (``z ~ N(0, 1)``, one draw per patch and LED);
-    - cross-talk: each channel gains ``stray * z`` of the patch's mean over the
+    - cross-talk: each channel gains ``crosstalk * z`` of the patch's mean over the
       other two channels (one draw per patch, LED and channel);
     - a slight non-linearity: ``signal ** nonlinearity`` (full-scale units).
 
@@ -371,6 +372,6 @@ def systematic_effects(
     level = rgb.mean(axis=0, keepdims=True)
     out = rgb + stray * rng.standard_normal(rgb.shape[:2])[..., None] * level
     others = (rgb.sum(axis=2, keepdims=True) - rgb) / 2.0
-    out = out + stray * rng.standard_normal(rgb.shape) * others
+    out = out + crosstalk * rng.standard_normal(rgb.shape) * others
     out = np.maximum(out, 0.0) ** nonlinearity
     return replace(responses, rgb=out)

@@ -59,12 +59,14 @@ from tunespec.core.metering import as_calibrated
 from tunespec.core.responses import Responses
 from tunespec.core.sensitivity import SensitivityEstimate
 from tunespec.core.spectra import Grid, Spectra, resampling_matrix
+from tunespec.core.target_prior import fit_target_priors
 from tunespec.core.wiener import (
     WienerEstimate,
     checked_noise_covariance,
     reflectance_basis,
     solve_with_noise,
     wiener_reflectance,
+    with_target_priors,
 )
 
 __all__ = [
@@ -76,9 +78,7 @@ __all__ = [
     "blind_edge_factor",
     "budget_summary",
     "calibration_response_covariance",
-    "fit_generic_prior",
     "lab_covariance",
-    "matern32",
     "reflectance_uncertainty",
     "wiener_with_uncertainty",
 ]
@@ -93,11 +93,12 @@ __all__ = [
 #: of the 95 % intervals of the reflectance at every wavelength and of L*, a*, b*
 #: closest to 95 %) under issue 23's conditions (10 nm readings with 0.1 % noise,
 #: stray light, cross-talk, non-linearity; one camera per family, the CAL1 model,
-#: 400:700:10) on four reflectance collections, three seeds: on all four (1.05, 0.50),
-#: (1.10, 0.75), (1.05, 0.50); with each left out in turn kappa 1.05-1.20, gamma
-#: 0.25-2.0 (rawtoaces 190 left out: 1.10-1.15, 1.5-2.0). It was (1.15, 0.25) while a
-#: phosphor white's cleaning cut its tails, whose misfit the fitted term took up.
-PRIOR_MISMATCH_SCALE = 1.05
+#: 400:700:10) on four reflectance collections, seeds 0-2: on all four (1.10, 0.50),
+#: (1.10, 1.00), (1.15, 0.50); with each left out in turn kappa 1.05-1.20, gamma
+#: 0.25-2.0. It was (1.05, 0.50) while Eq. 5 took the prior set's covariance
+#: unscaled (:func:`~tunespec.core.wiener.with_target_priors`), and (1.15, 0.25)
+#: while a phosphor white's cleaning cut its tails.
+PRIOR_MISMATCH_SCALE = 1.10
 #: ``gamma``: at a wavelength where Eq. 1 sees nothing (:func:`blind_edge_factor`)
 #: the prior-mismatch term's standard deviation is ``1 + gamma`` times the rest's:
 #: there the estimate is the prior's extrapolation alone, and surfaces depart from
@@ -108,159 +109,11 @@ BLIND_EDGE_SCALE = 0.5
 #: largest) below which a wavelength counts as blind, linearly: fully at 0.
 BLIND_VISIBILITY = 0.1
 
-#: Correlation lengths (nm) tried for the generic prior component (Matern 3/2).
-#: Surface reflectances are smooth: a handful of basis functions describe them
-#: (L. T. Maloney, "Evaluation of linear models of surface spectral reflectance with
-#: small numbers of parameters", JOSA A 3 (1986) 1673-1683), so no shorter scale
-#: is offered: structure finer than the LEDs resolve would only be invented.
-GENERIC_LENGTHS_NM = (20.0, 40.0, 80.0)
-#: Standard deviations tried for it (reflectance units).
-GENERIC_SIGMAS = np.concatenate([[0.0], np.logspace(-3.0, np.log10(0.3), 11)])
-#: Scales of the prior's own covariance tried per target.
-GENERIC_ALPHAS = (1.0, 1.5, 2.0, 3.0, 5.0)
+#: Targets whose error covariances are formed at once.
 _CHUNK = 256
 #: Targets whose moves (n_est x the calibration's parameters each: 1 nm estimates and
 #: a 2 nm calibration, 400 x 572) are formed at once.
 _MOVES_CHUNK = 32
-#: Corner of the bordered matrix [[C, y], [y', corner]] whose Cholesky factor gives
-#: ``L_C^-1 y`` in :func:`fit_generic_prior`: any value above ``y' C^-1 y`` keeps it
-#: positive definite and leaves the factor's other entries as they are.
-_BORDER_CORNER = 1e300
-
-
-def matern32(
-    wavelength_nm: NDArray[np.float64], length_nm: float
-) -> NDArray[np.float64]:
-    """Matern-3/2 correlation matrix of a spectrum on ``wavelength_nm``.
-
-    ``k(d) = (1 + sqrt(3) d / l) exp(-sqrt(3) d / l)`` (Rasmussen & Williams 2006,
-    Eq. 4.17): once differentiable curves, as reflectances are.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> K = matern32(np.array([400.0, 410.0]), 10.0)
-    >>> round(float(K[0, 1]), 4)
-    0.4834
-    """
-    d = (
-        np.abs(wavelength_nm[:, None] - wavelength_nm[None, :])
-        * np.sqrt(3.0)
-        / length_nm
-    )
-    return (1.0 + d) * np.exp(-d)
-
-
-def fit_generic_prior(
-    F: NDArray[np.float64],
-    K: NDArray[np.float64],
-    mean: NDArray[np.float64],
-    rgb: NDArray[np.float64],
-    noise: NDArray[np.float64],
-    wavelength_nm: NDArray[np.float64],
-) -> tuple[NDArray[np.float64], NDArray[np.float64], float, NDArray[np.float64]]:
-    """How far each measured target reaches beyond the prior.
-
-    The prior reflectances (e.g. the SG's 140) span fewer spectra than the world;
-    the error of a Wiener estimate outside that span is what the prior cannot
-    predict. For each target ``p`` the prior covariance is taken as
-    ``alpha_p^2 K + sigma_p^2 M_l``: the prior's own covariance, scaled for a
-    target more extreme than the prior set (a saturated print against a chart),
-    plus a Matern-3/2 correlation ``M_l`` (:func:`matern32`) for shapes the prior
-    set lacks. ``l`` maximises the marginal likelihood of the measured responses of
-    the whole batch, ``c_p - F m ~ N(0, F (alpha_p^2 K + sigma_p^2 M_l) F' + N_p)``,
-    and ``(alpha_p, sigma_p)`` that of each target's own responses; a target like
-    the prior set keeps ``(1, 0)``. No reference values are used.
-
-    Parameters
-    ----------
-    F : (3 n_i, n_wl)
-    K : (n_wl, n_wl), mean (n_wl,)
-    rgb : (n_p, 3 n_i)
-    noise : (n_p, 3 n_i, 3 n_i)
-        Response covariance of each target (noise and calibration).
-    wavelength_nm : (n_wl,)
-
-    Returns
-    -------
-    alpha, sigma : (n_p,)
-    length_nm : float
-    chi2 : (n_p,)
-        ``y' C^-1 y`` of each target at its most probable ``(alpha, sigma)``: how
-        far its responses are from any reflectance Eq. 1 can give
-        (:func:`~tunespec.core.plausibility.check_response_consistency`).
-
-    References
-    ----------
-    D. J. C. MacKay, "Bayesian interpolation" (1992) (maximum evidence);
-    Rasmussen and Williams, *Gaussian Processes for Machine Learning* (2006), Eq. 4.17
-    (Matern 3/2 kernel).
-    """
-    y = rgb - F @ mean
-    # a target with a non-finite response keeps a NaN likelihood (as a solve with
-    # it gave), without making its chunk's bordered factorisation fail
-    finite = np.isfinite(y).all(axis=1)
-    y_border = np.where(finite[:, None], y, 0.0)
-    base = F @ K @ F.T
-    n_p, m = rgb.shape
-    grid = [(a, sg) for a in GENERIC_ALPHAS for sg in GENERIC_SIGMAS]
-    best_total = np.inf
-    best = (np.ones(n_p), np.zeros(n_p), GENERIC_LENGTHS_NM[0], np.full(n_p, np.nan))
-    for length in GENERIC_LENGTHS_NM:
-        FMF = F @ matern32(wavelength_nm, length) @ F.T
-        nll = np.full((len(grid), n_p), np.inf)
-        chi2 = np.full((len(grid), n_p), np.nan)
-        for j, (alpha, sigma) in enumerate(grid):
-            for lo in range(0, n_p, _CHUNK):
-                hi = min(lo + _CHUNK, n_p)
-                # C bordered by y: the Cholesky factor's last row is then
-                # z = L_C^-1 y (the forward substitution inside the factorisation,
-                # half the cost of a separate solve); the corner only has to keep
-                # the bordered matrix positive definite and does not enter z
-                aug = np.empty((hi - lo, m + 1, m + 1))
-                C = aug[:, :m, :m]
-                np.multiply(alpha**2, base[None], out=C)
-                C += sigma**2 * FMF[None]
-                C += noise[lo:hi]
-                aug[:, m, :m] = y_border[lo:hi]
-                aug[:, :m, m] = y_border[lo:hi]
-                aug[:, m, m] = _BORDER_CORNER
-                try:
-                    La = np.linalg.cholesky(aug)
-                except np.linalg.LinAlgError:
-                    continue
-                z = La[:, m, :m]
-                chi2[j, lo:hi] = np.where(finite[lo:hi], np.sum(z**2, axis=1), np.nan)
-                nll[j, lo:hi] = np.where(
-                    finite[lo:hi],
-                    chi2[j, lo:hi]
-                    + 2.0
-                    * np.sum(
-                        np.log(np.diagonal(La[:, :m, :m], axis1=1, axis2=2)), axis=1
-                    ),
-                    np.nan,
-                )
-        # posterior over the (alpha, sigma) grid (flat prior on it): the error
-        # covariance is linear in alpha^2 and sigma^2, so their posterior means
-        # carry the hyper-parameters' own uncertainty (a point estimate would not)
-        low = np.min(nll, axis=0)
-        post = np.exp(-0.5 * (nll - low[None]))
-        evidence = low - 2.0 * np.log(np.sum(post, axis=0) / len(grid))
-        total = float(np.sum(evidence))
-        if total < best_total:
-            post /= np.sum(post, axis=0, keepdims=True)
-            g = np.array(grid)
-            best_total = total
-            best = (
-                np.sqrt(post.T @ g[:, 0] ** 2),
-                np.sqrt(post.T @ g[:, 1] ** 2),
-                float(length),
-                chi2[
-                    np.argmin(np.where(np.isnan(nll), np.inf, nll), axis=0),
-                    np.arange(n_p),
-                ],
-            )
-    return best
 
 
 @dataclass(frozen=True, eq=False)
@@ -772,10 +625,11 @@ def reflectance_uncertainty(
     jacobians = _f_jacobians(calibration, responses, illuminants)
     terms = _response_error_terms(responses, illuminants, calibration, refl, jacobians)
     noise_all = sum(terms.values())
-    alpha, sigma, length, chi2, misfit = _prior_reach(wiener, responses, rgb, noise_all)
-    IM = matern32(wl, length)
-    FK = F @ K
-    G = FK @ F.T
+    # each target's prior as the estimate used it, or (an estimate with the prior
+    # set's for all) fitted here for the mismatch term alone
+    priors = wiener.target_priors or fit_target_priors(
+        wiener, responses, rgb, noise_all
+    )
     n = wl.size
     kappa2 = float(PRIOR_MISMATCH_SCALE if prior_scale is None else prior_scale) ** 2
     cov, cov_prior = np.empty((n_p, n, n)), np.empty((n_p, n, n))
@@ -787,20 +641,19 @@ def reflectance_uncertainty(
     moves = _MovesOfF(wiener, responses, jacobians)
     for lo in range(0, n_p, _CHUNK):
         hi = min(lo + _CHUNK, n_p)
-        # W' = A^-1 F K with A = F K F' + K_e as the estimate used it (symmetric)
-        W = solve_with_noise(G, used[lo:hi], FK).transpose(0, 2, 1)
+        rows = slice(lo, hi)
+        Kp = priors.covariance(K, rows)
+        # W' = A^-1 F K with A = F K F' + K_e and K as the estimate used them
+        Ku = K if wiener.target_priors is None else priors.scaled(K, rows)
+        FK = F @ Ku
+        G = FK @ F.T
+        G = 0.5 * (G + np.swapaxes(G, -1, -2))
+        W = solve_with_noise(G, used[rows], FK).transpose(0, 2, 1)
         IWF = np.eye(n) - W @ F
-        P = (
-            IWF
-            @ (
-                kappa2 * alpha[lo:hi, None, None] ** 2 * K[None]
-                + kappa2 * sigma[lo:hi, None, None] ** 2 * IM[None]
-            )
-            @ IWF.transpose(0, 2, 1)
-        )
-        P *= edge[lo:hi, :, None] * edge[lo:hi, None, :]
+        P = IWF @ (kappa2 * Kp) @ IWF.transpose(0, 2, 1)
+        P *= edge[rows, :, None] * edge[rows, None, :]
         E = P.copy()  # + W N W' term by term: the budget's parts add up to it
-        u, posterior = moves.weights(G, used[lo:hi], slice(lo, hi)), IWF @ K
+        u, posterior = moves.weights(G, used[rows], rows), IWF @ Ku
         for t, N in terms.items():
             Et = moves.covariance(t, N[lo:hi], slice(lo, hi), W, posterior, u)
             E += Et
@@ -829,40 +682,30 @@ def reflectance_uncertainty(
         lab=lab,
         lab_std=np.sqrt(np.maximum(np.diagonal(lab_cov, axis1=1, axis2=2), 0.0)),
         lab_covariance=lab_cov,
-        generic_sigma=sigma,
-        generic_length_nm=length,
+        generic_sigma=priors.sigma,
+        generic_length_nm=priors.length_nm,
         prior_part_variance=prior_var,
         lab_prior_part_variance=lab_prior_var,
         budget=budget,
-        chi2_per_response=chi2,
-        misfit_by_light=misfit,
+        chi2_per_response=priors.chi2_per_response,
+        misfit_by_light=_misfit_by_light(wiener, responses, rgb, noise_all),
     )
 
 
-def _prior_reach(
+def _misfit_by_light(
     wiener: WienerEstimate,
     responses: Responses,
     rgb: NDArray[np.float64],
     noise: NDArray[np.float64],
-) -> tuple[
-    NDArray[np.float64], NDArray[np.float64], float, NDArray[np.float64],
-    NDArray[np.float64],
-]:  # fmt: skip
-    """:func:`fit_generic_prior` on the estimate's responses ``rgb`` (n_p, m) with
-    their error model ``noise``, saturated responses left out as the estimate leaves
-    them: ``alpha``, ``sigma``, the length, each target's chi-square per response
-    and, to say where a misfit is, the estimate's mean squared standardised
-    residual under each light."""
-    F, K, mean = wiener.lighting, wiener.prior_covariance, wiener.prior_mean
-    assert F is not None and K is not None and mean is not None
-    wl = wiener.reflectance.wavelength_nm
+) -> NDArray[np.float64]:
+    """To say where a misfit is: the estimate's mean squared standardised residual
+    under each light (n_i,), saturated responses left out."""
+    F = wiener.lighting
+    assert F is not None
     noise_fit = checked_noise_covariance(noise, responses, F.shape[0])
-    alpha, sigma, length, chi2 = fit_generic_prior(F, K, mean, rgb, noise_fit, wl)
-    dof = np.sum(np.isfinite(rgb) & ~np.repeat(responses.clipped, 3, axis=1), axis=1)
     residual = rgb - wiener.reflectance.values @ F.T
     z2 = residual**2 / np.diagonal(noise_fit, axis1=1, axis2=2)
-    by_light = np.nanmean(z2.reshape(rgb.shape[0], -1, 3), axis=(0, 2))
-    return alpha, sigma, length, chi2 / np.maximum(dof, 1), by_light
+    return np.nanmean(z2.reshape(rgb.shape[0], -1, 3), axis=(0, 2))
 
 
 def wiener_with_uncertainty(
@@ -890,10 +733,14 @@ def wiener_with_uncertainty(
     12). On ``benchmarks/generalisation.py`` under issue 23's conditions it lowers
     the mean CIEDE2000 of every family (see docs/validation.md). The model is
     evaluated at a first, Eq. 6 estimate (the calibration term depends on the
-    reflectance through Eq. 1).
+    reflectance through Eq. 1). Then each target's prior is fitted to its responses
+    (:func:`~tunespec.core.target_prior.fit_target_priors`) and Eq. 5 solved again
+    with the prior set's covariance scaled to it
+    (:func:`~tunespec.core.wiener.with_target_priors`).
 
     Without such a calibration, without per-pixel deviations, or with one noise
-    level for all (``noise_std``) it is Eq. 5-6 as the paper has it.
+    level for all (``noise_std``) the first two steps are Eq. 5-6 as the paper has
+    it.
 
     Parameters
     ----------
@@ -931,6 +778,17 @@ def wiener_with_uncertainty(
             responses, illuminants_fine, sensitivity_fine, prior, **kw,
             noise_covariance=sum(terms.values()),
         )  # fmt: skip
+    # each target's own prior, fitted to its responses with their whole error model
+    # at this estimate, and Eq. 5 again with it
+    noise_all = sum(
+        _response_error_terms(responses, illuminants, calibration, est.reflectance)
+        .values()
+    )  # fmt: skip
+    n_p = len(responses.patches)
+    rgb = responses.rgb.reshape(n_p, -1)
+    est = with_target_priors(
+        est, responses, fit_target_priors(est, responses, rgb, noise_all)
+    )
     return est, reflectance_uncertainty(est, responses, illuminants, calibration)
 
 

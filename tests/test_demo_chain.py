@@ -170,9 +170,9 @@ def test_the_demo_white_is_inside_its_interval_at_every_wavelength(demo) -> None
     ref = read_spectra_csv(demo / "estimate/reference.csv").resample(grid)
     white = est.names.index("C0M0Y0")
     z = (est.values[white] - ref.values[ref.names.index("C0M0Y0")]) / unc.values[white]
-    # measured: 1.82 and 1.90 sigma low at 400 and 405 nm, 1.31 at most from 410 nm
-    # (4.0 at 400 nm before the error-model estimate and the blind-edge term; 1.97
-    # and 1.99 with the edge scale chosen while the whites' tails were cut)
+    # measured: 1.46 and 1.67 sigma low at 400 and 405 nm, 1.14 at most from 410 nm
+    # (1.82 and 1.90 before Eq. 5 took each target's scale of the prior; 4.0 at
+    # 400 nm before the error-model estimate and the blind-edge term)
     assert est.wavelength_nm.size == 61 and np.all(np.abs(z) <= 1.96), z
 
 

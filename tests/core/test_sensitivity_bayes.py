@@ -27,8 +27,14 @@ from tunespec.core.led_correction import LedCorrection
 from tunespec.core.sensitivity import estimate_camera_sensitivity
 from tunespec.core.simulate import NoiseModel, scale_to_exposure, simulate_responses
 from tunespec.core.spectra import CALIBRATION_GRID, DEFAULT_GRID, Grid, Spectra
+from tunespec.core.target_prior import matern32
 from tunespec.core.uncertainty import reflectance_uncertainty
-from tunespec.core.wiener import on_integration_grid, wiener_reflectance
+from tunespec.core.wiener import (
+    TargetPriors,
+    on_integration_grid,
+    wiener_reflectance,
+    with_target_priors,
+)
 
 FINE = Grid(380.0, 730.0, 1.0)
 EST = Grid(400.0, 700.0, 5.0)
@@ -157,11 +163,16 @@ def test_led_correction_round_trip_and_bad_input() -> None:
 
 
 @pytest.mark.slow
-def test_calibration_term_is_the_estimates_first_order_change(bench) -> None:
+@pytest.mark.parametrize("per_target", [False, True])
+def test_calibration_term_is_the_estimates_first_order_change(
+    bench, per_target
+) -> None:
     """The budget's calibration variance is what moving the calibration along each
     direction of its covariance does to Eq. 5's estimate (F and its gain W both
     recomputed), by central differences: W dF r and the gain's (I - W F) K dF' u.
-    On the product's calibration grid, where Eq. 1 is integrated."""
+    On the product's calibration grid, where Eq. 1 is integrated; with the prior
+    set's covariance for all, and with each target's own scale of it (the
+    uncertainty must take the gain with the prior the estimate used)."""
     metered = bench["metered"].resample(CALIBRATION_GRID)
     est = estimate_camera_sensitivity(
         bench["chart"],
@@ -172,11 +183,18 @@ def test_calibration_term_is_the_estimates_first_order_change(bench) -> None:
     )
     test = bench["test"].subset(list(bench["test"].patches[:8]))
 
+    wl = EST.wavelength_nm
+    priors = TargetPriors(
+        np.linspace(1.0, 3.0, 8), np.full(8, 0.05), matern32(wl, 40.0), 40.0,
+        np.ones(8),
+    )  # fmt: skip
+
     def estimate(calibration):
         illum, sens, _ = on_integration_grid(
             calibration.correct_illuminants(metered), calibration.sensitivity, EST
         )
-        return wiener_reflectance(test, illum, sens, bench["sg_est"], clip=False)
+        w = wiener_reflectance(test, illum, sens, bench["sg_est"], clip=False)
+        return with_target_priors(w, test, priors) if per_target else w
 
     w = estimate(est)
     unc = reflectance_uncertainty(w, test, metered, est)
