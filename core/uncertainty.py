@@ -63,6 +63,7 @@ from tunespec.core.target_prior import fit_target_priors
 from tunespec.core.wiener import (
     WienerEstimate,
     checked_noise_covariance,
+    prior_gram,
     reflectance_basis,
     solve_with_noise,
     wiener_reflectance,
@@ -619,8 +620,7 @@ def reflectance_uncertainty(
     assert F is not None and K is not None
     m_rows = F.shape[0]
     n_p = len(responses.patches)
-    diag = wiener.noise_variance.reshape(n_p, m_rows)
-    used = diag if wiener.noise_covariance is None else wiener.noise_covariance
+    diag, used = wiener.noise_variance.reshape(n_p, m_rows), wiener.k_e
     rgb = responses.rgb.reshape(n_p, m_rows)
     jacobians = _f_jacobians(calibration, responses, illuminants)
     terms = _response_error_terms(responses, illuminants, calibration, refl, jacobians)
@@ -645,9 +645,7 @@ def reflectance_uncertainty(
         Kp = priors.covariance(K, rows)
         # W' = A^-1 F K with A = F K F' + K_e and K as the estimate used them
         Ku = K if wiener.target_priors is None else priors.scaled(K, rows)
-        FK = F @ Ku
-        G = FK @ F.T
-        G = 0.5 * (G + np.swapaxes(G, -1, -2))
+        FK, G = prior_gram(F, Ku)
         W = solve_with_noise(G, used[rows], FK).transpose(0, 2, 1)
         IWF = np.eye(n) - W @ F
         P = IWF @ (kappa2 * Kp) @ IWF.transpose(0, 2, 1)

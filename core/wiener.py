@@ -53,6 +53,7 @@ __all__ = [
     "integrated_lighting_matrix",
     "integration_grid",
     "on_integration_grid",
+    "prior_gram",
     "reflectance_basis",
     "solve_with_noise",
     "wiener_reflectance",
@@ -162,6 +163,14 @@ class WienerEstimate:
     prior_covariance: NDArray[np.float64] | None = None
     noise_covariance: NDArray[np.float64] | None = None
     target_priors: TargetPriors | None = None
+
+    @property
+    def k_e(self) -> NDArray[np.float64]:
+        """``K_e`` as Eq. 5 used it: each patch's diagonal (n_p, 3 n_i), or its whole
+        covariance (n_p, 3 n_i, 3 n_i) where one was given."""
+        if self.noise_covariance is not None:
+            return self.noise_covariance
+        return self.noise_variance.reshape(self.noise_variance.shape[0], -1)
 
     @property
     def std(self) -> NDArray[np.float64]:
@@ -313,20 +322,14 @@ def with_target_priors(
     F, K, mean = estimate.lighting, estimate.prior_covariance, estimate.prior_mean
     assert F is not None and K is not None and mean is not None
     patches, n_p = responses.patches, len(responses.patches)
-    noise = (
-        estimate.noise_variance.reshape(n_p, F.shape[0])
-        if estimate.noise_covariance is None
-        else estimate.noise_covariance
-    )
 
     def system(rows: slice) -> tuple[NDArray[np.float64], ...]:
         Kp = priors.scaled(K, rows)
-        FK = F @ Kp
-        G = FK @ F.T
-        return 0.5 * (G + G.transpose(0, 2, 1)), FK, np.diagonal(Kp, axis1=1, axis2=2)
+        FK, G = prior_gram(F, Kp)
+        return G, FK, np.diagonal(Kp, axis1=1, axis2=2)
 
     resid = responses.rgb.reshape(n_p, F.shape[0]) - F @ mean
-    est, post_var = _solve_patchwise(system, mean, resid, noise, patches)
+    est, post_var = _solve_patchwise(system, mean, resid, estimate.k_e, patches)
     est, clipped, n_clipped = _clip_estimate(
         est, patches, bool(estimate.params.get("clip", True))
     )
@@ -398,9 +401,7 @@ def _gram(
     F: NDArray[np.float64], K: NDArray[np.float64]
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
     """``F K``, ``G = F K F^T`` of Eq. 5 (exactly symmetric) and its mean diagonal."""
-    FK = F @ K  # (3 n_i, n_wl) = (K F^T)^T, K symmetric
-    G = FK @ F.T
-    G = 0.5 * (G + G.T)  # exact symmetry for the solver; rounding made it inexact
+    FK, G = prior_gram(F, K)
     scale = float(np.trace(G)) / F.shape[0]
     if not (np.isfinite(scale) and scale > 0.0):
         raise SingularSystemError(
@@ -408,6 +409,17 @@ def _gram(
             "the prior varies only where the camera sees nothing"
         )
     return FK, G, scale
+
+
+def prior_gram(
+    F: NDArray[np.float64], K: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``F K`` and ``F K F^T`` of Eq. 5, the latter exactly symmetric (rounding made
+    it inexact; the solver needs it so), for one prior covariance ``K`` (n_wl, n_wl)
+    or one per target (k, n_wl, n_wl)."""
+    FK = F @ K  # (..., 3 n_i, n_wl) = (K F^T)^T, K symmetric
+    G = FK @ F.T
+    return FK, 0.5 * (G + np.swapaxes(G, -1, -2))
 
 
 def _ridged(
@@ -562,8 +574,8 @@ def solve_with_noise(
     ``K_e`` (or whole ``K_e``: ``noise`` (k, m, m)), in one batched LAPACK call; no
     inverse is formed.
 
-    ``G`` is (m, m) or (k, m, m), ``noise`` (k, m) or (k, m, m), ``rhs`` (k, m, r) or (m, r) for
-    all ``k``.
+    ``G`` is (m, m) or (k, m, m), ``noise`` (k, m) or (k, m, m), ``rhs`` (k, m, r) or
+    (m, r) for all ``k``.
     A singular system raises :class:`SingularSystemError` (``where`` names it).
     """
     k, m = noise.shape[:2]
