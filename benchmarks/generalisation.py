@@ -409,11 +409,14 @@ def estimate_tests(
     the calibration's grid, the reflectance on EST (as `tunespec estimate` does),
     Eq. 5 with the error model as K_e where the calibration carries one, and its
     uncertainty. ``used``: the spectra Eq. 1 takes (corrected as the calibration
-    found); ``reported``: as the light reported them."""
+    found); ``reported``: as the light reported them. The responses are linearised
+    as the calibration's chart was (``est.linearise``)."""
     illum, sens, _ = on_integration_grid(
         est.correct_illuminants(used), est.sensitivity, EST
     )
-    return wiener_with_uncertainty(resp_t, illum, sens, setup[3], reported, est)
+    return wiener_with_uncertainty(
+        est.linearise(resp_t), illum, sens, setup[3], reported, est
+    )
 
 
 def run_camera(

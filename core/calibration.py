@@ -63,6 +63,8 @@ __all__ = [
     "calibration_curves",
     "correct_illuminants_from_meta",
     "correct_spd_shift",
+    "excess_from_meta",
+    "linearise_from_meta",
     "predict_responses",
     "undo_metering",
 ]
@@ -184,6 +186,11 @@ class Calibration:
             return self.led_correction.lookup(names)
         n = len(names)
         return np.full(n, -1), np.ones(n), np.full(n, float(self.spd_shift_nm))
+
+    def linearise(self, responses: Responses) -> Responses:
+        """``responses`` as the calibration took its own: its sensor's non-linearity
+        undone (:meth:`ExcessVariance.linearise`; as they are without one)."""
+        return responses if self.excess is None else self.excess.linearise(responses)
 
     def side_meta(self) -> dict[str, Any]:
         """The calibration as :func:`correct_illuminants_from_meta` and the side-file
@@ -379,12 +386,7 @@ class Calibration:
                     ] = T1
                 T[3 * T1.shape[0] :, 3 * wl.size :] = np.eye(2 * n_led)
                 cov = T @ cov @ T.T
-        excess = None
-        if "excess_variance" in meta:
-            doc = meta["excess_variance"]
-            excess = ExcessVariance.from_dict(
-                json.loads(doc) if isinstance(doc, str) else doc, path=source
-            )
+        excess = excess_from_meta(meta)
         readings = None
         if "reading_replicates" in meta:
             from tunespec.core.readings import ReadingReplicates
@@ -655,6 +657,24 @@ def undo_metering(
     if not shift_nm:
         return illuminants
     return correct_spd_shift(illuminants, shift_nm)
+
+
+def excess_from_meta(meta: Mapping[str, Any]) -> ExcessVariance | None:
+    """The side file's ``excess_variance`` (None without one); its non-linearity
+    is undone in a capture's responses before any estimate (:meth:`Calibration.linearise`)."""
+    if "excess_variance" not in meta:
+        return None
+    doc = meta["excess_variance"]
+    return ExcessVariance.from_dict(
+        json.loads(doc) if isinstance(doc, str) else doc, path=meta.get("meta_path")
+    )
+
+
+def linearise_from_meta(responses: Responses, meta: Mapping[str, Any]) -> Responses:
+    """``responses`` with the non-linearity of the calibration whose side file is
+    ``meta`` undone, as :meth:`Calibration.linearise`."""
+    excess = excess_from_meta(meta)
+    return responses if excess is None else excess.linearise(responses)
 
 
 def correct_illuminants_from_meta(

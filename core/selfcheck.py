@@ -450,7 +450,7 @@ def residual_chi_square(
     patches = list(patches)
     if not patches:
         raise InputError("no patches to compare with the noise model")
-    measured = responses.subset(patches)
+    measured = estimate.linearise(responses.subset(patches))
     corrected = estimate.correct_illuminants(illuminants)
     predicted = predict_responses(
         estimate.sensitivity,
@@ -522,6 +522,9 @@ def systematic_warnings(estimate: SensitivityEstimate) -> dict[str, str]:
     for key, (what, hint) in _SYSTEMATIC_TERMS.items():
         value = float(getattr(excess, key))
         gamma = key == "nonlinearity"
+        # a non-linearity the calibration undid is flagged at the size it had
+        undone = gamma and abs(excess.linearity_gamma) > value
+        value = abs(excess.linearity_gamma) if undone else value
         limit = NONLINEARITY_LIMIT if gamma else SYSTEMATIC_LIMIT
         if value <= limit:
             continue
@@ -530,10 +533,15 @@ def systematic_warnings(estimate: SensitivityEstimate) -> dict[str, str]:
             if gamma
             else (f"{100 * value:.2f} %", f"{100 * limit:.1f} %")
         )
+        carried = (
+            "every response was linearised with it"
+            if undone
+            else "the error bars carry it"
+        )
         out[what] = (
             f"the calibration's residuals show a {what} of {size} (limit {cap}): "
-            "the error bars carry it, but the numbers are less precise than the "
-            f"instrument can give; {hint}"
+            f"{carried}, but the numbers are less precise than the instrument can "
+            f"give; {hint}"
         )
     return out
 
@@ -586,7 +594,7 @@ def held_out_of(
     corrected = estimate.correct_illuminants(illuminants)
 
     def stats(patches: Sequence[str]) -> PredictionStats:
-        measured = responses.subset(list(patches))
+        measured = estimate.linearise(responses.subset(list(patches)))
         predicted = predict_responses(
             estimate.sensitivity,
             corrected,

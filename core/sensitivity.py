@@ -61,15 +61,20 @@ from tunespec.core.calibration import (
     shift_values,
     undo_metering,
 )
+from tunespec.core.camera_basis import database_basis
 from tunespec.core.datasets import load_camera_database
 from tunespec.core.errors import InputError, SingularSystemError
 from tunespec.core.excess import (
-    ExcessVariance,
+    LINEARITY_GAMMA_MAX,
+    LINEARITY_GAMMA_MIN,
+    LINEARITY_SIGNIFICANCE,
     fit_excess_variance,
+    fit_linearity,
+    linearise,
 )
 from tunespec.core.led_correction import LedCorrection
 from tunespec.core.metering import suppress_meter_floor
-from tunespec.core.progress import ProgressFn, StopFn, check_stop, report
+from tunespec.core.progress import ProgressFn, StopFn, check_stop, report, sub_progress
 from tunespec.core.readings import (
     REPLICATES,
     ReadingReplicates,
@@ -197,96 +202,6 @@ def stimulus_matrix(
     R = np.atleast_2d(np.asarray(reflectances, dtype=np.float64))
     L = np.atleast_2d(np.asarray(illuminants, dtype=np.float64))
     return (R[:, None, :] * L[None, :, :]).reshape(-1, R.shape[1]) * step_nm
-
-
-def database_basis(
-    database: Mapping[str, Spectra],
-    channel: int,
-    n_components: int | None = 4,
-    explained_variance: float | None = None,
-) -> tuple[NDArray[np.float64], float]:
-    """Principal components of one channel of a sensitivity database (uncentred).
-
-    Each camera's curve of ``channel`` is normalised to peak 1 (so every camera
-    counts alike) and the matrix of curves ``X`` (n_cameras, n_wl) is decomposed by
-    the SVD without subtracting the mean. Eq. 4 of the paper models ``s_k = alpha_k
-    P^k`` with no mean term, so the basis must span the curves themselves, not their
-    deviations from the mean: the first right singular vector is (nearly) the mean
-    curve and the next ones its main variations.
-
-    Parameters
-    ----------
-    database
-        Camera name -> sensitivities (R, G, B) on one grid.
-    channel
-        0, 1, 2 for R, G, B.
-    n_components
-        Number of components, used if ``explained_variance`` is ``None``.
-    explained_variance
-        Take the fewest components whose span explains at least this fraction of the
-        database's variance, ``1 - ||X - X P^T P||^2 / ||X - mean(X)||^2`` (the
-        coefficient of determination of the model, relative to the variance about
-        the mean as the paper's "97 % of the total variance"). On the shipped
-        database 4 components explain 0.94 (R), 0.96 (G), 0.93 (B).
-
-    Returns
-    -------
-    P : (n_components, n_wl)
-        Orthonormal rows.
-    explained : float
-        The fraction of variance the returned span explains.
-
-    Raises
-    ------
-    InputError
-        If the database is empty, has non-finite values, or cannot give the number of
-        components asked for.
-
-    References
-    ----------
-    The paper, Eq. 4 and the text above it (4 components, 97 %); Jiang et al. 2013.
-
-    Examples
-    --------
-    >>> from tunespec.core.datasets import load_camera_database
-    >>> P, ev = database_basis(load_camera_database(), 1, n_components=4)
-    >>> P.shape, round(ev, 2)
-    ((4, 71), 0.96)
-    """
-    if not database:
-        raise InputError("the camera sensitivity database is empty")
-    curves = []
-    for name, s in database.items():
-        v = np.asarray(s.values[channel], dtype=np.float64)
-        if not np.all(np.isfinite(v)) or not v.max() > 0:
-            raise InputError(
-                f"database camera {name!r}: channel {CHANNELS[channel]} is not a "
-                "finite, positive curve",
-                path=s.meta.get("source"),
-            )
-        curves.append(v / v.max())
-    X = np.array(curves)
-    _, sv, Vt = np.linalg.svd(X, full_matrices=False)
-    total = float(np.sum((X - X.mean(axis=0)) ** 2))
-    energy = sv**2
-    # explained[j] = fraction explained by the first j + 1 components.
-    tail = np.concatenate([np.cumsum(energy[::-1])[::-1][1:], [0.0]])
-    explained = 1.0 - tail / total if total > 0 else np.ones_like(energy)
-    if explained_variance is not None:
-        if not 0.0 < explained_variance <= 1.0:
-            raise InputError(
-                f"explained_variance {explained_variance} must be in (0, 1]"
-            )
-        reach = np.nonzero(explained >= explained_variance - 1e-12)[0]
-        n = int(reach[0]) + 1 if reach.size else sv.size
-    else:
-        n = int(n_components) if n_components is not None else 4
-    if not 1 <= n <= sv.size:
-        raise InputError(
-            f"cannot take {n} principal components from a database of "
-            f"{len(database)} camera(s)"
-        )
-    return Vt[:n], float(explained[n - 1])
 
 
 def _check_finite(spectra: Spectra, what: str) -> None:
@@ -810,6 +725,12 @@ def estimate_camera_sensitivity(
     progress, should_stop
         Progress callback (fraction 0..1) and cancellation check.
 
+    A sensor that bends its responses (``c = x^(1 + gamma)``) shows it in the
+    chart's residuals: where :func:`~tunespec.core.excess.fit_linearity` finds it
+    (:data:`~tunespec.core.excess.LINEARITY_SIGNIFICANCE`), the calibration is
+    fitted again on the linearised responses and keeps ``gamma``
+    (``.excess.linearity_gamma``; each fit reports half of the progress).
+
     Returns
     -------
     SensitivityEstimate
@@ -840,6 +761,63 @@ def estimate_camera_sensitivity(
     >>> est.sensitivity.names
     ('R', 'G', 'B')
     """
+
+    def fit(resp: Responses, progress: ProgressFn | None) -> SensitivityEstimate:
+        return _estimate_once(
+            resp, illuminants, reflectances, method=method, database=database,
+            exclude=exclude, n_components=n_components,
+            explained_variance=explained_variance, fit_spd_shift=fit_spd_shift,
+            self_calibrate=self_calibrate, replicates=replicates,
+            progress=progress, should_stop=should_stop,
+        )  # fmt: skip
+
+    first = fit(responses, sub_progress(progress, 0.0, 0.5))
+    gamma = _significant_linearity(first, responses, illuminants, reflectances)
+    if gamma == 0.0:
+        report(progress, 1.0)
+        return first
+    again = fit(linearise(responses, gamma), sub_progress(progress, 0.5, 1.0))
+    assert again.excess is not None
+    return _with_side_meta(
+        replace(again, excess=replace(again.excess, linearity_gamma=gamma))
+    )
+
+
+def _significant_linearity(
+    cal: SensitivityEstimate,
+    responses: Responses,
+    illuminants: Spectra,
+    reflectances: Spectra,
+) -> float:
+    """The chart's non-linearity ``gamma`` (:func:`fit_linearity` at the fit's
+    residuals, :func:`_chart_residual_terms`) where it is significant
+    and plausible, else 0."""
+    if cal.excess is None or cal.excess.nonlinearity == 0.0:
+        return 0.0
+    problem = _prepare(responses, illuminants, reflectances)
+    measured, pred, noise = _chart_residual_terms(problem, cal)
+    gamma, se = fit_linearity(measured, pred, noise, cal.excess)
+    plausible = LINEARITY_GAMMA_MIN <= abs(gamma) < LINEARITY_GAMMA_MAX
+    return gamma if plausible and abs(gamma) >= LINEARITY_SIGNIFICANCE * se else 0.0
+
+
+def _estimate_once(
+    responses: Responses,
+    illuminants: Spectra,
+    reflectances: Spectra,
+    *,
+    method: str = "bayes",
+    database: Mapping[str, Spectra] | None = None,
+    exclude: str | Iterable[str] | None = None,
+    n_components: int = 4,
+    explained_variance: float | None = None,
+    fit_spd_shift: bool | None = None,
+    self_calibrate: bool | None = None,
+    replicates: int = REPLICATES,
+    progress: ProgressFn | None = None,
+    should_stop: StopFn | None = None,
+) -> SensitivityEstimate:
+    """One fit of :func:`estimate_camera_sensitivity` on ``responses`` as given."""
     fit_spd_shift, self_calibrate = _options(method, fit_spd_shift, self_calibrate)
     report(progress, 0.0)
     problem = _prepare(responses, illuminants, reflectances)
@@ -873,19 +851,31 @@ def estimate_camera_sensitivity(
 
 
 def _with_excess(cal: SensitivityEstimate, problem: _Problem) -> SensitivityEstimate:
-    """``cal`` with its excess variance (:func:`_excess_variance`) and the side
-    file's keys in its sensitivities' meta (the pipeline reads them there)."""
-    cal = replace(cal, excess=_excess_variance(problem, cal))
+    """``cal`` with its excess variance (:func:`fit_excess_variance` of
+    :func:`_chart_residual_terms`) and the side file's keys in its sensitivities'
+    meta."""
+    measured, pred, noise = _chart_residual_terms(problem, cal)
+    excess = fit_excess_variance(
+        measured, pred, noise, weight_variance=problem.var.reshape(pred.shape)
+    )
+    return _with_side_meta(replace(cal, excess=excess))
+
+
+def _with_side_meta(cal: SensitivityEstimate) -> SensitivityEstimate:
+    """``cal`` with the side file's keys in its sensitivities' meta (the pipeline
+    reads them there)."""
     s = cal.sensitivity
     sens = Spectra(s.wavelength_nm, s.values, s.names, cal.side_meta())
     return replace(cal, sensitivity=sens)
 
 
-def _excess_variance(problem: _Problem, cal: SensitivityEstimate) -> ExcessVariance:
-    """The chart's residuals beyond its known noise (:func:`fit_excess_variance`):
-    Eq. 1 with the fitted corrections against the responses, the known variance
-    the ROI noise (the flat-field residual is fitted there) and what the light's
-    reading noise does to Eq. 1 at the chart (the replicates' spread,
+def _chart_residual_terms(
+    problem: _Problem, cal: SensitivityEstimate
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The chart's responses, what the fit predicts for them (Eq. 1 with the fitted
+    corrections) and their known variance, (n_p, m) each: the ROI noise (the
+    flat-field residual is fitted from the residuals) and what the light's reading
+    noise does to Eq. 1 at the chart (the replicates' spread,
     :class:`~tunespec.core.readings.ReadingReplicates`): the estimate's budget
     carries that apart, as its ``readings`` term, and an excess fitted to it would
     count it twice."""
@@ -899,12 +889,7 @@ def _excess_variance(problem: _Problem, cal: SensitivityEstimate) -> ExcessVaria
             problem.readings, S, cal.corrections_for(problem.readings.names)
         )
         noise = noise + np.mean(np.einsum("kml,pl->kpm", dF, problem.R) ** 2, axis=0)
-    return fit_excess_variance(
-        problem.C.reshape(n_p, -1),
-        pred.reshape(n_p, -1),
-        noise,
-        weight_variance=problem.var.reshape(n_p, -1),
-    )
+    return problem.C.reshape(n_p, -1), pred.reshape(n_p, -1), noise
 
 
 def _check_solvable(problem: _Problem, method: str, db: dict[str, Spectra]) -> None:

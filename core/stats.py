@@ -311,7 +311,7 @@ def calibration_report(
     corrected = estimate.correct_illuminants(illuminants)
 
     def stats(patches: tuple[str, ...]) -> PredictionStats:
-        measured = responses.subset(list(patches))
+        measured = estimate.linearise(responses.subset(list(patches)))
         predicted = predict_responses(
             estimate.sensitivity,
             corrected,

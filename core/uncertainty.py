@@ -94,18 +94,20 @@ __all__ = [
 #: of the 95 % intervals of the reflectance at every wavelength and of L*, a*, b*
 #: closest to 95 %) under issue 23's conditions (10 nm readings with 0.1 % noise,
 #: stray light, cross-talk, non-linearity; one camera per family, the CAL1 model,
-#: 400:700:10) on four reflectance collections, seeds 0-2: on all four (1.10, 0.50),
-#: (1.10, 1.00), (1.15, 0.50); with each left out in turn kappa 1.05-1.20, gamma
-#: 0.25-2.0. It was (1.05, 0.50) while Eq. 5 took the prior set's covariance
-#: unscaled (:func:`~tunespec.core.wiener.with_target_priors`), and (1.15, 0.25)
-#: while a phosphor white's cleaning cut its tails.
+#: 400:700:10) on four reflectance collections, seeds 0-2: on all four (1.10, 0.75),
+#: (1.10, 0.75), (1.15, 0.75); with each left out in turn kappa 1.00-1.30, gamma
+#: 0.25-1.50. It was (1.10, 0.50) while the non-linearity was carried in the error
+#: bars instead of undone (:func:`~tunespec.core.excess.linearise`), (1.05, 0.50)
+#: while Eq. 5 took the prior set's covariance unscaled
+#: (:func:`~tunespec.core.wiener.with_target_priors`), and (1.15, 0.25) while a
+#: phosphor white's cleaning cut its tails.
 PRIOR_MISMATCH_SCALE = 1.10
 #: ``gamma``: at a wavelength where Eq. 1 sees nothing (:func:`blind_edge_factor`)
 #: the prior-mismatch term's standard deviation is ``1 + gamma`` times the rest's:
 #: there the estimate is the prior's extrapolation alone, and surfaces depart from
 #: the prior set's correlations (a paper's UV edge against the SG's) more than the
 #: fitted term can show. Chosen with :data:`PRIOR_MISMATCH_SCALE` (above).
-BLIND_EDGE_SCALE = 0.5
+BLIND_EDGE_SCALE = 0.75
 #: Visibility (the noise-weighted column norm of Eq. 1's ``F`` relative to its
 #: largest) below which a wavelength counts as blind, linearly: fully at 0.
 BLIND_VISIBILITY = 0.1

@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tunespec.app.pipeline.gonio import DARK, HDR_EXPOSURES, MIX, GonioPlan
+from tunespec.core.calibration import linearise_from_meta
 from tunespec.core.colorimetry import astm_e308_weights_d50, xyz_d50, xyz_to_lab_d50
 from tunespec.core.errors import InputError
 from tunespec.core.fusion import fuse_patch, fused_covariance, material_prior
@@ -298,7 +299,10 @@ def process_gonio(
     post: dict[int, NDArray[np.float64]] = {}
     for i in spectral_idx:
         d = data[i]
-        resp = d.responses.subset(illuminants=leds)
+        # the sensor's non-linearity undone as the calibration undid it
+        resp = linearise_from_meta(
+            d.responses.subset(illuminants=leds), sensitivity.meta
+        )
         est = wiener_reflectance(resp, d.illuminants, sensitivity, wprior, clip=False)
         # reflectance factors may exceed 1 near the specular peak: clip below only
         R[:, i], uR[:, i] = np.maximum(est.reflectance.values, 0.0), est.std

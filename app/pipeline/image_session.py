@@ -63,6 +63,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tunespec.core.errors import InputError
+from tunespec.core.excess import linearised
 from tunespec.core.image import (
     DEFAULT_LEVEL_BINS,
     DEFAULT_PHI_BINS,
@@ -658,6 +659,8 @@ def setup_estimation(
         flat_residual=flat_field_residual(excess),
     )  # fmt: skip
     bank.params["noise_source"] = noise.source
+    # the sensor's non-linearity, undone in every pixel as in the chart's responses
+    bank.params["linearity_gamma"] = 0.0 if excess is None else excess.linearity_gamma
     return bank
 
 
@@ -758,6 +761,9 @@ def estimate_block(
     m, r, cols = planes.shape
     c = _pixels_as_rows(planes.reshape(m, r * cols))
     del planes
+    gamma = float(bank.params.get("linearity_gamma", 0.0))
+    if gamma:
+        c = linearised(c, gamma)
     # placed as the cube's rows fall in its files: written there without a copy
     est = estimate_pixels(
         bank, c, phi.reshape(-1), clip=clip,
@@ -951,8 +957,9 @@ def systematic_table(
     )  # fmt: skip
     sensitivity = read_sensitivities(sensitivity_csv)
     L, S, _ = _corrected_for(job, sensitivity, meta, grid)
-    est = wiener_reflectance(resp, L, S, prior)
     calibration = Calibration.from_meta(sensitivity, meta)
+    resp = calibration.linearise(resp)
+    est = wiener_reflectance(resp, L, S, prior)
     unc = reflectance_uncertainty(est, resp, illuminants_of(job), calibration)
     bins = bank.bins_of(c.astype(np.float32), phi)
     y = unc.xyz[:, 1]

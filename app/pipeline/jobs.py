@@ -428,13 +428,14 @@ def predicted_table1(
     on one grid."""
     from tunespec.core.calibration import (
         correct_illuminants_from_meta,
+        linearise_from_meta,
         predict_responses,
     )
     from tunespec.core.stats import prediction_stats
 
     illum = correct_illuminants_from_meta(illuminants, meta)
     predicted = predict_responses(sensitivity, illum, chart)
-    return prediction_stats(responses.rgb, predicted.rgb)
+    return prediction_stats(linearise_from_meta(responses, meta).rgb, predicted.rgb)
 
 
 def sensitivity_methods() -> tuple[tuple[str, ...], str]:

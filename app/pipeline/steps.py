@@ -366,7 +366,7 @@ def table1_by_patch(
 
     skip = set(estimate.excluded_patches)
     patches = [p for p in responses.patches if p not in skip]
-    measured = responses.subset(patches)
+    measured = estimate.linearise(responses.subset(patches))
     predicted = predict_responses(
         estimate.sensitivity,
         estimate.correct_illuminants(illuminants),
@@ -515,6 +515,7 @@ def estimate_reflectance(
     noise_std, center_prior, clip
         :func:`~tunespec.core.wiener.wiener_reflectance`'s.
     """
+    from tunespec.core.calibration import linearise_from_meta
     from tunespec.core.plausibility import (
         Checks,
         check_calibration_grid,
@@ -524,6 +525,8 @@ def estimate_reflectance(
     from tunespec.core.uncertainty import wiener_with_uncertainty
 
     meta = sensitivity.meta if meta is None else meta
+    # the sensor's non-linearity, undone as the calibration undid it in the chart's
+    responses = linearise_from_meta(responses, meta)
     checks = checks if checks is not None else Checks()
     checks(check_calibration_grid, sensitivity.wavelength_nm, meta)
     illum_fine, sens_fine, _ = estimation_lighting(
