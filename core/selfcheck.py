@@ -293,6 +293,9 @@ class SelfCheck:
     large_systematic
         The systematic terms the calibration fitted above their limits
         (:func:`systematic_warnings`).
+    linearity_gamma
+        The sensor's non-linearity the calibration undid in every response (0: none,
+        :func:`~tunespec.core.excess.linearise`): said, not a finding by itself.
     warnings
         One line per finding; none means every check passed.
     """
@@ -302,6 +305,7 @@ class SelfCheck:
     meter_noise: Mapping[str, float] = field(default_factory=dict)
     implausible_leds: tuple[str, ...] = ()
     large_systematic: tuple[str, ...] = ()
+    linearity_gamma: float = 0.0
     warnings: tuple[str, ...] = ()
 
     @property
@@ -319,6 +323,7 @@ class SelfCheck:
             "meter_noise_fraction": {k: float(v) for k, v in self.meter_noise.items()},
             "implausible_leds": list(self.implausible_leds),
             "large_systematic_terms": list(self.large_systematic),
+            "linearity_gamma": self.linearity_gamma,
             "limits": {
                 "systematic_relative": SYSTEMATIC_LIMIT,
                 "nonlinearity": NONLINEARITY_LIMIT,
@@ -343,6 +348,11 @@ class SelfCheck:
                 f"{h.prediction.mean[3]:.4f} max {h.prediction.max[3]:.4f} "
                 f"(fitted {h.training.mean[3]:.4f} / {h.training.max[3]:.4f}); "
                 f"chi-square {h.chi_square.format_values()}"
+            )
+        if self.linearity_gamma:
+            lines.append(
+                "  the sensor's non-linearity, undone in every response: "
+                f"response^(1 + gamma), gamma {self.linearity_gamma:+.4f}"
             )
         if self.meter_noise:
             name, worst = max(self.meter_noise.items(), key=lambda kv: kv[1])
@@ -708,5 +718,8 @@ def self_check(
         meter_noise=noise,
         implausible_leds=tuple(dict.fromkeys(w.split(":")[0] for w in led_lines)),
         large_systematic=tuple(large),
+        linearity_gamma=(
+            0.0 if estimate.excess is None else estimate.excess.linearity_gamma
+        ),
         warnings=tuple(warnings),
     )

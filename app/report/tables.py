@@ -372,6 +372,16 @@ def _self_check_table(report: ReportData) -> _Table | None:
                 "over" if large else "ok",
             )
         )
+    gamma = float(checked.get("linearity_gamma", 0.0))
+    if gamma:
+        rows.append(
+            (
+                "Sensor non-linearity, undone in every response",
+                f"response^(1 + gamma), gamma {gamma:+.4f}",
+                "-",
+                "ok",
+            )
+        )
     noise = checked.get("meter_noise_fraction", {})
     if noise:
         name, worst = max(noise.items(), key=lambda kv: kv[1])

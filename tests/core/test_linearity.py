@@ -26,6 +26,7 @@ from tunespec.core.excess import (
     log_profile,
 )
 from tunespec.core.responses import Responses
+from tunespec.core.selfcheck import self_check
 from tunespec.core.sensitivity import estimate_camera_sensitivity
 from tunespec.core.simulate import NoiseModel, scale_to_exposure, simulate_responses
 from tunespec.core.spectra import CALIBRATION_GRID, Grid
@@ -124,6 +125,12 @@ def test_a_bent_sensor_is_found_linearised_and_estimated_better(
     back = Calibration.load(cal.save(tmp_path / "cal.json"))
     assert back.excess is not None
     assert back.excess.linearity_gamma == cal.excess.linearity_gamma
+    # the self-check says so, and the linearised residuals match the error model
+    checked = self_check(cal, bent_bench["chart"], illum, bent_bench["sg"])
+    assert checked.linearity_gamma == cal.excess.linearity_gamma
+    assert "undone in every response" in checked.format_text()
+    assert checked.as_dict()["linearity_gamma"] == cal.excess.linearity_gamma
+    assert checked.residuals.flagged == () and checked.passed, checked.warnings
     test = bent_bench["test"]
     via_meta = linearise_from_meta(test, back.sensitivity.meta)
     assert np.array_equal(via_meta.rgb, cal.linearise(test).rgb)
