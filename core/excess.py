@@ -33,11 +33,11 @@ A non-linearity is not random: one exponent ``gamma`` bends every response of th
 session alike. Where the chart's residuals show it (:func:`fit_linearity`, generalised
 least squares of the residuals on ``u`` under the other terms' covariance, at least
 :data:`LINEARITY_SIGNIFICANCE` standard errors and :data:`LINEARITY_GAMMA_MIN` from
-zero) the calibration is fitted
-again on the responses linearised, ``c^(1 / (1 + gamma))`` (:func:`linearise`), and every
-estimate linearises its responses the same way (:attr:`ExcessVariance.linearity_gamma`):
-on ``benchmarks/generalisation.py`` under issue 23's conditions (``signal^1.003``) the fit
-found gamma 0.0024-0.0033 +- 0.00015 and the mean CIEDE2000 fell by 0.005-0.015 on every
+zero) the calibration is fitted again on the responses linearised,
+``c^(1 / (1 + gamma))`` (:func:`linearise`), and every estimate linearises its
+responses the same way (:attr:`ExcessVariance.linearity_gamma`): on
+``benchmarks/generalisation.py`` under issue 23's conditions (``signal^1.003``) the fit
+found gamma 0.0024-0.0033 +- 0.00015 and the mean CIEDE2000 fell by 0.006-0.015 on every
 family (``docs/validation.md``). ``tau_n`` is then what the residuals show of it after.
 
 A channel that barely sees an LED shows what a model without cross-talk cannot
