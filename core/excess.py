@@ -202,6 +202,12 @@ class ExcessVariance:
         at :attr:`linearity_gamma`; themselves at 0)."""
         return linearise(responses, self.linearity_gamma)
 
+    def log_reference_for(self, m: int) -> NDArray[np.float64]:
+        """The chart's mean log response for ``m`` stacked responses: one per response
+        where the chart had ``m`` (``log_reference_by_response``), else their mean."""
+        by = self.log_reference_by_response
+        return np.asarray(by if len(by) == m else self.log_reference, dtype=np.float64)
+
     def covariance(
         self,
         rgb: NDArray[np.float64],
@@ -218,12 +224,7 @@ class ExcessVariance:
         if level is None:
             level = rgb.mean(axis=0)
         if log_reference is None:
-            by = self.log_reference_by_response
-            log_reference = (
-                np.asarray(by)
-                if len(by) == rgb.shape[1]
-                else np.asarray(self.log_reference)
-            )
+            log_reference = self.log_reference_for(rgb.shape[1])
         out = self.common_relative**2 * rgb[:, :, None] * rgb[:, None, :]
         u = log_profile(rgb, np.asarray(log_reference)[None])
         out += self.nonlinearity**2 * u[:, :, None] * u[:, None, :]
@@ -542,8 +543,7 @@ def fit_linearity(
     """
     c = np.asarray(predicted, dtype=np.float64)
     meas = np.asarray(measured, dtype=np.float64)
-    by = excess.log_reference_by_response
-    log_ref = np.asarray(by if len(by) == c.shape[1] else excess.log_reference)
+    log_ref = excess.log_reference_for(c.shape[1])
     u = log_profile(c, np.broadcast_to(log_ref, c.shape[1:])[None])
     V = replace(excess, nonlinearity=0.0).covariance(c, log_reference=log_ref)
     V += excess.flat_field_relative**2 * led_blocks(meas)

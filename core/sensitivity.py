@@ -727,10 +727,9 @@ def estimate_camera_sensitivity(
 
     A sensor that bends its responses (``c = x^(1 + gamma)``) shows it in the
     chart's residuals: where :func:`~tunespec.core.excess.fit_linearity` finds it
-    after a ``"bayes"`` fit
-    (:data:`~tunespec.core.excess.LINEARITY_SIGNIFICANCE`), the calibration is
-    fitted again on the linearised responses and keeps ``gamma``
-    (``.excess.linearity_gamma``; each fit reports half of the progress).
+    after a ``"bayes"`` fit, the calibration is fitted again on the linearised
+    responses and keeps ``gamma`` (``.excess.linearity_gamma``; each fit reports half
+    of the progress).
 
     Returns
     -------
@@ -763,33 +762,40 @@ def estimate_camera_sensitivity(
     ('R', 'G', 'B')
     """
 
-    def fit(resp: Responses, progress: ProgressFn | None) -> SensitivityEstimate:
+    fit_spd_shift, self_calibrate = _options(method, fit_spd_shift, self_calibrate)
+    report(progress, 0.0)
+    problem = _prepare(responses, illuminants, reflectances)
+    db = _database(database, exclude, problem.wavelength_nm, illuminants.step_nm)
+    _check_solvable(problem, method, db)
+
+    def fit(problem: _Problem, progress: ProgressFn | None) -> SensitivityEstimate:
         return _estimate_once(
-            resp, illuminants, reflectances, method=method, database=database,
-            exclude=exclude, n_components=n_components,
-            explained_variance=explained_variance, fit_spd_shift=fit_spd_shift,
-            self_calibrate=self_calibrate, replicates=replicates,
+            problem, db, method, fit_spd_shift=fit_spd_shift,
+            self_calibrate=self_calibrate, n_components=n_components,
+            explained_variance=explained_variance, replicates=replicates,
+            illuminant_names=tuple(responses.illuminants), exclude=exclude,
             progress=progress, should_stop=should_stop,
         )  # fmt: skip
 
-    first = fit(responses, sub_progress(progress, 0.0, 0.5))
-    gamma = _significant_linearity(first, responses, illuminants, reflectances)
+    first = fit(problem, sub_progress(progress, 0.0, 0.5))
+    gamma = _significant_linearity(first, problem)
     if gamma == 0.0:
         report(progress, 1.0)
         return first
-    again = fit(linearise(responses, gamma), sub_progress(progress, 0.5, 1.0))
-    assert again.excess is not None
+    # the same stimuli and database, the responses linearised
+    linear = _prepare(linearise(responses, gamma), illuminants, reflectances)
+    return _linearised(fit(linear, sub_progress(progress, 0.5, 1.0)), gamma)
+
+
+def _linearised(cal: SensitivityEstimate, gamma: float) -> SensitivityEstimate:
+    """``cal``, fitted to responses linearised at ``gamma``, keeping it."""
+    assert cal.excess is not None
     return _with_side_meta(
-        replace(again, excess=replace(again.excess, linearity_gamma=gamma))
+        replace(cal, excess=replace(cal.excess, linearity_gamma=gamma))
     )
 
 
-def _significant_linearity(
-    cal: SensitivityEstimate,
-    responses: Responses,
-    illuminants: Spectra,
-    reflectances: Spectra,
-) -> float:
+def _significant_linearity(cal: SensitivityEstimate, problem: _Problem) -> float:
     """The chart's non-linearity ``gamma`` (:func:`fit_linearity` at the fit's
     residuals, :func:`_chart_residual_terms`) where it is significant and plausible,
     else 0. Only ``"bayes"``, whose residuals its error model explains: the paper's
@@ -798,7 +804,6 @@ def _significant_linearity(
     paper as published."""
     if cal.method != "bayes" or cal.excess is None or cal.excess.nonlinearity == 0.0:
         return 0.0
-    problem = _prepare(responses, illuminants, reflectances)
     measured, pred, noise = _chart_residual_terms(problem, cal)
     gamma, se = fit_linearity(measured, pred, noise, cal.excess)
     plausible = LINEARITY_GAMMA_MIN <= abs(gamma) < LINEARITY_GAMMA_MAX
@@ -806,31 +811,27 @@ def _significant_linearity(
 
 
 def _estimate_once(
-    responses: Responses,
-    illuminants: Spectra,
-    reflectances: Spectra,
+    problem: _Problem,
+    db: dict[str, Spectra],
+    method: str,
     *,
-    method: str = "bayes",
-    database: Mapping[str, Spectra] | None = None,
-    exclude: str | Iterable[str] | None = None,
-    n_components: int = 4,
-    explained_variance: float | None = None,
-    fit_spd_shift: bool | None = None,
-    self_calibrate: bool | None = None,
-    replicates: int = REPLICATES,
-    progress: ProgressFn | None = None,
-    should_stop: StopFn | None = None,
+    fit_spd_shift: bool,
+    self_calibrate: bool,
+    n_components: int,
+    explained_variance: float | None,
+    replicates: int,
+    illuminant_names: tuple[str, ...],
+    exclude: str | Iterable[str] | None,
+    progress: ProgressFn | None,
+    should_stop: StopFn | None,
 ) -> SensitivityEstimate:
-    """One fit of :func:`estimate_camera_sensitivity` on ``responses`` as given."""
-    fit_spd_shift, self_calibrate = _options(method, fit_spd_shift, self_calibrate)
+    """One fit of :func:`estimate_camera_sensitivity` (its options resolved) to the
+    prepared ``problem`` with the camera database ``db``."""
     report(progress, 0.0)
-    problem = _prepare(responses, illuminants, reflectances)
-    db = _database(database, exclude, problem.wavelength_nm, illuminants.step_nm)
-    _check_solvable(problem, method, db)
     if method == "bayes":
         S, params, correction, covariance, readings = _estimate_sensitivity_bayes(
             problem, db, fit_shift=fit_spd_shift, self_calibrate=self_calibrate,
-            illuminant_names=tuple(responses.illuminants), replicates=replicates,
+            illuminant_names=illuminant_names, replicates=replicates,
             should_stop=should_stop,
         )  # fmt: skip
         shift_nm = float(correction.common_shift_nm)
