@@ -406,16 +406,16 @@ def estimate_tests(
     est: SensitivityEstimate, resp_t: Responses, used: Spectra, reported: Spectra, setup
 ):
     """The product's estimate chain for the test reflectances: Eq. 1 integrated on
-    the calibration's grid, the reflectance on EST (as `tunespec estimate` does),
-    Eq. 5 with the error model as K_e where the calibration carries one, and its
-    uncertainty. ``used``: the spectra Eq. 1 takes (corrected as the calibration
+    the calibration's grid, the reflectance solved for wherever it integrates and
+    reported on EST (as `tunespec estimate` does), Eq. 5 with the error model as
+    K_e where the calibration carries one, and its uncertainty. ``used``: the spectra Eq. 1 takes (corrected as the calibration
     found); ``reported``: as the light reported them. The responses are linearised
     as the calibration's chart was (``est.linearise``)."""
     illum, sens, _ = on_integration_grid(
         est.correct_illuminants(used), est.sensitivity, EST
     )
     return wiener_with_uncertainty(
-        est.linearise(resp_t), illum, sens, setup[3], reported, est
+        est.linearise(resp_t), illum, sens, setup[3], reported, est, grid=EST
     )
 
 
@@ -515,7 +515,7 @@ def load_setup():
         gd.chart(),
         gd.test_reflectances(),
         load_colorchecker_sg(WORK),
-        load_colorchecker_sg(EST),
+        load_colorchecker_sg(),  # the prior, reported on EST
         load_camera_database(WORK),
         gd.test_reflectances().resample(EST),
     )

@@ -408,11 +408,14 @@ class WienerBank:
     Parameters
     ----------
     wavelength_nm : (n_wl,)
-    F : (m, n_wl)
-        Lighting matrix of Eq. 5 (``m = 3 n_i``, illuminant-major).
-    mean : (n_wl,)
+        The samples the pixels' spectra are reported on.
+    F : (m, n_s)
+        Lighting matrix of Eq. 5 (``m = 3 n_i``, illuminant-major), on the samples
+        Eq. 5 solves for (:func:`tunespec.core.wiener.support_grid`: ``n_s >=
+        n_wl``, the reported ones among them).
+    mean : (n_s,)
         Prior mean.
-    K : (n_wl, n_wl)
+    K : (n_s, n_s)
         Prior covariance.
     white : (m,)
         ``w``: the white board's Eq. 2 normaliser of each response (full scale).
@@ -434,6 +437,8 @@ class WienerBank:
         ``T^T P_b T`` with the ASTM E308 D50 weights ``T`` (XYZ on 0..100).
     T : (n_wl, 3)
         The D50 weights, ``XYZ = r @ T``.
+    report : (n_wl,) int or None
+        Where the reported samples lie among Eq. 5's (``None``: they are the same).
     """
 
     wavelength_nm: NDArray[np.float64]
@@ -452,6 +457,18 @@ class WienerBank:
     xyz_cov: NDArray[np.float64]
     T: NDArray[np.float64]
     params: dict[str, Any] = field(default_factory=dict)
+    report: NDArray[np.intp] | None = None
+
+    def reported(
+        self, values: NDArray[np.float64], *, covariance: bool = False
+    ) -> NDArray[np.float64]:
+        """Spectra (..., n_s), or ``covariance`` matrices (..., n_s, n_s), of Eq.
+        5's samples on the reported ones."""
+        if self.report is None:
+            return values
+        if covariance:
+            values = values[..., self.report, :]
+        return values[..., self.report]
 
     @property
     def n_phi(self) -> int:
@@ -529,6 +546,7 @@ def build_wiener_bank(
     n_levels: int = DEFAULT_LEVEL_BINS,
     n_phi: int = DEFAULT_PHI_BINS,
     flat_residual: float | None = None,
+    report_nm: ArrayLike | None = None,
 ) -> WienerBank:
     """The Wiener matrices (Eq. 5) of every (level, flat-field factor) bin.
 
@@ -545,7 +563,7 @@ def build_wiener_bank(
     noise
         Photon and read noise of the dark-subtracted planes.
     wavelength_nm : (n_wl,)
-        Equidistant grid of ``F`` and ``prior`` (for the D50 weights).
+        Equidistant grid of ``F`` and ``prior``: the samples Eq. 5 solves for.
     phi_range
         Smallest and largest flat-field factor in the image.
     level_max
@@ -556,6 +574,10 @@ def build_wiener_bank(
     flat_residual
         Relative flat-field residual (default
         :data:`tunespec.core.uncertainty.FLAT_FIELD_RESIDUAL`).
+    report_nm
+        The samples the pixels are reported on, some of ``wavelength_nm``
+        (default: all; :func:`tunespec.core.wiener.support_grid`): the matrices, the
+        posteriors and the D50 weights are theirs.
 
     Returns
     -------
@@ -585,10 +607,13 @@ def build_wiener_bank(
     """
     from tunespec.core.colorimetry import astm_e308_weights_d50
     from tunespec.core.uncertainty import FLAT_FIELD_RESIDUAL
-    from tunespec.core.wiener import _prior_moments
+    from tunespec.core.wiener import _prior_moments, sample_indices
 
     F, P, w, wl = _bank_inputs(F, prior, white, wavelength_nm)
-    m, n_wl = F.shape
+    m = F.shape[0]
+    keep = sample_indices(wl, wl if report_nm is None else np.asarray(report_nm))
+    report = None if keep.size == wl.size else keep
+    n_wl = keep.size
     flat_residual = FLAT_FIELD_RESIDUAL if flat_residual is None else flat_residual
     mean, K = _prior_moments(P, True)
     level_edges, phi_edges = _bank_edges(phi_range, level_max, n_levels, n_phi)
@@ -599,26 +624,28 @@ def build_wiener_bank(
     scale = float(np.trace(G)) / m
     if not (np.isfinite(scale) and scale > 0):
         raise SingularSystemError("F K F^T is zero: dark illuminants or no prior")
-    T = astm_e308_weights_d50(wl)
+    T = astm_e308_weights_d50(wl[keep])
     bank = WienerBank(
-        wl, F, mean, K, w, channel, noise, float(flat_residual), level_edges,
+        wl[keep], F, mean, K, w, channel, noise, float(flat_residual), level_edges,
         phi_edges, np.empty((0, m, n_wl), np.float32), np.empty((0, n_wl), np.float32),
-        np.empty(0), np.empty((0, 3, 3)), T,
+        np.empty(0), np.empty((0, 3, 3)), T, report=report,
     )  # fmt: skip
     rho, phi = bank.centres()
     c_model = rho[:, None] * w[None, :]  # (n_bins, m): c ~= rho w
     Ke = np.maximum(bank.noise_variance(c_model, phi), RIDGE_RELATIVE * scale)
     sol, P_post = _bin_solutions(G, FK, K, Ke)
+    P_post = bank.reported(P_post, covariance=True)
     W = sol.transpose(0, 2, 1)  # K F^T A^-1 (A, K symmetric)
     var_rms = np.maximum(np.einsum("bll->b", P_post) / n_wl, 0.0)
     xyz_cov = T.T[None] @ P_post @ T[None]
-    offset = mean[None] - W @ (F @ mean)
+    offset = bank.reported(mean[None] - W @ (F @ mean))
     return WienerBank(
-        wl, F, mean, K, w, channel, noise, float(flat_residual), level_edges,
-        phi_edges, np.ascontiguousarray(sol, dtype=np.float32),
+        wl[keep], F, mean, K, w, channel, noise, float(flat_residual), level_edges,
+        phi_edges, np.ascontiguousarray(bank.reported(sol), dtype=np.float32),
         offset.astype(np.float32), var_rms, xyz_cov,
         T, {"n_levels": n_levels, "n_phi": int(phi_edges.size - 1),
             "level_max": float(level_edges[-1]), "ridge": RIDGE_RELATIVE * scale},
+        report,
     )  # fmt: skip
 
 
@@ -760,11 +787,10 @@ def estimate_pixels(
             f"pixels: responses {c.shape} and phi {phi.shape} do not fit the "
             f"bank's {bank.F.shape[0]} responses"
         )
-    if out is not None and (
-        out.shape != (n, bank.mean.size) or out.dtype != np.float32
-    ):
-        raise InputError(f"pixels: output {out.shape} is not ({n}, {bank.mean.size})")
-    est = np.empty((n, bank.mean.size), dtype=np.float32) if out is None else out
+    n_wl = bank.wavelength_nm.size
+    if out is not None and (out.shape != (n, n_wl) or out.dtype != np.float32):
+        raise InputError(f"pixels: output {out.shape} is not ({n}, {n_wl})")
+    est = np.empty((n, n_wl), dtype=np.float32) if out is None else out
     if exact:
         sat = np.isnan(c @ bank.level_weights)
         bins = np.full(n, -1, dtype=np.int64)
@@ -777,7 +803,8 @@ def estimate_pixels(
         rest = np.flatnonzero(sat)
         bins[rest] = -1
     if rest.size:
-        exact_rows = wiener_pixels_exact(bank, c[rest], phi[rest]).astype(np.float32)
+        exact_rows = bank.reported(wiener_pixels_exact(bank, c[rest], phi[rest]))
+        exact_rows = exact_rows.astype(np.float32)
         est[rest] = np.clip(exact_rows, 0.0, 1.0) if clip else exact_rows
     xyz = est @ bank.T.astype(np.float32)
     lab = lab_from_xyz(xyz.T).T
@@ -805,7 +832,7 @@ def _bin_variances(
     var_rms = bank.var_rms[safe]
     var_y = bank.xyz_cov[safe, 1, 1]
     if rest.size:
-        P = _posterior_exact(bank, c[rest], phi[rest])
+        P = bank.reported(_posterior_exact(bank, c[rest], phi[rest]), covariance=True)
         var_rms[rest] = np.einsum("pll->p", P) / P.shape[1]
         t = bank.T[:, 1]
         var_y[rest] = np.einsum("l,plk,k->p", t, P, t)
@@ -862,7 +889,8 @@ def wiener_pixels_exact(
 
     Returns
     -------
-    (n, n_wl) float64
+    (n, n_s) float64
+        On Eq. 5's samples (:meth:`WienerBank.reported` gives the reported ones).
     """
     c64, var, FK, G = _exact_system(bank, c, phi)
     n = c64.shape[0]
@@ -878,7 +906,7 @@ def wiener_pixels_exact(
 def _posterior_exact(
     bank: WienerBank, c: NDArray[np.floating], phi: NDArray[np.floating]
 ) -> NDArray[np.float64]:
-    """Posterior covariances (n, n_wl, n_wl) of exactly solved pixels."""
+    """Posterior covariances (n, n_s, n_s) of exactly solved pixels."""
     _, var, FK, G = _exact_system(bank, c, phi)
     n = var.shape[0]
     n_wl = bank.K.shape[0]

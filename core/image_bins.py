@@ -24,7 +24,6 @@ class BankArrays(Protocol):
     """What the stage reads of a :class:`tunespec.core.image.WienerBank` (this module
     does not import it: the images' module imports this one)."""
 
-    mean: NDArray[np.float64]
     Wt: NDArray[np.float32]
     offset: NDArray[np.float32]
 
@@ -132,7 +131,7 @@ def _apply_tile(
     pixel order (``out``) while they are cached."""
     n, m = c.shape
     rows = scratch("bin_rows", (min(APPLY_ROWS, n), m))
-    ordered = scratch("sorted_r", (n, bank.mean.size))
+    ordered = scratch("sorted_r", (n, bank.offset.shape[1]))
     order, runs = _bin_runs(keys, bank.Wt.shape[0])
     # every result starts as its bin's offset: one call for the tile
     bank.offset.take(keys[order], axis=0, out=ordered, mode="clip")
@@ -156,7 +155,7 @@ def _apply_in_order(
     follow the image), sorted together: each run's results straight into their
     pixels' rows of ``out``."""
     rows = scratch("bin_rows", (min(APPLY_ROWS, c.shape[0]), c.shape[1]))
-    results = scratch("bin_results", (rows.shape[0], bank.mean.size))
+    results = scratch("bin_results", (rows.shape[0], bank.offset.shape[1]))
     order, runs = _bin_runs(keys, bank.Wt.shape[0])
     for b, lo, hi in runs:
         idx, res = order[lo:hi], results[: hi - lo]

@@ -64,7 +64,9 @@ from tunespec.core.wiener import (
     WienerEstimate,
     checked_noise_covariance,
     prior_gram,
+    prior_on_support,
     reflectance_basis,
+    sample_indices,
     solve_with_noise,
     wiener_reflectance,
     with_target_priors,
@@ -614,24 +616,25 @@ def reflectance_uncertainty(
     Returns
     -------
     ReflectanceUncertainty
+        On ``wiener``'s samples, formed on its ``support`` where it has one.
     """
-    refl = wiener.reflectance
+    whole = wiener.support or wiener
+    refl = whole.reflectance
     wl = refl.wavelength_nm
+    report = sample_indices(wl, wiener.reflectance.wavelength_nm)
     # F and the prior exactly as the estimate used them (integrated_lighting_matrix)
-    F, K = wiener.lighting, wiener.prior_covariance
+    F, K = whole.lighting, whole.prior_covariance
     assert F is not None and K is not None
     m_rows = F.shape[0]
     n_p = len(responses.patches)
-    diag, used = wiener.noise_variance.reshape(n_p, m_rows), wiener.k_e
+    diag, used = whole.noise_variance.reshape(n_p, m_rows), whole.k_e
     rgb = responses.rgb.reshape(n_p, m_rows)
     jacobians = _f_jacobians(calibration, responses, illuminants)
     terms = _response_error_terms(responses, illuminants, calibration, refl, jacobians)
     noise_all = sum(terms.values())
     # each target's prior as the estimate used it, or (an estimate with the prior
     # set's for all) fitted here for the mismatch term alone
-    priors = wiener.target_priors or fit_target_priors(
-        wiener, responses, rgb, noise_all
-    )
+    priors = whole.target_priors or fit_target_priors(whole, responses, rgb, noise_all)
     n = wl.size
     kappa2 = float(PRIOR_MISMATCH_SCALE if prior_scale is None else prior_scale) ** 2
     cov, cov_prior = np.empty((n_p, n, n)), np.empty((n_p, n, n))
@@ -639,14 +642,15 @@ def reflectance_uncertainty(
     # each term's share of every reflectance variance, and its XYZ covariance
     term_var = {t: np.empty((n_p, n)) for t in terms}
     term_xyz = {t: np.empty((n_p, 3, 3)) for t in terms}
-    T = astm_e308_weights_d50(wl)  # (n, 3), XYZ = r @ T
-    moves = _MovesOfF(wiener, responses, jacobians)
+    T = np.zeros((n, 3))  # XYZ = r @ T: the colour of the reported samples
+    T[report] = astm_e308_weights_d50(wl[report])
+    moves = _MovesOfF(whole, responses, jacobians)
     for lo in range(0, n_p, _CHUNK):
         hi = min(lo + _CHUNK, n_p)
         rows = slice(lo, hi)
         Kp = priors.covariance(K, rows)
         # W' = A^-1 F K with A = F K F' + K_e and K as the estimate used them
-        Ku = K if wiener.target_priors is None else priors.scaled(K, rows)
+        Ku = K if whole.target_priors is None else priors.scaled(K, rows)
         FK, G = prior_gram(F, Ku)
         W = solve_with_noise(G, used[rows], FK).transpose(0, 2, 1)
         IWF = np.eye(n) - W @ F
@@ -670,6 +674,7 @@ def reflectance_uncertainty(
     lab_prior_var = np.diagonal(lab_cov_prior, axis1=1, axis2=2).copy()
     budget = {"prior mismatch": (prior_var, lab_prior_var)}
     budget |= _budget_terms(xyz, term_var, term_xyz)
+    cov, budget = _reported(report, cov, budget)
     # A reflectance factor lies in [0, 1] (as the clipped estimate does), so its
     # standard deviation cannot exceed 0.5 (Popoviciu's inequality); the linear
     # model can claim more where the LEDs see nothing.
@@ -684,12 +689,25 @@ def reflectance_uncertainty(
         lab_covariance=lab_cov,
         generic_sigma=priors.sigma,
         generic_length_nm=priors.length_nm,
-        prior_part_variance=prior_var,
+        prior_part_variance=budget["prior mismatch"][0],
         lab_prior_part_variance=lab_prior_var,
         budget=budget,
         chi2_per_response=priors.chi2_per_response,
-        misfit_by_light=_misfit_by_light(wiener, responses, rgb, noise_all),
+        misfit_by_light=_misfit_by_light(whole, responses, rgb, noise_all),
     )
+
+
+def _reported(
+    report: NDArray[np.intp],
+    cov: NDArray[np.float64],
+    budget: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]],
+) -> tuple[NDArray[np.float64], dict[str, tuple[NDArray[np.float64], ...]]]:
+    """The covariances and the budget's reflectance variances on the reported
+    samples ``report`` of Eq. 5's (all of them: as they are)."""
+    if report.size == cov.shape[1]:
+        return cov, budget
+    cut = {t: (r[:, report], lab) for t, (r, lab) in budget.items()}
+    return cov[:, report][:, :, report], cut
 
 
 def _misfit_by_light(
@@ -719,6 +737,7 @@ def wiener_with_uncertainty(
     noise_std: float | None = None,
     center_prior: bool = True,
     clip: bool = True,
+    grid: Grid | None = None,
 ) -> tuple[WienerEstimate, ReflectanceUncertainty | None]:
     """Eq. 5 with the responses' whole error model as ``K_e``, and its uncertainty.
 
@@ -742,10 +761,17 @@ def wiener_with_uncertainty(
     level for all (``noise_std``) the first two steps are Eq. 5-6 as the paper has
     it.
 
+    With a reporting ``grid`` the reflectance is solved for on
+    :func:`~tunespec.core.wiener.support_grid`'s samples (the whole range the light
+    covers, where the prior is known) and reported on ``grid``'s, its colour theirs.
+
     Parameters
     ----------
-    responses, prior, noise_std, center_prior, clip
+    responses, noise_std, center_prior, clip
         As :func:`~tunespec.core.wiener.wiener_reflectance` takes them.
+    prior
+        The prior's reflectances: on the estimation grid (without ``grid``), or on
+        any grid that covers it (resampled to its support here).
     illuminants_fine, sensitivity_fine
         Eq. 1's illuminants (corrected as the calibration found) and sensitivities
         on the integration grid (:func:`~tunespec.core.wiener.on_integration_grid`).
@@ -754,17 +780,27 @@ def wiener_with_uncertainty(
         :func:`reflectance_uncertainty` takes them.
     calibration
         The sensitivity estimate (None: no uncertainty).
+    grid
+        Where the reflectance is reported (default: the prior's grid, solved for
+        alone).
 
     Returns
     -------
     (WienerEstimate, ReflectanceUncertainty or None)
+        On ``grid`` (:meth:`~tunespec.core.wiener.WienerEstimate.restricted`).
     """
     kw = {"noise_std": noise_std, "center_prior": center_prior, "clip": clip}
+    if grid is not None:
+        prior = prior_on_support(prior, grid, illuminants_fine.wavelength_nm)
+
+    def reported(estimate: WienerEstimate) -> WienerEstimate:
+        return estimate if grid is None else estimate.restricted(grid)
+
     first = wiener_reflectance(
         responses, illuminants_fine, sensitivity_fine, prior, **kw
     )
     if calibration is None or calibration.covariance is None:
-        return first, None
+        return reported(first), None
     est = first
     if noise_std is None and responses.rgb_std is not None:
         # the readings' term enters the uncertainty only: a sample covariance of a
@@ -786,8 +822,10 @@ def wiener_with_uncertainty(
     )  # fmt: skip
     n_p = len(responses.patches)
     rgb = responses.rgb.reshape(n_p, -1)
-    est = with_target_priors(
-        est, responses, fit_target_priors(est, responses, rgb, noise_all)
+    est = reported(
+        with_target_priors(
+            est, responses, fit_target_priors(est, responses, rgb, noise_all)
+        )
     )
     return est, reflectance_uncertainty(est, responses, illuminants, calibration)
 

@@ -54,8 +54,11 @@ __all__ = [
     "integration_grid",
     "on_integration_grid",
     "prior_gram",
+    "prior_on_support",
     "reflectance_basis",
+    "sample_indices",
     "solve_with_noise",
+    "support_grid",
     "wiener_reflectance",
     "with_target_priors",
 ]
@@ -149,6 +152,11 @@ class WienerEstimate:
     target_priors : TargetPriors or None
         Each target's own prior where Eq. 5 used one (:func:`with_target_priors`),
         else None (``prior_covariance`` for all).
+    support : WienerEstimate or None
+        Where this estimate is the part of a wider one on the samples it is reported
+        on (:meth:`restricted`): the estimate on every sample Eq. 5 solved for
+        (:func:`support_grid`); the other fields are its rows and columns of those
+        samples. None: Eq. 5 solved for these samples alone.
     """
 
     reflectance: Spectra
@@ -163,6 +171,39 @@ class WienerEstimate:
     prior_covariance: NDArray[np.float64] | None = None
     noise_covariance: NDArray[np.float64] | None = None
     target_priors: TargetPriors | None = None
+    support: WienerEstimate | None = None
+
+    def restricted(self, grid: Grid) -> WienerEstimate:
+        """This estimate on the samples of ``grid`` (its own, or some of them: the
+        reported range of :func:`support_grid`'s samples), the whole kept as
+        ``support``. The clipping report counts the samples kept (a clipped sample
+        is at 0 or 1 exactly)."""
+        wl = self.reflectance.wavelength_nm
+        keep = sample_indices(wl, grid.wavelength_nm)
+        if keep.size == wl.size:
+            return self
+        refl = self.reflectance
+        values = refl.values[:, keep]
+        out = (values <= 0.0) | (values >= 1.0)
+        if not self.params.get("clip", True):
+            out[:] = False
+        F, K, mean, tp = (
+            self.lighting, self.prior_covariance, self.prior_mean, self.target_priors,
+        )  # fmt: skip
+        return replace(
+            self,
+            reflectance=Spectra(wl[keep], values, refl.names, refl.meta),
+            clipped=tuple(refl.names[i] for i in np.flatnonzero(out.any(axis=1))),
+            n_clipped_samples=int(np.count_nonzero(out)),
+            variance=self.variance[:, keep],
+            lighting=None if F is None else F[:, keep],
+            prior_mean=None if mean is None else mean[keep],
+            prior_covariance=None if K is None else K[np.ix_(keep, keep)],
+            target_priors=None
+            if tp is None
+            else replace(tp, generic=tp.generic[np.ix_(keep, keep)]),
+            support=self,
+        )
 
     @property
     def k_e(self) -> NDArray[np.float64]:
@@ -485,8 +526,9 @@ def integration_grid(
     10 nm estimation grid cannot), an LED 20 nm wide is not integrated on a few
     samples when the sensitivities come coarser (the demo's calibration as rawtoaces
     JSON at 5 nm: Table 2's mean dE00 0.070 integrated at 5 nm, 0.061 at 2 nm, 0.029
-    from the 2 nm CSV), and light beyond the estimation range still counts (with the
-    reflectance held at its end value, see :func:`integrated_lighting_matrix`).
+    from the 2 nm CSV), and light beyond the estimation range still counts (the
+    reflectance solved for there where the prior reaches, :func:`support_grid`,
+    else held at its end value, :func:`reflectance_basis`).
     """
     lo, hi = float(sensitivity.wavelength_nm[0]), float(sensitivity.wavelength_nm[-1])
     if illuminants is not None:
@@ -496,6 +538,61 @@ def integration_grid(
     step = min(sensitivity.step_nm, estimate.step_nm, CALIBRATION_MAX_STEP_NM)
     n = max(int(np.floor((hi - lo) / step + 1e-6)), 1)
     return Grid(lo, lo + n * step, step)
+
+
+def support_grid(
+    report: Grid, integration_nm: NDArray[np.float64], prior_nm: NDArray[np.float64]
+) -> Grid:
+    """The samples Eq. 5 solves for to report a reflectance on ``report``: its step,
+    extended by whole steps below and above it as far as Eq. 1 integrates
+    (``integration_nm``, :func:`integration_grid`) and the prior is known
+    (``prior_nm``).
+
+    The light a camera sees beyond a reported range still enters its responses.
+    With the reflectance held at the range's end value there
+    (:func:`reflectance_basis`), a surface that rises past 700 nm (foliage, a red
+    paint) misfit a deep-red LED with half its light above 700 nm by 13 standard
+    deviations on a camera without an IR cut, and the estimate on the range
+    followed that misfit (``benchmarks/generalisation.py`` at ``--estimate-grid
+    400:700:10``: docs/validation.md, "The reflectance beyond the reported range").
+    Solved on the whole range the light covers and reported on ``report``
+    (:meth:`WienerEstimate.restricted`), the estimate and its uncertainty count it.
+
+    Examples
+    --------
+    >>> str(support_grid(Grid(400, 700, 10), np.arange(380.0, 731.0, 2), np.arange(380.0, 731.0)))
+    '380:730:10'
+    >>> str(support_grid(Grid(400, 700, 10), np.arange(380.0, 731.0, 2), np.arange(400.0, 701.0)))
+    '400:700:10'
+    """
+    step = report.step_nm
+    lo = max(float(integration_nm[0]), float(prior_nm[0]))
+    hi = min(float(integration_nm[-1]), float(prior_nm[-1]))
+    below = max(int(np.floor((report.start_nm - lo) / step + 1e-6)), 0)
+    above = max(int(np.floor((hi - report.end_nm) / step + 1e-6)), 0)
+    return Grid(report.start_nm - below * step, report.end_nm + above * step, step)
+
+
+def prior_on_support(
+    prior: Spectra, report: Grid, integration_nm: NDArray[np.float64]
+) -> Spectra:
+    """``prior`` on the samples Eq. 5 solves for to report on ``report``
+    (:func:`support_grid`)."""
+    support = support_grid(report, integration_nm, prior.wavelength_nm)
+    return prior.resample(support, source=prior.meta.get("source"))
+
+
+def sample_indices(
+    wl: NDArray[np.float64], samples_nm: NDArray[np.float64]
+) -> NDArray[np.intp]:
+    """The indices in ``wl`` of ``samples_nm`` (each of them one of its samples)."""
+    idx = np.clip(np.searchsorted(wl, samples_nm - _WL_TOL_NM), 0, wl.size - 1)
+    if not np.allclose(wl[idx], samples_nm, rtol=0, atol=_WL_TOL_NM):
+        raise InputError(
+            f"the samples {samples_nm[0]:g}-{samples_nm[-1]:g} nm are not among the "
+            f"estimate's ({wl[0]:g}-{wl[-1]:g} nm)"
+        )
+    return idx
 
 
 def on_integration_grid(

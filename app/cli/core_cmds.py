@@ -514,16 +514,9 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         )
         out.say(f"standard uncertainties written to {u_path} and {lab_path}")
         files.update({"uncertainty": str(u_path), "colorimetry": str(lab_path)})
-    doc: dict[str, Any] = {
-        "grid": str(grid),
-        "sensitivities": str(args.sensitivities),
-        **files,
-    }
-    if args.no_corrections:
-        doc["corrections"] = "none (--no-corrections)"
-    if checks.overridden:
-        doc["forced"] = list(checks.overridden)
-    _write_json(_meta_path(args.output), doc)
+    # Eq. 5 solved on the whole range Eq. 1 integrates (core.wiener.support_grid)
+    solved = grid if est.support is None else est.support.reflectance.grid
+    _write_estimate_meta(args, grid, solved, files, checks.overridden)
     if est.clipped:
         out.warn(
             f"clipped to [0, 1]: {est.n_clipped_samples} sample(s) in "
@@ -539,7 +532,14 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         misfit := pl.inconsistent_patches(chi2, est.reflectance.names)
     ):
         out.warn(misfit)
-    out.say(f"{len(est.reflectance)} reflectances written to {args.output}")
+    out.say(
+        f"{len(est.reflectance)} reflectances written to {args.output}"
+        + (
+            ""
+            if solved == grid
+            else f" (solved for on {solved} nm, where Eq. 1 reaches)"
+        )
+    )
     out.summary(
         {
             "grid": str(grid),
@@ -551,6 +551,27 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         | ({} if chi2 is None else {"chi2_per_response": np.round(chi2, 3).tolist()})
     )
     return 0
+
+
+def _write_estimate_meta(
+    args: argparse.Namespace,
+    grid: Grid,
+    solved: Grid,
+    files: dict[str, str],
+    forced: list[str],
+) -> None:
+    """The estimate's side file: the grid reported, the one Eq. 5 solved on."""
+    doc: dict[str, Any] = {
+        "grid": str(grid),
+        "solved_on": str(solved),
+        "sensitivities": str(args.sensitivities),
+        **files,
+    }
+    if args.no_corrections:
+        doc["corrections"] = "none (--no-corrections)"
+    if forced:
+        doc["forced"] = list(forced)
+    _write_json(_meta_path(args.output), doc)
 
 
 def _corrections(args: argparse.Namespace, out: Console) -> dict[str, Any]:

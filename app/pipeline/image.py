@@ -135,7 +135,8 @@ class _Calibration:
 
 def _load_calibration(sensitivities: str | PathLike[str], grid: Grid) -> _Calibration:
     """Sensitivities (on their own grid: Eq. 1 is integrated there, as ``tunespec
-    estimate`` does), their side file and the prior on ``grid``, read once."""
+    estimate`` does), their side file and the prior (on its own range: Eq. 5 solves
+    for the reflectance wherever the light reaches), read once."""
     from tunespec.core.calibration import calibrated_sensitivities
     from tunespec.core.datasets import load_colorchecker_sg
     from tunespec.core.io.session import sha256_file
@@ -145,7 +146,7 @@ def _load_calibration(sensitivities: str | PathLike[str], grid: Grid) -> _Calibr
     sens, meta = calibrated_sensitivities(path)
     check_calibration_grid(sens.wavelength_nm, meta)
     return _Calibration(
-        str(path.resolve()), sha256_file(path), sens, meta, load_colorchecker_sg(grid),
+        str(path.resolve()), sha256_file(path), sens, meta, load_colorchecker_sg(),
         grid,
     )  # fmt: skip
 

@@ -610,7 +610,8 @@ def setup_estimation(
         its per-LED corrections (or common shift) are applied to the measured SPDs
         as ``tunespec estimate`` does (:func:`lighting_for`).
     prior
-        Prior reflectances on ``grid``, the estimation grid.
+        Prior reflectances, on ``grid`` or reaching beyond it: Eq. 5 is solved on
+        the samples of :func:`_support` and the pixels reported on ``grid``.
     noise
         The sensor's noise model, or its figures (the session's averaged darks
         complete the model); default: fitted to the white frames
@@ -640,7 +641,8 @@ def setup_estimation(
             np.concatenate([r.ptc_level for r in results], axis=1),
             np.concatenate([r.ptc_var for r in results], axis=1),
         )
-    F = lighting_for(job, sensitivity, meta, grid)
+    prior, support = _support(job, sensitivity, meta, prior, grid)
+    F = lighting_for(job, sensitivity, meta, support)
     white = np.concatenate([r.white_mean for r in results])
     # phi: the flat-field factor of the brightest LED's G plane
     brightest = int(np.argmax([r.white_mean[1] for r in results]))
@@ -653,10 +655,10 @@ def setup_estimation(
     # the patches' estimate and uncertainty use it)
     excess = Calibration.from_meta(sensitivity, meta).excess
     bank = build_wiener_bank(
-        F, prior.values, white, noise, grid.wavelength_nm,
+        F, prior.values, white, noise, support.wavelength_nm,
         phi_range=(float(phi.min()), float(phi.max())),
         n_levels=n_levels, n_phi=n_phi,
-        flat_residual=flat_field_residual(excess),
+        flat_residual=flat_field_residual(excess), report_nm=grid.wavelength_nm,
     )  # fmt: skip
     bank.params["noise_source"] = noise.source
     # the sensor's non-linearity, undone in every pixel as in the chart's responses
@@ -684,6 +686,22 @@ def warm_up(wavelength_nm: NDArray[np.float64], job: ImageJob | None = None) -> 
     astm_e308_weights_d50(np.asarray(wavelength_nm, dtype=np.float64))
     if job is not None:
         illuminants_of(job)
+
+
+def _support(
+    job: ImageJob,
+    sensitivity: Spectra,
+    meta: dict[str, Any],
+    prior: Spectra,
+    grid: Grid,
+) -> tuple[Spectra, Grid]:
+    """The prior on the samples Eq. 5 solves for, as ``tunespec estimate`` does for a
+    patch, and those samples (:func:`tunespec.core.wiener.support_grid`)."""
+    from tunespec.core.wiener import prior_on_support
+
+    fine = _corrected_for(job, sensitivity, meta, grid)[2]
+    prior = prior_on_support(prior, grid, fine.wavelength_nm)
+    return prior, prior.grid
 
 
 def _corrected_for(
@@ -767,7 +785,7 @@ def estimate_block(
     # placed as the cube's rows fall in its files: written there without a copy
     est = estimate_pixels(
         bank, c, phi.reshape(-1), clip=clip,
-        out=scratch("block_reflectance", (r * cols, bank.mean.size),
+        out=scratch("block_reflectance", (r * cols, bank.wavelength_nm.size),
                     phase=outputs.cube_offset(row0) % SCRATCH_ALIGN),
     )  # fmt: skip
     del c
@@ -959,7 +977,8 @@ def systematic_table(
     L, S, _ = _corrected_for(job, sensitivity, meta, grid)
     calibration = Calibration.from_meta(sensitivity, meta)
     resp = calibration.linearise(resp)
-    est = wiener_reflectance(resp, L, S, prior)
+    prior, _ = _support(job, sensitivity, meta, prior, grid)
+    est = wiener_reflectance(resp, L, S, prior).restricted(grid)
     unc = reflectance_uncertainty(est, resp, illuminants_of(job), calibration)
     bins = bank.bins_of(c.astype(np.float32), phi)
     y = unc.xyz[:, 1]

@@ -445,7 +445,7 @@ def estimate(
     ``checks`` (default: refuse, no override) runs the plausibility checks of the
     responses against Eq. 1 first (:func:`tunespec.core.plausibility.check_estimate_inputs`).
     """
-    prior = prior if prior is not None else load_colorchecker_sg(grid)
+    prior = prior if prior is not None else load_colorchecker_sg()
     est = estimate_reflectance(
         sample.responses,
         sample.illuminants,
@@ -498,7 +498,9 @@ def estimate_reflectance(
     sensitivity
         Absolute sensitivities, on their own grid.
     prior
-        Training reflectances (resampled onto ``grid`` here).
+        Training reflectances (resampled here onto ``grid`` and, where they reach
+        further, the range beyond it that Eq. 1 integrates:
+        ``core.wiener.support_grid``).
     grid
         The reflectances' grid.
     meta
@@ -543,12 +545,13 @@ def estimate_reflectance(
         responses,
         illum_fine,
         sens_fine,
-        prior.resample(grid, source=prior.meta.get("source")),
+        prior,
         illuminants,
         calibration,
         noise_std=noise_std,
         center_prior=center_prior,
         clip=clip,
+        grid=grid,
     )
     if unc is not None and unc.chi2_per_response is not None:
         checks(

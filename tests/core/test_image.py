@@ -157,6 +157,36 @@ def test_uncertainty_is_calibrated_on_prior_like_pixels(system) -> None:
     assert COVERAGE_RANGE[0] < cover_l < COVERAGE_RANGE[1]
 
 
+def test_a_bank_reports_some_of_its_samples() -> None:
+    """Solved on 380-730 nm and reported on 400-700 nm (as a session solves on the
+    range Eq. 1 integrates, ``core.wiener.support_grid``): the reported pixels, the
+    exactly solved ones (a clipped response) among them, are the whole bank's on
+    those samples, and the uncertainty and colour are theirs."""
+    rng = np.random.default_rng(3)
+    wide = Grid(380.0, 730.0, 10.0)
+    F = lighting_matrix(load_led_set(wide).values, load_camera(grid=wide).values, 10.0)
+    F = F / (F @ np.full(wide.n, 0.9)).max()
+    white, sg = F @ np.full(wide.n, 0.9), load_colorchecker_sg(wide).values
+    truth = load_training_reflectances_190(wide).values[:50]
+    phi = rng.uniform(1.0, 1.5, len(truth))
+    c = _noisy(F, truth, phi, rng)
+    c[:5, 7] = np.nan  # clipped: solved exactly
+    kw = {"phi_range": (1.0, 1.5)}
+    whole = build_wiener_bank(F, sg, white, CAMERA_NOISE, wide.wavelength_nm, **kw)
+    part = build_wiener_bank(
+        F, sg, white, CAMERA_NOISE, wide.wavelength_nm, report_nm=GRID.wavelength_nm,
+        **kw,
+    )  # fmt: skip
+    keep = np.isin(wide.wavelength_nm, GRID.wavelength_nm)
+    assert np.array_equal(part.wavelength_nm, GRID.wavelength_nm)
+    assert np.array_equal(part.Wt, whole.Wt[:, :, keep])
+    got, ref = estimate_pixels(part, c, phi), estimate_pixels(whole, c, phi)
+    assert got.saturated[:5].all() and (got.bins[:5] == -1).all()
+    np.testing.assert_allclose(got.reflectance, ref.reflectance[:, keep], atol=1e-6)
+    np.testing.assert_allclose(got.xyz, got.reflectance @ part.T, rtol=1e-5)
+    assert np.all(got.u_rms > 0) and np.all(np.isfinite(got.u_lab_l))
+
+
 def test_saturated_response_is_left_out(system) -> None:
     F, white, sg = system["F"], system["white"], system["sg"]
     bank = build_wiener_bank(F, sg.values, white, CAMERA_NOISE, GRID.wavelength_nm)

@@ -28,7 +28,7 @@ from tunespec.core.sensitivity import estimate_camera_sensitivity
 from tunespec.core.simulate import NoiseModel, scale_to_exposure, simulate_responses
 from tunespec.core.spectra import CALIBRATION_GRID, DEFAULT_GRID, Grid, Spectra
 from tunespec.core.target_prior import matern32
-from tunespec.core.uncertainty import reflectance_uncertainty
+from tunespec.core.uncertainty import reflectance_uncertainty, wiener_with_uncertainty
 from tunespec.core.wiener import (
     TargetPriors,
     on_integration_grid,
@@ -140,6 +140,30 @@ def test_uncertainty_intervals_cover_the_truth(bench) -> None:
     inside_lab = np.abs(unc.lab - lab_true) <= 1.96 * unc.lab_std
     assert np.all(inside_lab.mean(axis=0) >= 0.90), inside_lab.mean(axis=0)
     assert np.allclose(unc.lab, lab_d50(w.reflectance), atol=1e-9)
+
+
+def test_an_estimate_solved_past_its_range_reports_its_range(bench) -> None:
+    """Solved for on 380-730 nm (the SG's range, where Eq. 1 integrates) and
+    reported on 400-700 nm: the uncertainty is the reported samples' (their rows and
+    columns of the whole covariance) and the colour theirs, as ``refl_colorimetry.csv``
+    computes it from the exported samples."""
+    est = _calibrate(bench, bench["metered"])
+    illum, sens, _ = on_integration_grid(
+        est.correct_illuminants(bench["metered"]), est.sensitivity, EST
+    )
+    w, unc = wiener_with_uncertainty(
+        bench["test"], illum, sens, bench["sg"], bench["metered"], est, grid=EST
+    )
+    assert w.reflectance.grid == EST and w.support.reflectance.grid == DEFAULT_GRID
+    assert unc.covariance.shape == (len(w.reflectance), EST.n, EST.n)
+    for _, (variance, _lab) in unc.budget.items():
+        assert variance.shape == (len(w.reflectance), EST.n)
+    std = np.sqrt(np.diagonal(unc.covariance, axis1=1, axis2=2))
+    assert np.allclose(unc.reflectance_std, np.minimum(std, 0.5))
+    assert np.allclose(unc.lab, lab_d50(w.reflectance), atol=1e-9)
+    truth = bench["test_ref"].values
+    inside = np.abs(w.reflectance.values - truth) <= 1.96 * unc.reflectance_std
+    assert 0.90 <= inside.mean() <= 0.9995, inside.mean()
 
 
 def test_led_correction_round_trip_and_bad_input() -> None:
