@@ -408,9 +408,10 @@ def estimate_tests(
     """The product's estimate chain for the test reflectances: Eq. 1 integrated on
     the calibration's grid, the reflectance solved for wherever it integrates and
     reported on EST (as `tunespec estimate` does), Eq. 5 with the error model as
-    K_e where the calibration carries one, and its uncertainty. ``used``: the spectra Eq. 1 takes (corrected as the calibration
-    found); ``reported``: as the light reported them. The responses are linearised
-    as the calibration's chart was (``est.linearise``)."""
+    K_e where the calibration carries one, and its uncertainty. ``used``: the
+    spectra Eq. 1 takes (corrected as the calibration found); ``reported``: as the
+    light reported them. The responses are linearised as the calibration's chart
+    was (``est.linearise``)."""
     illum, sens, _ = on_integration_grid(
         est.correct_illuminants(used), est.sensitivity, EST
     )

@@ -532,14 +532,8 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         misfit := pl.inconsistent_patches(chi2, est.reflectance.names)
     ):
         out.warn(misfit)
-    out.say(
-        f"{len(est.reflectance)} reflectances written to {args.output}"
-        + (
-            ""
-            if solved == grid
-            else f" (solved for on {solved} nm, where Eq. 1 reaches)"
-        )
-    )
+    where = "" if solved == grid else f" (solved for on {solved} nm: Eq. 1 reaches)"
+    out.say(f"{len(est.reflectance)} reflectances written to {args.output}{where}")
     out.summary(
         {
             "grid": str(grid),

@@ -611,7 +611,8 @@ def setup_estimation(
         as ``tunespec estimate`` does (:func:`lighting_for`).
     prior
         Prior reflectances, on ``grid`` or reaching beyond it: Eq. 5 is solved on
-        the samples of :func:`_support` and the pixels reported on ``grid``.
+        :func:`tunespec.core.wiener.support_grid`'s samples, as ``tunespec
+        estimate`` solves a patch, and the pixels reported on ``grid``.
     noise
         The sensor's noise model, or its figures (the session's averaged darks
         complete the model); default: fitted to the white frames
@@ -626,6 +627,7 @@ def setup_estimation(
 
     from tunespec.core.calibration import Calibration
     from tunespec.core.excess import flat_field_residual
+    from tunespec.core.wiener import prior_on_support
 
     # the LEDs are done: their frame buffers (about 0.3 GB a thread at full
     # resolution) and the dark planes go back to the heap, where the blocks' buffers
@@ -641,7 +643,10 @@ def setup_estimation(
             np.concatenate([r.ptc_level for r in results], axis=1),
             np.concatenate([r.ptc_var for r in results], axis=1),
         )
-    prior, support = _support(job, sensitivity, meta, prior, grid)
+    # Eq. 5 solved wherever Eq. 1 integrates, the pixels reported on ``grid``
+    fine = _corrected_for(job, sensitivity, meta, grid)[2]
+    prior = prior_on_support(prior, grid, fine.wavelength_nm)
+    support = prior.grid
     F = lighting_for(job, sensitivity, meta, support)
     white = np.concatenate([r.white_mean for r in results])
     # phi: the flat-field factor of the brightest LED's G plane
@@ -686,22 +691,6 @@ def warm_up(wavelength_nm: NDArray[np.float64], job: ImageJob | None = None) -> 
     astm_e308_weights_d50(np.asarray(wavelength_nm, dtype=np.float64))
     if job is not None:
         illuminants_of(job)
-
-
-def _support(
-    job: ImageJob,
-    sensitivity: Spectra,
-    meta: dict[str, Any],
-    prior: Spectra,
-    grid: Grid,
-) -> tuple[Spectra, Grid]:
-    """The prior on the samples Eq. 5 solves for, as ``tunespec estimate`` does for a
-    patch, and those samples (:func:`tunespec.core.wiener.support_grid`)."""
-    from tunespec.core.wiener import prior_on_support
-
-    fine = _corrected_for(job, sensitivity, meta, grid)[2]
-    prior = prior_on_support(prior, grid, fine.wavelength_nm)
-    return prior, prior.grid
 
 
 def _corrected_for(
@@ -959,7 +948,7 @@ def systematic_table(
     from tunespec.core.image import _u_lightness
     from tunespec.core.responses import Responses
     from tunespec.core.uncertainty import reflectance_uncertainty
-    from tunespec.core.wiener import wiener_reflectance
+    from tunespec.core.wiener import prior_on_support, wiener_reflectance
 
     c, phi = _samples(job, n_samples)
     zeros = np.zeros(_LAB_CELLS)
@@ -974,10 +963,10 @@ def systematic_table(
         np.ones((n, n_i)),
     )  # fmt: skip
     sensitivity = read_sensitivities(sensitivity_csv)
-    L, S, _ = _corrected_for(job, sensitivity, meta, grid)
+    L, S, fine = _corrected_for(job, sensitivity, meta, grid)
     calibration = Calibration.from_meta(sensitivity, meta)
     resp = calibration.linearise(resp)
-    prior, _ = _support(job, sensitivity, meta, prior, grid)
+    prior = prior_on_support(prior, grid, fine.wavelength_nm)
     est = wiener_reflectance(resp, L, S, prior).restricted(grid)
     unc = reflectance_uncertainty(est, resp, illuminants_of(job), calibration)
     bins = bank.bins_of(c.astype(np.float32), phi)
