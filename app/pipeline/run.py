@@ -377,7 +377,7 @@ def _run_on(
     truth, truth_sens = _score_truth(
         folder, plan, (bench, sample_bench), (chart, sample), cal
     )
-    settings = _settings(plan, cal, chart, sample)
+    settings = _settings(plan, cal, (chart, sample), est)
     files = _export_step(
         folder,
         plan,
@@ -422,12 +422,18 @@ def _run_on(
 
 
 def _settings(
-    plan: Plan, cal: Calibration, chart: ProcessedSession, sample: ProcessedSession
+    plan: Plan,
+    cal: Calibration,
+    sessions: tuple[ProcessedSession, ProcessedSession],
+    est: Estimation,
 ) -> dict[str, str]:
     """The run's settings as the report and ``summary.json`` list them."""
+    chart, sample = sessions
+    support = est.wiener.support  # where Eq. 5 solved (core.wiener.support_grid)
+    solved = "" if support is None else f" (solved on {support.reflectance.grid})"
     return {
         "calibration grid": str(plan.grid),
-        "estimation grid": str(plan.estimation_grid),
+        "estimation grid": f"{plan.estimation_grid}{solved}",
         "sensitivity method": str(cal.estimate.method),
         "exposure": str(plan.exposure),
         "chart corners": chart.corners_source,
