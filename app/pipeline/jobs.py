@@ -704,6 +704,7 @@ def export_job(
         devices={k: dict(v) for k, v in inputs.devices.items()},
         settings={
             "sensitivity method": calibration.method,
+            "estimation grid": est.grid_text,
             "Table 1 threshold (RGB mean)": f"{calibration.threshold:g}",
             "chart corners": chart.corners_source,
             "sample corners": sample.corners_source,

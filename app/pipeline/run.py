@@ -377,7 +377,7 @@ def _run_on(
     truth, truth_sens = _score_truth(
         folder, plan, (bench, sample_bench), (chart, sample), cal
     )
-    settings = _settings(plan, cal, (chart, sample), est)
+    settings = _settings(plan, cal, chart, sample, est)
     files = _export_step(
         folder,
         plan,
@@ -424,16 +424,14 @@ def _run_on(
 def _settings(
     plan: Plan,
     cal: Calibration,
-    sessions: tuple[ProcessedSession, ProcessedSession],
+    chart: ProcessedSession,
+    sample: ProcessedSession,
     est: Estimation,
 ) -> dict[str, str]:
     """The run's settings as the report and ``summary.json`` list them."""
-    chart, sample = sessions
-    support = est.wiener.support  # where Eq. 5 solved (core.wiener.support_grid)
-    solved = "" if support is None else f" (solved on {support.reflectance.grid})"
     return {
         "calibration grid": str(plan.grid),
-        "estimation grid": f"{plan.estimation_grid}{solved}",
+        "estimation grid": est.grid_text,
         "sensitivity method": str(cal.estimate.method),
         "exposure": str(plan.exposure),
         "chart corners": chart.corners_source,

@@ -143,6 +143,16 @@ class Estimation:
     def reflectance(self) -> Spectra:
         return self.wiener.reflectance
 
+    @property
+    def grid_text(self) -> str:
+        """The reflectances' grid and, where Eq. 5 solved on a wider one
+        (``core.wiener.support_grid``), that one: ``400:700:5 (solved on
+        380:730:5)``, as the reports list it."""
+        grid, support = self.reflectance.grid, self.wiener.support
+        return f"{grid}" + (
+            "" if support is None else f" (solved on {support.reflectance.grid})"
+        )
+
 
 # -- steps -----------------------------------------------------------------------------
 def process(
