@@ -514,8 +514,7 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         )
         out.say(f"standard uncertainties written to {u_path} and {lab_path}")
         files.update({"uncertainty": str(u_path), "colorimetry": str(lab_path)})
-    # Eq. 5 solved on the whole range Eq. 1 integrates (core.wiener.support_grid)
-    solved = grid if est.support is None else est.support.reflectance.grid
+    solved = estimation.solved_grid  # the whole range Eq. 1 integrates
     _write_estimate_meta(args, grid, solved, files, checks.overridden)
     if est.clipped:
         out.warn(

@@ -144,14 +144,17 @@ class Estimation:
         return self.wiener.reflectance
 
     @property
+    def solved_grid(self) -> Grid:
+        """Where Eq. 5 solved: the reflectances' grid, or the wider one it is cut
+        from (``core.wiener.support_grid``)."""
+        return (self.wiener.support or self.wiener).reflectance.grid
+
+    @property
     def grid_text(self) -> str:
-        """The reflectances' grid and, where Eq. 5 solved on a wider one
-        (``core.wiener.support_grid``), that one: ``400:700:5 (solved on
-        380:730:5)``, as the reports list it."""
-        grid, support = self.reflectance.grid, self.wiener.support
-        return f"{grid}" + (
-            "" if support is None else f" (solved on {support.reflectance.grid})"
-        )
+        """The reflectances' grid and where Eq. 5 solved, as the reports list them:
+        ``400:700:5 (solved on 380:730:5)``."""
+        grid, solved = self.reflectance.grid, self.solved_grid
+        return f"{grid}" + ("" if solved == grid else f" (solved on {solved})")
 
 
 # -- steps -----------------------------------------------------------------------------
