@@ -227,7 +227,7 @@ def test_local_cluster_gives_identical_images(bench_session, images, tmp_path) -
 
     out = tmp_path / "cluster"
     with LocalCluster(
-        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0"
     ) as cluster:
         code = main([
             "estimate-image", str(bench_session["session"]), "--sensitivities",

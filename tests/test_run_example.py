@@ -124,7 +124,7 @@ def test_a_run_computes_the_images_on_the_configured_cluster(tmp_path) -> None:
     from distributed import LocalCluster
 
     with LocalCluster(
-        n_workers=1, processes=False, protocol="tcp", dashboard_address=None
+        n_workers=1, processes=False, protocol="tcp", dashboard_address=":0"
     ) as cluster:
         path = tmp_path / "run.toml"
         path.write_text(
