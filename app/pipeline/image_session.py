@@ -627,7 +627,6 @@ def setup_estimation(
 
     from tunespec.core.calibration import Calibration
     from tunespec.core.excess import flat_field_residual
-    from tunespec.core.wiener import prior_on_support
 
     # the LEDs are done: their frame buffers (about 0.3 GB a thread at full
     # resolution) and the dark planes go back to the heap, where the blocks' buffers
@@ -644,10 +643,7 @@ def setup_estimation(
             np.concatenate([r.ptc_var for r in results], axis=1),
         )
     # Eq. 5 solved wherever Eq. 1 integrates, the pixels reported on ``grid``
-    fine = _corrected_for(job, sensitivity, meta, grid)[2]
-    prior = prior_on_support(prior, grid, fine.wavelength_nm)
-    support = prior.grid
-    F = lighting_for(job, sensitivity, meta, support)
+    F, prior = lighting_for(job, sensitivity, meta, grid, prior)
     white = np.concatenate([r.white_mean for r in results])
     # phi: the flat-field factor of the brightest LED's G plane
     brightest = int(np.argmax([r.white_mean[1] for r in results]))
@@ -660,7 +656,7 @@ def setup_estimation(
     # the patches' estimate and uncertainty use it)
     excess = Calibration.from_meta(sensitivity, meta).excess
     bank = build_wiener_bank(
-        F, prior.values, white, noise, support.wavelength_nm,
+        F, prior.values, white, noise, prior.wavelength_nm,
         phi_range=(float(phi.min()), float(phi.max())),
         n_levels=n_levels, n_phi=n_phi,
         flat_residual=flat_field_residual(excess), report_nm=grid.wavelength_nm,
@@ -705,21 +701,29 @@ def _corrected_for(
 
 
 def lighting_for(
-    job: ImageJob, sensitivity: Spectra, meta: dict[str, Any], grid: Grid
-) -> NDArray[np.float64]:
+    job: ImageJob,
+    sensitivity: Spectra,
+    meta: dict[str, Any],
+    grid: Grid,
+    prior: Spectra,
+) -> tuple[NDArray[np.float64], Spectra]:
     """``F`` of Eq. 5 for the session, exactly as ``tunespec estimate`` builds it:
     the calibration's corrections applied to the measured SPDs, Eq. 1 integrated on
-    the finer of the calibration's and the estimation grid, reflectance on ``grid``
-    (:func:`tunespec.core.wiener.integrated_lighting_matrix`)."""
-    from tunespec.core.wiener import integrated_lighting_matrix
+    the finer of the calibration's and the estimation grid, the reflectance on the
+    samples Eq. 5 solves for to report on ``grid``
+    (:func:`tunespec.core.wiener.support_grid`,
+    :func:`tunespec.core.wiener.integrated_lighting_matrix`); and ``prior`` on them."""
+    from tunespec.core.wiener import integrated_lighting_matrix, prior_on_support
 
     L, S, fine = _corrected_for(job, sensitivity, meta, grid)
-    return integrated_lighting_matrix(
+    prior = prior_on_support(prior, grid, fine.wavelength_nm)
+    F = integrated_lighting_matrix(
         L.select(job.channels).values,
         S.select(("R", "G", "B")).values,
         fine.wavelength_nm,
-        grid.wavelength_nm,
+        prior.wavelength_nm,
     )
+    return F, prior
 
 
 @dataclass(frozen=True)
