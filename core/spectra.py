@@ -228,13 +228,8 @@ class Spectra:
         InputError
             If the data do not cover the grid.
         """
+        self.check_covers(grid, source=source)
         wl = self.wavelength_nm
-        if wl[0] > grid.start_nm + _WL_TOL_NM or wl[-1] < grid.end_nm - _WL_TOL_NM:
-            raise InputError(
-                f"wavelength range {wl[0]:g}-{wl[-1]:g} nm is too short for the grid "
-                f"{grid} (choose a grid inside it with --grid START:END:STEP)",
-                path=source,
-            )
         target = grid.wavelength_nm
         if wl.size == target.size and np.allclose(
             wl, target, rtol=0.0, atol=_WL_TOL_NM
@@ -244,6 +239,22 @@ class Spectra:
         if average and np.all(self.values >= 0):
             out = np.maximum(out, 0.0)
         return Spectra(target, out, self.names, self.meta)
+
+    def check_covers(self, grid: Grid, *, source: str | None = None) -> None:
+        """Raise unless the data reach over ``grid``.
+
+        Raises
+        ------
+        InputError
+            Naming ``source``, the data's range and ``grid``.
+        """
+        wl = self.wavelength_nm
+        if wl[0] > grid.start_nm + _WL_TOL_NM or wl[-1] < grid.end_nm - _WL_TOL_NM:
+            raise InputError(
+                f"wavelength range {wl[0]:g}-{wl[-1]:g} nm is too short for the grid "
+                f"{grid} (choose a grid inside it with --grid START:END:STEP)",
+                path=source,
+            )
 
     def with_values(
         self, values: ArrayLike, names: Sequence[str] | None = None

@@ -604,10 +604,18 @@ def on_integration_grid(
     Pass the illuminants already corrected with the calibration's light-source
     corrections (on their own grid), as ``tunespec estimate`` does.
 
+    Raises
+    ------
+    InputError
+        The illuminants or the sensitivities do not reach over ``estimate``.
+
     References
     ----------
     The paper, Eq. 1 (integrated on the finer grid of the sensitivities).
     """
+    for spectra in (illuminants, sensitivity):
+        # named with the grid asked for, not the integration grid it widens to
+        spectra.check_covers(estimate, source=spectra.meta.get("source"))
     fine = integration_grid(sensitivity, estimate, illuminants)
     return (
         illuminants.resample(fine, source=illuminants.meta.get("source"), average=True),

@@ -128,6 +128,15 @@ def test_simulate_calibrate_estimate_evaluate(files, capsys) -> None:
         )
         == 0
     )
+    # a grid past the light is refused by the grid asked for, not the one Eq. 1
+    # would integrate on (wider, finer)
+    capsys.readouterr()
+    estimate = ["estimate", "--responses", str(d / "T.csv"), "--illuminants"]
+    past = [str(d / "L.csv"), "--sensitivities", str(d / "S.csv"), "--grid"]
+    assert main([*estimate, *past, "400:760:10", "-o", str(d / "X.csv")]) == 2
+    err = capsys.readouterr().err
+    assert "380-730 nm is too short for the grid 400:760:10" in err, err
+    assert len(err.strip().splitlines()) == 1 and not (d / "X.csv").exists()
     # the 'bayes' calibration carries a covariance: uncertainties beside the estimate
     assert len(meta["led_correction"]["leds"]) == 22
     unc = read_spectra_csv(d / "E_uncertainty.csv")
