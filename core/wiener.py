@@ -613,8 +613,9 @@ def on_integration_grid(
     ----------
     The paper, Eq. 1 (integrated on the finer grid of the sensitivities).
     """
-    for spectra in (illuminants, sensitivity):
-        # named with the grid asked for, not the integration grid it widens to
+    for spectra in (sensitivity, illuminants):
+        # named with the grid asked for, not the integration grid it widens to; the
+        # sensitivities first: corrected illuminants are on their grid
         spectra.check_covers(estimate, source=spectra.meta.get("source"))
     fine = integration_grid(sensitivity, estimate, illuminants)
     return (

@@ -135,7 +135,9 @@ def test_simulate_calibrate_estimate_evaluate(files, capsys) -> None:
     past = [str(d / "L.csv"), "--sensitivities", str(d / "S.csv"), "--grid"]
     assert main([*estimate, *past, "400:760:10", "-o", str(d / "X.csv")]) == 2
     err = capsys.readouterr().err
-    assert "380-730 nm is too short for the grid 400:760:10" in err, err
+    assert (
+        "S.csv: wavelength range 380-730 nm is too short for the grid 400:760:10" in err
+    )
     assert len(err.strip().splitlines()) == 1 and not (d / "X.csv").exists()
     # the 'bayes' calibration carries a covariance: uncertainties beside the estimate
     assert len(meta["led_correction"]["leds"]) == 22
