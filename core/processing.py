@@ -91,8 +91,21 @@ FLAT_MIN_PRECISION = 0.01
 DETECT_MAX_WIDTH_PX = 1000
 #: A patch is flagged when more than this fraction of its ROI pixels is clipped.
 SATURATION_TOLERANCE = 0.0
+#: ISO speed whose gain Eq. 1's illuminants are counted in. A raw response is
+#: proportional to the light, the exposure time and the sensor's gain, and the gain
+#: to the ISO speed: a chart calibrated at ISO 100 and a sample shot at ISO 200 (to
+#: shorten a dark sample's exposures) gave reflectances twice too high, with no
+#: check able to tell them from a brighter sample. The nominal ratio is taken; a
+#: camera's real gains differ from it by a few per cent, so calibrating at the ISO
+#: that is measured at stays the most accurate.
+ISO_REFERENCE = 100
 #: Unit of the illuminants written by processing.
-ILLUMINANT_UNIT = "W sr^-1 m^-2 nm^-1 s (measured radiance x exposure)"
+ILLUMINANT_UNIT = "W sr^-1 m^-2 nm^-1 s (measured radiance x exposure x ISO / 100)"
+
+
+def iso_gain(iso: float) -> float:
+    """The sensor's gain at ``iso`` relative to :data:`ISO_REFERENCE` (nominal)."""
+    return float(iso) / ISO_REFERENCE
 
 
 def illuminants_from_spds(
@@ -100,26 +113,29 @@ def illuminants_from_spds(
     exposures_s: Sequence[float],
     names: Sequence[str],
     *,
+    isos: Sequence[float] | None = None,
     source: str | None = None,
     factor: float = 1.0,
     grid: Grid | None = None,
 ) -> Spectra:
     """Eq. 1's illuminants from the light's readings: each channel's measured SPD,
     its meter floor suppressed (:func:`tunespec.core.metering.suppress_meter_floor`,
-    at the instrument's own sampling), times its exposure (and ``factor``: the gonio's
-    cos theta_i), on the first SPD's wavelengths -- or on ``grid``, band-averaged.
+    at the instrument's own sampling), times its exposure and its frames' gain
+    (:func:`iso_gain` of ``isos``, 1 without) and ``factor`` (the gonio's cos
+    theta_i), on the first SPD's wavelengths -- or on ``grid``, band-averaged.
 
     The one chain processing, the per-pixel images and the gonio sessions use.
     """
     rows: list[NDArray[np.float64]] = []
     wl: NDArray[np.float64] | None = None
     cleaned = [suppress_meter_floor(spd) for spd in spds]
-    for spd, t in zip(cleaned, exposures_s, strict=True):
+    gains = [1.0] * len(cleaned) if isos is None else [iso_gain(i) for i in isos]
+    for spd, t, gain in zip(cleaned, exposures_s, gains, strict=True):
         if grid is not None:
             spd = spd.resample(grid, average=True)
         if wl is None:
             wl = spd.wavelength_nm
-        rows.append(np.interp(wl, spd.wavelength_nm, spd.values[0]) * t * factor)
+        rows.append(np.interp(wl, spd.wavelength_nm, spd.values[0]) * t * gain * factor)
     if wl is None:
         raise InputError("no light readings (SPDs) to build the illuminants from")
     meta = {"unit": ILLUMINANT_UNIT, **({"source": source} if source else {})}
@@ -751,7 +767,7 @@ class _ChannelStats:
     rgb: NDArray[np.float64]
     std: NDArray[np.float64]
     sat: NDArray[np.float64]
-    spds: dict[str, tuple[Spectra, float]] = field(default_factory=dict)
+    spds: dict[str, tuple[Spectra, float, int]] = field(default_factory=dict)
     flagged: list[tuple[str, str]] = field(default_factory=list)
     n_borrowed: int = 0
 
@@ -789,9 +805,9 @@ class _ChannelStats:
         for i in np.nonzero(f > SATURATION_TOLERANCE)[0]:
             self.flagged.append((self.layout.patch_names[i], c))
 
-    def add_spd(self, c: str, spd: Spectra, exposure_s: float) -> None:
-        """Channel ``c``'s measured SPD and its exposure (:meth:`illuminants`)."""
-        self.spds[c] = (spd, exposure_s)
+    def add_spd(self, c: str, spd: Spectra, exposure_s: float, iso: int) -> None:
+        """Channel ``c``'s measured SPD, its exposure and ISO (:meth:`illuminants`)."""
+        self.spds[c] = (spd, exposure_s, iso)
 
     def warnings(self) -> list[str]:
         if not self.flagged:
@@ -819,5 +835,6 @@ class _ChannelStats:
             [self.spds[c][0] for c in self.use],
             [self.spds[c][1] for c in self.use],
             self.use,
+            isos=[self.spds[c][2] for c in self.use],
             source=str(session.root),
         )

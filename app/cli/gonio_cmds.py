@@ -249,7 +249,11 @@ def _add_gonio_run(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> 
     )
     add_scheduler_option(p, _SCHEDULER_HELP)
     p.add_argument(
-        "--iso", type=int, default=100, help="camera ISO, as at calibration (100)"
+        "--iso",
+        type=int,
+        default=100,
+        help="camera ISO (100); the calibration is scaled to its gain by the "
+        "nominal ratio, so the calibration's own ISO is the most accurate",
     )
     add_output_options(p)
     p.set_defaults(func=cmd_gonio_run, output_dirs=("out",))

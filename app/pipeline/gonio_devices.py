@@ -154,6 +154,7 @@ def run_gonio_session(
     )
     from tunespec.core.datasets import load_colorchecker_sg
     from tunespec.core.led_correction import LedCorrection
+    from tunespec.core.processing import iso_gain
     from tunespec.devices.goniometer_registry import open_goniometer
     from tunespec.devices.registry import open_bench
 
@@ -183,6 +184,9 @@ def run_gonio_session(
     S = read_spectra_csv(cal, allow_negative=True).resample(
         DEFAULT_GRID, source=str(cal)
     )
+    # the calibration counts its light at ISO 100 (core.processing.iso_gain): at
+    # this session's gain the camera gives that much more per unit of light
+    S = S.with_values(S.values * iso_gain(iso))
     with (
         open_bench(light, camera, layout=layout.with_corners(None),
                    layout_path=layout_path, resolution=resolution, seed=seed,
@@ -190,7 +194,7 @@ def run_gonio_session(
                    ) as bench,
         closing(open_goniometer(gonio)) as stage,
     ):  # fmt: skip
-        bench.camera.set_iso(iso)  # the calibration's: its scale depends on the gain
+        bench.camera.set_iso(iso)
         levels = _setup(root, bench.light, S, plan.mix)
         devices = DeviceGonioBench(bench.light, stage, bench.camera, root / RAW_DIR)
         taken = capture_gonio(plan, root, devices, S, levels, should_stop=should_stop,

@@ -553,7 +553,7 @@ _ILLUMINANTS_LOCK = threading.Lock()
 
 
 def illuminants_of(job: ImageJob) -> Spectra:
-    """Each channel's measured SPD x its target exposure, as processing's
+    """Each channel's measured SPD x its target exposure and gain, as processing's
     (:func:`tunespec.core.processing.illuminants_from_spds`); read once per
     process while the files are unchanged."""
     from tunespec.core.io.spectral import read_spectra_csv
@@ -566,7 +566,8 @@ def illuminants_of(job: ImageJob) -> Spectra:
             stamps.append((st.st_mtime_ns, st.st_size))
         except OSError:
             stamps.append(None)  # read_spectra_csv names the missing file
-    key = (job.spd_files, job.spd_exposures_s, job.channels, job.session_root,
+    isos = tuple(t[0].iso for t in job.targets)
+    key = (job.spd_files, job.spd_exposures_s, isos, job.channels, job.session_root,
            tuple(stamps))  # fmt: skip
     with _ILLUMINANTS_LOCK:
         found = _ILLUMINANTS.get(key)
@@ -576,6 +577,7 @@ def illuminants_of(job: ImageJob) -> Spectra:
         [read_spectra_csv(path) for path in job.spd_files],
         job.spd_exposures_s,
         job.channels,
+        isos=isos,
         source=job.session_root,
     )
     with _ILLUMINANTS_LOCK:

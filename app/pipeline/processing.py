@@ -207,7 +207,7 @@ def _process(
         for c in [first, *[c for c in use if c != first]]:
             acc.add(session, c, reader.pixels(whites[c]), reader.pixels(targets[c]))
             ref = targets[c][0]
-            acc.add_spd(c, spds[c], ref.exposure_s)
+            acc.add_spd(c, spds[c], ref.exposure_s, ref.iso)
     warnings.extend(acc.warnings())
     n_px = rois.n_pixels
     n_patch = layout.n_patches

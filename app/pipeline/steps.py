@@ -405,10 +405,12 @@ def session_provenance(
     -------
     (items, exposures_s, input_files)
         Session folders, their creation time, frame counts and fingerprints; the
-        chart's exposure per LED (s, first bracket); every manifest with its
-        SHA-256 (a manifest lists the SHA-256 of each of its frames).
+        first session's exposure per LED (s, first bracket, at ISO 100: times its
+        gain, as Eq. 1's illuminants have it); every manifest with its SHA-256 (a
+        manifest lists the SHA-256 of each of its frames).
     """
     from tunespec.core.io.session import sha256_file
+    from tunespec.core.processing import iso_gain
 
     items: dict[str, str] = {}
     exposures: dict[str, float] = {}
@@ -431,7 +433,9 @@ def session_provenance(
             (str(root.resolve() / MANIFEST_NAME), sha256_file(root / MANIFEST_NAME))
         )
         if not exposures:
-            exposures = {c: float(t[0]) for c, t in settings.exposures_s.items()}
+            # Eq. 1's illuminants count the gain too (core.processing.iso_gain)
+            gain = iso_gain(settings.iso)
+            exposures = {c: float(t[0]) * gain for c, t in settings.exposures_s.items()}
     return items, exposures, files
 
 
