@@ -46,6 +46,8 @@ __all__ = ["DeviceGonioBench", "measure_led_spectra", "run_gonio_session"]
 RAW_DIR = "raw"
 #: The session's own copy of the sample target's layout: a resumed session uses it.
 SESSION_LAYOUT = "layout.json"
+#: The ISO speed the session's frames are taken at: a resumed session keeps it.
+SESSION_CAMERA = "camera.json"
 #: A simulated camera's field of view, in widths of the sample target (a gonio
 #: camera frames the sample, not the room; ignored for a real camera).
 SIM_FIELD = 2.0
@@ -112,6 +114,27 @@ def _setup(root: Path, light: Any, sensitivity: Spectra, mix: str) -> np.ndarray
     return np.asarray(doc["levels"], dtype=np.float64)
 
 
+def _session_gain(root: Path, iso: int) -> float:
+    """The gain of the session's frames (``core.processing.iso_gain``): ``iso``,
+    kept in :data:`SESSION_CAMERA`, whose ISO a resumed session must be given again
+    (its frames and those still to take share one scale)."""
+    from tunespec.core.errors import InputError
+    from tunespec.core.processing import iso_gain
+
+    path = root / SESSION_CAMERA
+    if path.exists():
+        kept = read_json(path).get("iso")
+        if kept != iso:
+            raise InputError(
+                f"the session's frames are at ISO {kept}: resume it with --iso {kept}, "
+                f"not {iso}",
+                path=path,
+            )
+    else:
+        atomic_write_text(path, dumps_json({"iso": int(iso)}))
+    return iso_gain(iso)
+
+
 def run_gonio_session(
     out: str | Path,
     *,
@@ -154,7 +177,6 @@ def run_gonio_session(
     )
     from tunespec.core.datasets import load_colorchecker_sg
     from tunespec.core.led_correction import LedCorrection
-    from tunespec.core.processing import iso_gain
     from tunespec.devices.goniometer_registry import open_goniometer
     from tunespec.devices.registry import open_bench
 
@@ -186,7 +208,7 @@ def run_gonio_session(
     )
     # the calibration counts its light at ISO 100 (core.processing.iso_gain): at
     # this session's gain the camera gives that much more per unit of light
-    S = S.with_values(S.values * iso_gain(iso))
+    S = S.with_values(S.values * _session_gain(root, iso))
     with (
         open_bench(light, camera, layout=layout.with_corners(None),
                    layout_path=layout_path, resolution=resolution, seed=seed,

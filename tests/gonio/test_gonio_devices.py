@@ -106,6 +106,11 @@ def test_gonio_run_on_cal1_and_zaber_emulators_resumes_after_a_drop(
     assert main(args) == 2  # a session is there: --resume needed
     assert main([*args, "--resume", "--mix", "camera"]) == 2  # it keeps its mix
     capsys.readouterr()
+    # ... and its ISO: frames at two gains would not share Eq. 1's scale
+    assert main([*args, "--resume", "--iso", "200"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "camera.json" in err[0], err
+    assert "frames are at ISO 100: resume it with --iso 100, not 200" in err[0]
     # the session kept its layout: --resume needs no --layout (issue 27)
     assert (out / "layout.json").exists()
     k = args.index("--layout")
