@@ -136,7 +136,13 @@ def _add_capture(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
         metavar="S",
         help="longest exposure auto may choose (30 s)",
     )
-    p.add_argument("--iso", type=int, default=100)
+    p.add_argument(
+        "--iso",
+        type=int,
+        default=100,
+        help="ISO speed of every frame (100); processing counts its gain in Eq. 1's "
+        "illuminants (ISO / 100, nominal), so a chart and a sample may differ",
+    )
     p.add_argument(
         "--brackets",
         type=_floats,
