@@ -581,7 +581,9 @@ class SimCamera:
         What a calibration should recover (times the exposure time) when the
         responses are the full-scale planes of :func:`tunespec.core.io.raw.load_raw` at
         the image centre (irradiance and vignetting there are 1 up to the fall-off
-        centre's offset) and at the current ISO.
+        centre's offset) and at the current ISO; processing counts the gain in Eq. 1's
+        illuminants (:func:`tunespec.core.processing.iso_gain`), so a calibration
+        recovers these over the gain, their value at ISO 100.
         """
         scale = (
             self.electrons_per_unit
