@@ -108,6 +108,12 @@ def iso_gain(iso: float) -> float:
     return float(iso) / ISO_REFERENCE
 
 
+def light_scale(exposure_s: float, iso: float | None = None) -> float:
+    """What Eq. 1's illuminants multiply a channel's reading by: its exposure and
+    its frames' gain (:func:`iso_gain`; 1 without an ISO)."""
+    return float(exposure_s) * (1.0 if iso is None else iso_gain(iso))
+
+
 def illuminants_from_spds(
     spds: Sequence[Spectra],
     exposures_s: Sequence[float],
@@ -120,8 +126,8 @@ def illuminants_from_spds(
 ) -> Spectra:
     """Eq. 1's illuminants from the light's readings: each channel's measured SPD,
     its meter floor suppressed (:func:`tunespec.core.metering.suppress_meter_floor`,
-    at the instrument's own sampling), times its exposure and its frames' gain
-    (:func:`iso_gain` of ``isos``, 1 without) and ``factor`` (the gonio's cos
+    at the instrument's own sampling), times :func:`light_scale` of its exposure and
+    its frames' ISO (``isos``; none: no gain) and ``factor`` (the gonio's cos
     theta_i), on the first SPD's wavelengths -- or on ``grid``, band-averaged.
 
     The one chain processing, the per-pixel images and the gonio sessions use.
@@ -129,13 +135,14 @@ def illuminants_from_spds(
     rows: list[NDArray[np.float64]] = []
     wl: NDArray[np.float64] | None = None
     cleaned = [suppress_meter_floor(spd) for spd in spds]
-    gains = [1.0] * len(cleaned) if isos is None else [iso_gain(i) for i in isos]
-    for spd, t, gain in zip(cleaned, exposures_s, gains, strict=True):
+    iso_of = [None] * len(cleaned) if isos is None else list(isos)
+    for spd, t, iso in zip(cleaned, exposures_s, iso_of, strict=True):
         if grid is not None:
             spd = spd.resample(grid, average=True)
         if wl is None:
             wl = spd.wavelength_nm
-        rows.append(np.interp(wl, spd.wavelength_nm, spd.values[0]) * t * gain * factor)
+        scale = light_scale(t, iso) * factor
+        rows.append(np.interp(wl, spd.wavelength_nm, spd.values[0]) * scale)
     if wl is None:
         raise InputError("no light readings (SPDs) to build the illuminants from")
     meta = {"unit": ILLUMINANT_UNIT, **({"source": source} if source else {})}

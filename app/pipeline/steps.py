@@ -410,7 +410,7 @@ def session_provenance(
         manifest lists the SHA-256 of each of its frames).
     """
     from tunespec.core.io.session import sha256_file
-    from tunespec.core.processing import iso_gain
+    from tunespec.core.processing import light_scale
 
     items: dict[str, str] = {}
     exposures: dict[str, float] = {}
@@ -433,9 +433,11 @@ def session_provenance(
             (str(root.resolve() / MANIFEST_NAME), sha256_file(root / MANIFEST_NAME))
         )
         if not exposures:
-            # Eq. 1's illuminants count the gain too (core.processing.iso_gain)
-            gain = iso_gain(settings.iso)
-            exposures = {c: float(t[0]) * gain for c, t in settings.exposures_s.items()}
+            # as Eq. 1's illuminants count them (the gain too)
+            exposures = {
+                c: light_scale(t[0], settings.iso)
+                for c, t in settings.exposures_s.items()
+            }
     return items, exposures, files
 
 
