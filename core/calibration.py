@@ -670,6 +670,27 @@ def excess_from_meta(meta: Mapping[str, Any]) -> ExcessVariance | None:
     )
 
 
+def white_from_meta(meta: Mapping[str, Any]) -> dict[str, float] | None:
+    """The side file's ``white_background`` (light -> the chart session's white
+    background reflectance by Eq. 1, ``core.plausibility.white_reflectance``);
+    None without one."""
+    if "white_background" not in meta:
+        return None
+    doc = meta["white_background"]
+    try:
+        doc = json.loads(doc) if isinstance(doc, str) else doc
+        white = {str(k): float(v) for k, v in doc.items()}
+    except (AttributeError, TypeError, ValueError):
+        white = {}
+    if not white or not all(0.0 < v < 10.0 for v in white.values()):
+        raise InputError(
+            "white_background: expected an object of light name -> reflectance "
+            "(positive numbers), as 'tunespec calibrate' writes it",
+            path=meta.get("meta_path") or meta.get("source"),
+        )
+    return white
+
+
 def linearise_from_meta(responses: Responses, meta: Mapping[str, Any]) -> Responses:
     """``responses`` with the non-linearity of the calibration whose side file is
     ``meta`` undone, as :meth:`Calibration.linearise`."""

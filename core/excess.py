@@ -495,7 +495,8 @@ def fit_excess_variance(
 def linearise(responses: Responses, gamma: float) -> Responses:
     """``responses`` of a sensor whose signal is ``x^(1 + gamma)`` made linear:
     ``sign(c) |c|^(1 / (1 + gamma))`` (a gain the calibration absorbs aside, in any
-    unit), ``rgb_std`` carried by the derivative; ``responses`` itself at 0."""
+    unit), ``rgb_std`` carried by the derivative, the white level as the responses;
+    ``responses`` itself at 0."""
     if gamma == 0.0:
         return responses
     p = 1.0 / (1.0 + gamma)
@@ -504,7 +505,13 @@ def linearise(responses: Responses, gamma: float) -> Responses:
         # d c^p / dc = p c^(p - 1); at c = 0 the noise itself sets the scale
         scale = np.maximum(np.abs(responses.rgb), np.where(np.isfinite(std), std, 0))
         std = std * p * np.where(scale > 0, scale, 1.0) ** (p - 1.0)
-    return replace(responses, rgb=linearised(responses.rgb, gamma), rgb_std=std)
+    white = responses.white_rgb  # the same signal, on the responses' scale
+    return replace(
+        responses,
+        rgb=linearised(responses.rgb, gamma),
+        rgb_std=std,
+        white_rgb=None if white is None else linearised(white, gamma),
+    )
 
 
 def linearised(values: NDArray[np.floating], gamma: float) -> NDArray[np.floating]:

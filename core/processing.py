@@ -774,6 +774,7 @@ class _ChannelStats:
     rgb: NDArray[np.float64]
     std: NDArray[np.float64]
     sat: NDArray[np.float64]
+    white: NDArray[np.float64]  # (n_channels, 3): Eq. 2's mean A_B
     spds: dict[str, tuple[Spectra, float, int]] = field(default_factory=dict)
     flagged: list[tuple[str, str]] = field(default_factory=list)
     n_borrowed: int = 0
@@ -784,7 +785,8 @@ class _ChannelStats:
     ) -> _ChannelStats:
         rgb = np.zeros((layout.n_patches, len(use), 3))
         sat = np.zeros((layout.n_patches, len(use)))
-        return cls(layout, use, geo, rgb, np.zeros_like(rgb), sat)
+        white = np.zeros((len(use), 3))
+        return cls(layout, use, geo, rgb, np.zeros_like(rgb), sat, white)
 
     def add(self, session: Session, c: str, white: _Pixels, target: _Pixels) -> None:
         """Flat field (Eq. 2) and ROI statistics of channel ``c``."""
@@ -809,6 +811,7 @@ class _ChannelStats:
         m, s, f = _patch_stats(a_flat, clipped, self.geo)
         j = self.use.index(c)
         self.rgb[:, j], self.std[:, j], self.sat[:, j] = m, s, f
+        self.white[j] = mean_b
         for i in np.nonzero(f > SATURATION_TOLERANCE)[0]:
             self.flagged.append((self.layout.patch_names[i], c))
 
@@ -834,6 +837,7 @@ class _ChannelStats:
             self.std,
             np.repeat(n_px[:, None], len(self.use), axis=1).astype(np.float64),
             self.sat,
+            self.white,
         )
 
     def illuminants(self, session: Session) -> Spectra:

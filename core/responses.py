@@ -3,7 +3,9 @@
 Their long-format CSV is read and written in :mod:`tunespec.core.io.responses_csv`
 (``read_responses_csv``, ``write_responses_csv``; this module imports no reader). CSV columns: ``patch,illuminant,R,G,B`` and optionally ``R_std,G_std,B_std`` (per-pixel
 standard deviation inside the patch ROI, as Eq. 6 of the paper uses), ``n_pixels`` and
-``saturated`` (fraction of ROI pixels at or above the white level). Values are linear,
+``saturated`` (fraction of ROI pixels at or above the white level) and
+``white_R,white_G,white_B`` (the white background's level under the row's
+illuminant, the same on each of its rows). Values are linear,
 dark-corrected and flat-fielded, in units of full scale (1.0 = saturation).
 """
 
@@ -38,6 +40,10 @@ class Responses:
         Pixels averaged (per colour plane).
     saturated : (n_p, n_i) or None
         Fraction of ROI pixels that were clipped.
+    white_rgb : (n_i, 3) or None
+        The white background's level under each illuminant that the responses are
+        flat-fielded to (Eq. 2's mean ``A_B``, full scale): the scale a session's
+        responses share with its chart's (``core.plausibility.check_white_scale``).
     """
 
     patches: tuple[str, ...]
@@ -46,6 +52,7 @@ class Responses:
     rgb_std: NDArray[np.float64] | None = None
     n_pixels: NDArray[np.float64] | None = None
     saturated: NDArray[np.float64] | None = None
+    white_rgb: NDArray[np.float64] | None = None
 
     def __post_init__(self) -> None:
         shape = (len(self.patches), len(self.illuminants))
@@ -63,6 +70,7 @@ class Responses:
             ("rgb_std", (*shape, 3)),
             ("n_pixels", shape),
             ("saturated", shape),
+            ("white_rgb", (shape[1], 3)),
         ):
             arr = getattr(self, name)
             if arr is not None:
@@ -105,6 +113,7 @@ class Responses:
             take(self.rgb_std),
             take(self.n_pixels),
             take(self.saturated),
+            None if self.white_rgb is None else self.white_rgb[ii],
         )
 
 

@@ -176,6 +176,53 @@ def test_the_demo_white_is_inside_its_interval_at_every_wavelength(demo) -> None
     assert est.wavelength_nm.size == 61 and np.all(np.abs(z) <= 1.96), z
 
 
+def test_the_white_background_ties_the_sample_to_the_chart(demo, chain, capsys):
+    """The two sessions' white background by Eq. 1: the bench's board in the chart
+    session (the calibration's side file), the same in the sample's, and a sample
+    whose illuminants are 2x (before: exit 0, reflectances 0.5x) refused."""
+    from tunespec.app.pipeline.steps import white_background
+    from tunespec.core.forward_model import render_rgb
+    from tunespec.core.io.export import read_sensitivity_meta
+    from tunespec.core.io.responses_csv import read_responses_csv
+    from tunespec.core.io.spectral import read_spectral
+    from tunespec.core.io.spectral_csv import write_spectra_csv
+
+    sens = read_spectral(chain / "sensitivities.csv", kind="sensitivity")
+    meta = read_sensitivity_meta(chain / "sensitivities.csv")
+    illum = read_spectral(chain / "illuminants.csv", kind="illuminant")
+    sample = white_background(
+        read_responses_csv(chain / "responses.csv"), illum, sens, meta
+    )
+    chart = meta["white_background"]
+    # the 5D Mark III sees under 3 % of LED700's light (core.plausibility.
+    # MIN_SEEN_FRACTION): its reading noise would decide its ratio
+    assert sorted(sample) == sorted(chart) and len(chart) == 21
+    assert "LED700" not in chart
+    # the board's reflectance as the calibrated camera sees it under each LED
+    board = read_spectral(demo / "truth/truth_reflectances.csv").select(["background"])
+    e = illum.resample(sens.grid, average=True).values
+    seen = render_rgb(board.resample(sens.grid).values, e, sens.values, sens.step_nm)
+    truth = seen[0].sum(axis=1) / render_rgb(
+        np.ones((1, e.shape[1])), e, sens.values, sens.step_nm
+    )[0].sum(axis=1)
+    lit = [illum.names.index(n) for n in chart]
+    rho = np.array(list(chart.values()))
+    # measured 0.884-0.901 against the truth's 0.884-0.900 (within 0.002)
+    np.testing.assert_allclose(rho, truth[lit], atol=0.01)
+    # measured: sample / chart 0.995-1.005 over the 21 LEDs
+    ratio = np.array([sample[n] / chart[n] for n in chart])
+    assert np.all(np.abs(ratio - 1.0) < 0.015), ratio
+    doubled = illum.with_values(illum.values * 2.0)
+    write_spectra_csv(doubled, chain / "illuminants_x2.csv")
+    argv = ["estimate", "--responses", chain / "responses.csv", "--illuminants",
+            chain / "illuminants_x2.csv", "--sensitivities", chain / "sensitivities.csv",
+            "-o", chain / "x2.csv", "-q"]  # fmt: skip
+    capsys.readouterr()
+    assert main([str(a) for a in argv]) == 2
+    err = capsys.readouterr().err
+    assert "white background reflects 0.5x" in err and "come out 0.5x" in err, err
+
+
 def test_every_export_is_read_back_with_default_options(demo, chain, tmp_path):
     t = tmp_path
     # command outputs that are not in the demo folder, one of each kind

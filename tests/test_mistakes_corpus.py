@@ -15,6 +15,7 @@ import json
 import shutil
 import sys
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -72,7 +73,7 @@ def _all_saturated(path, d, share=1.0):
     def sat(r):
         s = np.zeros(r.rgb.shape[:2])
         s.flat[: round(share * s.size)] = 1.0
-        return type(r)(r.patches, r.illuminants, r.rgb, r.rgb_std, r.n_pixels, s)
+        return replace(r, saturated=s)
 
     return fs.edited_responses(path, d / "sat.csv", sat)
 
@@ -81,9 +82,7 @@ def _one_response(x, d, value, patch=2, light=5, channel=1, path=None):
     def edit(r):
         rgb = r.rgb.copy()
         rgb[patch, light, channel] = value
-        return type(r)(
-            r.patches, r.illuminants, rgb, r.rgb_std, r.n_pixels, r.saturated
-        )
+        return replace(r, rgb=rgb)
 
     return fs.edited_responses(path or x.responses, d / "one.csv", edit)
 
@@ -195,6 +194,22 @@ CASES: list[tuple[str, Callable, str, str]] = [
     ("one light's responses x100", lambda x, d: _est(x, responses=fs.scaled_responses(
         x.responses, d / "r.csv", 100.0, lambda p, i: i == 7)), "refused",
      "light LED510"),
+    # a scale that darker or brighter samples have too: only the white background
+    # against the chart session's tells it (before: exit 0, reflectances 0.5x, 1.4x)
+    ("the sample's illuminants x2 (exposure in another unit)", lambda x, d: _est(
+        x, illuminants=fs.scaled_spectra(x.illuminants, d / "i.csv", 2.0,
+                                         "illuminant")), "refused",
+     "white background reflects 0.5x"),
+    ("the sample half a stop brighter than recorded (ISO, aperture)", lambda x, d: _est(
+        x, responses=fs.scaled_responses(x.responses, d / "r.csv", 1.4,
+                                         white_too=True)), "refused",
+     "white background reflects 1.4x"),
+    ("one LED's exposure typed x1.25", lambda x, d: _est(x, illuminants=fs.scaled_spectra(
+        x.illuminants, d / "i.csv", 1.25, "illuminant", slice(9, 10))), "refused",
+     "light LED540: the sample's white background"),
+    ("responses without their white level", lambda x, d: _est(
+        x, responses=fs.edited_responses(x.responses, d / "r.csv", lambda r: replace(
+            r, white_rgb=None))), "flagged", "no white-background level"),
     # units and typos
     ("prior typo 5.0", lambda x, d: _est(x, prior=fs.typo_spectra(
         x.chart, d / "p.csv", 7, 3, 5.0)), "refused", "a typo?"),
@@ -252,9 +267,8 @@ CASES: list[tuple[str, Callable, str, str]] = [
         x.sensitivities, d / "s.csv", lambda w, v: (w, v[::-1]))), "refused",
      "do not match each other"),
     ("responses' R and B swapped", lambda x, d: _est(x, responses=fs.edited_responses(
-        x.responses, d / "r.csv", lambda r: type(r)(
-            r.patches, r.illuminants, r.rgb[..., ::-1], r.rgb_std[..., ::-1],
-            r.n_pixels, r.saturated))), "refused", "do not match each other"),
+        x.responses, d / "r.csv", lambda r: replace(
+            r, rgb=r.rgb[..., ::-1], rgb_std=r.rgb_std[..., ::-1]))), "refused", "do not match each other"),
     ("illuminant columns in another order", lambda x, d: _est(x, illuminants=_rewritten(
         x.illuminants, d / "i.csv", lambda w, v: (w, v[np.random.default_rng(0)
                                                       .permutation(len(v))]))),
@@ -268,9 +282,8 @@ CASES: list[tuple[str, Callable, str, str]] = [
      "fit no reflectance through Eq. 1"),
     ("responses not dark-subtracted (+1 % of full scale)", lambda x, d: _est(
         x, sensitivities=_with_covariance(x, d), responses=fs.edited_responses(
-            x.responses, d / "r.csv", lambda r: type(r)(
-                r.patches, r.illuminants, r.rgb + 0.01, r.rgb_std, r.n_pixels,
-                r.saturated))), "refused", "fit no reflectance through Eq. 1"),
+            x.responses, d / "r.csv", lambda r: replace(
+                r, rgb=r.rgb + 0.01))), "refused", "fit no reflectance through Eq. 1"),
     ("illuminants 10 nm off", lambda x, d: _est(x, illuminants=_rewritten(
         x.illuminants, d / "i.csv", lambda w, v: (w + 10, v))), "refused",
      "off by more than 2x"),

@@ -32,7 +32,7 @@ import signal
 import time
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -93,6 +93,7 @@ def build_inputs(folder: Path, *, source: str = "sim", seed: int = 0) -> Inputs:
 
 
 def _simulated(folder: Path, seed: int) -> Inputs:
+    from tunespec.app.pipeline.steps import white_background
     from tunespec.core.datasets import load_camera, load_led_set, resource_path
     from tunespec.core.io.export import write_sensitivities_csv
     from tunespec.core.simulate import NoiseModel, scale_to_exposure, simulate_responses
@@ -108,8 +109,18 @@ def _simulated(folder: Path, seed: int) -> Inputs:
     leds = load_led_set(SIM_GRID)
     illum = scale_to_exposure(sg, leds, sens, target=0.8)
     noise = NoiseModel(n_pixels=400)
-    chart = simulate_responses(sg, illum, sens, noise=noise, rng=rng)
-    sample = simulate_responses(cmy, illum, sens, noise=noise, rng=rng)
+    # the white background board (reflectance 0.9) both sessions are flat-fielded to
+    board = Spectra(SIM_GRID.wavelength_nm, np.full((1, SIM_GRID.wavelength_nm.size),
+                    0.9), ("background",))  # fmt: skip
+    white = simulate_responses(board, illum, sens, noise=None, rng=rng).rgb[0]
+    chart = replace(simulate_responses(sg, illum, sens, noise=noise, rng=rng),
+                    white_rgb=white)  # fmt: skip
+    sample = replace(simulate_responses(cmy, illum, sens, noise=noise, rng=rng),
+                     white_rgb=white)  # fmt: skip
+    # the chart session's white background by Eq. 1, as calibrate keeps it
+    board_by_light = white_background(chart, illum, sens, {})
+    sens = Spectra(sens.wavelength_nm, sens.values, sens.names,
+                   {**sens.meta, "white_background": json.dumps(board_by_light)})  # fmt: skip
     paths = Inputs(
         folder, folder / "chart_responses.csv", folder / "illuminants.csv",
         folder / "chart.csv", folder / "responses.csv", folder / "illuminants.csv",
@@ -180,9 +191,11 @@ def run_estimate(
 
 
 # -- mutations -----------------------------------------------------------------------
-def scaled_responses(src: Path, dst: Path, factor: float, where=None) -> Path:
+def scaled_responses(src: Path, dst: Path, factor: float, where=None, *,
+                     white_too: bool = False) -> Path:  # fmt: skip
     """Responses (and their standard deviations) times ``factor`` (all, or the rows
-    ``where(patch_index, illuminant_index)``)."""
+    ``where(patch_index, illuminant_index)``); ``white_too``: their white level too
+    (a whole session on another scale)."""
     r = read_responses_csv(src)
     mask = np.ones(r.rgb.shape[:2], dtype=bool)
     if where is not None:
@@ -190,9 +203,10 @@ def scaled_responses(src: Path, dst: Path, factor: float, where=None) -> Path:
                          for p in range(mask.shape[0])])  # fmt: skip
     f = np.where(mask[..., None], factor, 1.0)
     std = None if r.rgb_std is None else r.rgb_std * f
-    write_responses_csv(
-        type(r)(r.patches, r.illuminants, r.rgb * f, std, r.n_pixels, r.saturated), dst
-    )
+    white = r.white_rgb
+    if white_too and white is not None:
+        white = white * factor
+    write_responses_csv(replace(r, rgb=r.rgb * f, rgb_std=std, white_rgb=white), dst)
     return dst
 
 
@@ -423,16 +437,17 @@ def _case(inputs: Inputs, rng: random.Random, d: Path) -> tuple[str, str, list[s
             n = rng.choice([0, 1, -3])
             return f"--hold-out-every {n}", "calibrate", [*cal, "--hold-out-every", n]
         if what == "saturated":
-            p = edited_responses(x.chart_responses, d / "cr.csv", lambda r: type(r)(
-                r.patches, r.illuminants, r.rgb, r.rgb_std, r.n_pixels,
-                np.ones(r.rgb.shape[:2])))  # fmt: skip
+            p = edited_responses(
+                x.chart_responses,
+                d / "cr.csv",
+                lambda r: replace(r, saturated=np.ones(r.rgb.shape[:2])),
+            )
             return "chart all saturated", "calibrate", ["--responses", p, *cal[2:]]
 
         def negate(r):
             rgb = r.rgb.copy()
             rgb[3] *= -1.0
-            return type(r)(r.patches, r.illuminants, rgb, r.rgb_std, r.n_pixels,
-                           r.saturated)  # fmt: skip
+            return replace(r, rgb=rgb)
 
         p = edited_responses(x.chart_responses, d / "cr.csv", negate)
         return "chart negative patch", "calibrate", ["--responses", p, *cal[2:]]

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -547,7 +547,7 @@ def estimate_job(
         ),
     )
     ref, table2 = reference_and_table2(est.reflectance, inputs.reference)
-    est = Estimation(est.wiener, table2, est.uncertainty, est.forced)
+    est = replace(est, table2=table2)
     return record_estimate(
         inputs.sample_dir,
         inputs.out_dir,
@@ -685,7 +685,7 @@ def export_job(
             folder / SAMPLE_DIR, estimated.layout, "editor", should_stop=should_stop
         )
         est = estimate(sample, cal.sensitivity, reference=None)
-        est = Estimation(est.wiener, estimated.table2)
+        est = replace(est, table2=estimated.table2)
     report(progress, 0.5)
     check_stop(should_stop)
     files = export(

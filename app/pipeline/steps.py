@@ -24,7 +24,7 @@ loops over them for a :class:`~tunespec.app.pipeline.plan.Plan`.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from os import PathLike
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -138,6 +138,22 @@ class Estimation:
     uncertainty: ReflectanceUncertainty | None = None
     #: Plausibility checks overridden (``force = true``), one line each.
     forced: tuple[str, ...] = ()
+    #: The sample's white background by Eq. 1 over the chart session's, per light
+    #: (``core.plausibility.check_white_scale``); None where not compared.
+    white_scale: Mapping[str, float] | None = None
+
+    @property
+    def white_scale_text(self) -> str:
+        """:attr:`white_scale` as the report's provenance says it, ``""`` without."""
+        from tunespec.core.plausibility import WHITE_SCALE_TOLERANCE
+
+        if not self.white_scale:
+            return ""
+        r = np.array(list(self.white_scale.values()))
+        return (
+            f"{np.median(r):.3f}x ({r.min():.3f}-{r.max():.3f} over {r.size} lights; "
+            f"1 +- {WHITE_SCALE_TOLERANCE:g} accepted)"
+        )
 
     @property
     def reflectance(self) -> Spectra:
@@ -341,7 +357,31 @@ def fit_calibration(
             should_stop=should_stop,
         )
     per_patch = table1_by_patch(est, fit, illuminants, reflectances)
+    reported = illuminants if reported_illuminants is None else reported_illuminants
+    est = _with_white_background(est, responses, reported)
     return Calibration(est, rep, per_patch, self_check=checked)
+
+
+def _with_white_background(
+    est: SensitivityEstimate, responses: Responses, illuminants: Spectra
+) -> SensitivityEstimate:
+    """``est`` with the chart session's white background by Eq. 1 in its
+    sensitivities' meta (``white_background``: light -> :func:`white_background`),
+    which the side file keeps for the estimate's scale check; ``est`` as it is
+    when the responses carry no white level."""
+    import json
+
+    from tunespec.core.calibration import linearise_from_meta
+
+    sens = est.sensitivity
+    # linear, as the estimate's responses are when it compares them
+    responses = linearise_from_meta(responses, sens.meta)
+    white = white_background(responses, illuminants, sens, sens.meta)
+    if white is None:
+        return est
+    meta = {**sens.meta, "white_background": json.dumps(white)}
+    sens = Spectra(sens.wavelength_nm, sens.values, sens.names, meta)
+    return replace(est, sensitivity=sens)
 
 
 def _with_reference(responses: Any, refl: Spectra) -> Any:
@@ -477,9 +517,7 @@ def estimate(
     )
     if reference is None:
         return est
-    return Estimation(
-        est.wiener, evaluate(est.reflectance, reference), est.uncertainty, est.forced
-    )
+    return replace(est, table2=evaluate(est.reflectance, reference))
 
 
 def estimate_reflectance(
@@ -556,6 +594,7 @@ def estimate_reflectance(
     check_estimate_inputs(
         checks, responses, illum_fine, sens_fine, responses_path=responses_path
     )
+    white_scale = _check_white_scale(checks, responses, illuminants, sensitivity, meta)
     if calibration is None and uncertainty_from_meta:
         from tunespec.core.calibration import Calibration as FileCalibration
 
@@ -579,7 +618,36 @@ def estimate_reflectance(
             unc.misfit_by_light,
             responses.illuminants,
         )
-    return Estimation(est, None, unc, tuple(checks.overridden))
+    return Estimation(est, None, unc, tuple(checks.overridden), white_scale)
+
+
+def _check_white_scale(
+    checks: Checks,
+    responses: Responses,
+    illuminants: Spectra,
+    sensitivity: Spectra,
+    meta: Mapping[str, Any],
+) -> dict[str, float] | None:
+    """The sample's white background against the chart session's
+    (``core.plausibility.check_white_scale``), where the calibration kept it; a
+    warning when the responses carry no white level to compare. Returns the
+    ratio per light compared (None: none)."""
+    from tunespec.core.calibration import white_from_meta
+    from tunespec.core.plausibility import check_white_scale
+
+    chart = white_from_meta(meta)
+    if chart is None:
+        return None
+    sample = white_background(responses, illuminants, sensitivity, meta)
+    if sample is None:
+        if checks.warn is not None:
+            checks.warn(
+                "the responses carry no white-background level (white_R, white_G, "
+                "white_B): their scale against the chart session's is not checked"
+            )
+        return None
+    checks(check_white_scale, sample, chart)
+    return {n: sample[n] / chart[n] for n in sample if n in chart}
 
 
 def estimation_lighting(
@@ -612,6 +680,39 @@ def estimation_lighting(
         illuminants = as_calibrated(illuminants, sensitivity.grid)
     corrected = correct_illuminants_from_meta(illuminants, meta, spd_shift_nm)
     return on_integration_grid(corrected, sensitivity, grid)
+
+
+def white_background(
+    responses: Responses,
+    illuminants: Spectra,
+    sensitivity: Spectra,
+    meta: Mapping[str, Any],
+) -> dict[str, float] | None:
+    """The white background's reflectance by Eq. 1 under each of the responses'
+    lights (``core.plausibility.white_reflectance``; NaN ones left out): its level
+    in the responses over a perfect white's, with the illuminants corrected as
+    the calibration found (:func:`estimation_lighting`, where both are known).
+    ``None`` when the responses carry no white level."""
+    from tunespec.core.plausibility import white_reflectance
+
+    if responses.white_rgb is None:
+        return None
+    # Eq. 1 where both are known, as the estimate integrates it (wiener.integration_grid)
+    step = sensitivity.step_nm
+    lo = max(sensitivity.wavelength_nm[0], illuminants.wavelength_nm[0])
+    hi = min(sensitivity.wavelength_nm[-1], illuminants.wavelength_nm[-1])
+    if hi - lo < step:
+        return None
+    overlap = Grid(float(lo), float(lo + np.floor((hi - lo) / step) * step), step)
+    illum, sens, _ = estimation_lighting(illuminants, sensitivity, meta, overlap)
+    rho = white_reflectance(
+        responses.white_rgb, illum.select(list(responses.illuminants)), sens
+    )
+    return {
+        name: float(r)
+        for name, r in zip(responses.illuminants, rho, strict=True)
+        if np.isfinite(r)
+    }
 
 
 def write_uncertainty(
@@ -814,7 +915,15 @@ def _write_report(
         self_check=calibration.self_check,
         table1_patches=calibration.patch_rgb_error,
         chart_layout=chart.layout,
-        provenance={**dict(provenance), **items},
+        provenance={
+            **dict(provenance),
+            **items,
+            **(
+                {"sample's white background over the chart's (Eq. 1)": white}
+                if (white := estimation.white_scale_text)
+                else {}
+            ),
+        },
         exposures_s=exposures,
         input_files=tuple(inputs),
         chart_choice=chart_choice,

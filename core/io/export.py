@@ -123,6 +123,17 @@ _TABLE1_ROWS = ("Red", "Green", "Blue", "RGB")
 RAWTOACES_GRID = Grid(380.0, 780.0, 5.0)
 
 
+#: The calibration's records a side file keeps as they are (JSON in
+#: ``Spectra.meta``): the per-LED corrections, the responses' systematic errors, the
+#: readings' replicates and the chart session's white background.
+_META_KEYS = (
+    "led_correction",
+    "excess_variance",
+    "reading_replicates",
+    "white_background",
+)
+
+
 def sensitivity_meta_path(sensitivity_csv: str | PathLike[str]) -> Path:
     """``SENSITIVITIES.csv.meta.json``: what a sensitivities CSV cannot hold."""
     p = Path(sensitivity_csv)
@@ -231,7 +242,7 @@ def sensitivity_meta_document(
     }
     if curves:
         doc |= curves_document(sensitivity)
-    for key in ("led_correction", "excess_variance", "reading_replicates"):
+    for key in _META_KEYS:
         if key in sensitivity.meta:
             doc[key] = json.loads(sensitivity.meta[key])
     if "forced" in sensitivity.meta:  # plausibility checks overridden (--force)
@@ -312,7 +323,7 @@ def parse_sensitivity_meta(doc: Any, path: str | PathLike[str]) -> dict[str, Any
             "expected a JSON object with a number spd_shift_nm", path=path
         ) from None
     out: dict[str, Any] = {"meta_path": str(path), "spd_shift_nm": spd_shift_nm}
-    for key in ("led_correction", "excess_variance", "reading_replicates"):
+    for key in _META_KEYS:
         if key in doc:
             out[key] = doc[key]
     if "sensitivity" in doc:

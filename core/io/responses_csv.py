@@ -1,4 +1,4 @@
-"""The long-format responses CSV: ``patch,illuminant,R,G,B[,R_std,G_std,B_std][,n_pixels][,saturated]``.
+"""The long-format responses CSV: ``patch,illuminant,R,G,B[,R_std,G_std,B_std][,n_pixels][,saturated][,white_R,white_G,white_B]``.
 
 One row per patch and illuminant; values linear, dark-corrected and flat-fielded, in
 units of full scale (see :class:`tunespec.core.responses.Responses`).
@@ -22,6 +22,7 @@ from tunespec.core.responses import CHANNELS, Responses
 __all__ = ["read_responses_csv", "write_responses_csv"]
 
 _STD = tuple(f"{c}_std" for c in CHANNELS)
+_WHITE = tuple(f"white_{c}" for c in CHANNELS)
 
 
 def read_responses_csv(path: str | PathLike[str]) -> Responses:
@@ -31,7 +32,8 @@ def read_responses_csv(path: str | PathLike[str]) -> Responses:
     ------
     InputError
         Missing columns, bad or non-finite numbers, negative standard deviations,
-        duplicate or missing (patch, illuminant) pairs; each names the file and line.
+        duplicate or missing (patch, illuminant) pairs, a white level that differs
+        between rows of one illuminant; each names the file and line.
     """
     path = Path(path)
     rows = csv_rows(read_text(path), path=path)  # blank lines skipped, numbered
@@ -65,13 +67,16 @@ def read_responses_csv(path: str | PathLike[str]) -> Responses:
             line=header_line,
         )
     col = {h: i for i, h in enumerate(header)}
+    for group in (_STD, _WHITE):
+        if any(c in col for c in group) and not all(c in col for c in group):
+            raise InputError(
+                f"give all of {','.join(group)} or none", path=path, line=header_line
+            )
     has_std = all(c in col for c in _STD)
-    if any(c in col for c in _STD) and not has_std:
-        raise InputError(
-            "give all of R_std,G_std,B_std or none", path=path, line=header_line
-        )
+    has_white = all(c in col for c in _WHITE)
     has_n = "n_pixels" in col
     has_sat = "saturated" in col
+    white: dict[str, tuple[list[float], int]] = {}  # illuminant -> (level, line)
     records: dict[tuple[str, str], tuple[list[float], list[float], float, float]] = {}
     # dicts as ordered sets: a membership test per row stays O(1)
     patches: dict[str, None] = {}
@@ -109,6 +114,8 @@ def read_responses_csv(path: str | PathLike[str]) -> Responses:
             raise InputError("negative standard deviation", path=path, line=lineno)
         npx = num("n_pixels") if has_n else math.nan
         sat = num("saturated") if has_sat else math.nan
+        if has_white:
+            _white_level(white, il, [num(c) for c in _WHITE], path, lineno)
         records[(p, il)] = (rgb, std, npx, sat)
         patches.setdefault(p)
         illums.setdefault(il)
@@ -134,7 +141,27 @@ def read_responses_csv(path: str | PathLike[str]) -> Responses:
         std_a if has_std else None,
         n_a if has_n else None,
         s_a if has_sat else None,
+        np.array([white[i][0] for i in illums]) if has_white else None,
     )
+
+
+def _white_level(
+    seen: dict[str, tuple[list[float], int]],
+    illuminant: str,
+    level: list[float],
+    path: Path,
+    lineno: int,
+) -> None:
+    """Record a row's white level of ``illuminant``: that of the illuminant's first
+    row (it is one level per light, repeated on its rows)."""
+    first = seen.setdefault(illuminant, (level, lineno))
+    if not np.allclose(level, first[0], rtol=1e-9, atol=0.0):
+        raise InputError(
+            f"white_R,white_G,white_B under {shown(illuminant)} differ from line "
+            f"{first[1]}'s: one white level per illuminant",
+            path=path,
+            line=lineno,
+        )
 
 
 def write_responses_csv(responses: Responses, path: str | PathLike[str]) -> None:
@@ -146,6 +173,8 @@ def write_responses_csv(responses: Responses, path: str | PathLike[str]) -> None
         header.append("n_pixels")
     if responses.saturated is not None:
         header.append("saturated")
+    if responses.white_rgb is not None:
+        header += list(_WHITE)
     with atomic_open(path, newline="") as fh:
         w = csv.writer(fh, lineterminator="\n")
         w.writerow(header)
@@ -158,4 +187,6 @@ def write_responses_csv(responses: Responses, path: str | PathLike[str]) -> None
                     row.append(str(int(responses.n_pixels[a, b])))
                 if responses.saturated is not None:
                     row.append(repr(float(responses.saturated[a, b])))
+                if responses.white_rgb is not None:
+                    row += [repr(float(v)) for v in responses.white_rgb[b]]
                 w.writerow(row)

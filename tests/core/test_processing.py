@@ -186,6 +186,10 @@ def test_eq2_flat_field_and_dark_recover_patch_responses(tmp_path) -> None:
     r = out.responses
     assert r.patches == _layout().patch_names and r.illuminants == ("L1", "WHITE")
     np.testing.assert_allclose(r.rgb, _expected(patch_rgb, GAINS), atol=ATOL_QUANTISED)
+    # the white background's level each light's responses are scaled to (Eq. 2's
+    # mean A_B): the board's reflectance x the light's gain x the centre's field
+    white = WHITE_REFLECTANCE * np.stack(list(GAINS.values())) * _centre_mean_field()
+    np.testing.assert_allclose(r.white_rgb, white, atol=ATOL_QUANTISED)
     # uint16 rounding leaves about 1/sqrt(12) DN of spread per pixel, nothing else
     assert np.all(r.rgb_std < 1e-4)
     assert np.all(r.saturated == 0) and not out.flagged
@@ -307,6 +311,7 @@ def test_outputs_are_what_calibrate_reads(tmp_path) -> None:
     write_processed(out, tmp_path / "r.csv", tmp_path / "l.csv")
     back = read_responses_csv(tmp_path / "r.csv")
     np.testing.assert_array_equal(back.rgb, out.responses.rgb)
+    np.testing.assert_array_equal(back.white_rgb, out.responses.white_rgb)
     illum = read_spectra_csv(tmp_path / "l.csv")
     assert illum.names == ("L1", "WHITE")
 

@@ -21,12 +21,17 @@ def test_responses_round_trip(tmp_path) -> None:
         rng.random((2, 3, 3)) * 0.01,
         np.full((2, 3), 400.0),
         np.zeros((2, 3)),
+        rng.random((3, 3)),
     )
     write_responses_csv(r, tmp_path / "r.csv")
     b = read_responses_csv(tmp_path / "r.csv")
     assert b.patches == r.patches and b.illuminants == r.illuminants
     np.testing.assert_array_equal(b.rgb, r.rgb)
     np.testing.assert_array_equal(b.rgb_std, r.rgb_std)
+    np.testing.assert_array_equal(b.white_rgb, r.white_rgb)
+    # a subset keeps its lights' white levels
+    np.testing.assert_array_equal(r.subset(illuminants=["L3", "L1"]).white_rgb,
+                                  r.white_rgb[[2, 0]])  # fmt: skip
 
 
 @pytest.mark.parametrize(
@@ -37,6 +42,12 @@ def test_responses_round_trip(tmp_path) -> None:
         ("patch,illuminant,R,G,B\nA,L,1,2,3\nA,L,1,2,3\n", "duplicate row"),
         ("patch,illuminant,R,G,B\nA,L,1,2,3\nB,M,1,2,3\n", "pair"),
         ("patch,illuminant,R,G,B,R_std\nA,L,1,2,3,1\n", "R_std,G_std,B_std"),
+        ("patch,illuminant,R,G,B,white_R\nA,L,1,2,3,1\n", "white_R,white_G,white_B"),
+        (
+            "patch,illuminant,R,G,B,white_R,white_G,white_B\nA,L,1,2,3,4,5,6\n"
+            "B,L,1,2,3,4,5,6.1\n",
+            "under 'L' differ from line 2's",
+        ),
     ],
 )
 def test_responses_errors(tmp_path, text, fragment) -> None:
