@@ -18,7 +18,7 @@ chart's LED corrections then do not undo), 10 nm readings with ``--meter-noise``
 with the noise model's flat-field residual (a draw per light) over a 100 x 100 px
 window and the sensor's non-linearity. The chart session is calibrated with the
 default estimator; both sessions' board is then computed as the product does
-(``steps.white_background``, after the calibration's linearisation).
+(``lighting.white_background``, after the calibration's linearisation).
 
 Prints per family: the median ratio's range over the sessions, the largest light's
 deviation from its session's median, how many sessions the check refuses (false
@@ -51,7 +51,7 @@ import cli_protocol as cp
 import generalisation as gen
 import generalisation_data as gd
 
-from tunespec.app.pipeline.steps import white_background
+from tunespec.app.pipeline.lighting import white_background
 from tunespec.core.calibration import linearise_from_meta
 from tunespec.core.plausibility import Implausible, check_white_scale
 from tunespec.core.simulate import NoiseModel, simulate_responses

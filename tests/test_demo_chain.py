@@ -180,7 +180,7 @@ def test_the_white_background_ties_the_sample_to_the_chart(demo, chain, capsys):
     """The two sessions' white background by Eq. 1: the bench's board in the chart
     session (the calibration's side file), the same in the sample's, and a sample
     whose illuminants are 2x (before: exit 0, reflectances 0.5x) refused."""
-    from tunespec.app.pipeline.steps import white_background
+    from tunespec.app.pipeline.lighting import white_background
     from tunespec.core.forward_model import render_rgb
     from tunespec.core.io.export import read_sensitivity_meta
     from tunespec.core.io.responses_csv import read_responses_csv

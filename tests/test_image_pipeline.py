@@ -120,6 +120,31 @@ def test_outputs_agree_and_carry_provenance(images, bench_session) -> None:
     assert prov["led_corrections"] == "per-LED"
     assert (images["out"] / "srgb.png").stat().st_size > 1000
     assert not (images["out"] / ".work").exists()
+    # the white board against the calibration's chart session (here the same one)
+    assert prov["white_scale"].startswith("1.00") and prov["forced"] == []
+
+
+def test_a_session_on_another_scale_is_refused(bench_session, tmp_path, capsys):
+    """The images check the session's white board against the calibration's chart
+    session as ``estimate`` does: a side file whose board is half (the session
+    twice as bright as recorded) is refused, and ``--force`` lists the override."""
+    import json
+
+    sens = tmp_path / "S.csv"
+    shutil.copy(bench_session["sens"], sens)
+    doc = json.loads(Path(str(bench_session["sens"]) + ".meta.json").read_text())
+    doc["white_background"] = {k: v / 2 for k, v in doc["white_background"].items()}
+    Path(str(sens) + ".meta.json").write_text(json.dumps(doc))
+    argv = ["estimate-image", str(bench_session["session"]), "--sensitivities",
+            str(sens), "--formats", "envi"]  # fmt: skip
+    capsys.readouterr()
+    assert main([*argv, "--out", str(tmp_path / "refused")]) == 2
+    err = capsys.readouterr().err
+    assert "white background reflects 2x" in err and "--force to accept" in err, err
+    assert not (tmp_path / "refused" / "cube.hdr").exists()
+    assert main([*argv, "--out", str(tmp_path / "forced"), "--force"]) == 0
+    prov = json.loads((tmp_path / "forced" / "provenance.json").read_text())
+    assert prov["white_scale"].startswith("2.0") and len(prov["forced"]) == 1
 
 
 def test_pixel_means_agree_with_patchwise_estimates(images, bench_session) -> None:

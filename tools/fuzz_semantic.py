@@ -93,7 +93,7 @@ def build_inputs(folder: Path, *, source: str = "sim", seed: int = 0) -> Inputs:
 
 
 def _simulated(folder: Path, seed: int) -> Inputs:
-    from tunespec.app.pipeline.steps import white_background
+    from tunespec.app.pipeline.lighting import white_background
     from tunespec.core.datasets import load_camera, load_led_set, resource_path
     from tunespec.core.io.export import write_sensitivities_csv
     from tunespec.core.simulate import NoiseModel, scale_to_exposure, simulate_responses

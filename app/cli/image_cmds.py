@@ -105,6 +105,12 @@ def _common(p: argparse.ArgumentParser) -> None:
         metavar="N",
         help="Wiener matrices per flat-field factor (default 4)",
     )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="accept a session on another scale than the calibration's chart (its "
+        "white background by Eq. 1), listed in provenance.json's 'forced'",
+    )
     add_grid_option(p)
     add_output_options(p)
     p.set_defaults(grid=None)  # None: the pipeline's estimation grid, 400:700:5
@@ -162,6 +168,7 @@ def _settings(args: argparse.Namespace) -> object:
         noise=args.noise_model,
         dark=args.dark,
         formats=args.formats,
+        force=args.force,
         **bins,
     )
 

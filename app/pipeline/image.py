@@ -77,6 +77,10 @@ class ImageSettings:
     formats
         The files written (``--formats``): ``envi`` (cube.hdr/.img), ``zarr``
         (cube.zarr), ``tiff`` (xyz, lab, uncertainty); default all three.
+    force
+        Accept a session on another scale than the calibration's chart (its white
+        board by Eq. 1, ``lighting.sample_scale_record``), listed in the provenance's
+        ``forced``.
 
     Raises
     ------
@@ -93,6 +97,7 @@ class ImageSettings:
     noise: Any = None
     dark: str = "pixel"
     formats: tuple[str, ...] = ("envi", "zarr", "tiff")
+    force: bool = False
 
     def __post_init__(self) -> None:
         from tunespec.core.image import NoiseModel, SensorFigures
@@ -221,7 +226,7 @@ def session_graph(
     )
     bank = delayed(_after(st.setup_estimation), pure=True)(
         warm, job_ref, channels, sens, meta, prior, calibration.grid, noise=settings.noise,
-        n_levels=settings.n_levels, n_phi=settings.n_phi,
+        n_levels=settings.n_levels, n_phi=settings.n_phi, force=settings.force,
         dask_key_name=f"setup-{job.work}",
     )  # fmt: skip
     systematic = None
@@ -347,6 +352,9 @@ def _provenance_written(
     doc = {
         **provenance,
         "noise_model": _noise_doc(bank),
+        # the session's white board by Eq. 1 over the calibration's chart session's
+        "white_scale": bank.params.get("white_scale", ""),
+        "forced": bank.params.get("forced", []),
         "finished_utc": _now(),
     }
     shutil.rmtree(job.work, ignore_errors=True)

@@ -62,6 +62,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from tunespec.app.pipeline.lighting import estimation_lighting, sample_scale_record
 from tunespec.core.errors import InputError
 from tunespec.core.excess import linearised
 from tunespec.core.image import (
@@ -598,8 +599,10 @@ def setup_estimation(
     noise: NoiseModel | SensorFigures | None = None,
     n_levels: int = DEFAULT_LEVEL_BINS,
     n_phi: int = DEFAULT_PHI_BINS,
+    force: bool = False,
 ) -> WienerBank:
-    """Stage 3: noise model, corrected illuminants, lighting matrix, Wiener bank.
+    """Stage 3: the session's scale against the chart's, noise model, corrected
+    illuminants, lighting matrix, Wiener bank.
 
     Parameters
     ----------
@@ -619,11 +622,15 @@ def setup_estimation(
         The sensor's noise model, or its figures (the session's averaged darks
         complete the model); default: fitted to the white frames
         (:func:`tunespec.core.image.photon_transfer_fit`).
+    force
+        Accept a session on another scale than the calibration's chart
+        (:func:`tunespec.app.pipeline.lighting.sample_scale_record`).
 
     Returns
     -------
     WienerBank
-        Its ``params`` also hold the noise model's source.
+        Its ``params`` also hold the noise model's source and the session's scale
+        against the chart's (``white_scale``, ``forced``).
     """
     import cv2
 
@@ -657,6 +664,11 @@ def setup_estimation(
     # the flat field's residual as the calibration's chart showed it (its K_e, as
     # the patches' estimate and uncertainty use it)
     excess = Calibration.from_meta(sensitivity, meta).excess
+    gamma = 0.0 if excess is None else excess.linearity_gamma
+    scale = sample_scale_record(
+        linearised(white.reshape(-1, 3), gamma), job.channels, illuminants_of(job),
+        sensitivity, meta, force=force,
+    )  # fmt: skip
     bank = build_wiener_bank(
         F, prior.values, white, noise, prior.wavelength_nm,
         phi_range=(float(phi.min()), float(phi.max())),
@@ -665,7 +677,8 @@ def setup_estimation(
     )  # fmt: skip
     bank.params["noise_source"] = noise.source
     # the sensor's non-linearity, undone in every pixel as in the chart's responses
-    bank.params["linearity_gamma"] = 0.0 if excess is None else excess.linearity_gamma
+    bank.params["linearity_gamma"] = gamma
+    bank.params.update(scale)
     return bank
 
 
@@ -691,17 +704,6 @@ def warm_up(wavelength_nm: NDArray[np.float64], job: ImageJob | None = None) -> 
         illuminants_of(job)
 
 
-def _corrected_for(
-    job: ImageJob, sensitivity: Spectra, meta: dict[str, Any], grid: Grid
-) -> tuple[Spectra, Spectra, Grid]:
-    """The illuminants corrected as ``tunespec estimate`` corrects them (per-LED
-    corrections on the SPDs' own grid), and both illuminants and sensitivities on
-    the integration grid (:func:`tunespec.core.wiener.integration_grid`)."""
-    from tunespec.app.pipeline.steps import estimation_lighting
-
-    return estimation_lighting(illuminants_of(job), sensitivity, meta, grid)
-
-
 def lighting_for(
     job: ImageJob,
     sensitivity: Spectra,
@@ -717,7 +719,8 @@ def lighting_for(
     :func:`tunespec.core.wiener.integrated_lighting_matrix`); and ``prior`` on them."""
     from tunespec.core.wiener import integrated_lighting_matrix, prior_on_support
 
-    L, S, fine = _corrected_for(job, sensitivity, meta, grid)
+    # corrected as ``tunespec estimate`` corrects them, on the integration grid
+    L, S, fine = estimation_lighting(illuminants_of(job), sensitivity, meta, grid)
     prior = prior_on_support(prior, grid, fine.wavelength_nm)
     F = integrated_lighting_matrix(
         L.select(job.channels).values,
@@ -969,7 +972,8 @@ def systematic_table(
         np.ones((n, n_i)),
     )  # fmt: skip
     sensitivity = read_sensitivities(sensitivity_csv)
-    L, S, fine = _corrected_for(job, sensitivity, meta, grid)
+    # corrected as ``tunespec estimate`` corrects them, on the integration grid
+    L, S, fine = estimation_lighting(illuminants_of(job), sensitivity, meta, grid)
     calibration = Calibration.from_meta(sensitivity, meta)
     resp = calibration.linearise(resp)
     prior = prior_on_support(prior, grid, fine.wavelength_nm)

@@ -534,7 +534,7 @@ def _images(
         folder.sample_dir,
         folder.calibration_dir / "sensitivity.csv",
         out,
-        settings=ImageSettings(grid=plan.estimation_grid),
+        settings=ImageSettings(grid=plan.estimation_grid, force=plan.force),
         scheduler=scheduler,
         progress=progress,
         should_stop=should_stop,

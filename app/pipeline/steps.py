@@ -46,6 +46,12 @@ from tunespec.app.pipeline.folder import (
     CHART_CHOICE_FILE,
     write_exports_index,
 )
+from tunespec.app.pipeline.lighting import (
+    check_sample_scale,
+    estimation_lighting,
+    sample_scale_text,
+    white_background,
+)
 from tunespec.app.pipeline.plan import ESTIMATION_GRID
 from tunespec.app.pipeline.processing import process_session, write_processed
 from tunespec.core.colorimetry import ReflectanceStats, reflectance_stats
@@ -145,15 +151,7 @@ class Estimation:
     @property
     def white_scale_text(self) -> str:
         """:attr:`white_scale` as the report's provenance says it, ``""`` without."""
-        from tunespec.core.plausibility import WHITE_SCALE_TOLERANCE
-
-        if not self.white_scale:
-            return ""
-        r = np.array(list(self.white_scale.values()))
-        return (
-            f"{np.median(r):.3f}x ({r.min():.3f}-{r.max():.3f} over {r.size} lights; "
-            f"1 +- {WHITE_SCALE_TOLERANCE:g} accepted)"
-        )
+        return sample_scale_text(self.white_scale)
 
     @property
     def reflectance(self) -> Spectra:
@@ -594,7 +592,9 @@ def estimate_reflectance(
     check_estimate_inputs(
         checks, responses, illum_fine, sens_fine, responses_path=responses_path
     )
-    white_scale = _check_white_scale(checks, responses, illuminants, sensitivity, meta)
+    white_scale = check_sample_scale(
+        checks, white_background(responses, illuminants, sensitivity, meta), meta
+    )
     if calibration is None and uncertainty_from_meta:
         from tunespec.core.calibration import Calibration as FileCalibration
 
@@ -619,100 +619,6 @@ def estimate_reflectance(
             responses.illuminants,
         )
     return Estimation(est, None, unc, tuple(checks.overridden), white_scale)
-
-
-def _check_white_scale(
-    checks: Checks,
-    responses: Responses,
-    illuminants: Spectra,
-    sensitivity: Spectra,
-    meta: Mapping[str, Any],
-) -> dict[str, float] | None:
-    """The sample's white background against the chart session's
-    (``core.plausibility.check_white_scale``), where the calibration kept it; a
-    warning when the responses carry no white level to compare. Returns the
-    ratio per light compared (None: none)."""
-    from tunespec.core.calibration import white_from_meta
-    from tunespec.core.plausibility import check_white_scale
-
-    chart = white_from_meta(meta)
-    if chart is None:
-        return None
-    sample = white_background(responses, illuminants, sensitivity, meta)
-    if sample is None:
-        if checks.warn is not None:
-            checks.warn(
-                "the responses carry no white-background level (white_R, white_G, "
-                "white_B): their scale against the chart session's is not checked"
-            )
-        return None
-    checks(check_white_scale, sample, chart)
-    return {n: sample[n] / chart[n] for n in sample if n in chart}
-
-
-def estimation_lighting(
-    illuminants: Spectra,
-    sensitivity: Spectra,
-    meta: Mapping[str, Any],
-    grid: Grid,
-    *,
-    spd_shift_nm: float | None = None,
-) -> tuple[Spectra, Spectra, Grid]:
-    """The first half of the estimate chain, which the per-pixel images share
-    (``image_session``): the illuminants corrected as the calibration found
-    (``meta``), then they and the sensitivities on the integration grid (Eq. 1 on
-    the sensitivities' finer grid, the reflectances on ``grid``:
-    ``core.wiener.on_integration_grid``).
-
-    With a calibration's corrections the spectra are first taken as the
-    calibration took its own (``core.metering.as_calibrated``, on the
-    sensitivities' grid: ``calibrate``'s CSV is on the calibration's): the
-    corrections were fitted on that form.
-    Applied to the spectra as read, they placed an IR-cut camera's blue edge
-    wrongly (``benchmarks/cli_protocol.py``: IR-cut-01's 10 nm readings 0.104-0.300
-    mean dE00 against 0.090-0.118 over 4 draws; at 1 nm, 10 cameras 0.103 against
-    0.090, see docs/validation.md)."""
-    from tunespec.core.calibration import correct_illuminants_from_meta
-    from tunespec.core.metering import as_calibrated
-    from tunespec.core.wiener import on_integration_grid
-
-    if "led_correction" in meta or "spd_shift_nm" in meta:
-        illuminants = as_calibrated(illuminants, sensitivity.grid)
-    corrected = correct_illuminants_from_meta(illuminants, meta, spd_shift_nm)
-    return on_integration_grid(corrected, sensitivity, grid)
-
-
-def white_background(
-    responses: Responses,
-    illuminants: Spectra,
-    sensitivity: Spectra,
-    meta: Mapping[str, Any],
-) -> dict[str, float] | None:
-    """The white background's reflectance by Eq. 1 under each of the responses'
-    lights (``core.plausibility.white_reflectance``; NaN ones left out): its level
-    in the responses over a perfect white's, with the illuminants corrected as
-    the calibration found (:func:`estimation_lighting`, where both are known).
-    ``None`` when the responses carry no white level."""
-    from tunespec.core.plausibility import white_reflectance
-
-    if responses.white_rgb is None:
-        return None
-    # Eq. 1 where both are known, as the estimate integrates it (wiener.integration_grid)
-    step = sensitivity.step_nm
-    lo = max(sensitivity.wavelength_nm[0], illuminants.wavelength_nm[0])
-    hi = min(sensitivity.wavelength_nm[-1], illuminants.wavelength_nm[-1])
-    if hi - lo < step:
-        return None
-    overlap = Grid(float(lo), float(lo + np.floor((hi - lo) / step) * step), step)
-    illum, sens, _ = estimation_lighting(illuminants, sensitivity, meta, overlap)
-    rho = white_reflectance(
-        responses.white_rgb, illum.select(list(responses.illuminants)), sens
-    )
-    return {
-        name: float(r)
-        for name, r in zip(responses.illuminants, rho, strict=True)
-        if np.isfinite(r)
-    }
 
 
 def write_uncertainty(
