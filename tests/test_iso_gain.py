@@ -15,9 +15,11 @@ RESOLUTION = (256, 192)
 CHANNELS = ("LED450", "LED525", "LED600", "LED660")
 
 
-def _per_unit_light(root: Path, iso: int) -> np.ndarray:
+def _per_unit_light(root: Path, iso: int) -> tuple[np.ndarray, np.ndarray]:
     """A sim session at ``iso`` (exposures metered), processed: each patch's
-    responses over its LED's integrated illuminant (NaN where clipped)."""
+    responses over its LED's integrated illuminant (NaN where clipped), and the
+    white background's level the same way (the sample's scale check compares it
+    with the chart session's)."""
     from tunespec.app.pipeline.processing import process_session
     from tunespec.core.io.session import Session
     from tunespec.devices.capture import capture, new_session
@@ -40,7 +42,7 @@ def _per_unit_light(root: Path, iso: int) -> np.ndarray:
     light = done.illuminants.values.sum(axis=1)
     per_light = done.responses.rgb / light[None, :, None]  # (patch, channel, 3)
     per_light[done.responses.saturated > 0] = np.nan
-    return per_light
+    return per_light, done.responses.white_rgb / light[:, None]
 
 
 def test_iso_gain_is_the_nominal_ratio() -> None:
@@ -54,8 +56,8 @@ def test_iso_gain_is_the_nominal_ratio() -> None:
 def test_a_sample_at_twice_the_iso_gives_the_same_responses_per_unit_light(
     tmp_path,
 ) -> None:
-    at_100 = _per_unit_light(tmp_path / "iso100", 100)
-    at_200 = _per_unit_light(tmp_path / "iso200", 200)
+    at_100, white_100 = _per_unit_light(tmp_path / "iso100", 100)
+    at_200, white_200 = _per_unit_light(tmp_path / "iso200", 200)
     # responses of at least a fifth of the LED's largest (where noise is small)
     bright = at_100 > 0.2 * np.nanmax(at_100, axis=(0, 2), keepdims=True)
     bright &= np.isfinite(at_200)
@@ -64,3 +66,7 @@ def test_a_sample_at_twice_the_iso_gives_the_same_responses_per_unit_light(
     # in Eq. 1's illuminants the ratio was 2
     assert abs(np.median(ratio) - 1.0) < 0.02, np.median(ratio)
     assert np.all(np.abs(ratio - 1.0) < 0.06), (ratio.min(), ratio.max())
+    # so is the white board's (measured 1.000-1.010): the scale check passes a
+    # sample at another ISO
+    board = (white_200 / white_100)[white_100 > 0.2 * white_100.max(axis=0)]
+    assert np.all(np.abs(board - 1.0) < 0.02), (board.min(), board.max())

@@ -204,6 +204,10 @@ CASES: list[tuple[str, Callable, str, str]] = [
         x, responses=fs.scaled_responses(x.responses, d / "r.csv", 1.4,
                                          white_too=True)), "refused",
      "white background reflects 1.4x"),
+    ("sensitivities x2 (another calibration's scale)", lambda x, d: _est(
+        x, sensitivities=fs.with_side_file(x.sensitivities, fs.scaled_spectra(
+            x.sensitivities, d / "s.csv", 2.0, "sensitivity"))), "refused",
+     "white background reflects 0.5x"),
     ("one LED's exposure typed x1.25", lambda x, d: _est(x, illuminants=fs.scaled_spectra(
         x.illuminants, d / "i.csv", 1.25, "illuminant", slice(9, 10))), "refused",
      "light LED540: the sample's white background"),
