@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import time
 
 import numpy as np
@@ -137,6 +138,9 @@ def test_wizard_runs_to_the_end_on_the_simulated_bench(window, qtbot, tmp_path):
         np.testing.assert_allclose(panel.values, expected2, rtol=1e-9)
         assert panel.row_names == [*core2.names, "average", "max"]
     assert len(core2.names) == 8
+    # with the sample's scale against the chart's (the white board by Eq. 1)
+    note = wizard.estimate_page.table_panel.note_label.text()
+    assert re.search(r"white background over the chart's: 1\.0\d\dx", note), note
 
     # the plots show the results: sensitivities and a patch with its reference
     assert {"R estimated", "G estimated", "B estimated"} <= set(

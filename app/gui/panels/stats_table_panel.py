@@ -232,4 +232,9 @@ def show_table2(panel: StatsTablePanel, estimate: Any) -> None:
         f"average CIEDE2000 {t.mean_delta_e00:.2f}, spectral RMS {t.mean_spectral_rms:.4f} "
         "(paper: 0.67 / 0.0286)",
     )
-    panel.set_note(f"{len(t.names)} patches compared with their references")
+    note = f"{len(t.names)} patches compared with their references"
+    # the sample's scale against the chart session's (pipeline.lighting)
+    scale = getattr(estimate.estimation, "white_scale_text", "")
+    if scale:
+        note += f"; the sample's white background over the chart's: {scale}"
+    panel.set_note(note)
