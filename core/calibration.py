@@ -682,7 +682,7 @@ def white_from_meta(meta: Mapping[str, Any]) -> dict[str, float] | None:
         white = {str(k): float(v) for k, v in doc.items()}
     except (AttributeError, TypeError, ValueError):
         white = {}
-    if not white or not all(0.0 < v < 10.0 for v in white.values()):
+    if not white or not all(0.0 < v < np.inf for v in white.values()):
         raise InputError(
             "white_background: expected an object of light name -> reflectance "
             "(positive numbers), as 'tunespec calibrate' writes it",

@@ -67,6 +67,7 @@ __all__ = [
     "MAX_SPD_SHIFT_NM",
     "MIN_PRIOR_SPECTRA",
     "MIN_SEEN_FRACTION",
+    "MIN_WHITE_LEVEL",
     "NEEDED_RANGE_NM",
     "NEGATIVE_SIGMAS",
     "SIGNAL_RANGE",
@@ -159,6 +160,11 @@ WHITE_SCALE_TOLERANCE = 0.1
 #: (On ``benchmarks/white_scale.py`` the lights this leaves out are IR-cut cameras'
 #: deep red ones; seen 0.00-0.2 %, their ratios between two sessions were 0.3-1.4.)
 MIN_SEEN_FRACTION = 0.03
+#: Least level of the white board (its brightest channel, full scale) under a light
+#: for the light to count in :func:`check_white_scale`: a dark level off by 0.01 %
+#: of full scale is 1 % of it, and a failing LED (at 1e-5 of its power,
+#: ``tests/app/test_warnings_progress.py``) lights it at the dark level alone.
+MIN_WHITE_LEVEL = 0.01
 
 
 class Implausible(InputError):
@@ -660,7 +666,9 @@ def white_reflectance(
     level (``Responses.white_rgb``, Eq. 2's mean ``A_B``) over a perfect white's
     (:func:`white_response`), summed over the channels. NaN under a light the camera
     sees less than :data:`MIN_SEEN_FRACTION` of (a deep red LED through an IR-cut
-    filter): the light's reading noise decides the ratio there.
+    filter: the light's reading noise decides the ratio there), or that lit the
+    board below :data:`MIN_WHITE_LEVEL` (an LED too weak for its exposure: the dark
+    level's error and the reading's noise decide it).
 
     ``illuminants`` (named as the white's lights) and ``sensitivity`` on one grid."""
     level = np.sum(np.asarray(white_rgb, dtype=np.float64), axis=1)
@@ -669,7 +677,8 @@ def white_reflectance(
     light = np.sum(illuminants.values, axis=1) * illuminants.step_nm
     peak = float(np.max(np.sum(sensitivity.values, axis=0), initial=0.0))
     seen = perfect / np.maximum(light * peak, 1e-300)
-    usable = (seen >= MIN_SEEN_FRACTION) & (perfect > 0)
+    lit = np.max(np.asarray(white_rgb, dtype=np.float64), axis=1) >= MIN_WHITE_LEVEL
+    usable = (seen >= MIN_SEEN_FRACTION) & (perfect > 0) & lit & (level > 0)
     return np.where(usable, level / np.where(usable, perfect, 1.0), np.nan)
 
 

@@ -95,10 +95,23 @@ def test_white_reflectance_is_the_level_over_a_perfect_white() -> None:
     seen = perfect.sum(axis=1) / (light * sens.values.sum(axis=0).max())
     assert seen[0] > 0.7 and 0.005 < seen[1] < MIN_SEEN_FRACTION  # 0.74, 0.0095
     assert np.isnan(rho[1])
+    # a light too weak to light the board (a failing LED): its level is the dark's
+    two = Spectra(wl, np.stack([band(520, 10), band(540, 10)]), ("G1", "G2"))
+    for dark in ([0.004, 0.009, 0.001], [-0.002, 0.001, 0.0]):
+        weak = white_reflectance(np.array([[0.5, 0.6, 0.1], dark]), two, sens)
+        assert np.isfinite(weak[0]) and np.isnan(weak[1])
 
 
 @pytest.mark.parametrize(
-    "doc", ['{"LED410": -1}', "[0.9, 0.9]", '{"LED410": "x"}', "{}", "not json"]
+    "doc",
+    [
+        '{"LED410": -1}',
+        '{"LED410": 0}',
+        "[0.9, 0.9]",
+        '{"LED410": "x"}',
+        "{}",
+        "not json",
+    ],
 )
 def test_a_malformed_record_names_the_side_file(doc) -> None:
     meta = {"white_background": doc, "meta_path": "S.csv.meta.json"}
