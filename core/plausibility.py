@@ -89,6 +89,7 @@ __all__ = [
     "inconsistent_patches",
     "percent_spectra",
     "reflectance_unit",
+    "white_ratios",
     "white_reflectance",
     "white_response",
 ]
@@ -671,15 +672,25 @@ def white_reflectance(
     level's error and the reading's noise decide it).
 
     ``illuminants`` (named as the white's lights) and ``sensitivity`` on one grid."""
-    level = np.sum(np.asarray(white_rgb, dtype=np.float64), axis=1)
+    white = np.asarray(white_rgb, dtype=np.float64)
+    level = np.sum(white, axis=1)
     perfect = np.sum(white_response(illuminants, sensitivity), axis=1)
     # what the camera sees of each light against all of it at its most sensitive
     light = np.sum(illuminants.values, axis=1) * illuminants.step_nm
     peak = float(np.max(np.sum(sensitivity.values, axis=0), initial=0.0))
     seen = perfect / np.maximum(light * peak, 1e-300)
-    lit = np.max(np.asarray(white_rgb, dtype=np.float64), axis=1) >= MIN_WHITE_LEVEL
+    lit = np.max(white, axis=1) >= MIN_WHITE_LEVEL
     usable = (seen >= MIN_SEEN_FRACTION) & (perfect > 0) & lit & (level > 0)
     return np.where(usable, level / np.where(usable, perfect, 1.0), np.nan)
+
+
+def white_ratios(
+    sample: Mapping[str, float], chart: Mapping[str, float]
+) -> dict[str, float]:
+    """The sample's white background over the chart's, per light both have
+    (finite, positive ones): what :func:`check_white_scale` judges."""
+    ratios = {n: sample[n] / chart[n] for n in sample if n in chart}
+    return {n: r for n, r in ratios.items() if np.isfinite(r) and r > 0}
 
 
 def check_white_scale(sample: Mapping[str, float], chart: Mapping[str, float]) -> float:
@@ -689,11 +700,9 @@ def check_white_scale(sample: Mapping[str, float], chart: Mapping[str, float]) -
     sample whose responses or illuminants are on another scale than the chart's
     shows here, where a darker sample does not. Returns the median ratio (NaN
     when no light is shared)."""
-    names = [n for n in sample if n in chart]
-    ratio = np.array([sample[n] / chart[n] for n in names], dtype=np.float64)
-    keep = np.isfinite(ratio) & (ratio > 0)
-    names = [n for n, k in zip(names, keep, strict=True) if k]
-    ratio = ratio[keep]
+    ratios = white_ratios(sample, chart)
+    names = list(ratios)
+    ratio = np.array(list(ratios.values()), dtype=np.float64)
     if ratio.size == 0:
         return float("nan")
     median = float(np.median(ratio))

@@ -61,7 +61,7 @@ def check_sample_scale(
     warning when the sample has no white level to compare. Returns the ratio per
     light compared (None: none). ``estimate`` and the per-pixel images call it."""
     from tunespec.core.calibration import white_from_meta
-    from tunespec.core.plausibility import check_white_scale
+    from tunespec.core.plausibility import check_white_scale, white_ratios
 
     chart = white_from_meta(meta)
     if chart is None:
@@ -74,7 +74,7 @@ def check_sample_scale(
             )
         return None
     checks(check_white_scale, sample, chart)
-    return {n: sample[n] / chart[n] for n in sample if n in chart}
+    return white_ratios(sample, chart)
 
 
 def estimation_lighting(
