@@ -124,12 +124,15 @@ class CalibrationResult:
         Table 1's RGB error per fitted patch.
     self_check
         The calibration's self-check (``check=True``), else ``None``.
+    forced
+        Plausibility checks accepted with ``force=True``, one line each.
     """
 
     calibration: Calibration
     table1: PredictionStats
     patch_rgb_error: Mapping[str, float] = field(default_factory=dict)
     self_check: Any = None
+    forced: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True, eq=False)
@@ -324,6 +327,7 @@ def calibrate(
     method: str | None = None,
     grid: Grid | str | None = None,
     check: bool = False,
+    force: bool = False,
 ) -> CalibrationResult:
     """Camera sensitivities from a chart's responses (``tunespec calibrate``).
 
@@ -341,8 +345,12 @@ def calibrate(
         calibration grid).
     check
         Run the calibration's self-check too (``--check``).
+    force
+        Accept a fit the plausibility checks refuse (``--force``; a chart whose
+        responses bend more than a raw sensor's).
     """
     from tunespec.app.pipeline import steps
+    from tunespec.core import plausibility as pl
     from tunespec.core.sensitivity import SENSITIVITY_METHODS
 
     if method is not None and method not in SENSITIVITY_METHODS:
@@ -355,11 +363,21 @@ def calibrate(
         if reflectances is None
         else _spectra(reflectances, "reflectance", "reflectances")
     )
+    checks = pl.Checks(force=force, force_hint=_FORCE_HINT)
     done = steps.calibrate(
-        chart, refl, method=method, grid=_grid(grid, CALIBRATION_GRID), check=check
+        chart,
+        refl,
+        method=method,
+        grid=_grid(grid, CALIBRATION_GRID),
+        check=check,
+        checks=checks,
     )
     return CalibrationResult(
-        done.estimate, done.table1, dict(done.patch_rgb_error or {}), done.self_check
+        done.estimate,
+        done.table1,
+        dict(done.patch_rgb_error or {}),
+        done.self_check,
+        tuple(checks.overridden),
     )
 
 

@@ -45,6 +45,7 @@ from numpy.typing import NDArray
 
 from tunespec.core.errors import InputError, shown_names
 from tunespec.core.excess import ExcessVariance
+from tunespec.core.io.export import NOTE_KEYS
 from tunespec.core.metering import suppress_meter_floor
 from tunespec.core.plausibility import Checks, check_calibration_grid
 from tunespec.core.spectra import Grid, Spectra, resampling_matrix
@@ -78,7 +79,8 @@ _CORRECTION_KEYS = (
     "led_correction",
     "excess_variance",
     "reading_replicates",
-    "forced",
+    "white_background",
+    *NOTE_KEYS,
 )
 
 
@@ -130,6 +132,10 @@ class Calibration:
         The calibration fitted again with the light's readings' noise drawn anew
         (``"bayes"`` with noisy readings, :mod:`~tunespec.core.readings`): the
         errors-in-variables term of the estimate's uncertainty.
+    white_background
+        The chart session's white background by Eq. 1 under each light (light ->
+        reflectance, :func:`white_from_meta`): what an estimate's scale check
+        compares its own session's with; ``None`` without white levels.
     """
 
     sensitivity: Spectra
@@ -142,6 +148,7 @@ class Calibration:
     excess: ExcessVariance | None = None
     provenance: dict[str, Any] = field(default_factory=dict)
     readings: ReadingReplicates | None = None
+    white_background: dict[str, float] | None = None
 
     @property
     def std(self) -> NDArray[np.float64] | None:
@@ -205,8 +212,11 @@ class Calibration:
             meta["excess_variance"] = json.dumps(self.excess.as_dict())
         if self.readings is not None:
             meta["reading_replicates"] = json.dumps(self.readings.as_dict())
-        if "forced" in self.provenance:
-            meta["forced"] = json.dumps(list(self.provenance["forced"]))
+        if self.white_background is not None:
+            meta["white_background"] = json.dumps(self.white_background)
+        for key in NOTE_KEYS:
+            if key in self.provenance:
+                meta[key] = json.dumps(list(self.provenance[key]))
         return meta
 
     def save(self, path: str | os.PathLike[str]) -> Path:
@@ -399,8 +409,9 @@ class Calibration:
         label = meta.get("estimated_by")
         if isinstance(label, str) and label:
             prov["estimated_by"] = label
-        if isinstance(meta.get("forced"), list):
-            prov["forced"] = [str(x) for x in meta["forced"]]
+        for key in NOTE_KEYS:
+            if isinstance(meta.get(key), list):
+                prov[key] = [str(x) for x in meta[key]]
         method = "bayes" if corr is not None else "unknown"
         if (
             isinstance(label, str)
@@ -417,6 +428,7 @@ class Calibration:
             excess=excess,
             provenance=prov,
             readings=readings,
+            white_background=white_from_meta(meta),
         )
         # the sensitivities' meta says the same as the fields (the pipeline's
         # estimate reads the corrections from there)
@@ -428,10 +440,11 @@ class Calibration:
 
 
 def _labels(doc: Any) -> dict[str, Any]:
-    """The side file's provenance keys (``estimated_by``, ``forced``)."""
+    """The side file's estimator label (``estimated_by``; its findings,
+    :data:`NOTE_KEYS`, ``parse_sensitivity_meta`` reads)."""
     if not isinstance(doc, dict):
         return {}
-    return {k: doc[k] for k in ("estimated_by", "forced") if k in doc}
+    return {k: doc[k] for k in ("estimated_by",) if k in doc}
 
 
 def predict_responses(

@@ -38,6 +38,9 @@ The checks and the quantities they rest on:
   (:func:`white_reflectance`) must agree; the one check that tells a sample on
   another scale (exposure, ISO, aperture or illuminants' unit not as recorded) from
   a darker sample.
+- **A chart's linearity** (:func:`check_chart_linearity`): a raw sensor bends its
+  responses by far less than the largest bend a calibration undoes; a larger one is
+  a tone curve (JPEG, a TIFF with gamma) or a black level not subtracted.
 
 References
 ----------
@@ -762,6 +765,50 @@ def check_estimate_inputs(
         saturated=responses.saturated,
         path=responses_path,
     )
+
+
+def check_chart_linearity(params: Mapping[str, Any]) -> None:
+    """The chart's responses bend no more than a raw sensor's.
+
+    ``params``: the calibration's (``Calibration.params``), with the bend
+    ``c = x^(1 + gamma)`` its residuals showed (``linearity_gamma_found`` and
+    ``linearity_gamma_se``; no check without them). A bend of
+    :data:`~tunespec.core.excess.LINEARITY_GAMMA_MAX` or more, at least
+    :data:`~tunespec.core.excess.LINEARITY_SIGNIFICANCE` standard errors from zero, is
+    not undone: on the simulated chart an sRGB-like gamma 1/2.2 shows -0.68, 1/1.2
+    -0.15 and x^1.1 0.09, a dark level of 0.5 % / 1 % of full scale left in -0.18 /
+    -0.28 (``tests/test_mistakes_corpus.py``), where the benchmark's non-linear
+    sensor (``signal^1.003``) shows 0.0024-0.0033 and a black level subtracted 0.3 %
+    of full scale too much 0.049 (undone, with the self-check's warning).
+    """
+    from tunespec.core.excess import LINEARITY_GAMMA_MAX, LINEARITY_SIGNIFICANCE
+
+    gamma = params.get("linearity_gamma_found")
+    se = params.get("linearity_gamma_se")
+    if gamma is None or se is None:
+        return
+    if abs(gamma) < LINEARITY_GAMMA_MAX or abs(gamma) < LINEARITY_SIGNIFICANCE * se:
+        return
+    raise Implausible(
+        "linearity",
+        f"the chart's responses bend as response^(1 + gamma) with gamma {gamma:+.3f} "
+        f"+- {se:.2g} against Eq. 1 (a raw sensor's: within +-{LINEARITY_GAMMA_MAX:g}): "
+        "a tone curve (a JPEG, a TIFF with gamma or another camera profile) or a "
+        "black level not subtracted; extract the patches from raw or linear files",
+    )
+
+
+def calibration_notes(meta: Mapping[str, Any], path: object) -> list[str]:
+    """Warning lines, for an estimate, of what the calibration ``path`` found about
+    itself (its side file's ``forced`` and ``warnings``,
+    :data:`~tunespec.core.io.export.NOTE_KEYS`): its estimates inherit them."""
+    lines = []
+    for key, what in (("forced", "was accepted with --force"), ("warnings", "warned")):
+        notes = meta.get(key) or []
+        if notes:
+            more = f" (and {len(notes) - 1} more)" if len(notes) > 1 else ""
+            lines.append(f"the calibration {path} {what}: {notes[0]}{more}")
+    return lines
 
 
 #: Table 1's mean RGB RMS over the mean response above which a calibration's fit is

@@ -777,14 +777,26 @@ def estimate_camera_sensitivity(
             progress=progress, should_stop=should_stop,
         )  # fmt: skip
 
-    first = fit(problem, sub_progress(progress, 0.0, 0.5))
-    gamma = _significant_linearity(first, problem)
-    if gamma == 0.0:
-        report(progress, 1.0)
-        return first
-    # the same stimuli and database, the responses linearised
-    linear = _prepare(linearise(responses, gamma), illuminants, reflectances)
-    return _linearised(fit(linear, sub_progress(progress, 0.5, 1.0)), gamma)
+    cal = fit(problem, sub_progress(progress, 0.0, 0.5))
+    gamma, se = _chart_linearity(cal, problem)
+    if _undone(gamma, se):  # the same stimuli and database, the responses linearised
+        linear = _prepare(linearise(responses, gamma), illuminants, reflectances)
+        cal = _linearised(fit(linear, sub_progress(progress, 0.5, 1.0)), gamma)
+    report(progress, 1.0)
+    return _with_bend(cal, gamma, se)
+
+
+def _with_bend(
+    cal: SensitivityEstimate, gamma: float, se: float
+) -> SensitivityEstimate:
+    """``cal`` with the chart's bend as fitted, undone or not
+    (``params["linearity_gamma_found"]`` and ``..._se``; nothing where no fit ran):
+    a bend too large to undo is
+    :func:`~tunespec.core.plausibility.check_chart_linearity`'s."""
+    if not np.isfinite(se):
+        return cal
+    found = {"linearity_gamma_found": gamma, "linearity_gamma_se": se}
+    return replace(cal, params={**cal.params, **found})
 
 
 def _linearised(cal: SensitivityEstimate, gamma: float) -> SensitivityEstimate:
@@ -795,19 +807,25 @@ def _linearised(cal: SensitivityEstimate, gamma: float) -> SensitivityEstimate:
     )
 
 
-def _significant_linearity(cal: SensitivityEstimate, problem: _Problem) -> float:
-    """The chart's non-linearity ``gamma`` (:func:`fit_linearity` at the fit's
-    residuals, :func:`_chart_residual_terms`) where it is significant and plausible,
-    else 0. Only ``"bayes"``, whose residuals its error model explains: the paper's
-    estimators leave a misfit of percents that looks like a bend (``"pca"`` 0.007-0.009
-    on an ideal sensor of ``benchmarks/generalisation.py``), and they reproduce the
-    paper as published."""
+def _chart_linearity(
+    cal: SensitivityEstimate, problem: _Problem
+) -> tuple[float, float]:
+    """The chart's non-linearity ``gamma`` and its standard error
+    (:func:`fit_linearity` at the fit's residuals, :func:`_chart_residual_terms`);
+    ``(0, inf)`` where none was fitted. Only ``"bayes"``, whose residuals its error
+    model explains: the paper's estimators leave a misfit of percents that looks like
+    a bend (``"pca"`` 0.007-0.009 on an ideal sensor of
+    ``benchmarks/generalisation.py``), and they reproduce the paper as published."""
     if cal.method != "bayes" or cal.excess is None or cal.excess.nonlinearity == 0.0:
-        return 0.0
+        return 0.0, float("inf")
     measured, pred, noise = _chart_residual_terms(problem, cal)
-    gamma, se = fit_linearity(measured, pred, noise, cal.excess)
+    return fit_linearity(measured, pred, noise, cal.excess)
+
+
+def _undone(gamma: float, se: float) -> bool:
+    """Whether a bend is undone: significant, and a sensor's, not a mistake's."""
     plausible = LINEARITY_GAMMA_MIN <= abs(gamma) < LINEARITY_GAMMA_MAX
-    return gamma if plausible and abs(gamma) >= LINEARITY_SIGNIFICANCE * se else 0.0
+    return plausible and abs(gamma) >= LINEARITY_SIGNIFICANCE * se
 
 
 def _estimate_once(

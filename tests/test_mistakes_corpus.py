@@ -234,6 +234,15 @@ CASES: list[tuple[str, Callable, str, str]] = [
         x.chart, d, 1.6)), "refused", "1.6 in a file of fractions"),
     ("one response 5 (full scale is 1)", lambda x, d: _est(
         x, responses=_one_response(x, d, 5.0, channel=0)), "refused", "full scale"),
+    # a chart on another response curve than a raw sensor's: every patch is off,
+    # which a calibration with free per-LED gains half absorbs (before: exit 0 with
+    # warnings, and the sample's estimate 2.4 dE00 off without one)
+    ("chart from a TIFF with a tone curve (gamma 1/1.2)", lambda x, d: _cal(
+        x, responses=_toned(x.chart_responses, d, 1 / 1.2)), "refused",
+     "bend as response^(1 + gamma) with gamma -0.1"),
+    ("chart not dark-subtracted (+0.5 % of full scale)", lambda x, d: _cal(
+        x, responses=fs.edited_responses(x.chart_responses, d / "r.csv", lambda r: replace(
+            r, rgb=r.rgb + 0.005))), "refused", "black level not subtracted"),
     ("chart responses x100", lambda x, d: _cal(x, responses=fs.scaled_responses(
         x.chart_responses, d / "r.csv", 100.0)), "refused", "above full scale"),
     # coverage
@@ -328,6 +337,19 @@ def _with_covariance(x, d):
     return write_sensitivities_csv(
         d / "S.csv", s, (0.002 * s.values.max()) ** 2 * np.eye(n)
     )
+
+
+def _toned(path, d, exponent):
+    """The responses (their noise and white level too) through ``c^exponent``: a
+    rendered file's tone curve."""
+    d.mkdir(exist_ok=True)
+
+    def tone(r):
+        c = np.clip(r.rgb, 1e-6, None)
+        return replace(r, rgb=c**exponent, rgb_std=r.rgb_std * exponent
+                       * c ** (exponent - 1), white_rgb=r.white_rgb**exponent)  # fmt: skip
+
+    return fs.edited_responses(path, d / "toned.csv", tone)
 
 
 def _typo_on_white(path, d, value):
@@ -484,6 +506,62 @@ def test_force_on_calibrate_is_recorded_beside_the_sensitivities(
     side = json.loads((tmp_path / "S.csv.meta.json").read_text())
     stats = json.loads((tmp_path / "t1.json").read_text())
     assert side["forced"] == stats["forced"] and "covers 420-680" in side["forced"][0]
+
+
+def test_force_keeps_a_toned_chart_as_fitted_and_says_so(good, tmp_path, capsys):
+    """``--force`` on a bend no sensor has: the fit without linearising (as before
+    the check), the override beside the sensitivities."""
+    argv = [*_cal(good, responses=_toned(good.chart_responses, tmp_path, 1 / 1.2)),
+            "-o", str(tmp_path / "S.csv"), "--force"]  # fmt: skip
+    code, lines = _run(argv, capsys)
+    assert code == 0, lines
+    assert any("accepted with --force" in ln and "gamma -0.1" in ln for ln in lines)
+    side = json.loads((tmp_path / "S.csv.meta.json").read_text())
+    assert "gamma -0.1" in side["forced"][0]
+    assert side["excess_variance"]["linearity_gamma"] == 0.0
+
+
+def test_an_estimate_repeats_what_its_calibration_warned(good, tmp_path, capsys):
+    """A calibration's warnings (here the self-check's: a chart bent as
+    ``c^(1/1.05)``, undone, but more than a sensor bends) travel in its side file;
+    every estimate with it repeats them, so a script that calls the two commands
+    does not lose them."""
+    chart = _toned(good.chart_responses, tmp_path, 1 / 1.05)
+    cal = [*_cal(good, responses=chart), "-o", str(tmp_path / "S.csv")]
+    code, lines = _run(cal, capsys)
+    assert code == 0 and any("non-linearity" in ln for ln in lines), lines
+    side = json.loads((tmp_path / "S.csv.meta.json").read_text())
+    assert side["warnings"] == [ln.removeprefix("warning: ") for ln in lines]
+    sample = _toned(good.responses, tmp_path / "sample", 1 / 1.05)
+    est = [*_est(good, sensitivities=tmp_path / "S.csv", responses=sample),
+           "-o", str(tmp_path / "e.csv")]  # fmt: skip
+    code, lines = _run(est, capsys)
+    assert code == 0, lines
+    assert lines[0].startswith(
+        f"warning: the calibration {tmp_path / 'S.csv'} warned: self-check: "
+    ), lines
+
+
+def test_the_python_api_keeps_the_white_background_and_checks_the_scale(
+    good, tmp_path
+) -> None:
+    """``Calibration.load``/``save`` keep the chart session's white background
+    (before: dropped, so ``api.estimate`` checked no scale), and ``api.estimate``
+    refuses a sample on another scale as the command does."""
+    from tunespec.app import api
+    from tunespec.core.calibration import Calibration
+    from tunespec.core.plausibility import Implausible
+
+    side = json.loads(Path(f"{good.sensitivities}.meta.json").read_text())
+    cal = Calibration.load(good.sensitivities)
+    assert cal.white_background == side["white_background"]
+    again = Calibration.load(cal.save(tmp_path / "cal.json"))
+    assert again.white_background == cal.white_background
+    doubled = fs.scaled_spectra(good.illuminants, tmp_path / "i.csv", 2.0, "illuminant")
+    with pytest.raises(Implausible, match=r"white background reflects 0\.5x"):
+        api.estimate(good.responses, doubled, again)
+    done = api.estimate(good.responses, doubled, again, force=True)
+    assert any("white background reflects 0.5x" in f for f in done.forced)
 
 
 @pytest.mark.slow

@@ -301,27 +301,18 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         reported_illuminants=illum_in,
         hold_out_every=args.hold_out_every,
         check=args.self_check,
+        checks=checks,
         progress=out.progress("calibrating"),
         **_fit_options(args),
     )
     est, report, checked = cal.estimate, cal.report, cal.self_check
-    sensitivity = est.sensitivity
-    if checks.overridden:
-        meta = {**sensitivity.meta, "forced": dumps_json(checks.overridden)}
-        sensitivity = Spectra(
-            sensitivity.wavelength_nm, sensitivity.values, sensitivity.names, meta
-        )
-    write_sensitivities_csv(args.output, sensitivity, est.covariance)
+    # with the checks overridden and the findings below in its side file
+    write_sensitivities_csv(args.output, est.sensitivity, est.covariance)
     _print_calibration(out, est, report)
-    fit_warning = pl.calibration_fit_warning(
-        float(report.training.as_dict()["RGB"]["mean"]), responses.rgb
-    )
-    if fit_warning:
-        out.warn(fit_warning)
     if checked is not None:
         out.say(checked.format_text())
-        for w in checked.warnings:
-            out.warn(f"self-check: {w}")
+    for w in est.provenance.get("warnings", ()):
+        out.warn(w)
     out.say(f"sensitivities written to {args.output}")
     stats = {
         "method": est.method,
@@ -569,7 +560,9 @@ def _write_estimate_meta(
 
 def _corrections(args: argparse.Namespace, out: Console) -> dict[str, Any]:
     """The calibration's side file (LED corrections, covariance), refused missing
-    unless ``--no-corrections``."""
+    unless ``--no-corrections``; what the calibration found about itself is repeated
+    as warnings."""
+    from tunespec.core import plausibility as pl
     from tunespec.core.io.export import sensitivity_meta_path
 
     side = sensitivity_meta_path(args.sensitivities)
@@ -588,6 +581,8 @@ def _corrections(args: argparse.Namespace, out: Console) -> dict[str, Any]:
             "--no-corrections to accept",
             path=args.sensitivities,
         )
+    for line in pl.calibration_notes(meta, args.sensitivities):
+        out.warn(line)
     return meta
 
 

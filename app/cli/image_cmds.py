@@ -173,10 +173,12 @@ def _settings(args: argparse.Namespace) -> object:
     )
 
 
-def _warn_without_corrections(out: Console, sensitivities: Path) -> None:
+def _warn_of_calibration(out: Console, sensitivities: Path) -> None:
     """Say so when the sensitivities come without their side file: the images are
-    then estimated without the calibration's LED corrections (never silently)."""
-    from tunespec.core.io.export import sensitivity_meta_path
+    then estimated without the calibration's LED corrections (never silently); and
+    repeat what the calibration found about itself."""
+    from tunespec.core.io.export import read_sensitivity_meta, sensitivity_meta_path
+    from tunespec.core.plausibility import calibration_notes
 
     side = sensitivity_meta_path(sensitivities)
     if not side.exists():
@@ -185,6 +187,9 @@ def _warn_without_corrections(out: Console, sensitivities: Path) -> None:
             "images are estimated without the calibration's per-LED corrections "
             "and come out worse; copy the side file along with the CSV"
         )
+        return
+    for line in calibration_notes(read_sensitivity_meta(sensitivities), sensitivities):
+        out.warn(line)
 
 
 def cmd_estimate_image(args: argparse.Namespace) -> int:
@@ -193,7 +198,7 @@ def cmd_estimate_image(args: argparse.Namespace) -> int:
     if not (args.session / "manifest.json").is_file():
         raise InputError("not a session folder (no manifest.json)", path=args.session)
     out = Console(args)
-    _warn_without_corrections(out, args.sensitivities)
+    _warn_of_calibration(out, args.sensitivities)
     prov = estimate_images(
         args.session,
         args.sensitivities,
@@ -215,7 +220,7 @@ def cmd_batch(args: argparse.Namespace) -> int:
     if args.sessions_at_once < 1:
         raise InputError(f"--sessions-at-once {args.sessions_at_once}: must be >= 1")
     out = Console(args)
-    _warn_without_corrections(out, args.sensitivities)
+    _warn_of_calibration(out, args.sensitivities)
     result = batch_images(
         args.folder,
         args.sensitivities,

@@ -85,8 +85,8 @@ def read_linear_image(path: str | PathLike[str]) -> LinearImage:
     Raises
     ------
     InputError
-        Naming the file: missing, not a raw file or TIFF, an 8-bit TIFF (not linear
-        camera data), not RGB.
+        Naming the file: missing, not a raw file or TIFF, an 8-bit TIFF or one whose
+        ICC profile declares a tone curve (not linear camera data), not RGB.
     """
     path = Path(path)
     if not path.is_file():
@@ -109,10 +109,21 @@ def read_linear_image(path: str | PathLike[str]) -> LinearImage:
 def _read_tiff(path: Path) -> LinearImage:
     import tifffile
 
+    from tunespec.core.io.icc import profile_tone
+
     try:
-        a = tifffile.imread(path)
+        with tifffile.TiffFile(path) as tif:
+            a = tif.asarray()
+            profile = tif.pages.first.iccprofile
     except (OSError, ValueError, tifffile.TiffFileError) as exc:
         raise InputError(f"cannot read as a TIFF: {exc}", path=path) from None
+    if profile and (gamma := profile_tone(profile)) is not None:
+        raise InputError(
+            f"its ICC profile declares a tone curve (gamma {gamma:.2f} at mid-grey): "
+            "the TIFF is rendered, not linear camera data; export it linear (no "
+            "tone curve, a linear profile or none) or give the raw file",
+            path=path,
+        )
     if a.ndim != 3 or a.shape[-1] not in (3, 4):
         raise InputError(
             f"expected an RGB TIFF (height x width x 3), got shape {a.shape}",

@@ -72,6 +72,7 @@ from tunespec.app.pipeline.steps import (
 from tunespec.core.errors import InputError
 from tunespec.core.io.session import Session, SessionLock
 from tunespec.core.layout import TargetLayout
+from tunespec.core.plausibility import Checks
 from tunespec.core.progress import (
     ProgressFn,
     StopFn,
@@ -108,6 +109,9 @@ __all__ = [
     "sensitivity_methods",
     "write_uncertainty",
 ]
+
+#: How a step's result names a plausibility check accepted with ``force``.
+_FORCED = "accepted with force = true:"
 
 
 # -- the progress/cancel handle --------------------------------------------------------
@@ -317,6 +321,9 @@ class CalibrateInputs:
         ``check_extraction`` the extraction is checked against them.
     grid
         Working grid.
+    force, force_hint
+        Accept a fit that fails a plausibility check (a warning of the result), and
+        how a refusal names that override.
     """
 
     chart_dir: Path
@@ -328,6 +335,8 @@ class CalibrateInputs:
     reflectances: Spectra | None = None
     check_extraction: bool = False
     grid: Grid = CALIBRATION_GRID
+    force: bool = False
+    force_hint: str = "--force"
 
 
 #: A job alone: processing takes 60 % of the calibrate job's bar, 80 % of the
@@ -369,6 +378,7 @@ def calibrate_job(
     refl = inputs.reflectances
     if refl is None:
         refl = layout_reflectances(inputs.layout or chart.layout, grid=inputs.grid)
+    checks = Checks(force=inputs.force, force_hint=inputs.force_hint)
     cal = stages.timed(
         "calibrate",
         lambda p: calibrate(
@@ -377,6 +387,7 @@ def calibrate_job(
             method=inputs.method,
             grid=inputs.grid,
             check=True,
+            checks=checks,
             progress=p,
             should_stop=should_stop,
         ),
@@ -388,6 +399,7 @@ def calibrate_job(
         chart,
         threshold=inputs.threshold,
         elapsed_s=time.monotonic() - t0,
+        forced=tuple(checks.overridden),
     )
 
 
@@ -399,16 +411,18 @@ def record_calibration(
     *,
     threshold: float,
     elapsed_s: float = 0.0,
+    forced: tuple[str, ...] = (),
 ) -> CalibrationResult:
     """The calibration's result written, once for every front end: its warnings
     (the chart's capture and processing, the patches left out, the self-check's
-    findings) and the session's fingerprint with it."""
+    findings, the checks ``forced``) and the session's fingerprint with it."""
     excluded = tuple(cal.estimate.excluded_patches)
     result = CalibrationResult.from_step(
         cal,
         chart,
         threshold=threshold,
-        warnings=step_warnings(chart_dir, chart, excluded),
+        warnings=step_warnings(chart_dir, chart, excluded)
+        + tuple(f"{_FORCED} {f}" for f in forced),
         elapsed_s=elapsed_s,
     )
     write_calibration(out_dir, result, session_fingerprint(chart_dir))
@@ -521,8 +535,6 @@ def estimate_job(
 ) -> EstimateResult:
     """Process the sample session, estimate its reflectances (Table 2 against the
     reference) and write ``estimate/`` (:func:`record_estimate`)."""
-    from tunespec.core.plausibility import Checks
-
     t0 = time.monotonic()
     stages = stages or Stages(progress, _ESTIMATE_STAGES)
     sample = stages.timed(
@@ -571,7 +583,7 @@ def record_estimate(
     sample's capture and processing, the checks overridden) and the session's
     fingerprint with it."""
     warnings = step_warnings(sample_dir, sample) + tuple(
-        f"accepted with force = true: {f}" for f in est.forced
+        f"{_FORCED} {f}" for f in est.forced
     )
     result = EstimateResult.from_step(
         est, sample, reference=reference, warnings=warnings, elapsed_s=elapsed_s

@@ -175,6 +175,8 @@ DemoResult = RunResult
 
 
 # -- orchestration ---------------------------------------------------------------------
+#: How a refusal names the configuration's override.
+_FORCE_HINT = "force = true in the configuration"
 _STAGE_WEIGHTS = {
     "capture_chart": 30.0,
     "process_chart": 6.0,
@@ -340,6 +342,8 @@ def _run_on(
             reflectances=plan.chart_reflectances,
             check_extraction=plan.chart_reflectances is not None,
             grid=plan.grid,
+            force=plan.force,
+            force_hint=_FORCE_HINT,
         ),
         should_stop=should_stop,
         stages=stages,
@@ -363,7 +367,7 @@ def _run_on(
             prior=plan.prior,
             grid=plan.estimation_grid,
             force=plan.force,
-            force_hint="force = true in the configuration",
+            force_hint=_FORCE_HINT,
         ),
         should_stop=should_stop,
         stages=stages,

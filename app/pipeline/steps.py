@@ -229,6 +229,7 @@ def calibrate(
     method: str | None = None,
     grid: Grid = CALIBRATION_GRID,
     check: bool = False,
+    checks: Checks | None = None,
     progress: ProgressFn | None = None,
     should_stop: StopFn | None = None,
     **options: Any,
@@ -251,6 +252,8 @@ def calibrate(
         A method of ``SENSITIVITY_METHODS`` (default: the library's default).
     grid
         Working wavelength grid.
+    checks
+        :func:`fit_calibration`'s.
     options
         More arguments for ``estimate_camera_sensitivity``.
     """
@@ -265,6 +268,7 @@ def calibrate(
         refl,
         reported_illuminants=chart.illuminants,
         check=check,
+        checks=checks,
         progress=progress,
         should_stop=should_stop,
         **options,
@@ -279,6 +283,7 @@ def fit_calibration(
     reported_illuminants: Spectra | None = None,
     hold_out_every: int | None = None,
     check: bool = False,
+    checks: Checks | None = None,
     progress: ProgressFn | None = None,
     should_stop: StopFn | None = None,
     **options: Any,
@@ -302,9 +307,18 @@ def fit_calibration(
     hold_out_every
         Fit without every N-th patch (``split_patches``, offset N-1); Table 1's
         held-out rows and the self-check's left-out patches are those.
+    checks
+        The plausibility checks of the fit (default: refuse, no override): a chart
+        whose responses bend more than a raw sensor's
+        (:func:`~tunespec.core.plausibility.check_chart_linearity`).
     options
         More arguments for ``estimate_camera_sensitivity``.
     """
+    from tunespec.core.plausibility import (
+        Checks,
+        calibration_fit_warning,
+        check_chart_linearity,
+    )
     from tunespec.core.sensitivity import estimate_camera_sensitivity
     from tunespec.core.stats import calibration_report, split_patches
 
@@ -323,6 +337,8 @@ def fit_calibration(
         should_stop=should_stop,
         **options,
     )
+    checks = checks if checks is not None else Checks()
+    checks(check_chart_linearity, est.params)
     rep = calibration_report(
         est, responses, illuminants, reflectances, held_out_patches=held
     )
@@ -356,30 +372,48 @@ def fit_calibration(
         )
     per_patch = table1_by_patch(est, fit, illuminants, reflectances)
     reported = illuminants if reported_illuminants is None else reported_illuminants
-    est = _with_white_background(est, responses, reported)
+    findings = [
+        w
+        for w in (
+            calibration_fit_warning(
+                float(rep.training.as_dict()["RGB"]["mean"]), responses.rgb
+            ),
+            *(f"self-check: {w}" for w in (checked.warnings if checked else ())),
+        )
+        if w
+    ]
+    notes = {"forced": list(checks.overridden), "warnings": findings}
+    est = _kept(
+        est,
+        white_background=_white_background(est, responses, reported),
+        provenance={**est.provenance, **{k: v for k, v in notes.items() if v}},
+    )
     return Calibration(est, rep, per_patch, self_check=checked)
 
 
-def _with_white_background(
+def _white_background(
     est: SensitivityEstimate, responses: Responses, illuminants: Spectra
-) -> SensitivityEstimate:
-    """``est`` with the chart session's white background by Eq. 1 in its
-    sensitivities' meta (``white_background``: light -> :func:`white_background`),
-    which the side file keeps for the estimate's scale check; ``est`` as it is
-    when the responses carry no white level."""
-    import json
-
+) -> dict[str, float] | None:
+    """The chart session's white background by Eq. 1 (light ->
+    :func:`white_background`), which the side file keeps for the estimate's scale
+    check; ``None`` when the responses carry no white level."""
     from tunespec.core.calibration import linearise_from_meta
 
     sens = est.sensitivity
     # linear, as the estimate's responses are when it compares them
     responses = linearise_from_meta(responses, sens.meta)
-    white = white_background(responses, illuminants, sens, sens.meta)
-    if white is None:
-        return est
-    meta = {**sens.meta, "white_background": json.dumps(white)}
-    sens = Spectra(sens.wavelength_nm, sens.values, sens.names, meta)
-    return replace(est, sensitivity=sens)
+    return white_background(responses, illuminants, sens, sens.meta)
+
+
+def _kept(est: SensitivityEstimate, **fields: Any) -> SensitivityEstimate:
+    """``est`` with ``fields`` replaced, and its sensitivities' meta (what the side
+    file keeps, ``Calibration.side_meta``) written from them."""
+    est = replace(est, **fields)
+    s = est.sensitivity
+    side = {k: v for k, v in est.side_meta().items() if k != "source"}
+    return replace(
+        est, sensitivity=Spectra(s.wavelength_nm, s.values, s.names, {**s.meta, **side})
+    )
 
 
 def _with_reference(responses: Any, refl: Spectra) -> Any:

@@ -132,6 +132,12 @@ _META_KEYS = (
     "reading_replicates",
     "white_background",
 )
+#: What a calibration found about itself, kept beside its curves for every estimate
+#: to repeat (lists of one-line findings): the plausibility checks accepted with
+#: ``--force`` and its warnings (a poor fit, the self-check's).
+NOTE_KEYS = ("forced", "warnings")
+#: Most findings a side file may hold, and their longest line.
+_MAX_NOTES, _MAX_NOTE_CHARS = 100, 2000
 
 
 def sensitivity_meta_path(sensitivity_csv: str | PathLike[str]) -> Path:
@@ -245,8 +251,9 @@ def sensitivity_meta_document(
     for key in _META_KEYS:
         if key in sensitivity.meta:
             doc[key] = json.loads(sensitivity.meta[key])
-    if "forced" in sensitivity.meta:  # plausibility checks overridden (--force)
-        doc["forced"] = json.loads(sensitivity.meta["forced"])
+    for key in NOTE_KEYS:
+        if key in sensitivity.meta:
+            doc[key] = json.loads(sensitivity.meta[key])
     if covariance is not None:
         doc["covariance"] = {
             "parameters": "s_R, s_G, s_B at wavelength_nm, then log gain and "
@@ -326,6 +333,9 @@ def parse_sensitivity_meta(doc: Any, path: str | PathLike[str]) -> dict[str, Any
     for key in _META_KEYS:
         if key in doc:
             out[key] = doc[key]
+    for key in NOTE_KEYS:
+        if key in doc:
+            out[key] = _notes(doc[key], key, path)
     if "sensitivity" in doc:
         out["curves"] = document_curves(doc, path)
     cov = doc.get("covariance")
@@ -350,6 +360,20 @@ def parse_sensitivity_meta(doc: Any, path: str | PathLike[str]) -> dict[str, Any
         out["covariance"] = values
         out["covariance_wavelength_nm"] = wl
     return out
+
+
+def _notes(value: Any, key: str, path: str | PathLike[str]) -> list[str]:
+    """A side file's list of findings (:data:`NOTE_KEYS`), checked."""
+    if (
+        not isinstance(value, list)
+        or len(value) > _MAX_NOTES
+        or not all(isinstance(v, str) and len(v) <= _MAX_NOTE_CHARS for v in value)
+    ):
+        raise InputError(
+            f"{key}: expected a list of at most {_MAX_NOTES} lines of text",
+            path=path,
+        )
+    return value
 
 
 #: Largest magnitude of a calibration covariance entry (sensitivities of peak ~1-10

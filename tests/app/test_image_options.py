@@ -121,14 +121,23 @@ def test_sensitivities_without_their_side_file_are_said_never_silently(
     import argparse
 
     from tunespec.app.cli.common import Console
-    from tunespec.app.cli.image_cmds import _warn_without_corrections
+    from tunespec.app.cli.image_cmds import _warn_of_calibration
 
     sens = tmp_path / "S.csv"
     sens.write_text("wavelength,R,G,B\n")
     console = Console(argparse.Namespace(quiet=False, json=False))
-    _warn_without_corrections(console, sens)
+    _warn_of_calibration(console, sens)
     err = capsys.readouterr().err
     assert err.startswith("warning: no LED corrections next to S.csv (S.csv.meta.json)")
     (tmp_path / "S.csv.meta.json").write_text("{}")
-    _warn_without_corrections(console, sens)
+    _warn_of_calibration(console, sens)
     assert capsys.readouterr().err == ""
+    # what the calibration found about itself, repeated
+    (tmp_path / "S.csv.meta.json").write_text(
+        '{"warnings": ["Table 1 is poor", "self-check: chi-square 8"]}'
+    )
+    _warn_of_calibration(console, sens)
+    err = capsys.readouterr().err
+    assert err == (
+        f"warning: the calibration {sens} warned: Table 1 is poor (and 1 more)\n"
+    ), err

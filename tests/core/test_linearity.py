@@ -4,6 +4,7 @@ linearised responses, and every estimate linearises its own responses the same w
 
 from __future__ import annotations
 
+import re
 from dataclasses import replace
 
 import numpy as np
@@ -20,11 +21,13 @@ from tunespec.core.datasets import (
 )
 from tunespec.core.errors import InputError
 from tunespec.core.excess import (
+    LINEARITY_GAMMA_MAX,
     ExcessVariance,
     fit_linearity,
     linearise,
     log_profile,
 )
+from tunespec.core.plausibility import Implausible, check_chart_linearity
 from tunespec.core.responses import Responses
 from tunespec.core.selfcheck import self_check
 from tunespec.core.sensitivity import estimate_camera_sensitivity
@@ -71,6 +74,21 @@ def test_the_fit_finds_the_bend_with_its_sign(gamma: float) -> None:
     g, se = fit_linearity(c + r, c, noise, ex)
     assert 1e-5 < se < 2e-4
     assert abs(g - gamma) < 3 * se, (g, se)
+
+
+def test_a_bend_no_sensor_has_is_refused() -> None:
+    """A significant bend of LINEARITY_GAMMA_MAX or more is a tone curve or a black
+    level, not undone: the calibration refuses it (``--force`` to accept)."""
+    check_chart_linearity({})  # no fit (the paper's estimators, a linear chart)
+    check_chart_linearity({"linearity_gamma_found": 0.003, "linearity_gamma_se": 1e-4})
+    check_chart_linearity({"linearity_gamma_found": 0.049, "linearity_gamma_se": 1e-4})
+    # as large, but not significant: nothing to say
+    check_chart_linearity({"linearity_gamma_found": -0.2, "linearity_gamma_se": 0.1})
+    for gamma in (LINEARITY_GAMMA_MAX, -0.148, 0.09):
+        with pytest.raises(Implausible, match=re.escape(f"gamma {gamma:+.3f} ")):
+            check_chart_linearity(
+                {"linearity_gamma_found": gamma, "linearity_gamma_se": 1e-3}
+            )
 
 
 def test_side_file_keeps_the_exponent_and_refuses_an_implausible_one() -> None:
@@ -121,6 +139,10 @@ def test_a_bent_sensor_is_found_linearised_and_estimated_better(
     # 0.00266 measured (+-0.00015); after the second fit the residuals show 0.0001
     assert 0.0022 <= cal.excess.linearity_gamma <= 0.0038, cal.excess
     assert cal.excess.nonlinearity <= 0.001, cal.excess
+    # the bend as fitted travels in the params, and a sensor's passes the check
+    assert cal.params["linearity_gamma_found"] == cal.excess.linearity_gamma
+    assert cal.params["linearity_gamma_se"] < 0.0005, cal.params
+    check_chart_linearity(cal.params)
     # it travels with the calibration, and the file path undoes it too
     back = Calibration.load(cal.save(tmp_path / "cal.json"))
     assert back.excess is not None
