@@ -72,6 +72,7 @@ from tunespec.core.spectra import Grid, Spectra
 
 __all__ = [
     "BRACKET_CLIP_LEVEL",
+    "EXIF_EXPOSURE_RTOL",
     "FLAT_WINDOW_PX",
     "SATURATION_TOLERANCE",
     "CornerDetection",
@@ -80,6 +81,7 @@ __all__ = [
     "exposure_groups",
     "find_session_corners",
     "flat_window",
+    "frame_settings_problem",
 ]
 
 #: Side of the centre window of the white frame whose mean normalises Eq. 2 (plane px).
@@ -112,6 +114,40 @@ def light_scale(exposure_s: float, iso: float | None = None) -> float:
     """What Eq. 1's illuminants multiply a channel's reading by: its exposure and
     its frames' gain (:func:`iso_gain`; 1 without an ISO)."""
     return float(exposure_s) * (1.0 if iso is None else iso_gain(iso))
+
+
+#: How far a raw file's own exposure time (EXIF) may lie from the one its session
+#: records and scales the light's readings by: EXIF keeps the nominal step (1/125 s
+#: for 2^-7 s is 2.4 % off), a third of a stop is 26 %.
+EXIF_EXPOSURE_RTOL = 0.1
+
+
+def frame_settings_problem(
+    frame: RawFrame, exposure_s: float, iso: float | None, aperture: float | None
+) -> str:
+    """What a raw file's own EXIF says against its record: its exposure time and ISO
+    (:data:`EXIF_EXPOSURE_RTOL`; Eq. 1's illuminants are scaled by the recorded
+    ones, :func:`light_scale`) and its f-number against ``aperture`` (the session's
+    first frame's: Eq. 2's white and target frames need one); ``""`` when they agree
+    or the file does not say."""
+    t = frame.exposure_s
+    if t is not None and not math.isclose(t, exposure_s, rel_tol=EXIF_EXPOSURE_RTOL):
+        return (
+            f"its raw file was exposed {t:g} s where the session records "
+            f"{exposure_s:g} s"
+        )
+    if frame.iso is not None and iso and not math.isclose(frame.iso, iso, rel_tol=0.01):
+        return f"its raw file is at ISO {frame.iso:g} where the session records {iso:g}"
+    if (
+        frame.aperture is not None
+        and aperture
+        and not math.isclose(frame.aperture, aperture, rel_tol=0.01)
+    ):
+        return (
+            f"its raw file was taken at f/{frame.aperture:g} where the session's "
+            f"first frame was at f/{aperture:g} (the aperture changed)"
+        )
+    return ""
 
 
 def illuminants_from_spds(

@@ -50,6 +50,7 @@ from tunespec.core.processing import (
     _Pixels,
     _RoiGeometry,
     flat_window,
+    frame_settings_problem,
 )
 from tunespec.core.progress import Cancelled, ProgressFn, StopFn, check_stop, report
 from tunespec.core.spectra import Spectra
@@ -444,6 +445,7 @@ class _FrameReader:
             f"retake it (tunespec capture --out {session.root} --retake {{}})"
         )
         self._first: tuple[str, tuple[int, ...], str] | None = None
+        self._aperture: float | None = None
         self._rois: RoiSet | None = None
         self._preloaded: dict[str, RawFrame] = {}
         self._darks: dict[tuple[float, int], _Pixels] = {}
@@ -479,6 +481,7 @@ class _FrameReader:
         geometry = (frame.mosaic.shape, frame.cfa_pattern)
         if self._first is None:
             self._first = (rec.id, *geometry)
+            self._aperture = frame.aperture
         elif geometry != self._first[1:]:
             ref_id, (h, w), cfa = self._first
             raise InputError(
@@ -486,6 +489,14 @@ class _FrameReader:
                 f"{geometry[1]} mosaic but frame {ref_id} is {w}x{h} {cfa}: all "
                 f"frames of a session need the same camera and raw size; "
                 f"{self._retake.format(rec.id)}",
+                path=self._session.manifest_path,
+            )
+        if why := frame_settings_problem(
+            frame, rec.exposure_s, rec.iso, self._aperture
+        ):
+            raise InputError(
+                f"frame {rec.id}: {why}: the camera took another frame than the "
+                f"session's; {self._retake.format(rec.id)}",
                 path=self._session.manifest_path,
             )
         return frame

@@ -248,10 +248,7 @@ def sensitivity_meta_document(
     }
     if curves:
         doc |= curves_document(sensitivity)
-    for key in _META_KEYS:
-        if key in sensitivity.meta:
-            doc[key] = json.loads(sensitivity.meta[key])
-    for key in NOTE_KEYS:
+    for key in (*_META_KEYS, *NOTE_KEYS):
         if key in sensitivity.meta:
             doc[key] = json.loads(sensitivity.meta[key])
     if covariance is not None:

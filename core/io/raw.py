@@ -125,8 +125,9 @@ class RawFrame:
         Raw DN at which the sensor clips.
     make, model
         Camera make and model from the file's TIFF tags ("" when absent).
-    exposure_s, iso
-        Exposure time and ISO speed from the file's EXIF, ``None`` when absent.
+    exposure_s, iso, aperture
+        Exposure time, ISO speed and f-number from the file's EXIF, ``None`` when
+        absent.
     """
 
     path: Path
@@ -139,6 +140,7 @@ class RawFrame:
     exposure_s: float | None = None
     iso: float | None = None
     meta: dict[str, str] = field(default_factory=dict)
+    aperture: float | None = None
 
     # -- sizes and levels -------------------------------------------------------
     @property
@@ -496,6 +498,7 @@ def load_raw(
             other = raw.other
             shutter = float(other.shutter_speed)
             iso_speed = float(other.iso_speed)
+            f_number = float(other.aperture)
             if keep:  # the mosaic's memory: closed when the frame is dropped
                 opened.pop_all()
     except InputError:
@@ -531,6 +534,7 @@ def load_raw(
         model=tags.get(272, ""),
         exposure_s=shutter if shutter > 0 else None,
         iso=iso_speed if iso_speed > 0 else None,
+        aperture=f_number if f_number > 0 else None,
         meta={"unique_camera_model": tags.get(50708, "")} if 50708 in tags else {},
     )
 

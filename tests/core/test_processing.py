@@ -9,6 +9,8 @@ the light field's mean over the centre window.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -430,3 +432,39 @@ def test_frames_are_decoded_ahead_in_the_order_processing_reads_them(
     in_turn = process_session(session, loader=_npy_loader, corners=corners)
     np.testing.assert_array_equal(out.responses.rgb, in_turn.responses.rgb)
     np.testing.assert_array_equal(out.responses.rgb_std, in_turn.responses.rgb_std)
+
+
+@pytest.mark.parametrize(
+    ("exif", "message"),
+    [
+        ({"exposure_s": 0.25}, "exposed 0.25 s where the session records 0.5 s"),
+        ({"iso": 400.0}, "at ISO 400 where the session records 100"),
+        ({"aperture": 8.0}, "at f/8 where the session's first frame was at f/5.6"),
+    ],
+)
+def test_a_raw_file_taken_otherwise_than_recorded_is_refused(
+    tmp_path, exif, message
+) -> None:
+    """Eq. 1's illuminants are the readings x the recorded exposure and ISO, and
+    Eq. 2 divides frames of one aperture: a raw file whose own EXIF says otherwise
+    (a camera dial, a manual mode, a lens touched) is refused, naming the frame."""
+
+    session, _ = _make_session(tmp_path / "s", with_corners=True)
+    records = {session.path_of(f): f for f in session.frames}
+
+    def loader(odd: dict) -> Callable[[Path], RawFrame]:
+        def load(path: Path) -> RawFrame:
+            # each file as recorded (0.5 s under L1, f/5.6), target_L1 with ``odd``
+            f = records[path]
+            frame = replace(_npy_loader(path), exposure_s=f.exposure_s, iso=f.iso,
+                            aperture=5.6)  # fmt: skip
+            return replace(frame, **odd) if f.id == "target_L1" else frame
+
+        return load
+
+    with pytest.raises(InputError, match="frame target_L1: its raw file") as err:
+        process_session(session, loader=loader(exif))
+    assert message in str(err.value), err.value
+    assert "retake it" in str(err.value)
+    out = process_session(session, loader=loader({}))  # as recorded: as before
+    assert out.responses.illuminants == ("L1", "WHITE")
