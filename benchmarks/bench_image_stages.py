@@ -75,6 +75,7 @@ def run_stages(session_dir: Path, sensitivities: Path, out: Path) -> np.ndarray:
     """Every stage of one session in this thread; returns the total costs."""
     import tunespec.app.pipeline.image_session as st
     from tunespec.app.pipeline import image as pim
+    from tunespec.app.pipeline.image_systematic import systematic_table
     from tunespec.core.io.session import Session
 
     settings = pim.ImageSettings()
@@ -104,7 +105,7 @@ def run_stages(session_dir: Path, sensitivities: Path, out: Path) -> np.ndarray:
         cal.sensitivity, cal.meta, cal.prior, cal.grid, noise=settings.noise,
     )  # fmt: skip
     systematic = stage(
-        "3 systematic uncertainty table", st.systematic_table, job, bank, cal.path,
+        "3 systematic uncertainty table", systematic_table, job, bank, cal.path,
         cal.meta, cal.prior, cal.grid,
     )  # fmt: skip
     shape = job.plane_shape

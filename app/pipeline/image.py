@@ -181,12 +181,13 @@ def session_graph(
     provenance dict) and the blocks of rows (for progress on a cluster).
 
     The blocks start as soon as the Wiener bank is built: the systematic part of
-    the uncertainty (:func:`~tunespec.app.pipeline.image_session.systematic_table`,
+    the uncertainty (:func:`~tunespec.app.pipeline.image_systematic.systematic_table`,
     only computed for the TIFFs) is added in the final task, while the blocks
     compute beside it."""
     from dask import delayed
 
     from tunespec.app.pipeline import image_session as st
+    from tunespec.app.pipeline.image_systematic import systematic_table
     from tunespec.core.io.session import Session
 
     session = Session.open(session_dir)
@@ -232,7 +233,7 @@ def session_graph(
     systematic = None
     if "tiff" in settings.formats:  # only the uncertainty TIFF holds it
         systematic = delayed(one_blas_thread, pure=True)(
-            st.systematic_table, job_ref, bank, calibration.path, meta, prior,
+            systematic_table, job_ref, bank, calibration.path, meta, prior,
             calibration.grid, dask_key_name=f"systematic-{job.work}",
         )  # fmt: skip
     rows = st.block_rows_for(shape[1])

@@ -177,3 +177,20 @@ def test_quad_mask_and_coordinate_round_trip() -> None:
     xy = np.array([[0.5, 0.5], [101.5, 37.5]])
     np.testing.assert_allclose(plane_to_full_px(full_to_plane_px(xy)), xy)
     np.testing.assert_allclose(full_to_plane_px(xy), [[0, 0], [50.5, 18.5]])
+
+
+def test_a_frame_whose_exif_disagrees_with_its_record_is_refused() -> None:
+    """The image stages read their frames themselves: a raw file exposed otherwise
+    than its session records is refused there as processing refuses it."""
+    from types import SimpleNamespace
+
+    from tunespec.app.pipeline.image_session import _Frame, _planes
+    from tunespec.core.errors import InputError
+    from tunespec.core.io.raw import load_raw
+
+    job = SimpleNamespace(plane_shape=load_raw(TINYDNG).shape)  # 1 s, no ISO
+    planes, _ = _planes(job, _Frame(str(TINYDNG), 1.0, 100))
+    assert planes.shape == (3, *job.plane_shape)
+    with pytest.raises(InputError, match=r"exposed 1 s where the session records 2 s"):
+        _planes(job, _Frame(str(TINYDNG), 2.0, 100))
+    _planes(job, _Frame(str(TINYDNG), 1.05, 400))  # within 10 %; no ISO to compare
