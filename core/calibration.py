@@ -430,13 +430,17 @@ class Calibration:
             readings=readings,
             white_background=white_from_meta(meta),
         )
-        # the sensitivities' meta says the same as the fields (the pipeline's
-        # estimate reads the corrections from there)
-        s = sensitivity
+        return cal.synced()
+
+    def synced(self) -> Calibration:
+        """This calibration with its sensitivities' meta saying what its fields
+        say (:meth:`side_meta`; the pipeline's estimate and the side-file writer
+        read the corrections from there), its other keys kept."""
+        s = self.sensitivity
         merged = {k: v for k, v in s.meta.items() if k not in _CORRECTION_KEYS}
-        merged.update((k, v) for k, v in cal.side_meta().items() if k != "source")
+        merged.update((k, v) for k, v in self.side_meta().items() if k != "source")
         sens = Spectra(s.wavelength_nm, s.values, s.names, merged)
-        return replace(cal, sensitivity=sens)
+        return replace(self, sensitivity=sens)
 
 
 def _labels(doc: Any) -> dict[str, Any]:

@@ -102,6 +102,17 @@ LINEARITY_GAMMA_MIN = 0.001
 LINEARITY_GAMMA_MAX = 0.05
 
 
+def bend_verdict(gamma: float, se: float) -> str:
+    """What a calibration does with the bend ``gamma`` (+- ``se``) its chart's
+    residuals show: ``"undo"`` a sensor's (significant, :data:`LINEARITY_GAMMA_MIN`
+    to :data:`LINEARITY_GAMMA_MAX`), ``"refuse"`` one no sensor has (significant,
+    :data:`LINEARITY_GAMMA_MAX` or more), ``""`` else."""
+    g = abs(gamma)
+    if not (g >= LINEARITY_GAMMA_MIN and g >= LINEARITY_SIGNIFICANCE * se):
+        return ""
+    return "undo" if g < LINEARITY_GAMMA_MAX else "refuse"
+
+
 def flat_field_residual(excess: ExcessVariance | None) -> float:
     """The flat field's relative residual: as a calibration's residuals showed it
     (:attr:`ExcessVariance.flat_field_relative`), or the nominal

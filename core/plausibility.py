@@ -782,13 +782,11 @@ def check_chart_linearity(params: Mapping[str, Any]) -> None:
     (``docs/validation.md``) and a black level subtracted 0.3 %
     of full scale too much 0.049 (undone, with the self-check's warning).
     """
-    from tunespec.core.excess import LINEARITY_GAMMA_MAX, LINEARITY_SIGNIFICANCE
+    from tunespec.core.excess import LINEARITY_GAMMA_MAX, bend_verdict
 
     gamma = params.get("linearity_gamma_found")
     se = params.get("linearity_gamma_se")
-    if gamma is None or se is None:
-        return
-    if abs(gamma) < LINEARITY_GAMMA_MAX or abs(gamma) < LINEARITY_SIGNIFICANCE * se:
+    if gamma is None or se is None or bend_verdict(gamma, se) != "refuse":
         return
     raise Implausible(
         "linearity",

@@ -65,9 +65,7 @@ from tunespec.core.camera_basis import database_basis
 from tunespec.core.datasets import load_camera_database
 from tunespec.core.errors import InputError, SingularSystemError
 from tunespec.core.excess import (
-    LINEARITY_GAMMA_MAX,
-    LINEARITY_GAMMA_MIN,
-    LINEARITY_SIGNIFICANCE,
+    bend_verdict,
     fit_excess_variance,
     fit_linearity,
     linearise,
@@ -779,7 +777,7 @@ def estimate_camera_sensitivity(
 
     cal = fit(problem, sub_progress(progress, 0.0, 0.5))
     gamma, se = _chart_linearity(cal, problem)
-    if _undone(gamma, se):  # the same stimuli and database, the responses linearised
+    if bend_verdict(gamma, se) == "undo":  # the same stimuli, responses linearised
         linear = _prepare(linearise(responses, gamma), illuminants, reflectances)
         cal = _linearised(fit(linear, sub_progress(progress, 0.5, 1.0)), gamma)
     report(progress, 1.0)
@@ -820,12 +818,6 @@ def _chart_linearity(
         return 0.0, float("inf")
     measured, pred, noise = _chart_residual_terms(problem, cal)
     return fit_linearity(measured, pred, noise, cal.excess)
-
-
-def _undone(gamma: float, se: float) -> bool:
-    """Whether a bend is undone: significant, and a sensor's, not a mistake's."""
-    plausible = LINEARITY_GAMMA_MIN <= abs(gamma) < LINEARITY_GAMMA_MAX
-    return plausible and abs(gamma) >= LINEARITY_SIGNIFICANCE * se
 
 
 def _estimate_once(

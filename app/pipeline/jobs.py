@@ -378,7 +378,6 @@ def calibrate_job(
     refl = inputs.reflectances
     if refl is None:
         refl = layout_reflectances(inputs.layout or chart.layout, grid=inputs.grid)
-    checks = Checks(force=inputs.force, force_hint=inputs.force_hint)
     cal = stages.timed(
         "calibrate",
         lambda p: calibrate(
@@ -387,7 +386,7 @@ def calibrate_job(
             method=inputs.method,
             grid=inputs.grid,
             check=True,
-            checks=checks,
+            checks=Checks(force=inputs.force, force_hint=inputs.force_hint),
             progress=p,
             should_stop=should_stop,
         ),
@@ -399,7 +398,6 @@ def calibrate_job(
         chart,
         threshold=inputs.threshold,
         elapsed_s=time.monotonic() - t0,
-        forced=tuple(checks.overridden),
     )
 
 
@@ -411,12 +409,13 @@ def record_calibration(
     *,
     threshold: float,
     elapsed_s: float = 0.0,
-    forced: tuple[str, ...] = (),
 ) -> CalibrationResult:
     """The calibration's result written, once for every front end: its warnings
     (the chart's capture and processing, the patches left out, the self-check's
-    findings, the checks ``forced``) and the session's fingerprint with it."""
+    findings, the checks accepted with ``force``, which the calibration keeps) and
+    the session's fingerprint with it."""
     excluded = tuple(cal.estimate.excluded_patches)
+    forced = cal.estimate.provenance.get("forced", ())
     result = CalibrationResult.from_step(
         cal,
         chart,

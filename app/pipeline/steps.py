@@ -383,11 +383,11 @@ def fit_calibration(
         if w
     ]
     notes = {"forced": list(checks.overridden), "warnings": findings}
-    est = _kept(
+    est = replace(
         est,
         white_background=_white_background(est, responses, reported),
         provenance={**est.provenance, **{k: v for k, v in notes.items() if v}},
-    )
+    ).synced()
     return Calibration(est, rep, per_patch, self_check=checked)
 
 
@@ -403,17 +403,6 @@ def _white_background(
     # linear, as the estimate's responses are when it compares them
     responses = linearise_from_meta(responses, sens.meta)
     return white_background(responses, illuminants, sens, sens.meta)
-
-
-def _kept(est: SensitivityEstimate, **fields: Any) -> SensitivityEstimate:
-    """``est`` with ``fields`` replaced, and its sensitivities' meta (what the side
-    file keeps, ``Calibration.side_meta``) written from them."""
-    est = replace(est, **fields)
-    s = est.sensitivity
-    side = {k: v for k, v in est.side_meta().items() if k != "source"}
-    return replace(
-        est, sensitivity=Spectra(s.wavelength_nm, s.values, s.names, {**s.meta, **side})
-    )
 
 
 def _with_reference(responses: Any, refl: Spectra) -> Any:
