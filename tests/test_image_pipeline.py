@@ -127,13 +127,15 @@ def test_outputs_agree_and_carry_provenance(images, bench_session) -> None:
 def test_a_session_on_another_scale_is_refused(bench_session, tmp_path, capsys):
     """The images check the session's white board against the calibration's chart
     session as ``estimate`` does: a side file whose board is half (the session
-    twice as bright as recorded) is refused, and ``--force`` lists the override."""
+    twice as bright as recorded) is refused, and ``--force`` lists the override.
+    What the calibration found about itself is said once, where its file is read."""
     import json
 
     sens = tmp_path / "S.csv"
     shutil.copy(bench_session["sens"], sens)
     doc = json.loads(Path(str(bench_session["sens"]) + ".meta.json").read_text())
     doc["white_background"] = {k: v / 2 for k, v in doc["white_background"].items()}
+    doc["warnings"] = ["Table 1 is poor"]
     Path(str(sens) + ".meta.json").write_text(json.dumps(doc))
     argv = ["estimate-image", str(bench_session["session"]), "--sensitivities",
             str(sens), "--formats", "envi"]  # fmt: skip
@@ -141,6 +143,7 @@ def test_a_session_on_another_scale_is_refused(bench_session, tmp_path, capsys):
     assert main([*argv, "--out", str(tmp_path / "refused")]) == 2
     err = capsys.readouterr().err
     assert "white background reflects 2x" in err and "--force to accept" in err, err
+    assert err.count(f"warning: the calibration {sens} warned: Table 1 is poor") == 1
     assert not (tmp_path / "refused" / "cube.hdr").exists()
     assert main([*argv, "--out", str(tmp_path / "forced"), "--force"]) == 0
     prov = json.loads((tmp_path / "forced" / "provenance.json").read_text())

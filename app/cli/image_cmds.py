@@ -173,32 +173,12 @@ def _settings(args: argparse.Namespace) -> object:
     )
 
 
-def _warn_of_calibration(out: Console, sensitivities: Path) -> None:
-    """Say so when the sensitivities come without their side file: the images are
-    then estimated without the calibration's LED corrections (never silently); and
-    repeat what the calibration found about itself."""
-    from tunespec.core.io.export import read_sensitivity_meta, sensitivity_meta_path
-    from tunespec.core.plausibility import calibration_notes
-
-    side = sensitivity_meta_path(sensitivities)
-    if not side.exists():
-        out.warn(
-            f"no LED corrections next to {sensitivities.name} ({side.name}): the "
-            "images are estimated without the calibration's per-LED corrections "
-            "and come out worse; copy the side file along with the CSV"
-        )
-        return
-    for line in calibration_notes(read_sensitivity_meta(sensitivities), sensitivities):
-        out.warn(line)
-
-
 def cmd_estimate_image(args: argparse.Namespace) -> int:
     from tunespec.app.pipeline.image import estimate_images
 
     if not (args.session / "manifest.json").is_file():
         raise InputError("not a session folder (no manifest.json)", path=args.session)
     out = Console(args)
-    _warn_of_calibration(out, args.sensitivities)
     prov = estimate_images(
         args.session,
         args.sensitivities,
@@ -206,6 +186,7 @@ def cmd_estimate_image(args: argparse.Namespace) -> int:
         settings=_settings(args),  # type: ignore[arg-type]
         scheduler=args.scheduler,
         progress=out.progress("estimating images"),
+        warn=out.warn,
     )
     rows, cols = prov["shape"]
     files = ", ".join(v.split(" ")[0] for v in prov["files"].values())
@@ -220,7 +201,6 @@ def cmd_batch(args: argparse.Namespace) -> int:
     if args.sessions_at_once < 1:
         raise InputError(f"--sessions-at-once {args.sessions_at_once}: must be >= 1")
     out = Console(args)
-    _warn_of_calibration(out, args.sensitivities)
     result = batch_images(
         args.folder,
         args.sensitivities,
@@ -229,6 +209,7 @@ def cmd_batch(args: argparse.Namespace) -> int:
         scheduler=args.scheduler,
         sessions_at_once=args.sessions_at_once,
         progress=out.progress("batch"),
+        warn=out.warn,
     )
     for s in result["skipped"]:
         out.say(f"skipped (already done): {s}")

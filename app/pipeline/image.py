@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import contextlib
 import shutil
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from os import PathLike
@@ -138,10 +138,15 @@ class _Calibration:
     grid: Grid
 
 
-def _load_calibration(sensitivities: str | PathLike[str], grid: Grid) -> _Calibration:
+def _load_calibration(
+    sensitivities: str | PathLike[str],
+    grid: Grid,
+    warn: Callable[[str], None] | None = None,
+) -> _Calibration:
     """Sensitivities (on their own grid: Eq. 1 is integrated there, as ``tunespec
     estimate`` does), their side file and the prior (on its own range: Eq. 5 solves
-    for the reflectance wherever the light reaches), read once."""
+    for the reflectance wherever the light reaches), read once; ``warn`` is told
+    :func:`calibration_warnings`."""
     from tunespec.core.calibration import calibrated_sensitivities
     from tunespec.core.datasets import load_colorchecker_sg
     from tunespec.core.io.session import sha256_file
@@ -150,10 +155,30 @@ def _load_calibration(sensitivities: str | PathLike[str], grid: Grid) -> _Calibr
     path = Path(sensitivities)
     sens, meta = calibrated_sensitivities(path)
     check_calibration_grid(sens.wavelength_nm, meta)
+    for line in calibration_warnings(path, meta) if warn is not None else ():
+        warn(line)
     return _Calibration(
         str(path.resolve()), sha256_file(path), sens, meta, load_colorchecker_sg(),
         grid,
     )  # fmt: skip
+
+
+def calibration_warnings(sensitivities: Path, meta: Mapping[str, Any]) -> list[str]:
+    """What to say of a calibration before its images are estimated: that the
+    sensitivities come without their side file (the images are then estimated
+    without the calibration's LED corrections: never silently), else what the
+    calibration found about itself (``meta``, its side file as read)."""
+    from tunespec.core.io.export import sensitivity_meta_path
+    from tunespec.core.plausibility import calibration_notes
+
+    side = sensitivity_meta_path(sensitivities)
+    if not side.exists():
+        return [
+            f"no LED corrections next to {sensitivities.name} ({side.name}): the "
+            "images are estimated without the calibration's per-LED corrections "
+            "and come out worse; copy the side file along with the CSV"
+        ]
+    return calibration_notes(meta, sensitivities)
 
 
 def _rectification(session: Any) -> Any:
@@ -454,6 +479,7 @@ def estimate_images(
     scheduler: Any = None,
     progress: ProgressFn | None = None,
     should_stop: StopFn | None = None,
+    warn: Callable[[str], None] | None = None,
 ) -> dict[str, Any]:
     """Per-pixel reflectance, XYZ, L*a*b* and uncertainty images of one session.
 
@@ -471,6 +497,8 @@ def estimate_images(
     scheduler
         ``None`` (Dask's local threads), ``"sync"``, a ``dask.distributed`` address
         or ``Client``.
+    warn
+        Told what the calibration says of itself (:func:`calibration_warnings`).
 
     Returns
     -------
@@ -478,7 +506,7 @@ def estimate_images(
         The provenance written to ``provenance.json``.
     """
     grid = settings.grid or _default_grid()
-    cal = _load_calibration(sensitivities, grid)
+    cal = _load_calibration(sensitivities, grid, warn)
     with (
         connect(scheduler) as sched,
         reused_heap(),
@@ -563,6 +591,7 @@ def batch_images(
     sessions_at_once: int = 2,
     progress: ProgressFn | None = None,
     should_stop: StopFn | None = None,
+    warn: Callable[[str], None] | None = None,
 ) -> dict[str, Any]:
     """Images of every session in ``folder`` with one calibration, resumable.
 
@@ -571,6 +600,7 @@ def batch_images(
     calibration and settings is skipped. ``sessions_at_once`` sessions form one Dask graph (their
     LEDs and blocks run in parallel; more would hold more response stacks on disk at
     once), group after group; a killed batch loses only the sessions in progress.
+    ``warn`` as :func:`estimate_images` takes it.
 
     Returns
     -------
@@ -585,7 +615,7 @@ def batch_images(
     if not sessions:
         raise InputError("no session (a folder with manifest.json) found", path=root)
     grid = settings.grid or _default_grid()
-    cal = _load_calibration(sensitivities, grid)
+    cal = _load_calibration(sensitivities, grid, warn)
     done: list[str] = []
     skipped: list[str] = []
     todo: list[tuple[Path, Path]] = []

@@ -115,29 +115,24 @@ def test_settings_doc_survives_json_and_tells_settings_apart() -> None:
 
 
 def test_sensitivities_without_their_side_file_are_said_never_silently(
-    tmp_path, capsys
+    tmp_path,
 ) -> None:
-    """estimate-image and batch go on without the LED corrections only saying so."""
-    import argparse
-
-    from tunespec.app.cli.common import Console
-    from tunespec.app.cli.image_cmds import _warn_of_calibration
+    """estimate-image and batch go on without the LED corrections only saying so,
+    and repeat what the calibration found about itself."""
+    from tunespec.app.pipeline.image import calibration_warnings
+    from tunespec.core.io.export import read_sensitivity_meta
 
     sens = tmp_path / "S.csv"
     sens.write_text("wavelength,R,G,B\n")
-    console = Console(argparse.Namespace(quiet=False, json=False))
-    _warn_of_calibration(console, sens)
-    err = capsys.readouterr().err
-    assert err.startswith("warning: no LED corrections next to S.csv (S.csv.meta.json)")
+
+    def said() -> list[str]:
+        return calibration_warnings(sens, read_sensitivity_meta(sens))
+
+    (line,) = said()
+    assert line.startswith("no LED corrections next to S.csv (S.csv.meta.json)")
     (tmp_path / "S.csv.meta.json").write_text("{}")
-    _warn_of_calibration(console, sens)
-    assert capsys.readouterr().err == ""
-    # what the calibration found about itself, repeated
+    assert said() == []
     (tmp_path / "S.csv.meta.json").write_text(
         '{"warnings": ["Table 1 is poor", "self-check: chi-square 8"]}'
     )
-    _warn_of_calibration(console, sens)
-    err = capsys.readouterr().err
-    assert err == (
-        f"warning: the calibration {sens} warned: Table 1 is poor (and 1 more)\n"
-    ), err
+    assert said() == [f"the calibration {sens} warned: Table 1 is poor (and 1 more)"]
