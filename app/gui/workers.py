@@ -283,12 +283,21 @@ class Worker(QRunnable, _Job):
         Passed on to ``fn``.
     hooks
         Pass ``progress`` and ``should_stop``; ``False`` for plain functions.
+    warns
+        Pass ``warn`` too: each line it is given reaches
+        :attr:`WorkerSignals.warned`.
     """
 
     _alive: ClassVar[set[Worker]] = set()
 
     def __init__(
-        self, fn: Callable[..., Any], /, *args: Any, hooks: bool = True, **kwargs: Any
+        self,
+        fn: Callable[..., Any],
+        /,
+        *args: Any,
+        hooks: bool = True,
+        warns: bool = False,
+        **kwargs: Any,
     ) -> None:
         super().__init__()
         self.setAutoDelete(False)
@@ -299,6 +308,8 @@ class Worker(QRunnable, _Job):
                 "should_stop": self._stop.is_set,
                 **kwargs,
             }
+        if warns:
+            kwargs = {"warn": self.signals.warned.emit, **kwargs}
         self._call = partial(fn, *args, **kwargs)
 
     def start(self) -> Worker:

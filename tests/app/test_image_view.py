@@ -82,8 +82,18 @@ def test_estimate_runs_in_a_worker_with_progress(qtbot, tmp_path, monkeypatch) -
 
     calls = []
 
-    def fake(session, sens, out, *, scheduler=None, progress=None, should_stop=None):
+    def fake(
+        session,
+        sens,
+        out,
+        *,
+        scheduler=None,
+        progress=None,
+        should_stop=None,
+        warn=None,
+    ):
         calls.append(scheduler)
+        warn("the calibration cal.csv warned: Table 1 is poor")
         for k in range(5):
             progress((k + 1) / 5)
         _write_folder(out)
@@ -102,12 +112,29 @@ def test_estimate_runs_in_a_worker_with_progress(qtbot, tmp_path, monkeypatch) -
     assert seen and seen[-1] == pytest.approx(1.0)
     assert view.progress.isHidden()
     assert calls == ["tcp://cluster:8786"]
+    # what the calibration said of itself stays in view beside the images
+    assert view.warnings_label.isVisibleTo(view)
+    assert view.warnings_label.text() == (
+        "warning: the calibration cal.csv warned: Table 1 is poor"
+    )
+    _write_folder(tmp_path / "other")
+    view.open_folder(tmp_path / "other")
+    assert view.warnings_label.isHidden()
 
 
 def test_estimate_can_be_cancelled(qtbot, tmp_path, monkeypatch) -> None:
     import tunespec.app.pipeline.image as pipeline
 
-    def slow(session, sens, out, *, scheduler=None, progress=None, should_stop=None):
+    def slow(
+        session,
+        sens,
+        out,
+        *,
+        scheduler=None,
+        progress=None,
+        should_stop=None,
+        warn=None,
+    ):
         while True:
             check_stop(should_stop)
             time.sleep(0.01)

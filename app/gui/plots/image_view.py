@@ -143,6 +143,11 @@ class ImageView(QWidget):
             "empty: Dask's local threads"
         )
         self.status = QLabel("Estimate images or open an image folder.")
+        # what the calibration said of itself when the images were estimated
+        self.warnings_label = QLabel("")
+        self.warnings_label.setObjectName("image_warnings")
+        self.warnings_label.setWordWrap(True)
+        self.warnings_label.hide()
         self.region_label = QLabel("")
         self.region_label.setWordWrap(True)
         self.draw_button = QPushButton("Draw region")
@@ -207,6 +212,7 @@ class ImageView(QWidget):
         )
         self.legend_label.setObjectName("band_legend")
         self.pixel: tuple[int, int] | None = None
+        self._out: str | None = None  # the folder being (or last) estimated into
 
         layout = QVBoxLayout(self)
         layout.addLayout(top)
@@ -214,6 +220,7 @@ class ImageView(QWidget):
         layout.addWidget(self.spectrum_plot, 2)
         layout.addWidget(self.legend_label)
         layout.addWidget(self.region_label)
+        layout.addWidget(self.warnings_label)
         layout.addWidget(self.status)
 
         self.layer_combo.currentTextChanged.connect(self._on_layer_combo_changed)
@@ -294,10 +301,14 @@ class ImageView(QWidget):
 
     # -- data ----------------------------------------------------------------------
     def open_folder(self, folder: str | Path) -> None:
-        """Show a finished image folder (see ``tunespec estimate-image``)."""
+        """Show a finished image folder (see ``tunespec estimate-image``); the
+        warnings of an estimate stay shown with its own folder only."""
         from tunespec.core.io.image_formats import open_image_outputs
 
         self.set_image(open_image_outputs(folder))
+        if str(folder) != self._out:
+            self.warnings_label.clear()
+            self.warnings_label.hide()
 
     def set_image(self, image: Any) -> None:
         """Show a :class:`~tunespec.core.io.image_formats.SpectralImage`."""
@@ -413,15 +424,20 @@ class ImageView(QWidget):
         self, session: str | Path, sensitivities: str | Path, out: str | Path
     ) -> Any:
         """Run ``estimate-image`` on the worker pool (on the Dask scheduler named in
-        :attr:`scheduler_edit`, else locally); the result is shown when done."""
+        :attr:`scheduler_edit`, else locally); the result is shown when done, and
+        what the calibration said of itself (its warnings, a missing side file)
+        above the status line."""
         from tunespec.app.gui.workers import Worker
         from tunespec.app.pipeline import image as pipeline
 
         scheduler = self.scheduler_edit.text().strip() or None
         self.worker = Worker(
             pipeline.estimate_images, str(session), str(sensitivities), str(out),
-            scheduler=scheduler,
+            scheduler=scheduler, warns=True,
         )  # fmt: skip
+        self.warnings_label.clear()
+        self.warnings_label.hide()
+        self.worker.signals.warned.connect(self._on_worker_warned)
         self.worker.signals.progressed.connect(self._on_worker_progressed)
         self.worker.signals.returned.connect(self._on_worker_returned)
         self.worker.signals.errored.connect(self._on_worker_errored)
@@ -497,6 +513,14 @@ class ImageView(QWidget):
     def _on_worker_returned(self, _provenance: object) -> None:
         self.open_folder(self._out)
         self.estimate_finished.emit(self._out)
+
+    @Slot(str)
+    def _on_worker_warned(self, line: str) -> None:
+        shown = self.warnings_label.text()
+        self.warnings_label.setText(
+            f"{shown}\nwarning: {line}" if shown else f"warning: {line}"
+        )
+        self.warnings_label.show()
 
     @Slot(object)
     def _on_worker_errored(self, exc: object) -> None:
