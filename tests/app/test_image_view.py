@@ -82,16 +82,7 @@ def test_estimate_runs_in_a_worker_with_progress(qtbot, tmp_path, monkeypatch) -
 
     calls = []
 
-    def fake(
-        session,
-        sens,
-        out,
-        *,
-        scheduler=None,
-        progress=None,
-        should_stop=None,
-        warn=None,
-    ):
+    def fake(session, sens, out, *, scheduler=None, progress=None, warn=None, **_):
         calls.append(scheduler)
         warn("the calibration cal.csv warned: Table 1 is poor")
         for k in range(5):
@@ -125,16 +116,7 @@ def test_estimate_runs_in_a_worker_with_progress(qtbot, tmp_path, monkeypatch) -
 def test_estimate_can_be_cancelled(qtbot, tmp_path, monkeypatch) -> None:
     import tunespec.app.pipeline.image as pipeline
 
-    def slow(
-        session,
-        sens,
-        out,
-        *,
-        scheduler=None,
-        progress=None,
-        should_stop=None,
-        warn=None,
-    ):
+    def slow(session, sens, out, *, should_stop=None, **_):
         while True:
             check_stop(should_stop)
             time.sleep(0.01)

@@ -78,16 +78,7 @@ def test_scheduler_setting_round_trips_and_is_used(qtbot, tmp_path, monkeypatch)
     assert view.scheduler_edit.text() == "tcp://cluster:8786"
     used = []
 
-    def fake(
-        session,
-        sens,
-        out,
-        *,
-        scheduler=None,
-        progress=None,
-        should_stop=None,
-        warn=None,
-    ):
+    def fake(session, sens, out, *, scheduler=None, **_):
         used.append(scheduler)
         _write_folder(out)
         return {}
