@@ -92,6 +92,7 @@ __all__ = [
     "ChiSquare",
     "HeldOut",
     "SelfCheck",
+    "finding_lines",
     "held_out_of",
     "hold_out_check",
     "led_correction_warnings",
@@ -100,6 +101,13 @@ __all__ = [
     "self_check",
     "systematic_warnings",
 ]
+
+
+def finding_lines(warnings: Sequence[str]) -> tuple[str, ...]:
+    """The self-check's warnings as the calibration's lists of warnings say them
+    (the side file's ``warnings``, the wizard's, the report's): ``"self-check: ..."``."""
+    return tuple(f"self-check: {w}" for w in warnings)
+
 
 #: A reduced chi-square above this flags a channel (and above ``1 + CHI2_SIGMAS``
 #: times its spread, which matters only for very few stimuli). The simulated bench

@@ -149,6 +149,8 @@ class CalibrationResult:
     ) -> CalibrationResult:
         """The result of the calibrate step: ``cal`` (``steps.Calibration``) of the
         processed ``chart``; the self-check's findings join ``warnings``."""
+        from tunespec.core.selfcheck import finding_lines
+
         checked = self_check_dict(getattr(cal, "self_check", None))
         found = () if checked is None else tuple(checked.get("warnings", ()))
         return cls(
@@ -158,7 +160,7 @@ class CalibrationResult:
             method=str(cal.estimate.method),
             layout=chart.layout,
             excluded_patches=tuple(cal.estimate.excluded_patches),
-            warnings=(*warnings, *(f"self-check: {w}" for w in found)),
+            warnings=(*warnings, *finding_lines(found)),
             elapsed_s=elapsed_s,
             calibration=cal,
             chart=chart,

@@ -372,13 +372,15 @@ def fit_calibration(
         )
     per_patch = table1_by_patch(est, fit, illuminants, reflectances)
     reported = illuminants if reported_illuminants is None else reported_illuminants
+    from tunespec.core.selfcheck import finding_lines
+
     findings = [
         w
         for w in (
             calibration_fit_warning(
                 float(rep.training.as_dict()["RGB"]["mean"]), responses.rgb
             ),
-            *(f"self-check: {w}" for w in (checked.warnings if checked else ())),
+            *finding_lines(checked.warnings if checked else ()),
         )
         if w
     ]
