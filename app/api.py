@@ -381,6 +381,21 @@ def calibrate(
     )
 
 
+def _where(cal: Calibration) -> str | None:
+    """The file a calibration was read from (None: made in memory)."""
+    return cal.provenance.get("sensitivities") or cal.provenance.get("calibration")
+
+
+def _warn_of(cal: Calibration) -> None:
+    """What the calibration found about itself (its warnings, the checks accepted
+    with ``force``) as Python warnings: its estimates inherit them, as the
+    commands repeat them."""
+    from tunespec.core.plausibility import calibration_notes
+
+    for line in calibration_notes(cal.provenance, _where(cal)):
+        warnings.warn(line, stacklevel=3)
+
+
 def estimate(
     responses: str | PathLike[str] | Responses,
     illuminants: SpectralInput,
@@ -430,9 +445,10 @@ def estimate(
         if isinstance(calibration, Calibration)
         else Calibration.load(calibration, checks=checks)
     )
+    _warn_of(cal)
     sample = read_stimuli(responses, illuminants)
     work = _grid(grid, ESTIMATION_GRID)
-    where = cal.provenance.get("sensitivities") or cal.provenance.get("calibration")
+    where = _where(cal)
     checks(pl.check_absolute_sensitivities, cal.sensitivity.values, where)
     prior_spectra = None
     if prior is not None:
@@ -552,6 +568,7 @@ def estimate_images(
         raise InputError("not a session folder (no manifest.json)", path=session)
     settings = settings if settings is not None else ImageSettings()
     if isinstance(calibration, Calibration):
+        _warn_of(calibration)
         path = calibration.provenance.get("sensitivities")
         if path and Path(path).is_file():
             Calibration.load(path)  # its side file still there
@@ -561,6 +578,6 @@ def estimate_images(
             saved = calibration.save(Path(tmp) / "sensitivities.csv")
             prov = job(session, saved, out_dir, settings=settings, scheduler=scheduler)
             return ImagesResult(Path(out_dir), prov)
-    load_calibration(calibration)  # refuses a missing side file
+    _warn_of(load_calibration(calibration))  # refuses a missing side file
     prov = job(session, calibration, out_dir, settings=settings, scheduler=scheduler)
     return ImagesResult(Path(out_dir), prov)

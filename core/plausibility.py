@@ -798,15 +798,16 @@ def check_chart_linearity(params: Mapping[str, Any]) -> None:
 
 
 def calibration_notes(meta: Mapping[str, Any], path: object) -> list[str]:
-    """Warning lines, for an estimate, of what the calibration ``path`` found about
-    itself (its side file's ``forced`` and ``warnings``,
+    """Warning lines, for an estimate, of what the calibration ``path`` (None: one
+    in memory) found about itself (its side file's ``forced`` and ``warnings``,
     :data:`~tunespec.core.io.export.NOTE_KEYS`): its estimates inherit them."""
     lines = []
+    name = "the calibration" if path is None else f"the calibration {path}"
     for key, what in (("forced", "was accepted with --force"), ("warnings", "warned")):
         notes = meta.get(key) or []
         if notes:
             more = f" (and {len(notes) - 1} more)" if len(notes) > 1 else ""
-            lines.append(f"the calibration {path} {what}: {notes[0]}{more}")
+            lines.append(f"{name} {what}: {notes[0]}{more}")
     return lines
 
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import re
 import shutil
 import sys
 from collections.abc import Callable
@@ -540,6 +541,12 @@ def test_an_estimate_repeats_what_its_calibration_warned(good, tmp_path, capsys)
     assert lines[0].startswith(
         f"warning: the calibration {tmp_path / 'S.csv'} warned: self-check: "
     ), lines
+    # the Python API says them too, as warnings
+    from tunespec.app import api
+
+    said = "^" + re.escape(f"the calibration {tmp_path / 'S.csv'} warned: self-check: ")
+    with pytest.warns(UserWarning, match=said):
+        api.estimate(sample, good.illuminants, tmp_path / "S.csv")
 
 
 def test_the_python_api_keeps_the_white_background_and_checks_the_scale(
