@@ -147,6 +147,7 @@ class ImageView(QWidget):
         self.warnings_label = QLabel("")
         self.warnings_label.setObjectName("image_warnings")
         self.warnings_label.setWordWrap(True)
+        self.warnings_label.setTextFormat(Qt.TextFormat.PlainText)  # paths, "<"
         self.warnings_label.hide()
         self.region_label = QLabel("")
         self.region_label.setWordWrap(True)
