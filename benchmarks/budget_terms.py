@@ -35,7 +35,6 @@ import sys
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -93,10 +92,7 @@ def _parts(cam: gd.Camera, leds, setup, args) -> dict[str, np.ndarray]:
         "bayes", session.resp, reported, setup[2], setup[4], cam.exclude
     )
     if args.true_sensitivities:
-        est = replace(
-            est, sensitivity=cam.truth.resample(gen.WORK), led_correction=None,
-            spd_shift_nm=0.0, covariance=est.covariance * 1e-12, readings=None,
-        )  # fmt: skip
+        est = gen.with_true_sensitivities(est, cam.truth)
     w, unc = gen.estimate_tests(est, session.resp_t, reported, reported, setup)
     samples = setup[5]
     truth = gen.lab_d50(samples)[[samples.names.index(n) for n in w.reflectance.names]]

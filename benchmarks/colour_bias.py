@@ -37,12 +37,6 @@ import cli_protocol as cp
 import generalisation as gen
 import generalisation_data as gd
 
-from tunespec.core.wiener import (
-    on_integration_grid,
-    prior_on_support,
-    wiener_reflectance,
-)
-
 
 def session_errors(cam, leds, setup, rng, args) -> dict[str, tuple]:
     """One session's errors of L*, a*, b* (n_targets, 3) and their standard
@@ -57,23 +51,15 @@ def session_errors(cam, leds, setup, rng, args) -> dict[str, tuple]:
         "bayes", session.resp, session.reported, setup[2], setup[4], cam.exclude
     )
     if args.true_sensitivities:
-        est = replace(
-            est, sensitivity=cam.truth.resample(gen.WORK), led_correction=None,
-            spd_shift_nm=0.0, covariance=est.covariance * 1e-12, readings=None,
-        )  # fmt: skip
-    if args.plain:  # Eq. 5-6 as the paper has them: K_e from the ROIs' pixels
-        illum, sens, _ = on_integration_grid(
-            est.correct_illuminants(session.reported), est.sensitivity, gen.EST
-        )
-        prior = prior_on_support(setup[3], gen.EST, illum.wavelength_nm)
-        w = wiener_reflectance(est.linearise(session.resp_t), illum, sens, prior)
-        w = w.restricted(gen.EST)
-        lab, u = gen.lab_d50(w.reflectance), None
-    else:
-        w, unc = gen.estimate_tests(
-            est, session.resp_t, session.reported, session.reported, setup
-        )
-        lab, u = unc.lab, unc.lab_std
+        est = gen.with_true_sensitivities(est, cam.truth)
+    if args.plain:  # Eq. 5-6 as the paper has them: without a covariance
+        est = replace(est, covariance=None)
+    w, unc = gen.estimate_tests(
+        est, session.resp_t, session.reported, session.reported, setup
+    )
+    lab, u = (
+        (gen.lab_d50(w.reflectance), None) if unc is None else (unc.lab, unc.lab_std)
+    )
     samples, surface = setup[5], gen.surface_lab(setup[1])
     order = [samples.names.index(n) for n in w.reflectance.names]
     return {

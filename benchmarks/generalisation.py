@@ -55,7 +55,7 @@ import argparse
 import json
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -169,6 +169,19 @@ def calibrate(
     return estimate_camera_sensitivity(
         responses, reported, chart, method=method, database=db, **kw
     )
+
+
+def with_true_sensitivities(
+    est: SensitivityEstimate, truth: Spectra
+) -> SensitivityEstimate:
+    """A ``"bayes"`` calibration with the camera's true curves (on :data:`WORK`) in
+    its sensitivities' place: no metering corrections, and a covariance shrunk to
+    nothing, so that Eq. 5 keeps the error model's ``K_e`` and the budget keeps its
+    other lines (``budget_terms.py``, ``colour_bias.py``)."""
+    return replace(
+        est, sensitivity=truth.resample(WORK), led_correction=None, spd_shift_nm=0.0,
+        covariance=est.covariance * 1e-12, readings=None,
+    )  # fmt: skip
 
 
 #: Candidate prior-mismatch scales (``core.uncertainty.PRIOR_MISMATCH_SCALE``).

@@ -155,8 +155,9 @@ def _load_calibration(
     path = Path(sensitivities)
     sens, meta = calibrated_sensitivities(path)
     check_calibration_grid(sens.wavelength_nm, meta)
-    for line in calibration_warnings(path, meta) if warn is not None else ():
-        warn(line)
+    if warn is not None:
+        for line in calibration_warnings(path, meta):
+            warn(line)
     return _Calibration(
         str(path.resolve()), sha256_file(path), sens, meta, load_colorchecker_sg(),
         grid,

@@ -342,10 +342,10 @@ def fit_calibration(
     rep = calibration_report(
         est, responses, illuminants, reflectances, held_out_patches=held
     )
+    from tunespec.core.selfcheck import finding_lines, held_out_of, self_check
+
     checked = None
     if check:
-        from tunespec.core.selfcheck import held_out_of, self_check
-
         held_out = None
         if held:
             held_out = held_out_of(
@@ -372,8 +372,6 @@ def fit_calibration(
         )
     per_patch = table1_by_patch(est, fit, illuminants, reflectances)
     reported = illuminants if reported_illuminants is None else reported_illuminants
-    from tunespec.core.selfcheck import finding_lines
-
     findings = [
         w
         for w in (
