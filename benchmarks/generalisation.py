@@ -38,10 +38,13 @@ Usage::
     python benchmarks/generalisation.py --grid 380:730:5  # calibrate on another grid
     python benchmarks/generalisation.py --meter-noise 0.001 --report-step-nm 10  # noisy SPDs
     python benchmarks/generalisation.py --systematic  # stray light, cross-talk, non-linearity
+    python benchmarks/generalisation.py --variants bayes,pca,smooth --chart-tone 0.8333
 
 After the table it prints the leave-one-reflectance-collection-out choice of
 ``core.uncertainty.PRIOR_MISMATCH_SCALE`` (:func:`tune_prior_scales`), with
-``BLIND_EDGE_SCALE`` as shipped or, with ``--tune-edge``, chosen with it.
+``BLIND_EDGE_SCALE`` as shipped or, with ``--tune-edge``, chosen with it, and per
+variant the bends the chart's residuals showed and how many the product refuses
+(:func:`print_bends`; ``--chart-tone`` puts the chart on a tone curve).
 """
 
 from __future__ import annotations
@@ -68,6 +71,7 @@ import generalisation_data as gd
 
 from tunespec.core.colorimetry import delta_e_2000, lab_d50, reflectance_stats
 from tunespec.core.datasets import load_camera_database, load_colorchecker_sg
+from tunespec.core.excess import bend_verdict, linearise
 from tunespec.core.metering import suppress_meter_floor
 from tunespec.core.responses import Responses
 from tunespec.core.selfcheck import self_check
@@ -129,6 +133,8 @@ class Score:
     fitted_excess: dict[str, Any] = field(default_factory=dict)
     # what the product's self-check (without its held-out refit) finds
     self_check_warnings: list[str] = field(default_factory=list)
+    # the chart's bend c^(1 + gamma) and its standard error, where the fit found one
+    bend: tuple[float, float] | None = None
     seconds: float = 0.0
 
 
@@ -388,6 +394,7 @@ def simulate_session(
     report_slit: bool = False,
     systematic: bool = False,
     flat_field: float = NoiseModel.flat_field_residual,
+    chart_tone: float = 1.0,
 ) -> Session:
     """Eq. 1 for the chart and the test reflectances, with the light's readings as
     an instrument reports them (the options as :func:`main`'s flags)."""
@@ -403,6 +410,7 @@ def simulate_session(
     if systematic:
         resp = gd.systematic_effects(resp, rng)
         resp_t = gd.systematic_effects(resp_t, rng)
+    resp = linearise(resp, 1.0 / chart_tone - 1.0)  # c^chart_tone: a rendered file
     # the instrument's own sampling, then its reading noise on what it reports
     reported_native = gd.report_at(reported_fine, report_step_nm, slit=report_slit)
     if meter_noise:
@@ -481,6 +489,11 @@ def run_camera(
             st.mean_spectral_rms,
             seconds=secs,
         )
+        if "linearity_gamma_found" in est.params:
+            sc.bend = (
+                est.params["linearity_gamma_found"],
+                est.params["linearity_gamma_se"],
+            )
         if est.excess is not None:
             sc.fitted_flat_field = est.excess.flat_field_relative
             sc.fitted_excess = est.excess.as_dict()
@@ -563,6 +576,21 @@ def shift_correlation(scores: list[Score]) -> float | None:
         return None
     # the common offset is absorbed by the sensitivities' shape; compare deviations
     return float(np.corrcoef(fit, true)[0, 1])
+
+
+def print_bends(scores: list[Score]) -> None:
+    """Per variant, the bend ``gamma`` the chart's residuals showed (the product's
+    linearity check, ``core.plausibility.check_chart_linearity``) and how many
+    calibrations it would refuse."""
+    for variant in sorted({s.variant for s in scores if s.bend is not None}):
+        bends = np.array([s.bend for s in scores if s.variant == variant and s.bend])
+        refused = sum(bend_verdict(g, se) == "refuse" for g, se in bends)
+        print(
+            f"\n{variant}: the chart's bend gamma {bends[:, 0].min():+.4f} to "
+            f"{bends[:, 0].max():+.4f} (|gamma| / s.e. up to "
+            f"{np.max(np.abs(bends[:, 0]) / bends[:, 1]):.1f}), refused "
+            f"{refused} of {len(bends)}"
+        )
 
 
 def print_summary(summary: dict[str, Any], variants) -> None:
@@ -652,6 +680,13 @@ def main(argv: list[str] | None = None) -> int:
         help="the flat field's residual (relative, one draw per patch and LED) in the "
         "simulated responses (default %(default)s; the calibration fits its size)",
     )
+    ap.add_argument(
+        "--chart-tone",
+        type=float,
+        default=1.0,
+        help="the chart's responses through c^E, a rendered file's tone curve (the "
+        "linearity check's refusals: the bends printed at the end)",
+    )
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument(
         "--grid",
@@ -704,6 +739,7 @@ def main(argv: list[str] | None = None) -> int:
                 report_slit=args.report_slit,
                 systematic=args.systematic,
                 flat_field=args.flat_field,
+                chart_tone=args.chart_tone,
                 edge_scales=EDGE_SCALES if args.tune_edge else (),
             )
     summary = summarise(scores)
@@ -715,6 +751,7 @@ def main(argv: list[str] | None = None) -> int:
     for s in flagged:
         for w in s.self_check_warnings:
             print(f"  {s.family} ({s.variant}): {w[:110]}")
+    print_bends(scores)
     corr = shift_correlation([s for s in scores if s.variant == "bayes"])
     if corr is not None:
         print(

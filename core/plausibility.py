@@ -40,7 +40,8 @@ The checks and the quantities they rest on:
   a darker sample.
 - **A chart's linearity** (:func:`check_chart_linearity`): a raw sensor bends its
   responses by far less than the largest bend a calibration undoes; a larger one is
-  a tone curve (JPEG, a TIFF with gamma) or a black level not subtracted.
+  a tone curve (JPEG, a TIFF with gamma) or a black level not subtracted, whichever
+  method fitted the chart.
 
 References
 ----------
@@ -781,6 +782,10 @@ def check_chart_linearity(params: Mapping[str, Any]) -> None:
     sensor (``signal^1.003``) shows 0.0023-0.0032 on all its 89 cameras
     (``docs/validation.md``) and a black level subtracted 0.3 %
     of full scale too much 0.049 (undone, with the self-check's warning).
+    ``"pca"`` and ``"smooth"`` (:func:`~tunespec.core.excess.fit_bend`) on the same
+    89 cameras and both lights: none refused (``smooth`` -0.014 to +0.005); their
+    chart on ``c^(1/1.2)`` or ``c^1.1``: ``smooth`` refused on all 178, ``pca`` on
+    153 and 126, where its misfit on a camera it does not know leaves the bend seen.
     """
     from tunespec.core.excess import LINEARITY_GAMMA_MAX, bend_verdict
 
@@ -792,8 +797,10 @@ def check_chart_linearity(params: Mapping[str, Any]) -> None:
         "linearity",
         f"the chart's responses bend as response^(1 + gamma) with gamma {gamma:+.3f} "
         f"+- {se:.2g} against Eq. 1 (a raw sensor's: within +-{LINEARITY_GAMMA_MAX:g}): "
-        "a tone curve (a JPEG, a TIFF with gamma or another camera profile) or a "
-        "black level not subtracted; extract the patches from raw or linear files",
+        "a tone curve (a JPEG, a TIFF with gamma or another camera profile), a "
+        "black level not subtracted, or reflectances that are not this chart's "
+        "patches; extract the patches from raw or linear files and check "
+        "--reflectances",
     )
 
 

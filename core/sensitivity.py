@@ -66,6 +66,7 @@ from tunespec.core.datasets import load_camera_database
 from tunespec.core.errors import InputError, SingularSystemError
 from tunespec.core.excess import (
     bend_verdict,
+    fit_bend,
     fit_excess_variance,
     fit_linearity,
     linearise,
@@ -777,7 +778,7 @@ def estimate_camera_sensitivity(
 
     cal = fit(problem, sub_progress(progress, 0.0, 0.5))
     gamma, se = _chart_linearity(cal, problem)
-    if bend_verdict(gamma, se) == "undo":  # the same stimuli, responses linearised
+    if cal.method == "bayes" and bend_verdict(gamma, se) == "undo":  # linearised
         linear = _prepare(linearise(responses, gamma), illuminants, reflectances)
         cal = _linearised(fit(linear, sub_progress(progress, 0.5, 1.0)), gamma)
     report(progress, 1.0)
@@ -808,16 +809,17 @@ def _linearised(cal: SensitivityEstimate, gamma: float) -> SensitivityEstimate:
 def _chart_linearity(
     cal: SensitivityEstimate, problem: _Problem
 ) -> tuple[float, float]:
-    """The chart's non-linearity ``gamma`` and its standard error
-    (:func:`fit_linearity` at the fit's residuals, :func:`_chart_residual_terms`);
-    ``(0, inf)`` where none was fitted. Only ``"bayes"``, whose residuals its error
-    model explains: the paper's estimators leave a misfit of percents that looks like
-    a bend (``"pca"`` 0.007-0.009 on an ideal sensor of
-    ``benchmarks/generalisation.py``), and they reproduce the paper as published."""
-    if cal.method != "bayes" or cal.excess is None or cal.excess.nonlinearity == 0.0:
+    """The chart's non-linearity ``gamma`` and its standard error at the fit's
+    residuals (:func:`_chart_residual_terms`); ``(0, inf)`` where none was fitted.
+    ``"bayes"``: :func:`fit_linearity` under its error model, where that found a
+    non-linearity. The paper's estimators: :func:`fit_bend`, only ever refused
+    (:func:`~tunespec.core.plausibility.check_chart_linearity`): they leave a misfit
+    of percents and reproduce the paper as published."""
+    if cal.method != "bayes":
+        return fit_bend(*_chart_residual_terms(problem, cal))
+    if cal.excess is None or cal.excess.nonlinearity == 0.0:
         return 0.0, float("inf")
-    measured, pred, noise = _chart_residual_terms(problem, cal)
-    return fit_linearity(measured, pred, noise, cal.excess)
+    return fit_linearity(*_chart_residual_terms(problem, cal), cal.excess)
 
 
 def _estimate_once(
