@@ -471,6 +471,8 @@ def estimate(
         calibration=cal,
         checks=checks,
     )
+    for line in done.warnings:
+        warnings.warn(line, stacklevel=2)
     wiener = done.wiener
     return EstimateResult(
         wiener.reflectance,

@@ -71,6 +71,7 @@ __all__ = [
     "LINEARITY_SIGNIFICANCE",
     "ExcessVariance",
     "fit_bend",
+    "fit_board_bend",
     "fit_excess_variance",
     "fit_linearity",
     "flat_field_residual",
@@ -630,3 +631,51 @@ def fit_bend(
     gamma = float(np.sum(w * u * r)) / info
     by_column = np.sum(w * u * (r - gamma * u), axis=0)
     return gamma, float(np.sqrt(np.sum(by_column**2))) / info
+
+
+def fit_board_bend(
+    white: NDArray[np.float64],
+    perfect: NDArray[np.float64],
+    usable: NDArray[np.bool_],
+) -> tuple[float, float]:
+    """The bend ``gamma`` of a white board's channels and its standard error.
+
+    ``white`` (n_i, 3): the board's level under each light; ``perfect`` (n_i, 3): Eq.
+    1's for a perfect white there; ``usable``: the channels that count. Under one
+    LED a board is one reflectance in every channel, so on a linear sensor
+    ``ln(white / perfect)`` is the same in each of them; a response ``c^(1 + gamma)``
+    tilts it by ``gamma / (1 + gamma)`` per unit of ``ln(white)``. Least squares of
+    that tilt with one level per light (a nuisance: the board's colour, the light's
+    reading), the standard error clustered by light. What it needs no chart for: a
+    sample's responses on a tone curve, with sensitivities that carry no Eq. 1
+    check of their own.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> rng = np.random.default_rng(0)
+    >>> perfect = rng.uniform(0.05, 1.0, (22, 3))
+    >>> board = 0.9 * perfect * rng.uniform(0.98, 1.02, (22, 3))
+    >>> g, se = fit_board_bend(board ** (1 / 1.2), perfect, np.ones((22, 3), bool))
+    >>> round(g, 2), bool(se < 0.02)
+    (-0.17, True)
+    """
+    ok = np.asarray(usable, dtype=bool) & (white > 0) & (perfect > 0)
+    ok &= np.sum(ok, axis=1, keepdims=True) >= 2  # a light with one channel: no tilt
+    if not np.any(ok):
+        return 0.0, float("inf")
+    x = np.log(np.where(ok, white, 1.0))
+    y = x - np.log(np.where(ok, perfect, 1.0))
+    n = np.maximum(np.sum(ok, axis=1, keepdims=True), 1)
+
+    def centred(v: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.where(ok, v - np.sum(np.where(ok, v, 0.0), 1, keepdims=True) / n, 0.0)
+
+    x, y = centred(x), centred(y)
+    info = float(np.sum(x * x))
+    if not info > 0:
+        return 0.0, float("inf")
+    tilt = float(np.sum(x * y)) / info
+    se = float(np.sqrt(np.sum(np.sum(x * (y - tilt * x), axis=1) ** 2))) / info
+    # tilt = gamma / (1 + gamma)
+    return tilt / (1.0 - tilt), se / (1.0 - tilt) ** 2

@@ -64,6 +64,8 @@ from tunespec.core.responses import Responses
 from tunespec.core.spectra import Spectra
 
 __all__ = [
+    "BOARD_BEND_SIGNIFICANCE",
+    "BOARD_CHANNEL_SHARE",
     "FRACTION_PERCENTILE",
     "MAX_CHI2_PER_RESPONSE",
     "MAX_PLAUSIBLE_FRACTION",
@@ -78,6 +80,8 @@ __all__ = [
     "WHITE_SCALE_TOLERANCE",
     "Checks",
     "Implausible",
+    "board_bend",
+    "board_bend_warning",
     "calibration_fit_warning",
     "calibration_grid_warning",
     "check_absolute_sensitivities",
@@ -165,6 +169,15 @@ WHITE_SCALE_TOLERANCE = 0.1
 #: (On ``benchmarks/white_scale.py`` the lights this leaves out are IR-cut cameras'
 #: deep red ones; seen 0.00-0.2 %, their ratios between two sessions were 0.3-1.4.)
 MIN_SEEN_FRACTION = 0.03
+#: Least share of a light's brightest channel a channel of the white board needs to
+#: count in :func:`board_bend_warning`: a channel that barely sees an LED sees its
+#: tails, which a reading at 10 nm does not resolve.
+BOARD_CHANNEL_SHARE = 0.1
+#: How many standard errors from zero the board's bend must lie, besides being
+#: :data:`~tunespec.core.excess.LINEARITY_GAMMA_MAX` or more, to be said: with the
+#: camera's own curves its channels misfit Eq. 1 by 1-3 % through 10 nm readings,
+#: as by a bend of up to 0.05 (``benchmarks/white_scale.py --board-bend``).
+BOARD_BEND_SIGNIFICANCE = 4.0
 #: Least level of the white board (its brightest channel, full scale) under a light
 #: for the light to count in :func:`check_white_scale`: a dark level off by 0.01 %
 #: of full scale is 1 % of it, and a failing LED (at 1e-5 of its power,
@@ -686,6 +699,49 @@ def white_reflectance(
     lit = np.max(white, axis=1) >= MIN_WHITE_LEVEL
     usable = (seen >= MIN_SEEN_FRACTION) & (perfect > 0) & lit & (level > 0)
     return np.where(usable, level / np.where(usable, perfect, 1.0), np.nan)
+
+
+def board_bend(
+    white_rgb: NDArray[np.float64], perfect: NDArray[np.float64]
+) -> tuple[float, float]:
+    """The bend of the white board's channels and its standard error
+    (:func:`~tunespec.core.excess.fit_board_bend` over the channels at
+    :data:`MIN_WHITE_LEVEL` and :data:`BOARD_CHANNEL_SHARE` of their light's
+    brightest or more)."""
+    from tunespec.core.excess import fit_board_bend
+
+    white = np.asarray(white_rgb, dtype=np.float64)
+    brightest = np.max(white, axis=1, keepdims=True)
+    usable = (white >= MIN_WHITE_LEVEL) & (white >= BOARD_CHANNEL_SHARE * brightest)
+    return fit_board_bend(white, np.asarray(perfect, dtype=np.float64), usable)
+
+
+def board_bend_warning(
+    white_rgb: NDArray[np.float64], perfect: NDArray[np.float64]
+) -> str | None:
+    """What the white board's channels say of the sample's linearity, or None.
+
+    ``white_rgb`` (n_i, 3): the board's level under each light (linear, as the
+    estimate's responses); ``perfect``: :func:`white_response` there. A bend
+    (:func:`board_bend`) of :data:`~tunespec.core.excess.LINEARITY_GAMMA_MAX` or
+    more, at least :data:`BOARD_BEND_SIGNIFICANCE` standard errors from zero, is a
+    tone curve on
+    the sample's frames or sensitivities that do not fit this camera. Said where no
+    covariance lets Eq. 1 check the targets themselves
+    (:func:`check_response_consistency`): external curves, ``pca``, ``smooth``.
+    """
+    from tunespec.core.excess import LINEARITY_GAMMA_MAX
+
+    gamma, se = board_bend(white_rgb, perfect)
+    if abs(gamma) < LINEARITY_GAMMA_MAX or abs(gamma) < BOARD_BEND_SIGNIFICANCE * se:
+        return None
+    return (
+        f"the white background's channels bend as response^(1 + gamma) with gamma "
+        f"{gamma:+.3f} +- {se:.2g} against Eq. 1 (a raw sensor's: within "
+        f"+-{LINEARITY_GAMMA_MAX:g}): frames on a tone curve (a JPEG, a TIFF with "
+        "gamma), a black level not subtracted, or sensitivities that do not fit this "
+        "camera; its reflectances do not hold"
+    )
 
 
 def white_ratios(

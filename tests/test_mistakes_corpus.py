@@ -249,6 +249,12 @@ CASES: list[tuple[str, Callable, str, str]] = [
     ("chart on a tone curve (x^1.1), method pca", lambda x, d: _cal(
         x, responses=_toned(x.chart_responses, d, 1.1), method="pca"),
      "refused", "bend as response^(1 + gamma) with gamma +0.0"),
+    # a sample on a tone curve, with sensitivities that carry no covariance (no Eq. 1
+    # check of the targets): its white background's channels tilt (before: exit 0,
+    # 3.0 dE00 at x^1.1)
+    ("sample on a tone curve (x^1.1), curves without a covariance", lambda x, d: _est(
+        x, responses=_toned(x.responses, d, 1.1)), "flagged",
+     "white background's channels bend as response^(1 + gamma) with gamma +0.10"),
     ("chart not dark-subtracted (+0.5 % of full scale)", lambda x, d: _cal(
         x, responses=fs.edited_responses(x.chart_responses, d / "r.csv", lambda r: replace(
             r, rgb=r.rgb + 0.005))), "refused", "black level not subtracted"),
@@ -458,6 +464,28 @@ def test_no_corrections_proceeds_and_says_so(good, tmp_path, capsys) -> None:
     assert code == 0 and len(lines) == 1 and "--no-corrections" in lines[0], lines
     meta = json.loads((tmp_path / "e.csv.meta.json").read_text())
     assert meta["corrections"] == "none (--no-corrections)"
+
+
+def test_a_toned_sample_without_side_file_is_flagged(good, tmp_path, capsys) -> None:
+    """Without the side file no chart's white background checks the sample's scale;
+    its own board's channels still show a tone curve (1/1.2: gamma -0.17)."""
+    x = good
+    bare = _copy(x.sensitivities, tmp_path / "S.csv")
+    toned = _toned(x.responses, tmp_path, 1 / 1.2)
+    argv = [
+        *_est(x, sensitivities=bare, responses=toned),
+        "-o",
+        str(tmp_path / "e.csv"),
+    ]
+    code, lines = _run([*argv, "--no-corrections"], capsys)
+    bends = [ln for ln in lines if "channels bend" in ln]
+    assert code == 0 and len(bends) == 1 and "gamma -0.1" in bends[0], lines
+    # the Python API says it too (the good side file: no covariance)
+    from tunespec.app import api
+
+    with pytest.warns(UserWarning, match="^the white background's channels bend"):
+        api.estimate(_toned(x.responses, tmp_path / "api", 1.1), x.illuminants,
+                     x.sensitivities)  # fmt: skip
 
 
 def test_a_single_typo_no_longer_decides_the_unit(good, tmp_path) -> None:

@@ -495,6 +495,8 @@ def cmd_estimate(args: argparse.Namespace) -> int:
         clip=not args.no_clip,
     )
     est = estimation.wiener
+    for line in estimation.warnings:
+        out.warn(line)
     write_spectra_csv(est.reflectance, args.output)
     files = {"reflectances": str(args.output)}
     if estimation.uncertainty is not None:

@@ -581,8 +581,10 @@ def record_estimate(
     """The estimate's result written, once for every front end: its warnings (the
     sample's capture and processing, the checks overridden) and the session's
     fingerprint with it."""
-    warnings = step_warnings(sample_dir, sample) + tuple(
-        f"{_FORCED} {f}" for f in est.forced
+    warnings = (
+        step_warnings(sample_dir, sample)
+        + est.warnings
+        + tuple(f"{_FORCED} {f}" for f in est.forced)
     )
     result = EstimateResult.from_step(
         est, sample, reference=reference, warnings=warnings, elapsed_s=elapsed_s

@@ -147,6 +147,9 @@ class Estimation:
     #: The sample's white background by Eq. 1 over the chart session's, per light
     #: (``core.plausibility.check_white_scale``); None where not compared.
     white_scale: Mapping[str, float] | None = None
+    #: What the estimate found doubtful in its inputs, one line each
+    #: (``core.plausibility.board_bend_warning``).
+    warnings: tuple[str, ...] = ()
 
     @property
     def white_scale_text(self) -> str:
@@ -598,9 +601,11 @@ def estimate_reflectance(
     from tunespec.core.calibration import linearise_from_meta
     from tunespec.core.plausibility import (
         Checks,
+        board_bend_warning,
         check_calibration_grid,
         check_estimate_inputs,
         check_response_consistency,
+        white_response,
     )
     from tunespec.core.uncertainty import wiener_with_uncertainty
 
@@ -634,6 +639,7 @@ def estimate_reflectance(
         clip=clip,
         grid=grid,
     )
+    warnings: tuple[str, ...] = ()
     if unc is not None and unc.chi2_per_response is not None:
         checks(
             check_response_consistency,
@@ -641,7 +647,14 @@ def estimate_reflectance(
             unc.misfit_by_light,
             responses.illuminants,
         )
-    return Estimation(est, None, unc, tuple(checks.overridden), white_scale)
+    elif responses.white_rgb is not None:  # no covariance: the board alone checks
+        perfect = white_response(
+            illum_fine.select(list(responses.illuminants)), sens_fine
+        )
+        warnings = tuple(
+            filter(None, [board_bend_warning(responses.white_rgb, perfect)])
+        )
+    return Estimation(est, None, unc, tuple(checks.overridden), white_scale, warnings)
 
 
 def write_uncertainty(

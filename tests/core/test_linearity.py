@@ -27,7 +27,13 @@ from tunespec.core.excess import (
     linearise,
     log_profile,
 )
-from tunespec.core.plausibility import Implausible, check_chart_linearity
+from tunespec.core.plausibility import (
+    Implausible,
+    board_bend,
+    board_bend_warning,
+    check_chart_linearity,
+    white_response,
+)
 from tunespec.core.responses import Responses
 from tunespec.core.selfcheck import self_check
 from tunespec.core.sensitivity import estimate_camera_sensitivity
@@ -207,3 +213,24 @@ def test_the_papers_estimators_are_not_linearised(bent_bench, method) -> None:
     assert -0.26 <= cal.params["linearity_gamma_found"] <= -0.17, cal.params
     with pytest.raises(Implausible, match=r"gamma -0\.2"):
         check_chart_linearity(cal.params)
+
+
+def test_a_white_board_on_a_tone_curve_is_said() -> None:
+    """The sample's board alone: under one LED one reflectance in every channel, so
+    its channels tilt against Eq. 1 on a tone curve (``board_bend_warning``)."""
+    grid = CALIBRATION_GRID
+    truth = load_camera_database(grid)[DEFAULT_CAMERA]
+    leds = scale_to_exposure(load_colorchecker_sg(grid), load_led_set(grid), truth)
+    perfect = white_response(leds, truth)
+    rng = np.random.default_rng(3)
+    # the board 0.9, a 1 % misfit per channel (the curves, the readings)
+    board = 0.9 * perfect * (1 + 0.01 * rng.standard_normal(perfect.shape))
+    gamma, se = board_bend(board**1.003, perfect)  # a sensor's bend: found, not said
+    assert abs(gamma - 0.003) < 3 * se and se < 0.003, (gamma, se)
+    assert board_bend_warning(board**1.003, perfect) is None
+    gamma, se = board_bend(board ** (1 / 1.2), perfect)
+    assert -0.175 <= gamma <= -0.16 and se < 0.003, (gamma, se)
+    said = board_bend_warning(board ** (1 / 1.2), perfect)
+    assert said is not None and "gamma -0.16" in said, said
+    # a board too dark under every light to tell anything: nothing to say
+    assert board_bend_warning(board * 1e-3, perfect) is None
