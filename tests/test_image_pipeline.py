@@ -122,6 +122,7 @@ def test_outputs_agree_and_carry_provenance(images, bench_session) -> None:
     assert not (images["out"] / ".work").exists()
     # the white board against the calibration's chart session (here the same one)
     assert prov["white_scale"].startswith("1.00") and prov["forced"] == []
+    assert prov["warnings"] == []  # a linear sensor's board: nothing to say
 
 
 def test_a_session_on_another_scale_is_refused(bench_session, tmp_path, capsys):

@@ -382,6 +382,8 @@ def _provenance_written(
         # the session's white board by Eq. 1 over the calibration's chart session's
         "white_scale": bank.params.get("white_scale", ""),
         "forced": bank.params.get("forced", []),
+        # what the session's white board says of its linearity
+        "warnings": bank.params.get("warnings", []),
         "finished_utc": _now(),
     }
     shutil.rmtree(job.work, ignore_errors=True)
@@ -499,7 +501,9 @@ def estimate_images(
         ``None`` (Dask's local threads), ``"sync"``, a ``dask.distributed`` address
         or ``Client``.
     warn
-        Told what the calibration says of itself (:func:`calibration_warnings`).
+        Told what the calibration says of itself (:func:`calibration_warnings`),
+        then what the session's white board says of its linearity (the
+        provenance's ``warnings``: ``lighting.board_bend_said``).
 
     Returns
     -------
@@ -515,7 +519,11 @@ def estimate_images(
         _disk_full(out_dir),
     ):
         graph = session_graph(session_dir, cal, out_dir, settings)
-        return compute([graph], sched, progress, should_stop)[0]
+        doc = compute([graph], sched, progress, should_stop)[0]
+    if warn is not None:
+        for line in doc.get("warnings", []):
+            warn(line)
+    return doc
 
 
 def _is_disk_full(exc: BaseException) -> bool:
@@ -647,7 +655,11 @@ def batch_images(
 
             with _disk_full(*(out for _, out in part)):
                 graphs = [session_graph(s, cal, out, settings) for s, out in part]
-                compute(graphs, sched, sub, should_stop)
+                docs = compute(graphs, sched, sub, should_stop)
             done.extend(str(s) for s, _ in part)
+            for (s, _), doc in zip(part, docs, strict=True):
+                for line in doc.get("warnings", []):
+                    if warn is not None:
+                        warn(f"{s}: {line}")
     report(progress, 1.0)
     return {"done": done, "skipped": skipped, "calibration_sha256": cal.sha256}

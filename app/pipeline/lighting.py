@@ -29,6 +29,7 @@ if TYPE_CHECKING:
     from tunespec.core.responses import Responses
 
 __all__ = [
+    "board_bend_said",
     "board_reflectance",
     "check_sample_scale",
     "estimation_lighting",
@@ -139,7 +140,42 @@ def board_reflectance(
     are known). ``None`` where the two share no range."""
     from tunespec.core.plausibility import white_reflectance
 
-    # Eq. 1 where both are known, as the estimate integrates it (wiener.integration_grid)
+    lit = _board_lighting(lights, illuminants, sensitivity, meta)
+    if lit is None:
+        return None
+    rho = white_reflectance(white_rgb, *lit)
+    return {
+        name: float(r) for name, r in zip(lights, rho, strict=True) if np.isfinite(r)
+    }
+
+
+def board_bend_said(
+    white_rgb: Any,
+    lights: Sequence[str],
+    illuminants: Spectra,
+    sensitivity: Spectra,
+    meta: Mapping[str, Any],
+) -> tuple[str, ...]:
+    """What the white background's channels say of the sample's linearity
+    (``core.plausibility.board_bend_warning``; ``()``: nothing), with the lighting
+    :func:`board_reflectance` takes. For the estimates no Eq. 1 check of the
+    targets covers: patches without a covariance, every per-pixel image."""
+    from tunespec.core.plausibility import board_bend_warning, white_response
+
+    lit = _board_lighting(lights, illuminants, sensitivity, meta)
+    said = None if lit is None else board_bend_warning(white_rgb, white_response(*lit))
+    return () if said is None else (said,)
+
+
+def _board_lighting(
+    lights: Sequence[str],
+    illuminants: Spectra,
+    sensitivity: Spectra,
+    meta: Mapping[str, Any],
+) -> tuple[Spectra, Spectra] | None:
+    """``lights`` corrected as the calibration found and the sensitivities, on one
+    grid where both are known (Eq. 1 as the estimate integrates it,
+    ``wiener.integration_grid``); None where they share no range."""
     step = sensitivity.step_nm
     lo = max(sensitivity.wavelength_nm[0], illuminants.wavelength_nm[0])
     hi = min(sensitivity.wavelength_nm[-1], illuminants.wavelength_nm[-1])
@@ -147,10 +183,7 @@ def board_reflectance(
         return None
     overlap = Grid(float(lo), float(lo + np.floor((hi - lo) / step) * step), step)
     illum, sens, _ = estimation_lighting(illuminants, sensitivity, meta, overlap)
-    rho = white_reflectance(white_rgb, illum.select(list(lights)), sens)
-    return {
-        name: float(r) for name, r in zip(lights, rho, strict=True) if np.isfinite(r)
-    }
+    return illum.select(list(lights)), sens
 
 
 def sample_scale_record(
@@ -163,11 +196,18 @@ def sample_scale_record(
     force: bool = False,
 ) -> dict[str, Any]:
     """:func:`check_sample_scale` of a session's white level ``white_rgb`` (linear,
-    under ``lights``) as the per-pixel images record it: ``white_scale`` (its text)
-    and ``forced`` (the override, with ``force``; without, an ``Implausible``)."""
+    under ``lights``) as the per-pixel images record it: ``white_scale`` (its text),
+    ``forced`` (the override, with ``force``; without, an ``Implausible``) and
+    ``warnings`` (:func:`board_bend_said`)."""
     from tunespec.core.plausibility import Checks
 
     checks = Checks(force=force)
     board = board_reflectance(white_rgb, lights, illuminants, sensitivity, meta)
     ratios = check_sample_scale(checks, board, meta)
-    return {"white_scale": sample_scale_text(ratios), "forced": list(checks.overridden)}
+    return {
+        "white_scale": sample_scale_text(ratios),
+        "forced": list(checks.overridden),
+        "warnings": list(
+            board_bend_said(white_rgb, lights, illuminants, sensitivity, meta)
+        ),
+    }

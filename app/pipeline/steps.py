@@ -47,6 +47,7 @@ from tunespec.app.pipeline.folder import (
     write_exports_index,
 )
 from tunespec.app.pipeline.lighting import (
+    board_bend_said,
     check_sample_scale,
     estimation_lighting,
     sample_scale_text,
@@ -601,11 +602,9 @@ def estimate_reflectance(
     from tunespec.core.calibration import linearise_from_meta
     from tunespec.core.plausibility import (
         Checks,
-        board_bend_warning,
         check_calibration_grid,
         check_estimate_inputs,
         check_response_consistency,
-        white_response,
     )
     from tunespec.core.uncertainty import wiener_with_uncertainty
 
@@ -648,11 +647,8 @@ def estimate_reflectance(
             responses.illuminants,
         )
     elif responses.white_rgb is not None:  # no covariance: the board alone checks
-        perfect = white_response(
-            illum_fine.select(list(responses.illuminants)), sens_fine
-        )
-        warnings = tuple(
-            filter(None, [board_bend_warning(responses.white_rgb, perfect)])
+        warnings = board_bend_said(
+            responses.white_rgb, responses.illuminants, illuminants, sensitivity, meta
         )
     return Estimation(est, None, unc, tuple(checks.overridden), white_scale, warnings)
 

@@ -136,3 +136,33 @@ def test_sensitivities_without_their_side_file_are_said_never_silently(
         '{"warnings": ["Table 1 is poor", "self-check: chi-square 8"]}'
     )
     assert said() == [f"the calibration {sens} warned: Table 1 is poor (and 1 more)"]
+
+
+def test_a_session_whose_board_bends_is_said() -> None:
+    """The per-pixel images have no Eq. 1 check of their targets: the white board's
+    channels say a session on a tone curve (``lighting.board_bend_said``), in the
+    record the provenance keeps."""
+    from tunespec.app.pipeline.lighting import sample_scale_record
+    from tunespec.core.datasets import (
+        DEFAULT_CAMERA,
+        load_camera_database,
+        load_colorchecker_sg,
+        load_led_set,
+    )
+    from tunespec.core.plausibility import white_response
+    from tunespec.core.simulate import scale_to_exposure
+    from tunespec.core.spectra import CALIBRATION_GRID
+
+    camera = load_camera_database(CALIBRATION_GRID)[DEFAULT_CAMERA]
+    leds = scale_to_exposure(
+        load_colorchecker_sg(CALIBRATION_GRID), load_led_set(CALIBRATION_GRID), camera
+    )
+    board = 0.9 * white_response(leds, camera)
+    lights = list(leds.names)
+    linear = sample_scale_record(board, lights, leds, camera, {})
+    assert linear["warnings"] == [] and linear["forced"] == []
+    toned = sample_scale_record(board ** (1 / 1.2), lights, leds, camera, {})
+    assert len(toned["warnings"]) == 1, toned
+    assert (
+        "channels bend" in toned["warnings"][0] and "gamma -0.1" in toned["warnings"][0]
+    )
