@@ -624,13 +624,25 @@ def fit_bend(
         den = np.sum(w * c * c, axis=0)
         return x - np.sum(w * x * c, axis=0) / np.where(den > 0, den, 1.0) * c
 
-    u, r = without_gain(u), without_gain(r)
+    return _clustered_slope(without_gain(u), without_gain(r), w, cluster_axis=0)
+
+
+def _clustered_slope(
+    u: NDArray[np.float64],
+    r: NDArray[np.float64],
+    w: NDArray[np.float64] | float,
+    *,
+    cluster_axis: int,
+) -> tuple[float, float]:
+    """The weighted least-squares slope of ``r`` on ``u`` and its standard error,
+    the terms along ``cluster_axis`` one cluster (their errors shared: the sandwich
+    estimator over clusters); ``(0, inf)`` where ``u`` carries nothing."""
     info = float(np.sum(w * u * u))
     if not info > 0:
         return 0.0, float("inf")
-    gamma = float(np.sum(w * u * r)) / info
-    by_column = np.sum(w * u * (r - gamma * u), axis=0)
-    return gamma, float(np.sqrt(np.sum(by_column**2))) / info
+    slope = float(np.sum(w * u * r)) / info
+    scores = np.sum(w * u * (r - slope * u), axis=cluster_axis)
+    return slope, float(np.sqrt(np.sum(scores**2))) / info
 
 
 def fit_board_bend(
@@ -671,11 +683,8 @@ def fit_board_bend(
     def centred(v: NDArray[np.float64]) -> NDArray[np.float64]:
         return np.where(ok, v - np.sum(np.where(ok, v, 0.0), 1, keepdims=True) / n, 0.0)
 
-    x, y = centred(x), centred(y)
-    info = float(np.sum(x * x))
-    if not info > 0:
-        return 0.0, float("inf")
-    tilt = float(np.sum(x * y)) / info
-    se = float(np.sqrt(np.sum(np.sum(x * (y - tilt * x), axis=1) ** 2))) / info
+    tilt, se = _clustered_slope(centred(x), centred(y), 1.0, cluster_axis=1)
+    if not tilt < 1.0:  # the channels in reverse of Eq. 1's order: no bend at all
+        return float("inf"), se
     # tilt = gamma / (1 + gamma)
     return tilt / (1.0 - tilt), se / (1.0 - tilt) ** 2
