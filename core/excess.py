@@ -104,13 +104,16 @@ LINEARITY_GAMMA_MIN = 0.001
 LINEARITY_GAMMA_MAX = 0.05
 
 
-def bend_verdict(gamma: float, se: float) -> str:
+def bend_verdict(
+    gamma: float, se: float, significance: float = LINEARITY_SIGNIFICANCE
+) -> str:
     """What a calibration does with the bend ``gamma`` (+- ``se``) its chart's
-    residuals show: ``"undo"`` a sensor's (significant, :data:`LINEARITY_GAMMA_MIN`
-    to :data:`LINEARITY_GAMMA_MAX`), ``"refuse"`` one no sensor has (significant,
-    :data:`LINEARITY_GAMMA_MAX` or more), ``""`` else."""
+    residuals show: ``"undo"`` a sensor's (``significance`` standard errors from
+    zero, :data:`LINEARITY_GAMMA_MIN` to :data:`LINEARITY_GAMMA_MAX`), ``"refuse"``
+    one no sensor has (as significant, :data:`LINEARITY_GAMMA_MAX` or more), ``""``
+    else."""
     g = abs(gamma)
-    if not (g >= LINEARITY_GAMMA_MIN and g >= LINEARITY_SIGNIFICANCE * se):
+    if not (g >= LINEARITY_GAMMA_MIN and g >= significance * se):
         return ""
     return "undo" if g < LINEARITY_GAMMA_MAX else "refuse"
 
@@ -588,8 +591,8 @@ def fit_bend(
     Their Eq. 1 misfits each LED and channel in a pattern of its own, by percents:
     the median relative residual of ``"pca"`` on cameras it has not seen is 5-80 %
     (median 10 %), of ``"smooth"`` 1-140 % (median 1.4 %;
-    ``benchmarks/generalisation.py``'s 89 cameras under issue 23's conditions). So each response column's gain is a nuisance (projected out,
-    weighted), the weights are ``noise_variance`` plus that misfit relative to the
+    ``benchmarks/generalisation.py``'s 89 cameras under issue 23's conditions). So
+    each response column's gain is a nuisance (projected out, weighted), the weights are ``noise_variance`` plus that misfit relative to the
     prediction (the residuals' median absolute relative value x 1.4826), and the
     standard error is clustered by column: a column's misfit is shared by its
     patches. Least squares of the residuals on ``u = c (ln c - mu)``, ``mu`` each

@@ -176,7 +176,7 @@ BOARD_CHANNEL_SHARE = 0.1
 #: How many standard errors from zero the board's bend must lie, besides being
 #: :data:`~tunespec.core.excess.LINEARITY_GAMMA_MAX` or more, to be said: with the
 #: camera's own curves its channels misfit Eq. 1 by 1-3 % through 10 nm readings,
-#: as by a bend of up to 0.05 (``benchmarks/white_scale.py --board-bend``).
+#: as by a bend of up to 0.05 (``benchmarks/board_bend.py``).
 BOARD_BEND_SIGNIFICANCE = 4.0
 #: Least level of the white board (its brightest channel, full scale) under a light
 #: for the light to count in :func:`check_white_scale`: a dark level off by 0.01 %
@@ -723,17 +723,17 @@ def board_bend_warning(
 
     ``white_rgb`` (n_i, 3): the board's level under each light (linear, as the
     estimate's responses); ``perfect``: :func:`white_response` there. A bend
-    (:func:`board_bend`) of :data:`~tunespec.core.excess.LINEARITY_GAMMA_MAX` or
-    more, at least :data:`BOARD_BEND_SIGNIFICANCE` standard errors from zero, is a
-    tone curve on
-    the sample's frames or sensitivities that do not fit this camera. Said where no
-    covariance lets Eq. 1 check the targets themselves
-    (:func:`check_response_consistency`): external curves, ``pca``, ``smooth``.
+    (:func:`board_bend`) a chart would be refused for
+    (:func:`~tunespec.core.excess.bend_verdict`), at
+    :data:`BOARD_BEND_SIGNIFICANCE` standard errors, is a tone curve on the sample's
+    frames or sensitivities that do not fit this camera. Said where no covariance
+    lets Eq. 1 check the targets themselves (:func:`check_response_consistency`:
+    external curves, ``pca``, ``smooth``) and for every per-pixel image.
     """
-    from tunespec.core.excess import LINEARITY_GAMMA_MAX
+    from tunespec.core.excess import LINEARITY_GAMMA_MAX, bend_verdict
 
     gamma, se = board_bend(white_rgb, perfect)
-    if abs(gamma) < LINEARITY_GAMMA_MAX or abs(gamma) < BOARD_BEND_SIGNIFICANCE * se:
+    if bend_verdict(gamma, se, BOARD_BEND_SIGNIFICANCE) != "refuse":
         return None
     return (
         f"the white background's channels bend as response^(1 + gamma) with gamma "

@@ -503,7 +503,7 @@ def estimate_images(
     warn
         Told what the calibration says of itself (:func:`calibration_warnings`),
         then what the session's white board says of its linearity (the
-        provenance's ``warnings``: ``lighting.board_bend_said``).
+        provenance's ``warnings``: ``lighting.sample_board``).
 
     Returns
     -------
@@ -657,9 +657,9 @@ def batch_images(
                 graphs = [session_graph(s, cal, out, settings) for s, out in part]
                 docs = compute(graphs, sched, sub, should_stop)
             done.extend(str(s) for s, _ in part)
-            for (s, _), doc in zip(part, docs, strict=True):
-                for line in doc.get("warnings", []):
-                    if warn is not None:
+            if warn is not None:
+                for (s, _), doc in zip(part, docs, strict=True):
+                    for line in doc.get("warnings", []):
                         warn(f"{s}: {line}")
     report(progress, 1.0)
     return {"done": done, "skipped": skipped, "calibration_sha256": cal.sha256}

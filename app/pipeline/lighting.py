@@ -29,10 +29,10 @@ if TYPE_CHECKING:
     from tunespec.core.responses import Responses
 
 __all__ = [
-    "board_bend_said",
     "board_reflectance",
     "check_sample_scale",
     "estimation_lighting",
+    "sample_board",
     "sample_scale_record",
     "sample_scale_text",
     "white_background",
@@ -119,8 +119,6 @@ def white_background(
     """The white background's reflectance by Eq. 1 under each of the responses'
     lights (:func:`board_reflectance` of their ``white_rgb``); ``None`` when the
     responses carry no white level."""
-    if responses.white_rgb is None:
-        return None
     return board_reflectance(
         responses.white_rgb, responses.illuminants, illuminants, sensitivity, meta
     )
@@ -137,34 +135,41 @@ def board_reflectance(
     (``core.plausibility.white_reflectance``; NaN ones left out): its level
     ``white_rgb`` (n_lights, 3, linear) over a perfect white's, with the illuminants
     corrected as the calibration found (:func:`estimation_lighting`, where both
-    are known). ``None`` where the two share no range."""
-    from tunespec.core.plausibility import white_reflectance
-
-    lit = _board_lighting(lights, illuminants, sensitivity, meta)
-    if lit is None:
-        return None
-    rho = white_reflectance(white_rgb, *lit)
-    return {
-        name: float(r) for name, r in zip(lights, rho, strict=True) if np.isfinite(r)
-    }
+    are known). ``None`` where the two share no range or without a level."""
+    return sample_board(white_rgb, lights, illuminants, sensitivity, meta)[0]
 
 
-def board_bend_said(
+def sample_board(
     white_rgb: Any,
     lights: Sequence[str],
     illuminants: Spectra,
     sensitivity: Spectra,
     meta: Mapping[str, Any],
-) -> tuple[str, ...]:
-    """What the white background's channels say of the sample's linearity
-    (``core.plausibility.board_bend_warning``; ``()``: nothing), with the lighting
-    :func:`board_reflectance` takes. For the estimates no Eq. 1 check of the
-    targets covers: patches without a covariance, every per-pixel image."""
-    from tunespec.core.plausibility import board_bend_warning, white_response
+) -> tuple[dict[str, float] | None, tuple[str, ...]]:
+    """:func:`board_reflectance`, and what the white background's channels say of
+    the sample's linearity (``core.plausibility.board_bend_warning``; ``()``:
+    nothing) on the same lighting. The latter is for the estimates no Eq. 1 check
+    of the targets covers: patches without a covariance, every per-pixel image.
+    ``(None, ())`` without a white level (``white_rgb`` None)."""
+    from tunespec.core.plausibility import (
+        board_bend_warning,
+        white_reflectance,
+        white_response,
+    )
 
-    lit = _board_lighting(lights, illuminants, sensitivity, meta)
-    said = None if lit is None else board_bend_warning(white_rgb, white_response(*lit))
-    return () if said is None else (said,)
+    lit = (
+        None
+        if white_rgb is None
+        else _board_lighting(lights, illuminants, sensitivity, meta)
+    )
+    if lit is None:
+        return None, ()
+    rho = white_reflectance(white_rgb, *lit)
+    said = board_bend_warning(white_rgb, white_response(*lit))
+    return (
+        {name: float(r) for name, r in zip(lights, rho, strict=True) if np.isfinite(r)},
+        () if said is None else (said,),
+    )
 
 
 def _board_lighting(
@@ -198,16 +203,14 @@ def sample_scale_record(
     """:func:`check_sample_scale` of a session's white level ``white_rgb`` (linear,
     under ``lights``) as the per-pixel images record it: ``white_scale`` (its text),
     ``forced`` (the override, with ``force``; without, an ``Implausible``) and
-    ``warnings`` (:func:`board_bend_said`)."""
+    ``warnings`` (:func:`sample_board`'s)."""
     from tunespec.core.plausibility import Checks
 
     checks = Checks(force=force)
-    board = board_reflectance(white_rgb, lights, illuminants, sensitivity, meta)
+    board, said = sample_board(white_rgb, lights, illuminants, sensitivity, meta)
     ratios = check_sample_scale(checks, board, meta)
     return {
         "white_scale": sample_scale_text(ratios),
         "forced": list(checks.overridden),
-        "warnings": list(
-            board_bend_said(white_rgb, lights, illuminants, sensitivity, meta)
-        ),
+        "warnings": list(said),
     }

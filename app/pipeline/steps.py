@@ -47,9 +47,9 @@ from tunespec.app.pipeline.folder import (
     write_exports_index,
 )
 from tunespec.app.pipeline.lighting import (
-    board_bend_said,
     check_sample_scale,
     estimation_lighting,
+    sample_board,
     sample_scale_text,
     white_background,
 )
@@ -619,9 +619,10 @@ def estimate_reflectance(
     check_estimate_inputs(
         checks, responses, illum_fine, sens_fine, responses_path=responses_path
     )
-    white_scale = check_sample_scale(
-        checks, white_background(responses, illuminants, sensitivity, meta), meta
+    board, said = sample_board(
+        responses.white_rgb, responses.illuminants, illuminants, sensitivity, meta
     )
+    white_scale = check_sample_scale(checks, board, meta)
     if calibration is None and uncertainty_from_meta:
         from tunespec.core.calibration import Calibration as FileCalibration
 
@@ -638,7 +639,6 @@ def estimate_reflectance(
         clip=clip,
         grid=grid,
     )
-    warnings: tuple[str, ...] = ()
     if unc is not None and unc.chi2_per_response is not None:
         checks(
             check_response_consistency,
@@ -646,11 +646,8 @@ def estimate_reflectance(
             unc.misfit_by_light,
             responses.illuminants,
         )
-    elif responses.white_rgb is not None:  # no covariance: the board alone checks
-        warnings = board_bend_said(
-            responses.white_rgb, responses.illuminants, illuminants, sensitivity, meta
-        )
-    return Estimation(est, None, unc, tuple(checks.overridden), white_scale, warnings)
+        said = ()  # Eq. 1 checked the targets themselves
+    return Estimation(est, None, unc, tuple(checks.overridden), white_scale, said)
 
 
 def write_uncertainty(

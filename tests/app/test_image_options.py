@@ -140,7 +140,7 @@ def test_sensitivities_without_their_side_file_are_said_never_silently(
 
 def test_a_session_whose_board_bends_is_said() -> None:
     """The per-pixel images have no Eq. 1 check of their targets: the white board's
-    channels say a session on a tone curve (``lighting.board_bend_said``), in the
+    channels say a session on a tone curve (``lighting.sample_board``), in the
     record the provenance keeps."""
     from tunespec.app.pipeline.lighting import sample_scale_record
     from tunespec.core.datasets import (
