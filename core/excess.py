@@ -70,6 +70,8 @@ __all__ = [
     "LINEARITY_GAMMA_MIN",
     "LINEARITY_SIGNIFICANCE",
     "ExcessVariance",
+    "bend_verdict",
+    "clustered_slope",
     "fit_bend",
     "fit_board_bend",
     "fit_excess_variance",
@@ -627,10 +629,10 @@ def fit_bend(
         den = np.sum(w * c * c, axis=0)
         return x - np.sum(w * x * c, axis=0) / np.where(den > 0, den, 1.0) * c
 
-    return _clustered_slope(without_gain(u), without_gain(r), w, cluster_axis=0)
+    return clustered_slope(without_gain(u), without_gain(r), w, cluster_axis=0)
 
 
-def _clustered_slope(
+def clustered_slope(
     u: NDArray[np.float64],
     r: NDArray[np.float64],
     w: NDArray[np.float64] | float,
@@ -686,7 +688,7 @@ def fit_board_bend(
     def centred(v: NDArray[np.float64]) -> NDArray[np.float64]:
         return np.where(ok, v - np.sum(np.where(ok, v, 0.0), 1, keepdims=True) / n, 0.0)
 
-    tilt, se = _clustered_slope(centred(x), centred(y), 1.0, cluster_axis=1)
+    tilt, se = clustered_slope(centred(x), centred(y), 1.0, cluster_axis=1)
     if not tilt < 1.0:  # the channels in reverse of Eq. 1's order: no bend at all
         return float("inf"), se
     # tilt = gamma / (1 + gamma)

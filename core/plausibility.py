@@ -66,6 +66,7 @@ from tunespec.core.spectra import Spectra
 __all__ = [
     "BOARD_BEND_SIGNIFICANCE",
     "BOARD_CHANNEL_SHARE",
+    "BRACKET_BEND_MAX",
     "FRACTION_PERCENTILE",
     "MAX_CHI2_PER_RESPONSE",
     "MAX_PLAUSIBLE_FRACTION",
@@ -82,6 +83,7 @@ __all__ = [
     "Implausible",
     "board_bend",
     "board_bend_warning",
+    "bracket_bend_warning",
     "calibration_fit_warning",
     "calibration_grid_warning",
     "check_absolute_sensitivities",
@@ -178,6 +180,15 @@ BOARD_CHANNEL_SHARE = 0.1
 #: camera's own curves its channels misfit Eq. 1 by 1-3 % through 10 nm readings,
 #: as by a bend of up to 0.05 (``benchmarks/board_bend.py``).
 BOARD_BEND_SIGNIFICANCE = 4.0
+#: Largest bend (``c^(1 + gamma)``) that a gonio geometry's exposure brackets may
+#: show once the calibration's non-linearity is undone
+#: (:func:`bracket_bend_warning`): brackets a factor 8 apart then read 4 % off
+#: their exposures and the shortest (1/64) merges 8 % off, more than a shutter's
+#: or a light level's step should be. A tone curve ``c^(1/1.05)`` (a bend of
+#: -0.048, at a chart's limit :data:`~tunespec.core.excess.LINEARITY_GAMMA_MAX`)
+#: costs the simulated gonio session 4 dE00; its own brackets show -0.0005
+#: (``benchmarks/bracket_bend.py``).
+BRACKET_BEND_MAX = 0.02
 #: Least level of the white board (its brightest channel, full scale) under a light
 #: for the light to count in :func:`check_white_scale`: a dark level off by 0.01 %
 #: of full scale is 1 % of it, and a failing LED (at 1e-5 of its power,
@@ -741,6 +752,31 @@ def board_bend_warning(
         f"+-{LINEARITY_GAMMA_MAX:g}): frames on a tone curve (a JPEG, a TIFF with "
         "gamma), a black level not subtracted, or sensitivities that do not fit this "
         "camera; its reflectances do not hold"
+    )
+
+
+def bracket_bend_warning(gamma: float, se: float) -> str | None:
+    """What exposure brackets of one scene say of the frames' linearity, or None.
+
+    ``gamma`` +- ``se``: the bend :func:`~tunespec.core.hdr.fit_bracket_bend` finds
+    in brackets from which the calibration's own non-linearity was undone. One of
+    :data:`BRACKET_BEND_MAX` or more, at
+    :data:`~tunespec.core.excess.LINEARITY_SIGNIFICANCE` standard errors, means the
+    brackets do not scale with their exposures, which the HDR merge and Eq. 1
+    assume: a tone curve, a black level not subtracted, exposures not as recorded.
+    """
+    from tunespec.core.excess import LINEARITY_SIGNIFICANCE
+
+    if not (
+        abs(gamma) >= BRACKET_BEND_MAX and abs(gamma) >= LINEARITY_SIGNIFICANCE * se
+    ):
+        return None
+    return (
+        f"its exposure brackets bend as response^(1 + gamma) with gamma "
+        f"{gamma:+.3f} +- {se:.2g} (linearised raw frames: within "
+        f"+-{BRACKET_BEND_MAX:g}): frames on a tone curve (a JPEG, a TIFF with "
+        "gamma), a black level not subtracted, or bracket exposures not as "
+        "recorded; its merged responses and the spectra from them do not hold"
     )
 
 

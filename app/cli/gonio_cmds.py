@@ -209,8 +209,7 @@ def cmd_gonio_demo(args: argparse.Namespace) -> int:
         f"({summary['mix']} mix) at the single-shot-only geometries "
         f"{summary['de00_single_shot_fused_mean']:.3f}"
     )
-    out.note(f"data set -> {args.out / 'gonio.nc'}")
-    out.summary({"out": str(args.out), **summary})
+    _finish(out, args.out, summary)
     return 0
 
 
@@ -336,9 +335,16 @@ def cmd_gonio_run(args: argparse.Namespace) -> int:
         f"{s['n_geometries']} geometries ({s['n_spectral']} spectral, {s['mix']} "
         f"mix), {s['frames_taken_now']} frames taken now"
     )
-    out.note(f"data set -> {args.out / 'gonio.nc'}")
-    out.summary({"out": str(args.out), **s})
+    _finish(out, args.out, s)
     return 0
+
+
+def _finish(out: Console, folder: Path, summary: dict[str, Any]) -> None:
+    """A processed session's warnings, where its data set went, its summary."""
+    for text in summary["warnings"]:
+        out.warn(text)
+    out.note(f"data set -> {folder / 'gonio.nc'}")
+    out.summary({"out": str(folder), **summary})
 
 
 def _session_layout(args: argparse.Namespace) -> Any:

@@ -181,6 +181,7 @@ def run_gonio_demo(
                            should_stop=should_stop)  # fmt: skip
     files = write_gonio_outputs(result, root)
     summary = {"mix": plan.mix, **result_summary(result, _truth(bench, plan))}
+    summary["warnings"] = list(result.warnings)
     summary["files"] = [str(p.relative_to(root)) for p in files[:1] + files[-1:]]
     atomic_write_text(root / "summary.json", dumps_json(summary))
     return summary

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from contextlib import closing
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -135,6 +136,45 @@ def _session_gain(root: Path, iso: int) -> float:
     return iso_gain(iso)
 
 
+def _session_calibration(
+    root: Path,
+    sensitivity: Spectra,
+    led_correction: Any,
+    side: Mapping[str, Any],
+) -> tuple[Spectra, Any]:
+    """The session's sensitivities and per-LED corrections, kept with it the first
+    time (``calibration.csv``, ``led_correction.json``, and the sensor's
+    non-linearity that the calibration undid, ``excess_variance.json``: every
+    frame of the session is linearised as the chart's were)."""
+    from tunespec.core.led_correction import LedCorrection
+
+    cal, corr_path = root / "calibration.csv", root / "led_correction.json"
+    excess_path = root / "excess_variance.json"
+    if not cal.exists():
+        if led_correction is not None:
+            atomic_write_text(corr_path, dumps_json(led_correction.as_dict()))
+        if "excess_variance" in side:
+            doc = side["excess_variance"]
+            atomic_write_text(
+                excess_path, doc if isinstance(doc, str) else dumps_json(doc)
+            )
+        write_spectra_csv(sensitivity, cal)
+    corr = (
+        LedCorrection.from_dict(read_json(corr_path), str(corr_path))
+        if corr_path.exists()
+        else None
+    )
+    # the gonio pipeline integrates Eq. 1 on the working grid (the measured SPDs are
+    # band-averaged onto it): finer calibrations are abridged to it (ASTM E308)
+    S = read_spectra_csv(cal, allow_negative=True).resample(
+        DEFAULT_GRID, source=str(cal)
+    )
+    if excess_path.exists():
+        meta = {"excess_variance": dumps_json(read_json(excess_path))}
+        S = replace(S, meta={**S.meta, **meta, "meta_path": str(excess_path)})
+    return S, corr
+
+
 def run_gonio_session(
     out: str | Path,
     *,
@@ -187,25 +227,11 @@ def run_gonio_session(
         )
     root = Path(out)
     plan = GonioPlan.load(root / "plan.json")
-    cal, corr_path = root / "calibration.csv", root / "led_correction.json"
     if not (root / SESSION_LAYOUT).exists():
         layout.save(root / SESSION_LAYOUT)
     if layout_path is None:
         layout_path = root / SESSION_LAYOUT
-    if not cal.exists():
-        if led_correction is not None:
-            atomic_write_text(corr_path, dumps_json(led_correction.as_dict()))
-        write_spectra_csv(sensitivity, cal)
-    corr = (
-        LedCorrection.from_dict(read_json(corr_path), str(corr_path))
-        if corr_path.exists()
-        else None
-    )
-    # the gonio pipeline integrates Eq. 1 on the working grid (the measured SPDs are
-    # band-averaged onto it): finer calibrations are abridged to it (ASTM E308)
-    S = read_spectra_csv(cal, allow_negative=True).resample(
-        DEFAULT_GRID, source=str(cal)
-    )
+    S, corr = _session_calibration(root, sensitivity, led_correction, side)
     # the calibration counts its light at ISO 100 (core.processing.iso_gain): at
     # this session's gain the camera gives that much more per unit of light
     S = S.with_values(S.values * _session_gain(root, iso))
@@ -240,6 +266,7 @@ def run_gonio_session(
         "frames_taken_now": len(taken),
         "positions": result.positions,
         "u_xyz_mean": [float(v) for v in np.nanmean(result.u_xyz, axis=(0, 2))],
+        "warnings": list(result.warnings),
         "files": [str(p.relative_to(root)) for p in files[:1] + files[-1:]],
     }
     atomic_write_text(root / "summary.json", dumps_json(summary))

@@ -101,6 +101,8 @@ def _dataset(result: GonioResult, folder: Path):
             "the fusion, first order",
         },
     )
+    if result.warnings:  # one line each (netCDF-3 attributes hold no lists)
+        ds.attrs["warnings"] = "\n".join(result.warnings)
     for name, (units, long_name) in _VARIABLE_ATTRS.items():
         ds[name].attrs.update(units=units, long_name=long_name)
     for a in ANGLE_AXES:

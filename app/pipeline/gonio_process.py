@@ -5,8 +5,11 @@ For each geometry of a captured session (:mod:`tunespec.app.pipeline.gonio`):
 1. dark subtraction; the target's corners are found again in the mix frame (its
    projection changes with the viewing angle, :func:`tunespec.core.homography.
    locate_target`); the ROIs follow from the layout;
-2. each illuminant's brackets are merged per ROI pixel (:func:`tunespec.core.hdr.
-   merge_brackets`) into responses whose noise and saturation flags go into Eq. 6;
+2. the calibration's non-linearity is undone in every frame (``core.excess.
+   linearised``), then each illuminant's brackets are merged per ROI pixel
+   (:func:`tunespec.core.hdr.merge_brackets`) into responses whose noise and
+   saturation flags go into Eq. 6; the brackets must scale with their exposures
+   (:func:`tunespec.core.hdr.fit_bracket_bend`), or the geometry is warned of;
 3. the illuminants of Eq. 1 are the measured SPDs times the base exposure times
    ``cos theta_i`` read back from the goniometer (responses are reflectance factors
    against a perfect diffuser at that geometry);
@@ -19,7 +22,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -27,11 +30,17 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tunespec.app.pipeline.gonio import DARK, HDR_EXPOSURES, MIX, GonioPlan
-from tunespec.core.calibration import linearise_from_meta
+from tunespec.core.calibration import excess_from_meta
 from tunespec.core.colorimetry import astm_e308_weights_d50, xyz_d50, xyz_to_lab_d50
 from tunespec.core.errors import InputError
+from tunespec.core.excess import linearised
 from tunespec.core.fusion import fuse_patch, fused_covariance, material_prior
-from tunespec.core.hdr import HdrImage, hdr_patch_responses, merge_brackets
+from tunespec.core.hdr import (
+    HdrImage,
+    fit_bracket_bend,
+    hdr_patch_responses,
+    merge_brackets,
+)
 from tunespec.core.io.spectral import read_spectra_csv
 from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import read_json
@@ -82,6 +91,8 @@ class GeometryData:
     responses: Responses
     illuminants: Spectra
     corners_px: NDArray[np.float64]
+    #: What the geometry's frames say against their use (``core.plausibility``).
+    warnings: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True, eq=False)
@@ -108,6 +119,8 @@ class GonioResult:
     lab: NDArray[np.float64]
     spectral: NDArray[np.bool_]
     u_lab: NDArray[np.float64]
+    #: The geometries' warnings, each naming its geometry.
+    warnings: tuple[str, ...] = ()
 
 
 def _roi_pixels(
@@ -176,26 +189,28 @@ def _load(gdir: Path, name: str, k: int) -> NDArray[np.float64]:
 
 
 def _process_geometry(gdir: Path, index: int, plan: GonioPlan, layout: TargetLayout,
-                      leds: list[str], correct: Correction | None) -> GeometryData:  # fmt: skip
-    """One geometry's responses and illuminants; an InputError names the geometry
-    (its number and read-back angles) and its folder."""
+                      leds: list[str], correct: Correction | None,
+                      gamma: float) -> GeometryData:  # fmt: skip
+    """One geometry's responses and illuminants, from frames of a sensor whose
+    response is ``x^(1 + gamma)`` (the calibration's); an InputError names the
+    geometry (its number and read-back angles) and its folder."""
     pos_path = gdir / "position.json"
     position = read_json(pos_path) if pos_path.exists() else None
+    where = f"{geometry_label(index, position)}, {gdir.name}"
     try:
-        return _geometry_data(gdir, index, plan, layout, leds, correct, position)
+        data = _geometry_data(gdir, index, plan, layout, leds, correct, position, gamma)
     except InputError as exc:
-        text = str(exc)
-        if text.startswith(f"geometry {index + 1}"):
+        if str(exc).startswith(f"geometry {index + 1}"):
             raise
-        raise InputError(
-            f"{geometry_label(index, position)}, {gdir.name}: {text}"
-        ) from exc
+        raise InputError(f"{where}: {exc}") from exc
+    return replace(data, warnings=tuple(f"{where}: {w}" for w in data.warnings))
 
 
 def _geometry_data(gdir: Path, index: int, plan: GonioPlan, layout: TargetLayout,
                    leds: list[str], correct: Correction | None,
-                   position: Any) -> GeometryData:  # fmt: skip
+                   position: Any, gamma: float) -> GeometryData:  # fmt: skip
     from tunespec.core.homography import locate_target
+    from tunespec.core.plausibility import bracket_bend_warning
 
     step = plan.steps[index]
     rel = HDR_EXPOSURES if step.hdr else (1.0,)
@@ -218,10 +233,19 @@ def _geometry_data(gdir: Path, index: int, plan: GonioPlan, layout: TargetLayout
     cos_i = math.cos(math.radians(abs(float(position["theta_i"]))))
     names = [MIX] + (leds if step.spectral else [])
     merged: list[list[HdrImage]] = [[] for _ in rois]
+    bracketed = []  # every ROI pixel's brackets, where there are several
     for name in names:
         stack = np.stack([_load(gdir, name, k) - dark for k in range(len(rel))])
+        stack = linearised(stack, gamma) if gamma else stack
         for p, (yy, xx) in enumerate(rois):
             merged[p].append(merge_brackets(stack[:, :, yy, xx], rel))
+            if len(rel) > 1:
+                bracketed.append(stack[:, :, yy, xx].reshape(len(rel), -1))
+    said = (
+        bracket_bend_warning(*fit_bracket_bend(np.concatenate(bracketed, 1), rel))
+        if bracketed
+        else None
+    )
     responses = hdr_patch_responses(merged, layout.patch_names, names)
     illum = illuminants_from_spds(
         [read_spectra_csv(gdir / f"spd_{name}.csv") for name in names],
@@ -232,7 +256,9 @@ def _geometry_data(gdir: Path, index: int, plan: GonioPlan, layout: TargetLayout
     )
     if correct is not None:
         illum = correct(illum)
-    return GeometryData(index, position, responses, illum, corners)
+    return GeometryData(
+        index, position, responses, illum, corners, (said,) if said else ()
+    )
 
 
 def _augmented(base: Spectra, offsets: tuple[float, ...]) -> Spectra:
@@ -280,7 +306,9 @@ def process_gonio(
     if not spectral_idx:
         raise InputError("the plan has no spectral geometry: fusion needs at least one")
     leds = list(plan.leds) or list(_led_names(root / plan.folder(spectral_idx[0])))
-    jobs = [(root / plan.folder(i), i, plan, layout, leds, correct)
+    excess = excess_from_meta(sensitivity.meta)
+    gamma = 0.0 if excess is None else excess.linearity_gamma
+    jobs = [(root / plan.folder(i), i, plan, layout, leds, correct, gamma)
             for i in range(len(plan.steps))]  # fmt: skip
     if scheduler is None:
         data = []
@@ -299,10 +327,7 @@ def process_gonio(
     post: dict[int, NDArray[np.float64]] = {}
     for i in spectral_idx:
         d = data[i]
-        # the sensor's non-linearity undone as the calibration undid it
-        resp = linearise_from_meta(
-            d.responses.subset(illuminants=leds), sensitivity.meta
-        )
+        resp = d.responses.subset(illuminants=leds)
         est = wiener_reflectance(resp, d.illuminants, sensitivity, wprior, clip=False)
         # reflectance factors may exceed 1 near the specular peak: clip below only
         R[:, i], uR[:, i] = np.maximum(est.reflectance.values, 0.0), est.std
@@ -341,7 +366,7 @@ def process_gonio(
     lab, u_lab = _lab_with_uncertainty(R, xyz_cov_R, wl)
     return GonioResult(layout.patch_names, plan, [d.position for d in data], wl, R, uR,
                        xyz, u_xyz, lab, np.array([s.spectral for s in plan.steps]),
-                       u_lab)  # fmt: skip
+                       u_lab, tuple(w for d in data for w in d.warnings))  # fmt: skip
 
 
 def _posterior_covariance(est: Any) -> NDArray[np.float64]:

@@ -89,7 +89,8 @@ def load_gonio_result(folder: str | Path) -> dict[str, Any]:
     Keys: ``patches``; per geometry ``theta_i``, ``theta_r``, ``phi_r`` (deg, as
     read back) and ``spectral`` (bool); ``wavelength_nm``; ``reflectance`` and its
     standard uncertainty ``u_reflectance`` (n_patch, n_geometry, n_wl); ``lab`` and
-    ``u_lab`` (n_patch, n_geometry, 3: L*, a*, b*, D50).
+    ``u_lab`` (n_patch, n_geometry, 3: L*, a*, b*, D50); ``warnings``: what the
+    processing said against the session's frames (a line each).
     """
     import xarray as xr
 
@@ -101,6 +102,7 @@ def load_gonio_result(folder: str | Path) -> dict[str, Any]:
             "patches": [str(p) for p in ds.patch.values],
             "wavelength_nm": np.asarray(ds.wavelength.values, np.float64),
             "spectral": np.asarray(ds.spectral.values).astype(bool),
+            "warnings": str(ds.attrs.get("warnings", "")).splitlines(),
         }
         for a in ("theta_i", "theta_r", "phi_r"):
             out[a] = np.asarray(ds[f"{a}_readback"].values, np.float64)

@@ -18,6 +18,10 @@ from tunespec.devices.goniometer import Geometry
 
 LEDS = [f"LED{k}" for k in range(3)]
 THETA_R = (30.0, 0.0, 10.0, 20.0)  # not in order: the L*a*b* plot sorts them
+BENT = (
+    "geometry 1 (theta_i 45, theta_r 30), g00_ti45_pi0_tr30_pr180: its exposure "
+    "brackets bend as response^(1 + gamma) with gamma +0.100 +- 0.00016"
+)
 
 
 def _plan() -> GonioPlan:
@@ -42,6 +46,7 @@ def _result(plan: GonioPlan) -> dict:
         "u_reflectance": rng.uniform(0.001, 0.01, (n_p, n_g, wl.size)),
         "lab": rng.uniform(-30, 80, (n_p, n_g, 3)),
         "u_lab": rng.uniform(0.1, 0.5, (n_p, n_g, 3)),
+        "warnings": [BENT],
     }
 
 
@@ -121,6 +126,8 @@ def test_progress_per_geometry_and_the_fused_result(qtbot, monkeypatch, tmp_path
     np.testing.assert_allclose(bars["height"], 2 * 1.96 * r["u_lab"][1, order, 2])
     L4, uL4 = r["lab"][1, 3, 0], r["u_lab"][1, 3, 0]
     assert f"geometry 4: L*a*b* {L4:.2f} ± {uL4:.2f}" in panel.result_label.text()
+    # what the processing said against the frames stays in view with the result
+    assert panel.status.text().endswith(f"\nwarning: {BENT}")
 
 
 def test_a_failure_marks_the_geometry_it_names(qtbot, monkeypatch, tmp_path):
@@ -153,6 +160,7 @@ def test_the_simulated_gonio_bench_runs_from_the_panel(qtbot, tmp_path):
     _, y = panel.spectrum_curve.getData()
     np.testing.assert_allclose(y, disk["reflectance"][0, 1])
     assert np.all(np.isfinite(disk["u_lab"])) and np.all(disk["u_lab"] > 0)
+    assert disk["warnings"] == [] and "warning" not in panel.status.text()
 
 
 def test_devices_are_passed_by_spec_and_all_are_needed(qtbot, monkeypatch, tmp_path):

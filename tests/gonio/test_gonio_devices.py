@@ -237,3 +237,26 @@ def test_gonio_run_resume_uses_the_sessions_own_layout(tmp_path, capsys):
     assert "no calibration.csv yet" in err[0] and "--layout" not in err[0]
     assert "uses its own layout.json" in err[1] and "other.json" in err[1]
     assert "no calibration.csv yet" in err[2]
+
+
+def test_a_session_keeps_the_sensor_bend_its_calibration_undid(tmp_path):
+    """gonio-run linearises every frame as the chart's were: the calibration's
+    ``linearity_gamma`` is kept with the session (``excess_variance.json``) and
+    reaches a resumed session, which is given no side file."""
+    from tunespec.core.calibration import excess_from_meta
+    from tunespec.core.excess import ExcessVariance
+
+    S = read_spectra_csv(_sensitivities(tmp_path))
+    side = {
+        "excess_variance": ExcessVariance(0.001, 0.0, linearity_gamma=0.02).as_dict()
+    }
+    first, corr = gonio_devices._session_calibration(tmp_path, S, None, side)
+    assert corr is None
+    assert excess_from_meta(first.meta).linearity_gamma == 0.02
+    resumed, _ = gonio_devices._session_calibration(tmp_path, S, None, {})
+    assert excess_from_meta(resumed.meta).linearity_gamma == 0.02
+    (tmp_path / "excess_variance.json").write_text('{"linearity_gamma": "0.02"}')
+    again, _ = gonio_devices._session_calibration(tmp_path, S, None, {})
+    bad = r"excess_variance\.json: excess_variance\.linearity_gamma = '0\.02': expected"
+    with pytest.raises(InputError, match=bad):
+        excess_from_meta(again.meta)

@@ -222,6 +222,35 @@ def test_cli_kill_and_resume(tmp_path, capsys):
     assert "4 geometries (2 spectral)" in capsys.readouterr().out
 
 
+@pytest.mark.slow
+def test_brackets_on_a_tone_curve_are_warned_of_by_geometry(tmp_path, capsys):
+    """A geometry whose HDR brackets do not scale with their exposures (frames on
+    c^1.1, as a JPEG's would be) is named on the console, in summary.json and in
+    gonio.nc; the simulated bench's own frames give no warning."""
+    from tunespec.app.pipeline.gonio_view import load_gonio_result
+
+    out = tmp_path / "g"
+    args = ["gonio-demo", "--out", str(out), "--geometries", "5", "--seed", "3"]
+    assert main(args) == 0
+    assert "warning" not in without_progress(capsys.readouterr().err)
+    assert load_gonio_result(out)["warnings"] == []
+    gdir = out / default_plan(5).folder(3)  # theta_r 30: the first HDR geometry
+    dark = np.load(gdir / "dark_e0.npy")
+    for path in gdir.glob("mix_e*.npy"):
+        frame = np.load(path)
+        np.save(path, (np.maximum(frame - dark, 0) ** 1.1 + dark).astype(frame.dtype))
+    assert main([*args, "--resume"]) == 0
+    err = without_progress(capsys.readouterr().err).splitlines()
+    said = [line for line in err if line.startswith("warning: ")]
+    assert len(said) == 1, err
+    assert said[0].startswith(
+        f"warning: geometry 4 (theta_i 45, theta_r 30), {gdir.name}: its exposure "
+        "brackets bend as response^(1 + gamma) with gamma +0.10"
+    )
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["warnings"] == load_gonio_result(out)["warnings"] == [said[0][9:]]
+
+
 def test_cli_writes_a_plan_and_refuses_bad_angles(tmp_path, capsys):
     out = tmp_path / "p.json"
     rc = main(["gonio-plan", "-o", str(out), "--theta-r", "0,15,30,45,60",

@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
 from tunespec.core.datasets import load_camera, load_colorchecker_sg, load_led_set
 from tunespec.core.errors import InputError
 from tunespec.core.forward_model import render_rgb
-from tunespec.core.hdr import hdr_patch_responses, merge_brackets
+from tunespec.core.hdr import fit_bracket_bend, hdr_patch_responses, merge_brackets
+from tunespec.core.plausibility import bracket_bend_warning
 from tunespec.core.responses import Responses
 from tunespec.core.simulate import NoiseModel
 from tunespec.core.wiener import SATURATED_VARIANCE, wiener_reflectance
@@ -70,6 +73,43 @@ def test_bad_brackets_give_one_line():
         merge_brackets(np.zeros((1, 3)), [0.0])
     with pytest.raises(InputError, match="finite"):
         merge_brackets(np.full((1, 3), np.nan), [1.0])
+
+
+def _bracketed(tone: float, seed: int = 0):
+    """Brackets of a noisy linear sensor's scene (0.2 % to 3x full scale at the
+    reference exposure), then a tone ``c^tone`` on them."""
+    rng = np.random.default_rng(seed)
+    x = np.geomspace(2e-3, 3.0, 4000)
+    t = [1.0, 1 / 8, 1 / 64]
+    frames = np.stack([_expose(x, tk, rng) for tk in t])
+    return np.sign(frames) * np.abs(frames) ** tone, t
+
+
+def test_bracket_bend_is_zero_on_a_linear_sensor_and_found_on_a_tone_curve():
+    gamma, se = fit_bracket_bend(*_bracketed(1.0), noise=NOISE)
+    # clipped and noisy brackets left out, so nothing is read as a bend
+    assert abs(gamma) < 3 * se + 0.002 and se < 0.003
+    assert bracket_bend_warning(gamma, se) is None
+    for tone in (1 / 1.2, 1.1, 1 / 1.05):
+        gamma, se = fit_bracket_bend(*_bracketed(tone), noise=NOISE)
+        assert gamma == pytest.approx(tone - 1, abs=0.004)
+    said = bracket_bend_warning(*fit_bracket_bend(*_bracketed(1.1), noise=NOISE))
+    assert said is not None and "tone curve" in said
+    assert re.search(r"gamma \+0\.(09[6-9]|10[0-4]) \+- ", said)
+    # a tone a chart would pass (a bend under 0.05) is said by the brackets
+    assert bracket_bend_warning(*fit_bracket_bend(*_bracketed(1 / 1.05), noise=NOISE))
+    # a bend under the brackets' limit, or not told from noise, is not
+    assert bracket_bend_warning(0.015, 0.0001) is None
+    assert bracket_bend_warning(0.1, 0.04) is None
+
+
+def test_bracket_bend_needs_two_usable_brackets():
+    # one bracket, or every pixel clipped or lost in the noise in all but one
+    assert fit_bracket_bend(np.full((1, 5), 0.5), [1.0]) == (0.0, float("inf"))
+    frames = np.array([[0.99, 0.99], [0.5, 1e-6]])
+    assert fit_bracket_bend(frames, [1.0, 0.5]) == (0.0, float("inf"))
+    with pytest.raises(InputError, match="one relative exposure per bracket"):
+        fit_bracket_bend(np.zeros((2, 3)), [1.0])
 
 
 def test_hdr_responses_carry_into_eq6():

@@ -411,9 +411,10 @@ class GonioPanel(QWidget):
         assert isinstance(result, dict)
         self.show_result(result)
         n = len(result["spectral"])
+        said = "".join(f"\nwarning: {w}" for w in result["warnings"])
         self.status.setText(
             f"done: {n} geometries ({int(np.sum(result['spectral']))} spectral, the "
-            f"others fused) in {self.folder}"
+            f"others fused) in {self.folder}{said}"
         )
 
     @Slot(object)
