@@ -14,6 +14,8 @@ from tunespec.core.progress import Cancelled, check_stop
 
 ROWS, COLS = 24, 32
 WL = np.arange(400.0, 701.0, 10.0)
+#: The sRGB preview's colours of the two halves.
+PREVIEW_LEFT, PREVIEW_RIGHT = (200, 90, 70), (70, 110, 210)
 
 
 def _write_folder(folder, u_reflectance=None) -> dict[str, np.ndarray]:
@@ -37,7 +39,10 @@ def _write_folder(folder, u_reflectance=None) -> dict[str, np.ndarray]:
     for r0 in range(0, ROWS, 8):
         sl = slice(r0, r0 + 8)
         out.write_rows(r0, cube[sl], xyz[sl], lab[sl], unc[sl])
-    out.write_preview(np.zeros((ROWS, COLS, 3), np.uint8))
+    preview = np.empty((ROWS, COLS, 3), np.uint8)  # not black: a screenshot shows it
+    preview[:, : COLS // 2] = PREVIEW_LEFT
+    preview[:, COLS // 2 :] = PREVIEW_RIGHT
+    out.write_preview(preview)
     out.write_provenance({"session": "test"})
     return {"cube": cube, "lab": lab, "unc": unc}
 
@@ -76,6 +81,14 @@ def test_layers_pixel_spectrum_and_regions(qtbot, tmp_path) -> None:
     assert f"dE00(A, B) = {expected:.2f}" in text
     assert "A: 100 px" in text and "B: 64 px" in text
 
+    # another folder: the last image's pixel spectrum goes with it
+    _write_folder(tmp_path / "next")
+    view.open_folder(tmp_path / "next")
+    assert view.pixel is None
+    for item in (view.curve, view.upper, view.lower):
+        x, _ = item.getData()
+        assert x is None or len(x) == 0
+
 
 def test_estimate_runs_in_a_worker_with_progress(qtbot, tmp_path, monkeypatch) -> None:
     import tunespec.app.pipeline.image as pipeline
@@ -111,6 +124,72 @@ def test_estimate_runs_in_a_worker_with_progress(qtbot, tmp_path, monkeypatch) -
     _write_folder(tmp_path / "other")
     view.open_folder(tmp_path / "other")
     assert view.warnings_label.isHidden()
+
+
+def _grab_rgb(widget, rect) -> np.ndarray:
+    """The (rows, cols, 3) RGB pixels of ``rect`` of ``widget`` as drawn."""
+    from PySide6.QtGui import QImage
+
+    img = widget.grab(rect).toImage().convertToFormat(QImage.Format.Format_RGB888)
+    rows = np.frombuffer(img.constBits(), np.uint8).reshape(
+        img.height(), img.bytesPerLine()
+    )
+    return rows[:, : 3 * img.width()].reshape(img.height(), img.width(), 3)
+
+
+def test_an_estimate_is_shown_at_once_over_its_wavelengths(
+    qtbot, tmp_path, monkeypatch
+) -> None:
+    """Before a pixel is chosen, the regions' spectra alone set the wavelength
+    axis (the empty band around the pixel's spectrum once put 0 nm in its range),
+    and the preview is drawn as soon as the estimate is done."""
+    import tunespec.app.pipeline.image as pipeline
+
+    def fake(session, sens, out, **_):
+        _write_folder(out)
+        return {"session": session}
+
+    monkeypatch.setattr(pipeline, "estimate_images", fake)
+    view = ImageView()
+    qtbot.addWidget(view)
+    view.resize(900, 700)
+    view.show()
+    qtbot.waitExposed(view)
+    with qtbot.waitSignal(view.estimate_finished, timeout=10_000):
+        view.estimate("S", "cal.csv", tmp_path / "out")
+    qtbot.waitUntil(lambda: view.worker is None)
+    assert view.pixel is None
+    box = view.spectrum_plot.getViewBox()
+    qtbot.waitUntil(lambda: box.viewRange()[0][1] >= WL[-1])
+    x0, x1 = box.viewRange()[0]
+    assert 380.0 <= x0 <= WL[0] and WL[-1] <= x1 <= 730.0
+    # a region off the image (its band empty) leaves the axis as it is
+    view.roi_b.setPos((10 * COLS, 10 * ROWS))
+    view._on_roi_changed()
+    assert "B: off the image" in view.region_label.text()
+    box.updateAutoRange()
+    x0, x1 = box.viewRange()[0]
+    assert 380.0 <= x0 <= WL[0] and WL[-1] <= x1 <= 730.0
+
+    # the sRGB preview as drawn: each half its colour, not black
+    gv = view.graphics
+    for roi in (view.roi_a, view.roi_b):
+        roi.hide()
+    shown = gv.mapFromScene(view.image_item.sceneBoundingRect()).boundingRect()
+    assert shown.width() > COLS and shown.height() > ROWS
+    drawn = _grab_rgb(gv.viewport(), shown.adjusted(3, 3, -3, -3)).astype(float)
+    half = drawn.shape[1] // 2
+    np.testing.assert_allclose(
+        drawn[:, : half - 3].mean(axis=(0, 1)), PREVIEW_LEFT, atol=3
+    )
+    np.testing.assert_allclose(
+        drawn[:, half + 3 :].mean(axis=(0, 1)), PREVIEW_RIGHT, atol=3
+    )
+    # a scalar layer's levels are finite and within its values
+    view.layer_combo.setCurrentText("wavelength")
+    lo, hi = view.image_item.levels
+    band = np.asarray(view.image_item.image)
+    assert np.isfinite([lo, hi]).all() and band.min() <= lo < hi <= band.max()
 
 
 def test_estimate_can_be_cancelled(qtbot, tmp_path, monkeypatch) -> None:

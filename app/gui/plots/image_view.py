@@ -199,7 +199,9 @@ class ImageView(QWidget):
         self.band = pg.FillBetweenItem(
             self.lower, self.upper, brush=(100, 100, 255, 70)
         )
-        self.spectrum_plot.addItem(self.band)
+        # a band's extent is its edges' (which count); an empty band's own bounds
+        # are the point (0, 0), which auto-ranged the wavelength axis from 0 nm
+        self.spectrum_plot.addItem(self.band, ignoreBounds=True)
         self.roi_a = self.add_region(0, 10, 0, 10, name="A").roi
         self.roi_b = self.add_region(0, 10, 20, 30, name="B").roi
         for roi in (self.roi_a, self.roi_b):
@@ -257,7 +259,7 @@ class ImageView(QWidget):
         fill = pg.mkColor(colour)
         fill.setAlpha(45)
         band = pg.FillBetweenItem(lower, upper, brush=fill)
-        self.spectrum_plot.addItem(band)
+        self.spectrum_plot.addItem(band, ignoreBounds=True)  # as the pixel's band
         region = Region(name, roi, curve, band, upper, lower)
         self.regions.append(region)
         roi.sigRegionChangeFinished.connect(self._on_roi_changed)
@@ -321,6 +323,9 @@ class ImageView(QWidget):
         self.band_spin.setValue(int(wl[wl.size // 2]))
         self.band_spin.blockSignals(False)
         rows, cols = image.shape
+        self.pixel = None  # the last image's pixel spectrum is not this image's
+        for item in (self.curve, self.upper, self.lower):
+            item.setData([], [])
         self.remove_drawn_regions()
         self.roi_a.setPos((round(cols * 0.1), round(rows * 0.1)))
         self.roi_a.setSize((max(2, cols // 8), max(2, rows // 8)))
