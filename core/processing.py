@@ -55,7 +55,9 @@ from numpy.typing import ArrayLike, NDArray
 from tunespec.core.errors import InputError, shown_names
 from tunespec.core.extraction import ExtractionCheck, check_responses
 from tunespec.core.io.raw import (
+    F_NUMBER_META,
     RawFrame,
+    f_number_text,
     load_raw,
     plane_to_full_px,
     quad_mask,
@@ -144,8 +146,9 @@ def frame_settings_problem(
         and not math.isclose(frame.aperture, aperture, rel_tol=0.01)
     ):
         return (
-            f"its raw file was taken at f/{frame.aperture:g} where the session's "
-            f"first frame was at f/{aperture:g} (the aperture changed)"
+            f"its raw file was taken at {f_number_text(frame.aperture)} where the "
+            f"session's first frame was at {f_number_text(aperture)} (the aperture "
+            "changed)"
         )
     return ""
 
@@ -159,12 +162,15 @@ def illuminants_from_spds(
     source: str | None = None,
     factor: float = 1.0,
     grid: Grid | None = None,
+    f_number: float | None = None,
 ) -> Spectra:
     """Eq. 1's illuminants from the light's readings: each channel's measured SPD,
     its meter floor suppressed (:func:`tunespec.core.metering.suppress_meter_floor`,
     at the instrument's own sampling), times :func:`light_scale` of its exposure and
     its frames' ISO (``isos``; none: no gain) and ``factor`` (the gonio's cos
     theta_i), on the first SPD's wavelengths -- or on ``grid``, band-averaged.
+    ``f_number``: the one the frames' raw files state, kept in ``meta``
+    (:data:`~tunespec.core.io.raw.F_NUMBER_META`; none: not kept).
 
     The one chain processing, the per-pixel images and the gonio sessions use.
     """
@@ -184,6 +190,8 @@ def illuminants_from_spds(
     meta = {"unit": ILLUMINANT_UNIT, **({"source": source} if source else {})}
     # each reading's noise and step as reported: the calibration draws it again
     meta |= reading_meta(cleaned, names)
+    if f_number is not None:
+        meta[F_NUMBER_META] = f"{f_number:g}"  # as EXIF states it (LibRaw: float32)
     return Spectra(wl, np.stack(rows), tuple(names), meta)
 
 
@@ -394,6 +402,16 @@ class ProcessedSession:
     corner_residual_px: float = float("nan")
     stats: dict[str, Any] = field(default_factory=dict)
     check: ExtractionCheck | None = None
+
+    @property
+    def aperture(self) -> float | None:
+        """The f-number the session's raw files state (EXIF; every frame was checked
+        against the first one read), ``None`` when they state none (a TIFF, the
+        simulator's DNGs). Kept with the illuminants (``meta``
+        :data:`~tunespec.core.io.raw.F_NUMBER_META`), whose CSV keeps it in a comment
+        line that its reader checks."""
+        value = self.illuminants.meta.get(F_NUMBER_META)
+        return None if value is None else float(value)
 
     def checked(self, reference_xyz: ArrayLike | None = None) -> ProcessedSession:
         """A copy with :attr:`check`: :func:`tunespec.core.extraction.
@@ -876,12 +894,14 @@ class _ChannelStats:
             self.white,
         )
 
-    def illuminants(self, session: Session) -> Spectra:
-        """Eq. 1's illuminants, in channel order (:func:`illuminants_from_spds`)."""
+    def illuminants(self, session: Session, f_number: float | None) -> Spectra:
+        """Eq. 1's illuminants, in channel order (:func:`illuminants_from_spds`),
+        with the frames' ``f_number``."""
         return illuminants_from_spds(
             [self.spds[c][0] for c in self.use],
             [self.spds[c][1] for c in self.use],
             self.use,
             isos=[self.spds[c][2] for c in self.use],
             source=str(session.root),
+            f_number=f_number,
         )

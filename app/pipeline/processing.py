@@ -214,7 +214,8 @@ def _process(
     n_patch = layout.n_patches
     return ProcessedSession(
         responses=acc.responses(n_px[:n_patch]),
-        illuminants=acc.illuminants(session),
+        # the f-number every frame was checked against, which the report shows
+        illuminants=acc.illuminants(session, reader.aperture),
         layout=layout,
         corners_source=source,
         flagged=tuple(acc.flagged),
@@ -451,6 +452,12 @@ class _FrameReader:
         self._darks: dict[tuple[float, int], _Pixels] = {}
         self._ahead: ReadAhead | None = None
         self.done = 0
+
+    @property
+    def aperture(self) -> float | None:
+        """The f-number of the first frame read, which the others are checked
+        against (``None``: its raw file states none)."""
+        return self._aperture
 
     def read_ahead(self, records: Sequence[FrameRecord]) -> None:
         """Decode ``records`` in this order on a thread of their own, one ahead."""

@@ -458,6 +458,7 @@ def table1_by_patch(
 
 def session_provenance(
     sessions: Mapping[str, str | PathLike[str]],
+    processed: Mapping[str, ProcessedSession] | None = None,
 ) -> tuple[dict[str, str], dict[str, float], list[tuple[str, str]]]:
     """What the report's provenance says about the capture sessions.
 
@@ -465,15 +466,21 @@ def session_provenance(
     ----------
     sessions
         Role (``"chart"``, ``"sample"``) -> session folder.
+    processed
+        Role -> the session as processed: the f-number its raw files state
+        (``ProcessedSession.aperture``, which the manifest does not keep).
 
     Returns
     -------
     (items, exposures_s, input_files)
-        Session folders, their creation time, frame counts and fingerprints; the
-        first session's exposure per LED (s, first bracket, at ISO 100: times its
-        gain, as Eq. 1's illuminants have it); every manifest with its SHA-256 (a
-        manifest lists the SHA-256 of each of its frames).
+        Session folders, their creation time, frame counts, aperture ("f/8", or
+        "not recorded" when the raw files state none; only for a role in
+        ``processed``) and fingerprints; the first session's exposure per LED (s,
+        first bracket, at ISO 100: times its gain, as Eq. 1's illuminants have it);
+        every manifest with its SHA-256 (a manifest lists the SHA-256 of each of
+        its frames).
     """
+    from tunespec.core.io.raw import f_number_text
     from tunespec.core.io.session import sha256_file
     from tunespec.core.processing import light_scale
 
@@ -493,6 +500,8 @@ def session_provenance(
             f"{len(ok)} ({sum(f.kind == 'dark' for f in ok)} dark), ISO "
             f"{settings.iso}, exposure {settings.exposure_mode}"
         )
+        if processed is not None and role in processed:
+            items[f"{role} aperture"] = f_number_text(processed[role].aperture)
         items[f"{role} frames fingerprint (SHA-256)"] = session.fingerprint()
         files.append(
             (str(root.resolve() / MANIFEST_NAME), sha256_file(root / MANIFEST_NAME))
@@ -814,7 +823,9 @@ def _write_report(
     from tunespec.core.uncertainty import budget_summary
 
     unc = estimation.uncertainty
-    items, exposures, inputs = session_provenance(sessions)
+    items, exposures, inputs = session_provenance(
+        sessions, {"chart": chart, "sample": sample}
+    )
     inputs += [(str(Path(f).resolve()), sha256_file(f)) for f in input_files]
     sample_dir = sessions.get("sample")
     _, sample_exposures, _ = session_provenance(

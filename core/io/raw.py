@@ -48,8 +48,11 @@ from numpy.typing import ArrayLike, NDArray
 from tunespec.core.errors import InputError
 
 __all__ = [
+    "F_NUMBER_META",
+    "F_NUMBER_RANGE",
     "PlaneStats",
     "RawFrame",
+    "f_number_text",
     "full_to_plane_px",
     "load_raw",
     "plane_to_full_px",
@@ -65,6 +68,28 @@ _KEEP_LIBRAW_BUFFER = os.name == "posix"
 #: Bytes of photosites :meth:`RawFrame.planes_minus` copies out per strip of rows
 #: (kept in the cache for the arithmetic that follows).
 _STRIP_BYTES = 1 << 19
+
+#: The f-numbers a lens has (f/0.95 to f/64 on sale): an EXIF f-number outside is no
+#: f-number (LibRaw's 0: the file states none), and a file stating one outside is
+#: refused.
+F_NUMBER_RANGE = (0.5, 128.0)
+#: Where a processed session keeps the f-number its raw files state
+#: (:attr:`RawFrame.aperture`): its illuminants' ``Spectra.meta`` (they carry the rest
+#: of Eq. 1's scale, exposure and ISO), which their spectral CSV keeps in a
+#: ``# f_number: 8`` comment line.
+F_NUMBER_META = "f_number"
+
+
+def f_number_text(f_number: float | None) -> str:
+    """How an f-number is shown: ``"f/8"``, ``"f/5.6"``; ``"not recorded"`` when the
+    raw files state none (a TIFF, the simulator's DNGs): never a guess.
+
+    Examples
+    --------
+    >>> f_number_text(8.0), f_number_text(5.6), f_number_text(None)
+    ('f/8', 'f/5.6', 'not recorded')
+    """
+    return "not recorded" if f_number is None else f"f/{f_number:g}"
 
 
 def _planes_out(
@@ -127,7 +152,7 @@ class RawFrame:
         Camera make and model from the file's TIFF tags ("" when absent).
     exposure_s, iso, aperture
         Exposure time, ISO speed and f-number from the file's EXIF, ``None`` when
-        absent.
+        absent (an f-number outside :data:`F_NUMBER_RANGE` too).
     """
 
     path: Path
@@ -524,6 +549,7 @@ def load_raw(
             path=path,
         )
     tags = _tiff_ifd0_strings(path)
+    lo, hi = F_NUMBER_RANGE  # outside: no f-number (0: none stated)
     return RawFrame(
         path=path,
         mosaic=mosaic,
@@ -534,7 +560,7 @@ def load_raw(
         model=tags.get(272, ""),
         exposure_s=shutter if shutter > 0 else None,
         iso=iso_speed if iso_speed > 0 else None,
-        aperture=f_number if f_number > 0 else None,
+        aperture=f_number if lo <= f_number <= hi else None,
         meta={"unique_camera_model": tags.get(50708, "")} if 50708 in tags else {},
     )
 

@@ -397,6 +397,8 @@ def read_spectral(
     text = _decode(read_bytes(path))
     fmt = detect_format(text)
     spectra = _parse(text, fmt, source, allow_negative, max_value)
+    if fmt == "csv":
+        spectra = _with_comment_meta(spectra, text, source, kind)
     if kind == "reflectance":
         spectra = to_reflectance_factor(
             spectra, source=source, locate=_locator(text, fmt, spectra)
@@ -408,8 +410,6 @@ def read_spectral(
         # resamples it (core.metering); a file written resampled says what it was
         from tunespec.core.metering import suppress_meter_floor
 
-        if fmt == "csv":
-            spectra = _with_reading_meta(spectra, text, source)
         spectra = suppress_meter_floor(spectra)
     spectra = Spectra(
         spectra.wavelength_nm,
@@ -424,15 +424,34 @@ def read_spectral(
     return spectra.resample(grid, source=source, average=average)
 
 
-def _with_reading_meta(spectra: Spectra, text: str, source: str) -> Spectra:
-    """``spectra`` with the reading noise and step its CSV's comment lines state
-    (:data:`~tunespec.core.io.spectral_csv.COMMENT_META`), checked."""
+def _with_comment_meta(spectra: Spectra, text: str, source: str, kind: str) -> Spectra:
+    """``spectra`` with what its CSV's comment lines state
+    (:data:`~tunespec.core.io.spectral_csv.COMMENT_META`), checked: the f-number of
+    a processed session's frames whatever the file is read as (the pipeline reads
+    its own illuminants back as plain spectra, not to clean them twice), the
+    reading noise and step of illuminants."""
+    from tunespec.core.io.raw import F_NUMBER_META, F_NUMBER_RANGE
     from tunespec.core.io.spectral_csv import COMMENT_META, comment_values
     from tunespec.core.metering import parse_reading_meta
 
-    found = comment_values(text, COMMENT_META)
+    keys = COMMENT_META if kind == "illuminant" else (F_NUMBER_META,)
     meta = dict(spectra.meta)
-    for key, (value, lineno) in found.items():
+    for key, (value, lineno) in comment_values(text, keys).items():
+        if key == F_NUMBER_META:
+            try:
+                f_number = float(value)
+            except ValueError:
+                f_number = math.nan  # refused below, as the text it is
+            lo, hi = F_NUMBER_RANGE
+            if not lo <= f_number <= hi:  # NaN too
+                raise InputError(
+                    f"{key}: expected an f-number in [{lo:g}, {hi:g}], got "
+                    f"{shown(value)}",
+                    path=source,
+                    line=lineno,
+                )
+            meta[key] = f"{f_number:g}"
+            continue
         try:
             meta |= parse_reading_meta({key: value}, spectra.names)
         except ValueError as exc:

@@ -39,6 +39,7 @@ import numpy as np
 
 from tunespec.core.atomic import atomic_open
 from tunespec.core.errors import InputError
+from tunespec.core.io.raw import F_NUMBER_META
 from tunespec.core.limits import (
     MAX_VALUE,
     MAX_WAVELENGTH_NM,
@@ -302,9 +303,10 @@ def write_spectra_csv(
     """Write ``spectra`` as a spectral CSV (full float precision, round-trips exactly).
 
     The light's readings keep their reading noise and step as the instrument reported
-    them (``meta`` keys :data:`COMMENT_META`) in ``# key: value`` comment lines after
-    the data (:func:`comment_values` reads them back): readers that take the first
-    line as the header and skip comments (numpy's ``genfromtxt``, colour-science's
+    them, and a processed session's illuminants the f-number of its frames (``meta``
+    keys :data:`COMMENT_META`), in ``# key: value`` comment lines after the data
+    (:func:`comment_values` reads them back): readers that take the first line as
+    the header and skip comments (numpy's ``genfromtxt``, colour-science's
     ``read_sds_from_csv_file``, pandas with ``comment="#"``) read the file as before."""
     with atomic_open(path, newline="") as fh:
         w = csv.writer(fh, lineterminator="\n")
@@ -317,8 +319,9 @@ def write_spectra_csv(
 
 
 #: ``Spectra.meta`` keys a spectral CSV keeps in ``# key: value`` comment lines: the
-#: light's reading noise and step as reported (:mod:`tunespec.core.metering`).
-COMMENT_META = (READING_NOISE_META, READING_STEP_META)
+#: light's reading noise and step as reported (:mod:`tunespec.core.metering`) and the
+#: f-number of a processed session's frames (:data:`~tunespec.core.io.raw.F_NUMBER_META`).
+COMMENT_META = (READING_NOISE_META, READING_STEP_META, F_NUMBER_META)
 
 
 def comment_values(text: str, keys: Sequence[str]) -> dict[str, tuple[str, int]]:

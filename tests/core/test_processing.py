@@ -468,3 +468,68 @@ def test_a_raw_file_taken_otherwise_than_recorded_is_refused(
     assert "retake it" in str(err.value)
     out = process_session(session, loader=loader({}))  # as recorded: as before
     assert out.responses.illuminants == ("L1", "WHITE")
+
+
+# -- the f-number: kept beside the responses, shown in the report's provenance --------
+def _at_f(f_number: float | None) -> Callable[[Path], RawFrame]:
+    """Frames whose raw files state ``f_number`` (``None``: none, the simulator's)."""
+    return lambda path: replace(_npy_loader(path), aperture=f_number)
+
+
+@pytest.mark.parametrize(
+    ("f_number", "line", "shown"),
+    [
+        (8.0, "# f_number: 8\n", "f/8"),
+        (float(np.float32(5.6)), "# f_number: 5.6\n", "f/5.6"),  # as LibRaw reads it
+        (None, None, "not recorded"),
+    ],
+)
+def test_the_f_number_of_the_frames_reaches_the_provenance(
+    tmp_path, f_number, line, shown
+) -> None:
+    """Processing keeps the f-number the raw files state with the illuminants, their
+    CSV keeps it in a comment line, the session read back from its files has it, and
+    the report's provenance shows it per session; frames stating none get none."""
+    from tunespec.app.pipeline.folder import read_processed
+    from tunespec.app.pipeline.steps import session_provenance
+
+    session, _ = _make_session(tmp_path / "s", with_corners=True)
+    out = process_session(session, loader=_at_f(f_number))
+    assert out.aperture == (None if f_number is None else pytest.approx(f_number))
+    write_processed(out, tmp_path / "responses.csv", tmp_path / "illuminants.csv")
+    text = (tmp_path / "illuminants.csv").read_text()
+    if line is None:
+        assert "f_number" not in text
+    else:
+        assert text.endswith(line)
+    back = read_processed(tmp_path, out.layout)
+    assert back.aperture == out.aperture
+    np.testing.assert_array_equal(back.illuminants.values, out.illuminants.values)
+    items, _, _ = session_provenance({"chart": session.root}, {"chart": back})
+    assert items["chart aperture"] == shown
+    assert items["chart frames"] == "5 (1 dark), ISO 100, exposure fixed"
+    # without the processed session the manifest alone cannot say it: nothing said
+    assert "chart aperture" not in session_provenance({"chart": session.root})[0]
+
+
+@pytest.mark.parametrize("value", ["0.1", "200", "nan", "inf", "eight", ""])
+def test_an_f_number_no_lens_has_is_refused_where_a_file_states_it(
+    tmp_path, value
+) -> None:
+    """An illuminants CSV stating an f-number outside [0.5, 128] (or no number) is
+    refused in one line naming the file, the line and the key, read as processing
+    reads it back and as calibrate and estimate read illuminants."""
+    from tunespec.core.io.spectral import read_spectral
+
+    path = tmp_path / "illuminants.csv"
+    path.write_text(f"wavelength_nm,L1\n400,1.0\n410,2.0\n# f_number: {value}\n")
+    for kind in ("spectra", "illuminant"):
+        with pytest.raises(InputError) as err:
+            read_spectral(path, kind=kind)
+        message = str(err.value)
+        assert message.startswith(
+            f"{path}:4: f_number: expected an f-number in [0.5, 128], got "
+        ), message
+        assert "\n" not in message
+    path.write_text("wavelength_nm,L1\n400,1.0\n410,2.0\n# f_number: 11.0\n")
+    assert read_spectra_csv(path).meta["f_number"] == "11"
