@@ -455,8 +455,8 @@ class _FrameReader:
 
     @property
     def aperture(self) -> float | None:
-        """The f-number of the first frame read, which the others are checked
-        against (``None``: its raw file states none)."""
+        """The f-number of the first frame read whose raw file states one, which
+        the others are checked against (``None``: none states one)."""
         return self._aperture
 
     def read_ahead(self, records: Sequence[FrameRecord]) -> None:
@@ -488,7 +488,6 @@ class _FrameReader:
         geometry = (frame.mosaic.shape, frame.cfa_pattern)
         if self._first is None:
             self._first = (rec.id, *geometry)
-            self._aperture = frame.aperture
         elif geometry != self._first[1:]:
             ref_id, (h, w), cfa = self._first
             raise InputError(
@@ -498,6 +497,8 @@ class _FrameReader:
                 f"{self._retake.format(rec.id)}",
                 path=self._session.manifest_path,
             )
+        if self._aperture is None:  # the first frame whose raw file states one
+            self._aperture = frame.aperture
         if why := frame_settings_problem(
             frame, rec.exposure_s, rec.iso, self._aperture
         ):

@@ -166,3 +166,40 @@ def test_a_session_whose_board_bends_is_said() -> None:
     assert (
         "channels bend" in toned["warnings"][0] and "gamma -0.1" in toned["warnings"][0]
     )
+
+
+def test_batch_tells_warn_each_sessions_warnings_under_its_path(
+    tmp_path, monkeypatch
+) -> None:
+    """What a session's images warn of (``provenance.json``'s ``warnings``, e.g. its
+    board's bend) reaches ``batch``'s warn callback once, named by the session;
+    the per-session work itself is faked here (the bench's sessions run in
+    ``tests/test_image_pipeline.py``)."""
+    from types import SimpleNamespace
+
+    from tunespec.app.pipeline import image
+
+    root = tmp_path / "in"
+    for name in ("a", "b", "c"):
+        (root / name).mkdir(parents=True)
+        (root / name / "manifest.json").write_text("{}")
+    monkeypatch.setattr(
+        image, "_load_calibration", lambda *_: SimpleNamespace(sha256="x")
+    )
+    monkeypatch.setattr(image, "session_graph", lambda s, *_: s.name)
+    bent = {"b": ["the white background's channels bend"], "c": ["one", "two"]}
+    monkeypatch.setattr(
+        image,
+        "compute",
+        lambda graphs, *_: [{"warnings": bent.get(g, [])} for g in graphs],
+    )
+    said: list[str] = []
+    result = image.batch_images(root, "S.csv", tmp_path / "out", warn=said.append)
+    assert len(result["done"]) == 3
+    assert said == [
+        f"{root / 'b'}: the white background's channels bend",
+        f"{root / 'c'}: one",
+        f"{root / 'c'}: two",
+    ]
+    # without a callback the same batch says nothing and still finishes
+    assert len(image.batch_images(root, "S.csv", tmp_path / "o2")["done"]) == 3

@@ -533,3 +533,26 @@ def test_an_f_number_no_lens_has_is_refused_where_a_file_states_it(
         assert "\n" not in message
     path.write_text("wavelength_nm,L1\n400,1.0\n410,2.0\n# f_number: 11.0\n")
     assert read_spectra_csv(path).meta["f_number"] == "11"
+
+
+def test_frames_are_checked_against_the_first_that_states_an_f_number(tmp_path) -> None:
+    """A session whose first frame read states no f-number (taken with another
+    tool, a lens without contacts) is still checked, against the first frame that
+    does."""
+    session, _ = _make_session(tmp_path / "s", with_corners=True)
+    records = {session.path_of(f): f for f in session.frames}
+
+    def loader(odd: float) -> Callable[[Path], RawFrame]:
+        read: list[str] = []
+
+        def load(path: Path) -> RawFrame:
+            f = records[path]
+            stated = None if not read else (odd if f.id == "target_L1" else 8.0)
+            read.append(f.id)
+            return replace(_npy_loader(path), aperture=stated)
+
+        return load
+
+    assert process_session(session, loader=loader(8.0)).aperture == 8.0
+    with pytest.raises(InputError, match=r"at f/5\.6 where the session's first frame"):
+        process_session(session, loader=loader(5.6))
