@@ -107,17 +107,20 @@ LINEARITY_GAMMA_MAX = 0.05
 
 
 def bend_verdict(
-    gamma: float, se: float, significance: float = LINEARITY_SIGNIFICANCE
+    gamma: float,
+    se: float,
+    significance: float = LINEARITY_SIGNIFICANCE,
+    limit: float = LINEARITY_GAMMA_MAX,
 ) -> str:
     """What a calibration does with the bend ``gamma`` (+- ``se``) its chart's
     residuals show: ``"undo"`` a sensor's (``significance`` standard errors from
-    zero, :data:`LINEARITY_GAMMA_MIN` to :data:`LINEARITY_GAMMA_MAX`), ``"refuse"``
-    one no sensor has (as significant, :data:`LINEARITY_GAMMA_MAX` or more), ``""``
-    else."""
+    zero, :data:`LINEARITY_GAMMA_MIN` to ``limit``), ``"refuse"`` one no sensor has
+    (as significant, ``limit`` or more: :data:`LINEARITY_GAMMA_MAX` for a raw
+    sensor's own), ``""`` else."""
     g = abs(gamma)
     if not (g >= LINEARITY_GAMMA_MIN and g >= significance * se):
         return ""
-    return "undo" if g < LINEARITY_GAMMA_MAX else "refuse"
+    return "undo" if g < limit else "refuse"
 
 
 def flat_field_residual(excess: ExcessVariance | None) -> float:
@@ -594,8 +597,8 @@ def fit_bend(
     the median relative residual of ``"pca"`` on cameras it has not seen is 5-80 %
     (median 10 %), of ``"smooth"`` 1-140 % (median 1.4 %;
     ``benchmarks/generalisation.py``'s 89 cameras under issue 23's conditions). So
-    each response column's gain is a nuisance (projected out, weighted), the weights are ``noise_variance`` plus that misfit relative to the
-    prediction (the residuals' median absolute relative value x 1.4826), and the
+    each response column's gain is a nuisance (projected out, weighted), the
+    weights are ``noise_variance`` plus that misfit relative to the prediction (the residuals' median absolute relative value x 1.4826), and the
     standard error is clustered by column: a column's misfit is shared by its
     patches. Least squares of the residuals on ``u = c (ln c - mu)``, ``mu`` each
     column's mean log prediction (:func:`log_profile`). A bend is refused, never

@@ -759,17 +759,15 @@ def bracket_bend_warning(gamma: float, se: float) -> str | None:
     """What exposure brackets of one scene say of the frames' linearity, or None.
 
     ``gamma`` +- ``se``: the bend :func:`~tunespec.core.hdr.fit_bracket_bend` finds
-    in brackets from which the calibration's own non-linearity was undone. One of
-    :data:`BRACKET_BEND_MAX` or more, at
-    :data:`~tunespec.core.excess.LINEARITY_SIGNIFICANCE` standard errors, means the
-    brackets do not scale with their exposures, which the HDR merge and Eq. 1
-    assume: a tone curve, a black level not subtracted, exposures not as recorded.
+    in brackets from which the calibration's own non-linearity was undone. One
+    :func:`~tunespec.core.excess.bend_verdict` refuses with the limit
+    :data:`BRACKET_BEND_MAX` means the brackets do not scale with their exposures,
+    which the HDR merge and Eq. 1 assume: a tone curve, a black level not
+    subtracted, exposures not as recorded.
     """
-    from tunespec.core.excess import LINEARITY_SIGNIFICANCE
+    from tunespec.core.excess import bend_verdict
 
-    if not (
-        abs(gamma) >= BRACKET_BEND_MAX and abs(gamma) >= LINEARITY_SIGNIFICANCE * se
-    ):
+    if bend_verdict(gamma, se, limit=BRACKET_BEND_MAX) != "refuse":
         return None
     return (
         f"its exposure brackets bend as response^(1 + gamma) with gamma "

@@ -238,9 +238,10 @@ def _geometry_data(gdir: Path, index: int, plan: GonioPlan, layout: TargetLayout
         stack = np.stack([_load(gdir, name, k) - dark for k in range(len(rel))])
         stack = linearised(stack, gamma) if gamma else stack
         for p, (yy, xx) in enumerate(rois):
-            merged[p].append(merge_brackets(stack[:, :, yy, xx], rel))
+            roi = stack[:, :, yy, xx]
+            merged[p].append(merge_brackets(roi, rel))
             if len(rel) > 1:
-                bracketed.append(stack[:, :, yy, xx].reshape(len(rel), -1))
+                bracketed.append(roi.reshape(len(rel), -1))
     said = (
         bracket_bend_warning(*fit_bracket_bend(np.concatenate(bracketed, 1), rel))
         if bracketed
