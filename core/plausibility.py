@@ -77,6 +77,7 @@ __all__ = [
     "MIN_WHITE_LEVEL",
     "NEEDED_RANGE_NM",
     "NEGATIVE_SIGMAS",
+    "NO_BRACKETS_WARNING",
     "SIGNAL_RANGE",
     "WHITE_SCALE_TOLERANCE",
     "Checks",
@@ -776,6 +777,14 @@ def bracket_bend_warning(gamma: float, se: float) -> str | None:
         "gamma), a black level not subtracted, or bracket exposures not as "
         "recorded; its merged responses and the spectra from them do not hold"
     )
+
+
+#: A gonio session whose plan has no HDR geometry: nothing checks its frames.
+NO_BRACKETS_WARNING = (
+    "no geometry of the plan has HDR brackets, so the frames' linearity is not "
+    "checked (a tone curve or a black level not subtracted would pass unseen): "
+    "give one geometry hdr: true"
+)
 
 
 def white_ratios(

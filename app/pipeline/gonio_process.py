@@ -45,6 +45,7 @@ from tunespec.core.io.spectral import read_spectra_csv
 from tunespec.core.layout import TargetLayout
 from tunespec.core.limits import read_json
 from tunespec.core.metering import suppress_meter_floor
+from tunespec.core.plausibility import NO_BRACKETS_WARNING
 from tunespec.core.processing import illuminants_from_spds
 from tunespec.core.progress import (
     ProgressFn,
@@ -365,9 +366,12 @@ def process_gonio(
                 xyz_cov_R[p, i] = W.T @ K @ W  # = cov[p]: the single shot's
         report(progress, 0.8 + 0.2 * (i + 1) / n_g)
     lab, u_lab = _lab_with_uncertainty(R, xyz_cov_R, wl)
+    said = [w for d in data for w in d.warnings]
+    if not any(s.hdr for s in plan.steps):
+        said.append(NO_BRACKETS_WARNING)
     return GonioResult(layout.patch_names, plan, [d.position for d in data], wl, R, uR,
                        xyz, u_xyz, lab, np.array([s.spectral for s in plan.steps]),
-                       u_lab, tuple(w for d in data for w in d.warnings))  # fmt: skip
+                       u_lab, tuple(said))  # fmt: skip
 
 
 def _posterior_covariance(est: Any) -> NDArray[np.float64]:

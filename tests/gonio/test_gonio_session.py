@@ -251,6 +251,25 @@ def test_brackets_on_a_tone_curve_are_warned_of_by_geometry(tmp_path, capsys):
     assert summary["warnings"] == load_gonio_result(out)["warnings"] == [said[0][9:]]
 
 
+@pytest.mark.slow
+def test_a_plan_without_brackets_says_its_frames_were_not_checked(tmp_path, capsys):
+    """Without an HDR geometry nothing checks the frames' linearity: the session
+    says so once, on the console and in summary.json, and still exits 0."""
+    from tunespec.core.plausibility import NO_BRACKETS_WARNING
+
+    plan = tmp_path / "plan.json"
+    assert main(["gonio-plan", "-o", str(plan), "--theta-r", "0,10,20",
+                 "--spectral", "0,20", "--hdr-from", "90"]) == 0  # fmt: skip
+    out = tmp_path / "g"
+    assert main(["gonio-demo", "--out", str(out), "--plan", str(plan)]) == 0
+    err = without_progress(capsys.readouterr().err).splitlines()
+    assert [line for line in err if line.startswith("warning: ")] == [
+        f"warning: {NO_BRACKETS_WARNING}"
+    ]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["warnings"] == [NO_BRACKETS_WARNING]
+
+
 def test_cli_writes_a_plan_and_refuses_bad_angles(tmp_path, capsys):
     out = tmp_path / "p.json"
     rc = main(["gonio-plan", "-o", str(out), "--theta-r", "0,15,30,45,60",
