@@ -24,12 +24,13 @@ Tags (TIFF 6.0, TIFF/EP, DNG 1.4.0.0): IFD0 NewSubFileType 254, ImageWidth 256,
 ImageLength 257, BitsPerSample 258, Compression 259, PhotometricInterpretation 262,
 ImageDescription 270, Make 271, Model 272, StripOffsets 273, Orientation 274,
 SamplesPerPixel 277, RowsPerStrip 278, StripByteCounts 279, PlanarConfiguration 284,
-Software 305, DateTime 306, CFARepeatPatternDim 33421, CFAPattern 33422,
-ExposureTime 33434, ExifIFD 34665, DNGVersion 50706, DNGBackwardVersion 50707,
+Software 305, DateTime 306, CFARepeatPatternDim 33421, CFAPattern 33422, ExposureTime
+33434, FNumber 33437, ExifIFD 34665, DNGVersion 50706, DNGBackwardVersion 50707,
 UniqueCameraModel 50708, CFAPlaneColor 50710, CFALayout 50711, BlackLevelRepeatDim
 50713, BlackLevel 50714, WhiteLevel 50717, ColorMatrix1 50721, AsShotNeutral 50728,
-CalibrationIlluminant1 50778; EXIF: ExposureTime 33434, PhotographicSensitivity
-34855, SensitivityType 34864, ExifVersion 36864, DateTimeOriginal 36867.
+CalibrationIlluminant1 50778; EXIF: ExposureTime 33434, FNumber 33437,
+PhotographicSensitivity 34855, SensitivityType 34864, ExifVersion 36864,
+DateTimeOriginal 36867.
 """
 
 from __future__ import annotations
@@ -76,6 +77,7 @@ def write_dng(
     white_level: int = 15000,
     exposure_s: float | None = None,
     iso: int | None = None,
+    f_number: float | None = None,
     make: str = "TuneSpec",
     model: str = "SimCamera",
     unique_camera_model: str | None = None,
@@ -103,6 +105,9 @@ def write_dng(
         Raw DN where the sensor clips (e.g. 15000 for a 14-bit Canon at ISO 100).
     exposure_s, iso
         Written to the EXIF sub-IFD (and ``ExposureTime`` to IFD0 as well).
+    f_number
+        The lens's f-number, EXIF ``FNumber`` (in both IFDs, as ``ExposureTime``);
+        omitted when ``None``.
     make, model, unique_camera_model
         TIFF ``Make``/``Model`` and DNG ``UniqueCameraModel`` (default
         ``"make model"``).
@@ -168,7 +173,7 @@ def write_dng(
         ifd0[50778] = _short(_D65)  # CalibrationIlluminant1
     if description:
         ifd0[270] = _ascii(description)
-    exif = _exif_tags(ifd0, exposure_s, iso, timestamp)
+    exif = _exif_tags(ifd0, exposure_s, iso, f_number, timestamp)
 
     head = _tiff_bytes(ifd0, exif)
     pixels = np.ascontiguousarray(mosaic, dtype="<u2")
@@ -221,6 +226,7 @@ def _exif_tags(
     ifd0: dict[int, tuple[int, bytes]],
     exposure_s: float | None,
     iso: int | None,
+    f_number: float | None,
     timestamp: datetime | None,
 ) -> dict[int, tuple[int, bytes]]:
     """The EXIF sub-IFD's tags (and their copies and pointer in ``ifd0``)."""
@@ -235,6 +241,11 @@ def _exif_tags(
             raise ValueError(f"iso must be in 1..65535, got {iso}")
         exif[34855] = _short(int(iso))  # PhotographicSensitivity
         exif[34864] = _short(3)  # SensitivityType: ISO speed
+    if f_number is not None:
+        if not f_number > 0:
+            raise ValueError(f"f_number must be > 0, got {f_number}")
+        frac = Fraction(f_number).limit_denominator(1000)
+        ifd0[33437] = exif[33437] = _rational((frac.numerator, frac.denominator))
     if timestamp is not None:
         text = timestamp.strftime("%Y:%m:%d %H:%M:%S")
         ifd0[306] = exif[36867] = _ascii(text)  # DateTime, DateTimeOriginal

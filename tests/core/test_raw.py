@@ -194,3 +194,23 @@ def test_a_frame_whose_exif_disagrees_with_its_record_is_refused() -> None:
     with pytest.raises(InputError, match=r"exposed 1 s where the session records 2 s"):
         _planes(job, _Frame(str(TINYDNG), 2.0, 100))
     _planes(job, _Frame(str(TINYDNG), 1.05, 400))  # within 10 %; no ISO to compare
+
+
+@pytest.mark.parametrize(
+    ("written", "read"),
+    [(8.0, 8.0), (5.6, 5.6), (0.5, 0.5), (128.0, 128.0), (200.0, None), (0.3, None),
+     (None, None)],
+)  # fmt: skip
+def test_an_f_number_outside_the_plausible_range_is_taken_as_none(
+    tmp_path: Path, written: float | None, read: float | None
+) -> None:
+    """The lens's f-number as the raw file's EXIF FNumber states it; outside
+    0.5-128 (a corrupt tag, or 0 for a lens without contacts) it is not one."""
+    from tunespec.devices.dng import write_dng
+
+    path = tmp_path / "f.dng"
+    write_dng(
+        path, np.full((64, 64), 3000, np.uint16), exposure_s=0.01, f_number=written
+    )
+    aperture = load_raw(path).aperture
+    assert aperture == (None if read is None else pytest.approx(read, rel=1e-6))
