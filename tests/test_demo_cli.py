@@ -102,7 +102,11 @@ def test_retake_one_frame_then_process(tmp_path, capsys) -> None:
     r = read_responses_csv(tmp_path / "r.csv")
     assert r.rgb.shape == (8, 2, 3) and r.illuminants == ("LED450", "WHITE_WARM")
     assert (tmp_path / "r_illuminants.csv").is_file()
-    assert "corners (auto)" in capsys.readouterr().out
+    said = capsys.readouterr().out
+    assert "corners (auto)" in said and "(aperture not recorded)" in said
+    assert main(["process", str(out), "-o", str(tmp_path / "r.csv"), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["f_number"] is None and summary["patches"] == 8
 
 
 def test_capture_input_errors_exit_2(tmp_path, capsys) -> None:

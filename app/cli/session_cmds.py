@@ -416,6 +416,7 @@ def cmd_process(args: argparse.Namespace) -> int:
     layout = load_layout(args.layout) if args.layout else None
     from tunespec.app.pipeline.extract import layout_reference_xyz
     from tunespec.app.pipeline.jobs import ProcessInputs, process_job
+    from tunespec.core.io.raw import f_number_text
 
     use = layout or session.layout
     ref = (
@@ -448,10 +449,14 @@ def cmd_process(args: argparse.Namespace) -> int:
         f"({processed.corners_source}): "
         + " ".join(f"({x:.1f},{y:.1f})" for x, y in corners)
     )
-    out.say(f"responses written to {args.output}, illuminants to {illum}")
+    out.say(
+        f"responses written to {args.output}, illuminants to {illum} (aperture "
+        f"{f_number_text(processed.aperture)})"
+    )
     out.summary(
         {
             "patches": len(r.patches),
+            "f_number": processed.aperture,
             "illuminants": len(r.illuminants),
             "corners_source": processed.corners_source,
             "corners_px": [list(map(float, c)) for c in corners],
