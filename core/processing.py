@@ -61,6 +61,7 @@ from tunespec.core.io.raw import (
     load_raw,
     plane_to_full_px,
     quad_mask,
+    stated_f_number,
 )
 from tunespec.core.io.session import (
     FrameRecord,
@@ -410,8 +411,7 @@ class ProcessedSession:
         simulator's DNGs). Kept with the illuminants (``meta``
         :data:`~tunespec.core.io.raw.F_NUMBER_META`), whose CSV keeps it in a comment
         line that its reader checks."""
-        value = self.illuminants.meta.get(F_NUMBER_META)
-        return None if value is None else float(value)
+        return stated_f_number(self.illuminants.meta)
 
     def checked(self, reference_xyz: ArrayLike | None = None) -> ProcessedSession:
         """A copy with :attr:`check`: :func:`tunespec.core.extraction.

@@ -297,11 +297,15 @@ def test_cli_export_rawtoaces(
 
 def test_cli_report(files: dict[str, Path]) -> None:
     out = files["dir"] / "report"
+    # the LEDs of a session whose raw files were at f/8 (process keeps it with them)
+    leds = files["dir"] / "leds_f8.csv"
+    leds.write_text(files["leds"].read_text() + "# f_number: 8\n")
     _cli_ok("report", "-o", out, "--reflectances", files["refl"], "--reference",
             files["refl"], "--sensitivities", files["cam"], "--illuminants",
-            files["leds"], "--responses", files["resp"], "--session-id", "S-9")  # fmt: skip
+            leds, "--responses", files["resp"], "--session-id", "S-9")  # fmt: skip
     text = (out / "report.html").read_text()
     assert "S-9" in text and "Table 2: reflectance accuracy" in text
+    assert re.search(r"aperture \(--illuminants\)</t[dh]>\s*<td>f/8</td>", text)
     assert '<td class="num">0.00</td>' in text  # estimate == reference
     assert (out / "report.pdf").read_bytes().startswith(b"%PDF-")
 

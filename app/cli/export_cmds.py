@@ -314,6 +314,7 @@ def _table1_from_json(path: Path) -> tuple[Any, Any, tuple[str, ...]]:
 
 def cmd_report(args: argparse.Namespace) -> int:
     from tunespec.app.report.report import ReportData, write_report
+    from tunespec.core.io.raw import f_number_text, stated_f_number
     from tunespec.core.io.responses_csv import read_responses_csv
 
     grid = args.grid
@@ -336,6 +337,9 @@ def cmd_report(args: argparse.Namespace) -> int:
         )
     if args.illuminants:
         data["illuminants"] = read_spectral(args.illuminants, grid, kind="illuminant")
+        # the aperture of the session they came from (process keeps it with them)
+        f_number = stated_f_number(data["illuminants"].meta)
+        data["provenance"] = {"aperture (--illuminants)": f_number_text(f_number)}
     if args.responses:
         data["responses"] = read_responses_csv(args.responses)
     if "reflectance" in data and "reflectance_reference" in data:

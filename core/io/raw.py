@@ -37,6 +37,7 @@ from __future__ import annotations
 import contextlib
 import os
 import struct
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import cached_property
 from os import PathLike
@@ -57,6 +58,7 @@ __all__ = [
     "load_raw",
     "plane_to_full_px",
     "quad_mask",
+    "stated_f_number",
 ]
 
 _CHANNELS = "RGB"
@@ -78,6 +80,13 @@ F_NUMBER_RANGE = (0.5, 128.0)
 #: of Eq. 1's scale, exposure and ISO), which their spectral CSV keeps in a
 #: ``# f_number: 8`` comment line.
 F_NUMBER_META = "f_number"
+
+
+def stated_f_number(meta: Mapping[str, object]) -> float | None:
+    """The f-number a processed session's illuminants keep (``meta``
+    :data:`F_NUMBER_META`, checked when their file was read), ``None`` if none."""
+    value = meta.get(F_NUMBER_META)
+    return None if value is None else float(str(value))
 
 
 def f_number_text(f_number: float | None) -> str:
