@@ -231,21 +231,22 @@ def _exif_tags(
 ) -> dict[int, tuple[int, bytes]]:
     """The EXIF sub-IFD's tags (and their copies and pointer in ``ifd0``)."""
     exif: dict[int, tuple[int, bytes]] = {}
-    if exposure_s is not None:
-        if not exposure_s > 0:
-            raise ValueError(f"exposure_s must be > 0, got {exposure_s}")
-        frac = Fraction(exposure_s).limit_denominator(1_000_000)
-        ifd0[33434] = exif[33434] = _rational((frac.numerator, frac.denominator))
+    # ExposureTime and FNumber: positive rationals, in both IFDs
+    for tag, name, value, most in (
+        (33434, "exposure_s", exposure_s, 1_000_000),
+        (33437, "f_number", f_number, 1000),
+    ):
+        if value is None:
+            continue
+        if not value > 0:
+            raise ValueError(f"{name} must be > 0, got {value}")
+        frac = Fraction(value).limit_denominator(most)
+        ifd0[tag] = exif[tag] = _rational((frac.numerator, frac.denominator))
     if iso is not None:
         if not 0 < iso <= 65535:
             raise ValueError(f"iso must be in 1..65535, got {iso}")
         exif[34855] = _short(int(iso))  # PhotographicSensitivity
         exif[34864] = _short(3)  # SensitivityType: ISO speed
-    if f_number is not None:
-        if not f_number > 0:
-            raise ValueError(f"f_number must be > 0, got {f_number}")
-        frac = Fraction(f_number).limit_denominator(1000)
-        ifd0[33437] = exif[33437] = _rational((frac.numerator, frac.denominator))
     if timestamp is not None:
         text = timestamp.strftime("%Y:%m:%d %H:%M:%S")
         ifd0[306] = exif[36867] = _ascii(text)  # DateTime, DateTimeOriginal
